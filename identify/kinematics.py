@@ -1,0 +1,134 @@
+"""Forward model of DESIGN.md: standard DH chain, base transform and tracked point (TP).
+
+``T(q) = base · A_1(q_1) · … · A_n(q_n)`` with
+``A_i = Rz(theta_i + q_i if R) · Tz(d_i + q_i if P) · Tx(a_i) · Rx(alpha_i)``
+and the predicted TP ``p(q) = T(q) · [tool, 1]``, in the tracker's frame, metres.
+
+Everything here is vectorised over samples: ``q`` has shape (m, n).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+DH_NAMES = ("theta", "d", "a", "alpha")
+
+
+def check_joint_types(joint_types: str) -> str:
+    """Return ``joint_types`` upper-cased, or raise ValueError unless it is a non-empty string of R/P."""
+    types = joint_types.strip().upper()
+    if not types or set(types) - {"R", "P"}:
+        raise ValueError(f"joint types must be a string of R and P, e.g. RRRRRR; got {joint_types!r}")
+    return types
+
+
+@dataclass(frozen=True)
+class DHModel:
+    """A serial chain in standard DH with base transform and tracked point.
+
+    ``theta``, ``alpha`` in radians; ``d``, ``a`` in metres (all shape (n,)).
+    ``base``: 4x4, tracker frame <- DH frame 0. ``tool``: TP in the last joint's DH frame n, metres.
+    """
+
+    joint_types: str
+    theta: Array
+    d: Array
+    a: Array
+    alpha: Array
+    base: Array = field(default_factory=lambda: np.eye(4))
+    tool: Array = field(default_factory=lambda: np.zeros(3))
+
+    def __post_init__(self) -> None:
+        types = check_joint_types(self.joint_types)
+        n = len(types)
+        object.__setattr__(self, "joint_types", types)
+        for name in DH_NAMES:
+            value = np.array(getattr(self, name), dtype=float).reshape(-1)
+            if value.shape != (n,):
+                raise ValueError(f"DH '{name}' has {value.size} values for {n} joints")
+            object.__setattr__(self, name, value)
+        base = np.array(self.base, dtype=float)
+        if base.shape != (4, 4):
+            raise ValueError("base must be a 4x4 matrix")
+        object.__setattr__(self, "base", base)
+        tool = np.array(self.tool, dtype=float).reshape(-1)
+        if tool.shape != (3,):
+            raise ValueError("tool must have 3 values")
+        object.__setattr__(self, "tool", tool)
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_types)
+
+    @property
+    def revolute(self) -> NDArray[np.bool_]:
+        return np.array([t == "R" for t in self.joint_types])
+
+    def dh_table(self) -> Array:
+        """(n, 4) array with columns theta, d, a, alpha."""
+        return np.column_stack([self.theta, self.d, self.a, self.alpha])
+
+    def with_dh_table(self, table: ArrayLike) -> DHModel:
+        table = np.asarray(table, dtype=float)
+        return replace(self, theta=table[:, 0], d=table[:, 1], a=table[:, 2], alpha=table[:, 3])
+
+
+def transform_from_dh(theta: ArrayLike, d: ArrayLike, a: ArrayLike, alpha: ArrayLike) -> Array:
+    """Standard DH link transforms ``Rz(theta) Tz(d) Tx(a) Rx(alpha)``; broadcast shape (..., 4, 4)."""
+    theta, d, a, alpha = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (theta, d, a, alpha)))
+    ct, st, ca, sa = np.cos(theta), np.sin(theta), np.cos(alpha), np.sin(alpha)
+    out = np.zeros((*theta.shape, 4, 4))
+    out[..., 0, 0] = ct
+    out[..., 0, 1] = -st * ca
+    out[..., 0, 2] = st * sa
+    out[..., 0, 3] = a * ct
+    out[..., 1, 0] = st
+    out[..., 1, 1] = ct * ca
+    out[..., 1, 2] = -ct * sa
+    out[..., 1, 3] = a * st
+    out[..., 2, 1] = sa
+    out[..., 2, 2] = ca
+    out[..., 2, 3] = d
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def _as_joints(model: DHModel, q: ArrayLike) -> Array:
+    q = np.asarray(q, dtype=float)
+    if q.ndim == 1:
+        q = q[None, :]
+    if q.ndim != 2 or q.shape[1] != model.n_joints:
+        raise ValueError(f"joint readings must have shape (m, {model.n_joints}); got {q.shape}")
+    return q
+
+
+def link_transforms(model: DHModel, q: ArrayLike) -> Array:
+    """A_i(q_i) for every sample and joint, shape (m, n, 4, 4)."""
+    q = _as_joints(model, q)
+    rev = model.revolute
+    theta = model.theta + np.where(rev, q, 0.0)
+    d = model.d + np.where(rev, 0.0, q)
+    return transform_from_dh(theta, d, model.a, model.alpha)
+
+
+def frames_from_joints(model: DHModel, q: ArrayLike) -> Array:
+    """DH frames 0..n in the tracker frame for each sample, shape (m, n+1, 4, 4)."""
+    links = link_transforms(model, q)
+    m, n = links.shape[:2]
+    frames = np.empty((m, n + 1, 4, 4))
+    frames[:, 0] = model.base
+    for i in range(n):
+        frames[:, i + 1] = frames[:, i] @ links[:, i]
+    return frames
+
+
+def points_from_joints(model: DHModel, q: ArrayLike) -> Array:
+    """Predicted TP in the tracker frame, metres, shape (m, 3)."""
+    frames = frames_from_joints(model, q)
+    last = frames[:, -1]
+    return last[:, :3, :3] @ model.tool + last[:, :3, 3]

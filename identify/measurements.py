@@ -1,0 +1,136 @@
+"""Measurements: joint readings and tracked-point positions, grouped in sweeps (pure data, no I/O).
+
+Rows follow the measurement CSV contract of DESIGN.md: ``sweep`` id, the 1-based ``joint`` moved in
+that sweep (0 for free poses), joint readings ``q`` (rad for R, m for P; NaN where a moved joint's
+reading was not logged) and the TP ``points`` in the tracker frame (metres).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from identify.kinematics import check_joint_types
+
+Array = NDArray[np.float64]
+
+MIN_SWEEP_SAMPLES = 3
+FEW_SWEEP_SAMPLES = 8
+
+
+class InputError(ValueError):
+    """Measurements that cannot be identified; the message is one line meant for the operator."""
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """One data set. Shapes: q (m, n), points (m, 3), sweep/joint (m,), sigma (m,) or None.
+
+    ``check`` (m,) marks rows held out for validation (never fitted); ``row`` (m,) is the source line
+    number of each sample, for messages.
+    """
+
+    joint_types: str
+    q: Array
+    points: Array
+    sweep: NDArray[np.int64]
+    joint: NDArray[np.int64]
+    sigma: Array | None = None
+    check: NDArray[np.bool_] | None = None
+    row: NDArray[np.int64] | None = None
+    has_role: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "joint_types", check_joint_types(self.joint_types))
+        m = len(self.points)
+        if self.check is None:
+            object.__setattr__(self, "check", np.zeros(m, dtype=bool))
+        if self.row is None:
+            object.__setattr__(self, "row", np.arange(1, m + 1))
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_types)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def subset(self, mask: NDArray[np.bool_]) -> Measurements:
+        """The rows where ``mask`` is true."""
+        sigma = None if self.sigma is None else self.sigma[mask]
+        return replace(
+            self,
+            q=self.q[mask],
+            points=self.points[mask],
+            sweep=self.sweep[mask],
+            joint=self.joint[mask],
+            sigma=sigma,
+            check=self.check[mask],
+            row=self.row[mask],
+        )
+
+    def sweeps_of(self, joint: int) -> list[int]:
+        """Sweep ids that move ``joint`` (1-based), in order of first appearance."""
+        ids = self.sweep[self.joint == joint]
+        _, first = np.unique(ids, return_index=True)
+        return [int(ids[i]) for i in sorted(first)]
+
+
+def validate(meas: Measurements) -> list[str]:
+    """Check that ``meas`` can be identified; raise InputError on the first fatal problem.
+
+    Returns warnings (one line each) for problems that do not stop the identification.
+    """
+    n = meas.n_joints
+    if meas.q.shape != (len(meas), n):
+        raise InputError(f"joint readings have {meas.q.shape[1]} columns but the joint types say {n} joints")
+    if not np.all(np.isfinite(meas.points)):
+        bad = int(meas.row[~np.all(np.isfinite(meas.points), axis=1)][0])
+        raise InputError(f"line {bad}: x, y, z must be finite numbers")
+    if np.any(np.isinf(meas.q)):
+        bad = int(meas.row[np.any(np.isinf(meas.q), axis=1)][0])
+        raise InputError(f"line {bad}: joint readings must be finite")
+    if meas.sigma is not None and not np.all(np.isfinite(meas.sigma) & (meas.sigma > 0)):
+        bad = int(meas.row[~(np.isfinite(meas.sigma) & (meas.sigma > 0))][0])
+        raise InputError(f"line {bad}: sigma must be a positive number (metres)")
+    if np.any((meas.joint < 0) | (meas.joint > n)):
+        bad = int(meas.row[(meas.joint < 0) | (meas.joint > n)][0])
+        raise InputError(f"line {bad}: joint must be 0 (free pose) or 1..{n}")
+    for rows in _rows_by_sweep(meas):
+        joints = np.unique(meas.joint[rows])
+        if len(joints) > 1:
+            raise InputError(f"sweep {meas.sweep[rows[0]]} mixes joints {joints.tolist()}; one sweep moves one joint")
+    missing_q = np.isnan(meas.q)
+    moved = np.zeros_like(missing_q)
+    swept = meas.joint > 0
+    moved[np.flatnonzero(swept), meas.joint[swept] - 1] = True
+    if np.any(missing_q & ~moved):
+        bad = int(meas.row[np.any(missing_q & ~moved, axis=1)][0])
+        raise InputError(f"line {bad}: only the moved joint's reading may be empty, in a sweep")
+    warnings: list[str] = []
+    fit = ~meas.check
+    for j in range(1, n + 1):
+        sweeps = [s for s in meas.sweeps_of(j) if np.any(fit & (meas.sweep == s))]
+        if not sweeps:
+            raise InputError(f"joint {j} is never swept: every joint needs a sweep where it alone moves")
+        for s in sweeps:
+            count = int(np.sum(fit & (meas.sweep == s)))
+            if count < MIN_SWEEP_SAMPLES:
+                raise InputError(f"sweep {s} (joint {j}) has {count} samples; at least {MIN_SWEEP_SAMPLES} needed")
+            if count < FEW_SWEEP_SAMPLES:
+                warnings.append(f"sweep {s} (joint {j}) has only {count} samples; {FEW_SWEEP_SAMPLES}+ recommended")
+    return warnings
+
+
+def looks_like_millimetres(points: Array) -> bool:
+    """True when positions look like millimetres (robot-sized data spans tens of metres otherwise)."""
+    return bool(np.max(np.abs(points)) > 20.0)
+
+
+def _rows_by_sweep(meas: Measurements) -> list[NDArray[np.int64]]:
+    order = np.argsort(meas.sweep, kind="stable")
+    ids = meas.sweep[order]
+    cuts = np.flatnonzero(np.diff(ids)) + 1
+    return np.split(order, cuts)

@@ -1,0 +1,290 @@
+"""Maximum-likelihood refinement of every model parameter against every fitted sample.
+
+Parameters, in this order (the "full" vector): base rotation (3, a rotation vector applied on the
+left of the start base rotation), base translation (3, m), tool (3, m, in DH frame n), then per joint
+theta, d, a, alpha (rad, m, m, rad). Parameters the data cannot separate are fixed (see
+:func:`select_free`); consecutive axes parallel within a tolerance keep their conventional ``d`` so no
+``d`` blows up. The fit is ``scipy.optimize.least_squares`` with an analytic Jacobian: first with a
+soft-L1 loss to find gross outliers, then a plain least-squares fit on the inliers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from identify.geometry import cross, skew
+from identify.kinematics import DH_NAMES, DHModel, frames_from_joints
+
+Array = NDArray[np.float64]
+
+BASE_NAMES = ("base.rx", "base.ry", "base.rz", "base.x", "base.y", "base.z")
+TOOL_NAMES = ("tool.x", "tool.y", "tool.z")
+OUTLIER_PROBABILITY = 1e-4  # chance that a clean sample is flagged as an outlier
+NOISE_FLOOR = 1e-8  # m: below this, residuals are rounding, not noise (no outlier is called on them)
+RANK_TOL = 1e-7  # relative: a parameter adding less than this to the span of the others is redundant
+
+
+def parameter_names(n: int) -> list[str]:
+    """Names of the full parameter vector for ``n`` joints, e.g. ``theta3``, ``base.rx``."""
+    return [*BASE_NAMES, *TOOL_NAMES, *(f"{name}{i}" for i in range(1, n + 1) for name in DH_NAMES)]
+
+
+def dh_index(joint: int, name: str) -> int:
+    """Index in the full vector of DH value ``name`` of 1-based ``joint``."""
+    return 9 + 4 * (joint - 1) + DH_NAMES.index(name)
+
+
+def _left_jacobian(omega: Array) -> Array:
+    angle = float(np.linalg.norm(omega))
+    k = skew(omega)
+    if angle < 1e-8:
+        return np.eye(3) + 0.5 * k
+    return np.eye(3) + (1 - np.cos(angle)) / angle**2 * k + (angle - np.sin(angle)) / angle**3 * (k @ k)
+
+
+def model_from_vector(start: DHModel, vector: Array) -> DHModel:
+    """The model at full parameter ``vector`` (base rotation relative to ``start.base``)."""
+    base = np.eye(4)
+    base[:3, :3] = Rotation.from_rotvec(vector[:3]).as_matrix() @ start.base[:3, :3]
+    base[:3, 3] = vector[3:6]
+    table = vector[9:].reshape(-1, 4)
+    return replace(start.with_dh_table(table), base=base, tool=vector[6:9].copy())
+
+
+def vector_from_model(model: DHModel) -> Array:
+    """Full parameter vector of ``model`` with zero base rotation increment."""
+    return np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
+
+
+def full_jacobian(model: DHModel, q: Array, omega: Array | None = None) -> tuple[Array, Array]:
+    """Predicted TP (m, 3) and its Jacobian (m, 3, 9 + 4n) with respect to the full vector."""
+    frames = frames_from_joints(model, q)
+    m, n = len(q), model.n_joints
+    last = frames[:, -1]
+    p = last[:, :3, :3] @ model.tool + last[:, :3, 3]
+    jac = np.zeros((m, 3, 9 + 4 * n))
+    rel_base = p - model.base[:3, 3]
+    jl = np.eye(3) if omega is None else _left_jacobian(omega)
+    jac[:, :, 0:3] = -skew(rel_base) @ jl
+    jac[:, :, 3:6] = np.eye(3)
+    jac[:, :, 6:9] = last[:, :3, :3]
+    for i in range(n):
+        z_prev, o_prev = frames[:, i, :3, 2], frames[:, i, :3, 3]
+        x_cur, o_cur = frames[:, i + 1, :3, 0], frames[:, i + 1, :3, 3]
+        col = 9 + 4 * i
+        jac[:, :, col] = cross(z_prev, p - o_prev)
+        jac[:, :, col + 1] = z_prev
+        jac[:, :, col + 2] = x_cur
+        jac[:, :, col + 3] = cross(x_cur, p - o_cur)
+    return p, jac
+
+
+def parallel_links(model: DHModel, parallel_tol: float) -> list[int]:
+    """1-based links i whose axes z_{i-1} and z_i are parallel within ``parallel_tol`` rad.
+
+    The last link is excluded (its frame is a convention anyway). Near such a pair, DH's polar
+    description of z_i about z_{i-1} is singular: the values it cannot resolve stay conventional."""
+    return [i + 1 for i in range(model.n_joints - 1) if abs(np.sin(model.alpha[i])) < np.sin(parallel_tol)]
+
+
+def _priority(types: str) -> list[int]:
+    """Order in which parameters are kept free; redundant ones late in the list get fixed.
+
+    Base and tool first (they absorb the free choices of frame 0 and frame n), then links from the tip,
+    each theta, alpha, a, d; prismatic a and d and the first link's theta and d last.
+    """
+    n = len(types)
+    first, late = list(range(9)), []
+    for j in range(n, 0, -1):
+        for name in DH_NAMES:
+            index = dh_index(j, name)
+            prismatic_offset = types[j - 1] == "P" and name in ("a", "d")
+            (late if prismatic_offset or (j == 1 and name in ("theta", "d")) else first).append(index)
+    return first + late
+
+
+def select_free(model: DHModel, q: Array, parallel_tol: float, tol: float = RANK_TOL) -> NDArray[np.bool_]:
+    """Mask of the full vector: the parameters that the samples at ``q`` determine.
+
+    Evaluated on the model with near-parallel consecutive axes made exactly parallel, so a ``d`` whose
+    value only a tiny misalignment could reveal is fixed rather than left to blow up. Greedy in the
+    order of :func:`_priority`: a parameter is kept when its (normalised) Jacobian column adds more
+    than ``tol`` to the span of those kept before it.
+    """
+    ideal = model.alpha.copy()
+    for i in parallel_links(model, parallel_tol):
+        ideal[i - 1] = np.round(ideal[i - 1] / np.pi) * np.pi
+    _, jac = full_jacobian(replace(model, alpha=ideal), q)
+    columns = jac.reshape(-1, jac.shape[2])
+    columns = columns / np.maximum(np.linalg.norm(columns, axis=0), 1e-300)
+    free = np.zeros(columns.shape[1], dtype=bool)
+    basis = np.zeros((columns.shape[0], 0))
+    for index in _priority(model.joint_types):
+        c = columns[:, index]
+        r = c - basis @ (basis.T @ c)
+        r = r - basis @ (basis.T @ r)
+        norm = np.linalg.norm(r)
+        if norm > tol:
+            free[index] = True
+            basis = np.column_stack([basis, r / norm])
+    return free
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """Result of the refinement. ``covariance`` is over the free parameters (``free`` mask of the full
+    vector), in the full vector's units. ``noise`` is the per-axis noise the residuals imply (m).
+    ``inliers`` masks the fitted samples; ``residuals`` (m, 3) are measured minus predicted (m)."""
+
+    model: DHModel
+    free: NDArray[np.bool_]
+    covariance: Array
+    noise: float
+    inliers: NDArray[np.bool_]
+    residuals: Array
+    condition: float
+    cost: float
+    q: Array
+    points: Array
+    notes: list[str] = field(default_factory=list)
+
+    def std(self) -> Array:
+        """Standard uncertainty of every full-vector parameter (0 for fixed ones)."""
+        out = np.zeros(len(self.free))
+        out[self.free] = np.sqrt(np.diag(self.covariance))
+        return out
+
+
+class _Problem:
+    """Residuals and Jacobian over the free parameters, weighted by 1/sigma when given."""
+
+    def __init__(self, start: DHModel, q: Array, points: Array, weights: Array, free: NDArray[np.bool_]):
+        self.start, self.q, self.points, self.weights, self.free = start, q, points, weights, free
+        self.template = vector_from_model(start)
+
+    def full(self, x: Array) -> Array:
+        v = self.template.copy()
+        v[self.free] = x
+        return v
+
+    def residuals(self, x: Array) -> Array:
+        model = model_from_vector(self.start, self.full(x))
+        _, frames_p = full_jacobian_points(model, self.q)
+        return ((frames_p - self.points) * self.weights[:, None]).ravel()
+
+    def jacobian(self, x: Array) -> Array:
+        v = self.full(x)
+        _, jac = full_jacobian(model_from_vector(self.start, v), self.q, omega=v[:3])
+        jac = jac * self.weights[:, None, None]
+        return jac.reshape(-1, jac.shape[2])[:, self.free]
+
+
+def full_jacobian_points(model: DHModel, q: Array) -> tuple[Array, Array]:
+    """Frames (m, n+1, 4, 4) and predicted TP (m, 3); cheaper than the Jacobian for residual calls."""
+    frames = frames_from_joints(model, q)
+    last = frames[:, -1]
+    return frames, last[:, :3, :3] @ model.tool + last[:, :3, 3]
+
+
+def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
+    """Least-squares solve; the robust (outlier-finding) pass needs less precision than the final one."""
+    linear = loss == "linear"
+    method = "lm" if linear and len(problem.points) * 3 >= len(x0) else "trf"
+    tol = 1e-14 if linear else 1e-8
+    fit = least_squares(
+        problem.residuals,
+        x0,
+        jac=problem.jacobian,
+        method=method,
+        loss=loss,
+        f_scale=scale,
+        x_scale="jac",
+        xtol=tol,
+        ftol=tol,
+        gtol=tol,
+        max_nfev=200 if linear else 50,
+    )
+    return fit.x
+
+
+def refine(
+    start: DHModel,
+    q: Array,
+    points: Array,
+    sigma: Array | None = None,
+    conventional: Array | None = None,
+    parallel_tol: float = 0.01,
+    noise_guess: float = 1e-4,
+    robust: bool = True,
+) -> Refinement:
+    """Maximum-likelihood DH model for joint readings ``q`` (m, n) and TP ``points`` (m, 3, tracker frame).
+
+    ``start`` must be close (the geometric step). ``sigma`` (m,) are per-sample standard uncertainties
+    (m) used as weights. ``conventional`` (n, 4) holds the values fixed parameters are moved to (the
+    nominal DH or zeros) when the data leave them free. ``noise_guess`` (m) scales the robust loss.
+    """
+    weights = np.ones(len(q)) if sigma is None else 1.0 / np.asarray(sigma, dtype=float)
+    free = select_free(start, q, parallel_tol)
+    notes: list[str] = []
+    # values the data cannot determine take their conventional ones; the fit absorbs the change
+    model, moved = _with_conventions(start, free, conventional)
+    problem = _Problem(model, q, points, weights, free)
+    x = _solve(problem, problem.template[free], "linear", 1.0)
+    inliers = _inliers(problem.residuals(x).reshape(-1, 3), int(free.sum()))
+    if robust and not np.all(inliers):
+        scale = max(noise_guess, NOISE_FLOOR) * 3.0 * (1.0 if sigma is None else float(np.median(weights)))
+        x = _solve(problem, x, "soft_l1", scale)
+        inliers = _inliers(problem.residuals(x).reshape(-1, 3), int(free.sum()))
+        model = model_from_vector(model, problem.full(x))
+        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free)
+        x = _solve(problem, problem.template[free], "linear", 1.0)
+    elif not robust:
+        inliers[:] = True
+    model = model_from_vector(problem.start, problem.full(x))
+    if moved:
+        notes.append(f"{moved} undetermined parameter(s) set to their conventional values")
+    problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free)
+    x = problem.template[free]
+    jac = problem.jacobian(x)
+    res_w = problem.residuals(x)
+    dof = max(len(res_w) - int(free.sum()), 1)
+    cost = float(res_w @ res_w)
+    scale2 = cost / dof
+    _, s, vt = np.linalg.svd(jac, full_matrices=False)
+    cov = (vt.T / s**2) @ vt
+    covariance = cov * (scale2 if sigma is None else 1.0)
+    col_norm = np.linalg.norm(jac, axis=0)
+    s_scaled = np.linalg.svd(jac / col_norm, compute_uv=False)
+    _, predicted = full_jacobian_points(model, q)
+    residuals = points - predicted
+    noise = float(np.sqrt(np.sum((residuals[inliers]) ** 2) / dof))
+    if sigma is not None:
+        notes.append(f"reduced chi-square {scale2:.3g} (1 when the given sigma is right)")
+    return Refinement(model, free, covariance, noise, inliers, residuals, float(s_scaled[0] / s_scaled[-1]), cost,
+                      q, points, notes)
+
+
+def _inliers(weighted_residuals: Array, n_free: int) -> NDArray[np.bool_]:
+    """Samples whose residual norm is within the chi-square(3) limit of a robust noise estimate."""
+    norms = np.linalg.norm(weighted_residuals, axis=1)
+    count = weighted_residuals.size
+    robust_sigma = 1.4826 * np.median(np.abs(weighted_residuals)) * np.sqrt(count / max(count - n_free, 1))
+    limit = max(robust_sigma, NOISE_FLOOR) * np.sqrt(chi2.ppf(1 - OUTLIER_PROBABILITY, 3))
+    return norms <= limit
+
+
+def _with_conventions(model: DHModel, free: NDArray[np.bool_], conventional: Array | None) -> tuple[DHModel, int]:
+    """``model`` with its fixed DH values set to the conventional ones (nominal DH or zeros)."""
+    n = model.n_joints
+    target = np.zeros((n, 4)) if conventional is None else np.asarray(conventional, dtype=float)
+    table = model.dh_table()
+    fixed_dh = ~free[9:].reshape(n, 4)
+    delta = np.where(fixed_dh, target - table, 0.0)
+    delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
+    return model.with_dh_table(table + delta), int(np.count_nonzero(np.abs(delta) > 1e-12))

@@ -1,0 +1,103 @@
+"""The result document of DESIGN.md (``joints``, ``base``, ``tool``) plus its evidence, as plain data.
+
+Units follow the contract: metres and radians. The dict is ready for ``yaml.safe_dump`` or ``json``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from identify import __version__
+from identify.kinematics import DH_NAMES, DHModel
+from identify.pipeline import Identification
+
+CONVENTION = (
+    "standard DH (DESIGN.md forward model). Frame 0: z0 on joint 1's axis, theta1 and d1 conventional, the "
+    "base absorbs the rest. Frame n: the last link's theta, d, a, alpha conventional, the tool carries the TP. "
+    "Consecutive axes parallel within parallel_tol: the common normal passes where d takes its conventional "
+    "value. Prismatic axes meet the next axis (a = 0). Conventional values: the nominal model's, or zero."
+)
+
+
+def _floats(values: Any) -> Any:
+    return np.asarray(values, dtype=float).tolist()
+
+
+def model_to_dict(model: DHModel) -> dict[str, Any]:
+    """The contract's three keys for ``model``."""
+    joints = [
+        {"type": t, "a": float(a), "alpha": float(al), "d": float(d), "theta": float(th)}
+        for t, th, d, a, al in zip(model.joint_types, model.theta, model.d, model.a, model.alpha, strict=True)
+    ]
+    return {"joints": joints, "base": _floats(model.base), "tool": _floats(model.tool)}
+
+
+def model_from_dict(doc: dict[str, Any]) -> DHModel:
+    """Inverse of :func:`model_to_dict`; raises ValueError (one line) on a malformed document."""
+    try:
+        joints = doc["joints"]
+        types = "".join(str(j["type"]) for j in joints)
+        table = np.array([[float(j[name]) for name in DH_NAMES] for j in joints])
+        return DHModel(types, table[:, 0], table[:, 1], table[:, 2], table[:, 3], doc["base"], doc["tool"])
+    except (KeyError, TypeError, IndexError) as exc:
+        raise ValueError(f"result document lacks or misshapes {exc}") from None
+
+
+def result_to_dict(ident: Identification, nominal: DHModel | None = None, nominal_name: str | None = None,
+                   source: str | None = None) -> dict[str, Any]:
+    """Everything the identification knows, contract keys first."""
+    ref = ident.refinement
+    n = ident.model.n_joints
+    std = ident.std
+    doc = model_to_dict(ident.model)
+    doc["uncertainty"] = {
+        "note": "standard uncertainty (1 sigma); 0 for fixed parameters",
+        "joints": [dict(zip(DH_NAMES, map(float, std[9 + 4 * i: 13 + 4 * i]), strict=True)) for i in range(n)],
+        "base_rotation": _floats(std[0:3]),
+        "base_translation": _floats(std[3:6]),
+        "tool": _floats(std[6:9]),
+    }
+    doc["fixed"] = [{"parameter": f.name, "value": f.value, "reason": f.reason} for f in ident.fixed]
+    doc["convention"] = {
+        "values_from": f"nominal model {nominal_name}" if nominal_name else ident.convention,
+        "parallel_links": ident.parallel,
+        "description": CONVENTION,
+    }
+    doc["residuals"] = {
+        "rms": ident.rms,
+        "noise_per_axis": ref.noise,
+        "samples": int(ref.inliers.size),
+        "rejected_rows": ident.rejected_rows,
+        "per_sweep": [
+            {"sweep": s.sweep, "joint": s.joint, "samples": s.samples, "rejected": s.rejected, "rms": s.rms}
+            for s in ident.sweeps
+        ],
+    }
+    doc["condition_number"] = ref.condition
+    v = ident.validation
+    doc["validation"] = None if v is None else {
+        "samples": v.samples, "rms": v.rms, "max": v.max, "bound": v.bound, "expected_rms": v.expected,
+    }
+    geo = ident.geometric
+    doc["geometric_step"] = {
+        "home": _floats(geo.home),
+        "axes": [
+            {"joint": ax.joint, "type": ax.kind, "point": _floats(ax.point), "direction": _floats(ax.direction),
+             "radius": None if np.isnan(ax.radius) else ax.radius, "rms": ax.rms, "travel": ax.travel,
+             "samples": ax.samples, "sweep": ax.sweep}
+            for ax in geo.axes
+        ],
+        "model": model_to_dict(geo.model),
+    }
+    if nominal is not None:
+        delta = ident.model.dh_table() - nominal.dh_table()
+        delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
+        doc["nominal"] = {"name": nominal_name, "delta": [dict(zip(DH_NAMES, map(float, row), strict=True))
+                                                         for row in delta]}
+    doc["warnings"] = list(ident.warnings) + list(ref.notes)
+    doc["software"] = {"name": "dh-calib", "version": __version__}
+    if source:
+        doc["source"] = source
+    return doc
