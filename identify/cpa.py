@@ -9,6 +9,7 @@ conventions of :func:`dh_from_axes`. All positions are in the tracker frame, met
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -115,10 +116,12 @@ def axis_from_sweep(
     angles = angles_on_circle(points[order], circle)
     span = float(np.ptp(angles))
     sagitta = circle.radius * (1.0 - np.cos(min(span, np.pi) / 2.0))
-    if span < MIN_ARC or sagitta < 3.0 * circle.rms:
+    # the arc's sagitta must stand out of the noise of its mean over the sweep's samples
+    sagitta_noise = circle.rms / np.sqrt(len(points))
+    if span < MIN_ARC or sagitta < 3.0 * sagitta_noise:
         raise InputError(
             f"joint {joint}: sweep {sweep} covers {np.degrees(span):.2f} deg, too short an arc to define an axis "
-            f"(sagitta {sagitta * 1e3:.3f} mm vs fit noise {circle.rms * 1e3:.3f} mm)"
+            f"(sagitta {sagitta * 1e3:.3f} mm vs its noise {sagitta_noise * 1e3:.3f} mm)"
         )
     reference = moved[order] if have_q else np.arange(len(points), dtype=float)
     slope = np.polyfit(reference, angles, 1)[0] if np.ptp(reference) > 0 else 1.0
@@ -180,6 +183,7 @@ def dh_from_axes(
     conventional: Array,
     parallel_tol: float = DEFAULT_PARALLEL_TOL,
     reference: DHModel | None = None,
+    force_parallel: Collection[int] = (),
 ) -> DHModel:
     """DH model whose axes at the ``home`` pose are the given lines (tracker frame).
 
@@ -188,6 +192,8 @@ def dh_from_axes(
     the last link's conventional theta, d, a, alpha (the tool carries the TP); for axes parallel within
     ``parallel_tol`` the common normal passes where d_i takes its conventional value; a prismatic axis
     meets the next axis (a_i = 0). Signs of x_i follow ``reference`` when given, else a_i >= 0.
+    Links in ``force_parallel`` (1-based) are treated as parallel whatever their measured angle (their
+    misalignment is within its uncertainty).
     """
     n = len(types)
     rev = np.array([t == "R" for t in types])
@@ -203,14 +209,16 @@ def dh_from_axes(
         else:
             anchor = origins[i - 1] + prev_offset * dirs[i - 1]
         # a prismatic axis was placed to meet the next one: their common normal is exact, never a convention
-        tol = 1e-12 if types[i - 1] == "P" else parallel_tol
+        tol = 1e-12 if types[i - 1] == "P" else (np.pi / 2 if i in force_parallel else parallel_tol)
         cn = common_normal(points[i - 1], dirs[i - 1], points[i], dirs[i], tol, anchor)
         gap = cn.foot_2 - cn.foot_1
         gap -= (gap @ dirs[i - 1]) * dirs[i - 1]
-        if np.linalg.norm(gap) > 1e-9:
+        normal = np.cross(dirs[i - 1], dirs[i])
+        if not cn.parallel:  # skew or intersecting: x is the common normal's direction, exactly
+            flip = np.linalg.norm(gap) > 1e-9 and gap @ normal < 0  # sign from a gap that is really there
+            x = -unit(normal) if flip else unit(normal)
+        elif np.linalg.norm(gap) > 1e-9:
             x = unit(gap)
-        elif np.linalg.norm(np.cross(dirs[i - 1], dirs[i])) > 1e-9:
-            x = unit(np.cross(dirs[i - 1], dirs[i]))
         else:  # coincident axes: keep the previous x (or any normal)
             x = xs[i - 1] if i > 1 else perpendicular_basis(dirs[0])[0]
             x = unit(x - (x @ dirs[i]) * dirs[i])
@@ -264,6 +272,7 @@ def geometric_step(
     conventional: Array | None = None,
     parallel_tol: float = DEFAULT_PARALLEL_TOL,
     reference: DHModel | None = None,
+    force_parallel: Collection[int] = (),
 ) -> GeometricResult:
     """The paper's method on the fit rows of ``meas``: one axis per joint, then DH frames.
 
@@ -302,6 +311,7 @@ def geometric_step(
         conventional,
         parallel_tol,
         reference,
+        force_parallel,
     )
     noise = float(np.sqrt(np.mean([ax.rms**2 for ax in axes])) / np.sqrt(3.0))
     return GeometricResult(axes, home, tp_home, model, noise)

@@ -10,12 +10,24 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, geometric_step
+from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, dh_from_axes, geometric_step
 from identify.kinematics import DHModel, points_from_joints
 from identify.measurements import Measurements, validate
-from identify.refine import Refinement, full_jacobian, parallel_links, parameter_names, refine
+from identify.poe import AxisLines, fit_lines
+from identify.refine import (
+    Refinement,
+    dh_index,
+    full_jacobian,
+    inlier_mask,
+    parallel_links,
+    parameter_names,
+    refine,
+)
 
 Array = NDArray[np.float64]
+
+PARALLEL_SIGMAS = 3.0  # an alpha within this many standard uncertainties of 0 or pi counts as parallel
+UNDETERMINED_D = 0.05  # m: a d less certain than this is left to the parallel-axis convention
 
 
 @dataclass(frozen=True)
@@ -131,9 +143,22 @@ def identify(
     geo = geometric_step(meas, conventional, parallel_tol, nominal)
     usable = ~meas.check & np.all(np.isfinite(meas.q), axis=1)
     fit = meas.subset(usable)
-    ref = refine(geo.model, fit.q, fit.points, fit.sigma, conventional, parallel_tol, max(geo.noise, 1e-9), robust)
+    lines = _fitted_lines(geo, fit, robust)
+
+    def start_model(parallel: list[int]) -> DHModel:
+        return dh_from_axes(meas.joint_types, list(lines.points), list(lines.directions), lines.home,
+                            lines.tp_home, _conventional(conventional, meas.n_joints), parallel_tol, nominal,
+                            parallel)
+
+    start = start_model([])
+    parallel = parallel_links(start, parallel_tol)
+    noise = max(geo.noise, 1e-9)
+    ref = refine(start, fit.q, fit.points, fit.sigma, conventional, parallel, noise, robust)
+    unresolved = _parallel_within_uncertainty(ref, parallel)
+    if unresolved:  # short or noisy sweeps: axes look skew only by noise; redo under the convention
+        parallel = sorted({*parallel, *unresolved})
+        ref = refine(start_model(parallel), fit.q, fit.points, fit.sigma, conventional, parallel, noise, robust)
     names = parameter_names(meas.n_joints)
-    parallel = parallel_links(geo.model, parallel_tol)
     fixed = [
         FixedParameter(name, float(value), _reason(name, meas.n_joints, meas.joint_types, parallel))
         for name, value, is_free in zip(names, _values(ref.model), ref.free, strict=True)
@@ -162,6 +187,37 @@ def identify(
         convention="nominal" if nominal is not None else "zero",
         warnings=warnings,
     )
+
+
+def _conventional(conventional: Array | None, n: int) -> Array:
+    return np.zeros((n, 4)) if conventional is None else conventional
+
+
+def _fitted_lines(geo: GeometricResult, fit: Measurements, robust: bool) -> AxisLines:
+    """Axis lines fitted to every sample with its joint readings, started from the paper's circles."""
+    start = AxisLines(fit.joint_types, np.array([ax.point for ax in geo.axes]),
+                      np.array([ax.direction for ax in geo.axes]), geo.home, geo.tp_home)
+    weights = None if fit.sigma is None else 1.0 / fit.sigma
+    lines, res = fit_lines(start, fit.q, fit.points, weights)
+    keep = inlier_mask(res, 4 * fit.n_joints + 3)
+    if robust and not np.all(keep):
+        lines, _ = fit_lines(lines, fit.q[keep], fit.points[keep], None if weights is None else weights[keep])
+    return lines
+
+
+def _parallel_within_uncertainty(ref: Refinement, parallel: list[int]) -> list[int]:
+    """Links not yet treated as parallel whose axes the data cannot tell from parallel: alpha within
+    PARALLEL_SIGMAS standard uncertainties of 0 or pi, or a ``d`` more uncertain than UNDETERMINED_D."""
+    std = ref.std()
+    out = []
+    for i in range(1, ref.model.n_joints):
+        alpha, d = dh_index(i, "alpha"), dh_index(i, "d")
+        if i in parallel:
+            continue
+        near_zero = ref.free[alpha] and abs(np.sin(ref.model.alpha[i - 1])) < PARALLEL_SIGMAS * std[alpha]
+        if near_zero or (ref.model.joint_types[i - 1] == "R" and std[d] > UNDETERMINED_D):
+            out.append(i)
+    return out
 
 
 def _values(model: DHModel) -> Array:

@@ -10,6 +10,7 @@ soft-L1 loss to find gross outliers, then a plain least-squares fit on the inlie
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -27,7 +28,10 @@ BASE_NAMES = ("base.rx", "base.ry", "base.rz", "base.x", "base.y", "base.z")
 TOOL_NAMES = ("tool.x", "tool.y", "tool.z")
 OUTLIER_PROBABILITY = 1e-4  # chance that a clean sample is flagged as an outlier
 NOISE_FLOOR = 1e-8  # m: below this, residuals are rounding, not noise (no outlier is called on them)
-RANK_TOL = 1e-7  # relative: a parameter adding less than this to the span of the others is redundant
+RANK_TOL = 1e-7
+RESIDUAL_FLOOR = 1e-12  # m: rounding level of residuals, floor of the noise in the significance test
+RELEASE_PROBABILITY = 1e-3  # false-alarm rate of the test that releases the parallel-axis convention
+DEFAULT_MAX_OFFSET = 1.0  # m  # relative: a parameter adding less than this to the span of the others is redundant
 
 
 def parameter_names(n: int) -> list[str]:
@@ -109,16 +113,16 @@ def _priority(types: str) -> list[int]:
     return first + late
 
 
-def select_free(model: DHModel, q: Array, parallel_tol: float, tol: float = RANK_TOL) -> NDArray[np.bool_]:
+def select_free(model: DHModel, q: Array, parallel: Collection[int], tol: float = RANK_TOL) -> NDArray[np.bool_]:
     """Mask of the full vector: the parameters that the samples at ``q`` determine.
 
-    Evaluated on the model with near-parallel consecutive axes made exactly parallel, so a ``d`` whose
+    Evaluated on the model with the ``parallel`` links (1-based) made exactly parallel, so a ``d`` whose
     value only a tiny misalignment could reveal is fixed rather than left to blow up. Greedy in the
     order of :func:`_priority`: a parameter is kept when its (normalised) Jacobian column adds more
     than ``tol`` to the span of those kept before it.
     """
     ideal = model.alpha.copy()
-    for i in parallel_links(model, parallel_tol):
+    for i in parallel:
         ideal[i - 1] = np.round(ideal[i - 1] / np.pi) * np.pi
     _, jac = full_jacobian(replace(model, alpha=ideal), q)
     columns = jac.reshape(-1, jac.shape[2])
@@ -219,34 +223,45 @@ def refine(
     points: Array,
     sigma: Array | None = None,
     conventional: Array | None = None,
-    parallel_tol: float = 0.01,
+    parallel: Collection[int] = (),
     noise_guess: float = 1e-4,
     robust: bool = True,
+    max_offset: float = DEFAULT_MAX_OFFSET,
 ) -> Refinement:
     """Maximum-likelihood DH model for joint readings ``q`` (m, n) and TP ``points`` (m, 3, tracker frame).
 
     ``start`` must be close (the geometric step). ``sigma`` (m,) are per-sample standard uncertainties
     (m) used as weights. ``conventional`` (n, 4) holds the values fixed parameters are moved to (the
     nominal DH or zeros) when the data leave them free. ``noise_guess`` (m) scales the robust loss.
+    ``parallel``: 1-based links whose consecutive axes are treated as parallel (their ``d`` stays
+    conventional unless the data resolve the misalignment). ``max_offset`` (m): the most a near-parallel
+    pair's ``d`` may move from its conventional value when the data resolve the pair's misalignment
+    (see :func:`_release_parallel`).
     """
     weights = np.ones(len(q)) if sigma is None else 1.0 / np.asarray(sigma, dtype=float)
-    free = select_free(start, q, parallel_tol)
+    free = select_free(start, q, parallel)
+    free_exact = select_free(start, q, ()) if parallel else free
     notes: list[str] = []
     # values the data cannot determine take their conventional ones; the fit absorbs the change
     model, moved = _with_conventions(start, free, conventional)
     problem = _Problem(model, q, points, weights, free)
     x = _solve(problem, problem.template[free], "linear", 1.0)
-    inliers = _inliers(problem.residuals(x).reshape(-1, 3), int(free.sum()))
+    inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
     if robust and not np.all(inliers):
         scale = max(noise_guess, NOISE_FLOOR) * 3.0 * (1.0 if sigma is None else float(np.median(weights)))
         x = _solve(problem, x, "soft_l1", scale)
-        inliers = _inliers(problem.residuals(x).reshape(-1, 3), int(free.sum()))
+        inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
         model = model_from_vector(model, problem.full(x))
         problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free)
         x = _solve(problem, problem.template[free], "linear", 1.0)
     elif not robust:
         inliers[:] = True
     model = model_from_vector(problem.start, problem.full(x))
+    if np.any(free_exact & ~free):
+        model, free, note = _release_parallel(
+            model, q[inliers], points[inliers], weights[inliers], free, free_exact, conventional, max_offset
+        )
+        notes += [note] if note else []
     if moved:
         notes.append(f"{moved} undetermined parameter(s) set to their conventional values")
     problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free)
@@ -270,7 +285,7 @@ def refine(
                       q, points, notes)
 
 
-def _inliers(weighted_residuals: Array, n_free: int) -> NDArray[np.bool_]:
+def inlier_mask(weighted_residuals: Array, n_free: int) -> NDArray[np.bool_]:
     """Samples whose residual norm is within the chi-square(3) limit of a robust noise estimate."""
     norms = np.linalg.norm(weighted_residuals, axis=1)
     count = weighted_residuals.size
@@ -288,3 +303,44 @@ def _with_conventions(model: DHModel, free: NDArray[np.bool_], conventional: Arr
     delta = np.where(fixed_dh, target - table, 0.0)
     delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
     return model.with_dh_table(table + delta), int(np.count_nonzero(np.abs(delta) > 1e-12))
+
+
+def _release_parallel(
+    model: DHModel, q: Array, points: Array, weights: Array, free: NDArray[np.bool_],
+    free_exact: NDArray[np.bool_], conventional: Array | None, max_offset: float,
+) -> tuple[DHModel, NDArray[np.bool_], str | None]:
+    """Free the values the parallel-axis convention fixed, if the data demand it and no ``d`` blows up.
+
+    The convention costs nothing when a near-parallel pair's misalignment is below the noise. When a
+    likelihood-ratio test (chi-square, false-alarm rate RELEASE_PROBABILITY) says the data resolve it,
+    exact DH is used, unless a ``d`` would move more than ``max_offset`` from its conventional value:
+    then the convention is kept and the returned note says what it costs.
+    """
+    constrained = _Problem(model, q, points, weights, free)
+    cost_c = float(np.sum(constrained.residuals(constrained.template[free]) ** 2))
+    exact = _Problem(model, q, points, weights, free_exact)
+    x = _solve(exact, exact.template[free_exact], "linear", 1.0)
+    cost_e = float(np.sum(exact.residuals(x) ** 2))
+    dof = max(3 * len(q) - int(free_exact.sum()), 1)
+    floor = (RESIDUAL_FLOOR * float(np.median(weights))) ** 2
+    extra = free_exact & ~free
+    statistic = (cost_c - cost_e) / max(cost_e / dof, floor)
+    if statistic <= chi2.ppf(1 - RELEASE_PROBABILITY, int(extra.sum())):
+        return model, free, None
+    candidate = model_from_vector(model, exact.full(x))
+    n = model.n_joints
+    target = np.zeros((n, 4)) if conventional is None else np.asarray(conventional, dtype=float)
+    extra_d = extra[9:].reshape(n, 4)[:, 1]
+    shift = np.abs(candidate.d - target[:, 1])[extra_d]
+    names = [parameter_names(n)[i] for i in np.flatnonzero(extra)]
+    if shift.size and shift.max() > max_offset:
+        rms_c, rms_e = (np.sqrt(c / len(q)) for c in (cost_c, cost_e))
+        return model, free, (
+            f"near-parallel axes are measurably misaligned (chi-square {statistic:.3g}), but exact standard DH "
+            f"would move d by {shift.max():.3g} m; kept the convention at an RMS cost of {rms_c * 1e3:.4f} vs "
+            f"{rms_e * 1e3:.4f} mm (raise --max-offset for exact DH)"
+        )
+    return candidate, free_exact, (
+        f"released the parallel-axis convention for {', '.join(names)}: the data resolve the misalignment "
+        f"(chi-square {statistic:.3g})"
+    )
