@@ -1,0 +1,101 @@
+"""Device protocols (small, structural: any class with these methods is a device) and reading types.
+
+Units: joint positions rad (revolute) / m (prismatic); speeds rad/s or m/s; TP positions metres in
+the tracker's own frame; timestamps seconds since the epoch (of the device's clock).
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+class RobotState(enum.Enum):
+    READY = "ready"
+    MOVING = "moving"
+    PROTECTIVE_STOP = "protective stop"
+    EMERGENCY_STOP = "emergency stop"
+    DISCONNECTED = "disconnected"
+    FAULT = "fault"
+
+
+@dataclass(frozen=True)
+class DeviceIdentity:
+    """What a device says it is, recorded in the session header."""
+
+    kind: str  # "robot" or "tracker"
+    model: str
+    serial: str = ""
+    firmware: str = ""
+    details: dict[str, str] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, object]:
+        return {"kind": self.kind, "model": self.model, "serial": self.serial, "firmware": self.firmware,
+                "details": dict(self.details)}
+
+
+@dataclass(frozen=True)
+class TrackerReading:
+    """One TP measurement: ``position`` (3,) m in the tracker frame, ``timestamp`` s, the device's
+    per-axis standard uncertainty ``sigma`` (m) when it reports one, and its ``status`` word."""
+
+    position: Array
+    timestamp: float
+    sigma: float | None = None
+    status: str = "ok"
+
+
+@runtime_checkable
+class Robot(Protocol):
+    """A robot arm the orchestrator can sequence. Every blocking call takes a timeout (s)."""
+
+    joint_types: str
+
+    def connect(self, timeout: float) -> None: ...
+
+    def close(self) -> None: ...
+
+    def identity(self) -> DeviceIdentity: ...
+
+    def state(self) -> RobotState: ...
+
+    def read_joints(self) -> Array:
+        """Actual joint positions (n,), rad / m (encoder values, not the commanded ones)."""
+        ...
+
+    def move_joints(self, q: Sequence[float], speed: Sequence[float], acceleration: Sequence[float],
+                    timeout: float) -> None:
+        """Move to ``q`` and return when the motion is done; raises RobotFault, DeviceTimeout,
+        ConnectionFailed. ``speed``/``acceleration`` per joint, rad/s (m/s) and rad/s² (m/s²)."""
+        ...
+
+    def wait_until_still(self, settle_time: float, timeout: float) -> None:
+        """Return once the joints have been still for ``settle_time`` s; DeviceTimeout after ``timeout``."""
+        ...
+
+    def stop(self) -> None:
+        """Stop any motion now (decelerating within the robot's limits). Never raises."""
+        ...
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """A device that measures the TP's position."""
+
+    def connect(self, timeout: float) -> None: ...
+
+    def close(self) -> None: ...
+
+    def identity(self) -> DeviceIdentity: ...
+
+    def measure(self, count: int, timeout: float) -> list[TrackerReading]:
+        """``count`` consecutive readings of the TP; raises MeasurementError subclasses, DeviceTimeout,
+        ConnectionFailed."""
+        ...
