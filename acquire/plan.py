@@ -4,13 +4,28 @@ A plan is an ordered list of steps. Sweeps move one joint through increments wit
 (last joint first, as in the paper); free poses move every joint (extra data for the fit and for
 validation); home checks return to the home pose every N steps to watch the tracker/robot drift.
 Joint values: rad (revolute) / m (prismatic).
+
+Functions (all pure): :func:`build_plan` (robot model + site configuration -> plan, free poses by a
+greedy optimal design), :func:`check_plan` (every limit violation, one line each; nothing moves unless
+it is empty), :func:`estimate_duration`, :func:`predicted_accuracy` (Cramér-Rao bound of the held-out
+TP error) and :func:`format_plan` (the dry-run table).
 """
 
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field
+import math
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from config.robots import RobotModel
+from config.site import SiteConfig
+from identify.kinematics import DHModel, frames_from_joints
+from identify.refine import full_jacobian
+from identify.simulate import axis_distances, random_poses
 
 STEP_KINDS = ("sweep", "free", "home")
 
@@ -56,3 +71,465 @@ class Plan:
         steps = tuple(Step(**{**s, "q": tuple(s["q"])}) for s in data.pop("steps"))
         tuples = {k: tuple(data[k]) for k in ("home", "speed", "acceleration", "notes")}
         return cls(steps=steps, **{**data, **tuples})
+
+
+# ------------------------------------------------------------------------------------------ building a plan
+
+Array = NDArray[np.float64]
+
+FREE_MARGIN = 0.1  # free poses stay this share of each joint's range inside it
+CANDIDATES = 1500  # size of the seeded pool free poses are chosen from
+EVAL_POSES = 200  # random held-out poses the design and the accuracy estimate average over
+PARTIAL_ARC = math.radians(20.0)  # half-width of the "±20° sweeps" of the comparison
+HOME_SWEEP = 0  # sweep id of the home checks (they are not a fitting sweep)
+SUBSPACE_TOL = 1e-7  # relative singular value below which a parameter combination counts as redundant
+
+
+class PlanError(ValueError):
+    """A site configuration that cannot be turned into a plan for this robot; the message is one line."""
+
+
+def sweep_values(joint_type: str, home: float, limits: tuple[float, float], steps: int,
+                 span: tuple[float, float] | None = None) -> Array:
+    """Commanded values (steps,) of one joint's sweep, increasing (rad / m).
+
+    With ``span`` = (min, max) from the site: those ends, not clipped (``check_plan`` judges them); a
+    revolute span of a full turn or more does not repeat its end point. Without: a revolute joint turns
+    a full turn home ± π in ``steps`` equal increments (home included, the end point not repeated) when
+    the limits allow it, else as far as the limits allow on either side, clipped; a prismatic joint
+    covers its limits.
+    """
+    lo, hi = limits
+    k = np.arange(steps)
+    if span is not None:
+        a, b = span
+        if joint_type == "R" and b - a >= 2 * np.pi - 1e-12:
+            return a + 2 * np.pi * k / steps
+        return np.linspace(a, b, steps)
+    if joint_type == "R":
+        values = home + 2 * np.pi * (k - steps // 2) / steps
+        if values[0] >= lo and values[-1] + 2 * np.pi / steps <= hi:
+            return values
+        return np.linspace(max(lo, home - np.pi), min(hi, home + np.pi), steps)
+    return np.linspace(lo, hi, steps)
+
+
+def tp_model(robot: RobotModel, tp_guess: Any) -> DHModel:
+    """The robot's nominal model with the TP guess (m, flange frame) as its tool."""
+    return replace(robot.nominal, tool=np.asarray(tp_guess, dtype=float))
+
+
+def axis_distances_many(model: DHModel, q: Array) -> Array:
+    """:func:`identify.simulate.axis_distances` for many poses at once: (m, n) m, inf for prismatic."""
+    frames = frames_from_joints(model, q)
+    last = frames[:, -1]
+    tp = last[:, :3, :3] @ model.tool + last[:, :3, 3]
+    rel = tp[:, None, :] - frames[:, :-1, :3, 3]
+    z = frames[:, :-1, :3, 2]
+    radial = rel - np.sum(rel * z, axis=2, keepdims=True) * z
+    out = np.linalg.norm(radial, axis=2)
+    out[:, ~model.revolute] = np.inf
+    return out
+
+
+def _per_joint(robot: RobotModel, site: SiteConfig, name: str) -> Array:
+    values = getattr(site, name)
+    default = robot.default_speed if name == "speed" else robot.default_acceleration
+    if values is not None and len(values) != robot.n_joints:
+        raise PlanError(f"{site.source}: robot.{name} has {len(values)} values for the {robot.n_joints} joints "
+                        f"of {robot.name}")
+    base = default if values is None else np.asarray(values, dtype=float)
+    return base * getattr(site, f"{name}_fraction")
+
+
+def _joint_box(robot: RobotModel, site: SiteConfig) -> Array:
+    """Per joint the (min, max) the joint may visit: its sweep range, clipped to the limits (n, 2)."""
+    box = np.empty((robot.n_joints, 2))
+    for j, kind in enumerate(robot.joint_types):
+        lo, hi = robot.limits[j]
+        span = site.sweep_ranges[j] if site.sweep_ranges is not None else None
+        if span is not None:
+            box[j] = max(lo, span[0]), min(hi, span[1])
+        elif kind == "R":
+            box[j] = max(lo, robot.home[j] - np.pi), min(hi, robot.home[j] + np.pi)
+        else:
+            box[j] = lo, hi
+        if box[j, 0] >= box[j, 1]:  # a site range wholly outside the limits: stay at home
+            box[j] = robot.home[j], robot.home[j]
+    return box
+
+
+def _fmt(value: float, kind: str) -> str:
+    return f"{math.degrees(value):.1f}°" if kind == "R" else f"{value * 1e3:.1f} mm"
+
+
+def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
+    """The plan for ``robot`` under ``site``: sweeps, free poses and home checks.
+
+    Sweeps: the joints ``site.sweep_joints`` (default all), last to first, ``site.steps_per_sweep`` values
+    each (:func:`sweep_values`), the other joints at home; a sweep pose where the TP guess comes within
+    ``site.min_axis_distance`` of a revolute axis is dropped (and noted). Free poses (kind "free", joint 0,
+    one sweep id each): ``site.check_poses`` random held-out ones (role "check") and ``site.free_poses``
+    chosen from a seeded pool by :func:`greedy_design`, inside every joint's sweep range (clipped to the
+    limits, shrunk by ``FREE_MARGIN``) with the TP off every axis; visited in nearest-neighbour order.
+    Home checks (kind "home", sweep ``HOME_SWEEP``): first, after every ``site.home_check_every`` other
+    steps, and last. Raises :class:`PlanError` when the TP guess is too close to an axis at home or the
+    site does not fit the robot.
+    """
+    n, types, home = robot.n_joints, robot.joint_types, robot.home
+    model = tp_model(robot, site.tp_guess)
+    if site.sweep_ranges is not None and len(site.sweep_ranges) != n:
+        raise PlanError(f"{site.source}: plan.sweep_ranges has {len(site.sweep_ranges)} entries for the {n} "
+                        f"joints of {robot.name}")
+    joints = list(range(1, n + 1)) if site.sweep_joints is None else list(site.sweep_joints)
+    if any(j > n for j in joints):
+        raise PlanError(f"{site.source}: plan.joints lists joint {max(joints)}; {robot.name} has joints 1..{n}")
+    speed, acceleration = _per_joint(robot, site, "speed"), _per_joint(robot, site, "acceleration")
+    minimum = site.min_axis_distance
+    at_home = axis_distances(model, home)
+    if np.any(at_home < minimum):
+        j = int(np.argmin(at_home))
+        raise PlanError(f"the TP guess {list(site.tp_guess)} m is {at_home[j]:.4f} m from the axis of joint "
+                        f"{j + 1} at home (< {minimum} m): mount the target off the axis and set plan.tp_guess")
+    notes = [f"TP guess {list(site.tp_guess)} m in the flange frame, kept >= {minimum * 1e3:g} mm off every "
+             "revolute axis"]
+
+    poses: list[tuple[str, int, int, Array, str]] = []  # kind, sweep, joint, q, role
+    sweep_id = 0
+    for j in sorted(joints, reverse=True):
+        span = site.sweep_ranges[j - 1] if site.sweep_ranges is not None else None
+        values = sweep_values(types[j - 1], float(home[j - 1]), tuple(robot.limits[j - 1]), site.steps_per_sweep,
+                              span)
+        q = np.tile(home, (len(values), 1))
+        q[:, j - 1] = values
+        dist = np.array([axis_distances(model, row) for row in q])
+        ok = np.all(dist >= minimum, axis=1)
+        if not ok.all():
+            near = sorted({int(i) + 1 for i in np.flatnonzero(np.any(dist[~ok] < minimum, axis=0))})
+            notes.append(f"joint {j} sweep: {int((~ok).sum())} of {len(q)} poses dropped (TP within "
+                         f"{minimum * 1e3:g} mm of the axis of joint {', '.join(map(str, near))})")
+        if ok.any():
+            sweep_id += 1
+            poses += [("sweep", sweep_id, j, row, "fit") for row in q[ok]]
+    if any(types[j - 1] == "R" and (site.sweep_ranges is None or site.sweep_ranges[j - 1] is None) for j in joints):
+        notes.append("default revolute sweeps turn as far as the limits allow (up to a full turn): make sure "
+                     "the cell is clear, or restrict them with plan.sweep_ranges")
+
+    free = _free_poses(robot, site, model, np.array([p[3] for p in poses]).reshape(-1, n), rng_seed, notes)
+    start = poses[-1][3] if poses else home
+    for q, role in _nearest_order(free, start, speed):
+        sweep_id += 1
+        poses.append(("free", sweep_id, 0, q, role))
+
+    steps: list[Step] = []
+
+    def add(kind: str, sweep: int, joint: int, q: Array, role: str = "fit") -> None:
+        steps.append(Step(len(steps), kind, sweep, joint, tuple(float(x) for x in q), role))
+
+    every = site.home_check_every
+    if every and poses:
+        add("home", HOME_SWEEP, 0, home)
+    for count, pose in enumerate(poses, start=1):
+        add(*pose)
+        if every and (count % every == 0 or count == len(poses)):
+            add("home", HOME_SWEEP, 0, home)
+    return Plan(robot.name, types, tuple(float(x) for x in home), tuple(steps), site.samples_per_step,
+                site.settle_time, tuple(float(x) for x in speed), tuple(float(x) for x in acceleration),
+                tuple(notes))
+
+
+def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: Array, rng_seed: int,
+                notes: list[str]) -> list[tuple[Array, str]]:
+    """Check poses (random) then designed free poses from one seeded pool of safe candidates."""
+    wanted = site.free_poses + site.check_poses
+    if not wanted:
+        return []
+    rng = np.random.default_rng(rng_seed)
+    box = _joint_box(robot, site)
+    pool = random_poses(box, CANDIDATES, rng, FREE_MARGIN)
+    pool = pool[np.all(axis_distances_many(model, pool) >= site.min_axis_distance, axis=1)]
+    if len(pool) < wanted + 1:
+        raise PlanError(f"only {len(pool)} candidate free poses keep the TP off every axis; lower "
+                        "plan.free_poses / plan.check_poses or plan.min_axis_distance")
+    check, pool = pool[: site.check_poses], pool[site.check_poses:]
+    q_eval = random_poses(robot.limits, EVAL_POSES, rng)
+    chosen = greedy_design(model, q_sweeps, pool, q_eval, site.free_poses)
+    if site.free_poses:
+        notes.append(f"{site.free_poses} free poses chosen from {len(pool)} candidates to minimise the predicted "
+                     f"held-out error (greedy design on the nominal model); {site.check_poses} check poses at "
+                     "random, held out for validation")
+    elif site.check_poses:
+        notes.append(f"{site.check_poses} check poses at random, held out for validation")
+    return [(q, "fit") for q in pool[chosen]] + [(q, "check") for q in check]
+
+
+def _nearest_order(poses: list[tuple[Array, str]], start: Array, speed: Array) -> list[tuple[Array, str]]:
+    """``poses`` reordered greedily: each next one the quickest to reach (slowest joint at ``speed``)."""
+    left, out, here = list(poses), [], start
+    while left:
+        k = min(range(len(left)), key=lambda i: float(np.max(np.abs(left[i][0] - here) / speed)))
+        out.append(left.pop(k))
+        here = out[-1][0]
+    return out
+
+
+def _gram(g: Array, block: int = 48) -> Array:
+    """``sum_k g_kᵀ g_k`` over the poses of ``g`` (m, 3, r): the (r, r) information of those TPs.
+
+    Summed over stacked small blocks: a multithreaded BLAS on one tall product is many times slower
+    on a busy machine (here: 10-20 ms against 1-2 ms)."""
+    flat = g.reshape(-1, g.shape[2])
+    pad = (-len(flat)) % block
+    if pad:
+        flat = np.vstack([flat, np.zeros((pad, flat.shape[1]))])
+    blocks = flat.reshape(-1, block, flat.shape[1])
+    return (np.swapaxes(blocks, 1, 2) @ blocks).sum(axis=0)
+
+
+def _whitened(model: DHModel, *qs: Array) -> list[Array]:
+    """Jacobians (m_i, 3, r) of the TP at each pose set w.r.t. the parameter combinations they determine.
+
+    The columns of the full Jacobian (:func:`identify.refine.full_jacobian`) are scaled to unit norm over
+    all sets, then projected on the eigenvectors of the information of all sets whose singular value is
+    above ``SUBSPACE_TOL`` of the largest: redundant combinations (which change no prediction; on the
+    nominal models they sit below 1e-15, the others above 1e-3) drop out. A small Gram matrix and its
+    eigendecomposition rather than an SVD of the tall Jacobian: fast on a busy machine too.
+    """
+    jacs = [full_jacobian(model, q)[1] if len(q) else np.zeros((0, 3, 9 + 4 * model.n_joints)) for q in qs]
+    gram = sum(_gram(j) for j in jacs)
+    scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
+    values, vectors = np.linalg.eigh(gram / np.outer(scale, scale))
+    keep = values > SUBSPACE_TOL**2 * values[-1]
+    basis = vectors[:, keep] / scale[:, None]
+    return [j @ basis for j in jacs]
+
+
+def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array, count: int) -> NDArray[np.int64]:
+    """Indices of ``count`` rows of ``candidates`` chosen one at a time, each the pose that most reduces the
+    predicted held-out error given ``q_fit`` and those chosen before: the trace of the Cramér-Rao prediction
+    covariance summed over ``q_eval`` (DESIGN.md), ``sum_k tr(Jc_k Σ Jc_kᵀ)`` with ``Σ = (JᵀJ)⁻¹``.
+
+    Rank-one (rank-three: one TP) updates of Σ keep it O(count · candidates · r²) for r parameters.
+    Directions the fit leaves undetermined get a tiny ridge, so poses that determine them win first.
+    """
+    if count <= 0:
+        return np.zeros(0, dtype=np.int64)
+    g_fit, g_pool, g_eval = _whitened(model, q_fit, candidates, q_eval)
+    r = g_pool.shape[2]
+    info = _gram(g_fit)
+    ridge = 1e-9 * max(float(np.trace(info)) / r, 1.0)
+    cov = np.linalg.inv(info + ridge * np.eye(r))
+    target = _gram(g_eval)
+    chosen: list[int] = []
+    available = np.ones(len(candidates), dtype=bool)
+    eye = np.eye(3)
+    g_pool_t = np.swapaxes(g_pool, 1, 2)
+    for _ in range(min(count, len(candidates))):
+        u = g_pool @ cov  # (K, 3, r): candidate rows weighted by the current covariance
+        s = eye + u @ g_pool_t  # (K, 3, 3)
+        w = (u @ target) @ np.swapaxes(u, 1, 2)  # (K, 3, 3)
+        gain = np.trace(np.linalg.solve(s, w), axis1=1, axis2=2)
+        gain[~available] = -np.inf
+        k = int(np.argmax(gain))
+        cov = cov - u[k].T @ np.linalg.solve(s[k], u[k])
+        cov = 0.5 * (cov + cov.T)
+        chosen.append(k)
+        available[k] = False
+    return np.array(chosen, dtype=np.int64)
+
+
+# ------------------------------------------------------------------------------------- checking and telling
+
+def _value(value: float, kind: str) -> str:
+    if kind == "R":
+        return f"{value:.4f} rad ({math.degrees(value):.2f}°)"
+    return f"{value:.4f} m"
+
+
+def check_plan(plan: Plan, robot: RobotModel) -> list[str]:
+    """Every reason not to run ``plan`` on ``robot``, one line each; an empty list means it may run.
+
+    Checks the robot and joint types, the joint count of the home pose, speeds, accelerations and every
+    step, every joint value against the limits (inclusive), speeds against ``max_speed``, and the step
+    fields (index, kind, role, samples, settle time).
+    """
+    n, types, limits = robot.n_joints, robot.joint_types, robot.limits
+    out: list[str] = []
+    if plan.robot != robot.name:
+        out.append(f"plan is for robot '{plan.robot}', the model is '{robot.name}'")
+    if plan.joint_types != types:
+        out.append(f"plan joint types {plan.joint_types}, the model's are {types}")
+    if not plan.steps:
+        out.append("plan has no steps")
+    if plan.samples_per_step < 1:
+        out.append(f"samples_per_step = {plan.samples_per_step}, expected >= 1")
+    if not (math.isfinite(plan.settle_time) and plan.settle_time >= 0):
+        out.append(f"settle_time = {plan.settle_time} s, expected a number >= 0")
+
+    def pose(where: str, q: tuple[float, ...]) -> None:
+        if len(q) != n:
+            out.append(f"{where}: {len(q)} joint values, {robot.name} has {n} joints")
+            return
+        for j, value in enumerate(q):
+            lo, hi = limits[j]
+            if not (math.isfinite(value) and lo <= value <= hi):
+                out.append(f"{where}: joint {j + 1} = {_value(value, types[j])} outside its limits "
+                           f"[{_value(lo, types[j])}, {_value(hi, types[j])}]")
+
+    pose("home", plan.home)
+    for name, values, top in (("speed", plan.speed, robot.max_speed), ("acceleration", plan.acceleration, None)):
+        if len(values) != n:
+            out.append(f"{name}: {len(values)} values, {robot.name} has {n} joints")
+            continue
+        for j, value in enumerate(values):
+            unit = ("rad" if types[j] == "R" else "m") + ("/s" if name == "speed" else "/s²")
+            if not (math.isfinite(value) and value > 0):
+                out.append(f"{name} of joint {j + 1} = {value} {unit}, expected a number > 0")
+            elif top is not None and value > top[j]:
+                out.append(f"speed of joint {j + 1} = {value:.4f} {unit} above its max_speed {top[j]:.4f}")
+    for i, step in enumerate(plan.steps):
+        where = f"step {i} ({step.kind}, sweep {step.sweep}, joint {step.joint})"
+        if step.index != i:
+            out.append(f"{where}: index {step.index}, expected {i}")
+        if step.kind not in STEP_KINDS:
+            out.append(f"{where}: kind '{step.kind}', expected one of {', '.join(STEP_KINDS)}")
+        if step.role not in ("fit", "check"):
+            out.append(f"{where}: role '{step.role}', expected fit or check")
+        if step.kind == "sweep" and not 1 <= step.joint <= n:
+            out.append(f"{where}: a sweep must name a joint 1..{n}")
+        pose(where, step.q)
+    return out
+
+
+def motion_time(distance: Any, speed: Any, acceleration: Any) -> Array:
+    """Time (s) of a trapezoidal (or, when too short to reach ``speed``, triangular) velocity profile
+    over ``distance`` from rest to rest; elementwise."""
+    d, v, a = (np.abs(np.asarray(x, dtype=float)) for x in (distance, speed, acceleration))
+    return np.where(d * a >= v * v, d / v + v / a, 2 * np.sqrt(d / a))
+
+
+def estimate_duration(plan: Plan, robot: RobotModel, measure_time_per_sample: float) -> float:
+    """Seconds to run ``plan`` from the home pose: for each step the move from the previous pose (the
+    slowest joint's trapezoidal profile at the plan's speed and acceleration), the settle time and
+    ``samples_per_step`` × ``measure_time_per_sample``."""
+    if not plan.steps:
+        return 0.0
+    q = np.array([plan.home, *(s.q for s in plan.steps)])
+    moves = motion_time(np.diff(q, axis=0), plan.speed, plan.acceleration).max(axis=1)
+    per_step = plan.settle_time + plan.samples_per_step * measure_time_per_sample
+    return float(moves.sum() + len(plan.steps) * per_step)
+
+
+def _partial_sweeps(plan: Plan, robot: RobotModel) -> Array:
+    """The plan's sweeps with each revolute one cut to home ± ``PARTIAL_ARC`` (same step counts)."""
+    rows = []
+    for j in dict.fromkeys(s.joint for s in plan.steps if s.kind == "sweep"):
+        count = sum(1 for s in plan.steps if s.kind == "sweep" and s.joint == j)
+        q = np.tile(np.array(plan.home), (count, 1))
+        if robot.joint_types[j - 1] == "R":
+            lo, hi = robot.limits[j - 1]
+            q[:, j - 1] = np.linspace(max(lo, plan.home[j - 1] - PARTIAL_ARC),
+                                      min(hi, plan.home[j - 1] + PARTIAL_ARC), count)
+        else:
+            q[:, j - 1] = [s.q[j - 1] for s in plan.steps if s.kind == "sweep" and s.joint == j]
+        rows.append(q)
+    return np.vstack(rows) if rows else np.zeros((0, robot.n_joints))
+
+
+def prediction_bound(model: DHModel, q_fit: Array, q_eval: Array, sigma: float) -> float:
+    """Cramér-Rao bound (m) on the RMS TP error at ``q_eval`` for data at ``q_fit`` with noise ``sigma``,
+    as :func:`identify.bounds.prediction_rms_bound`, but inf when the data leave a combination of
+    parameters that changes the predictions at ``q_eval`` undetermined."""
+    g_fit, g_eval = _whitened(model, q_fit, q_eval)
+    info = _gram(g_fit)
+    values = np.linalg.eigvalsh(info)
+    if not len(values) or values[0] <= SUBSPACE_TOL**2 * values[-1]:
+        return math.inf
+    cov = np.linalg.inv(info)
+    target = _gram(g_eval)
+    return float(sigma * np.sqrt(np.trace(cov @ target) / len(q_eval)))
+
+
+def predicted_accuracy(plan: Plan, robot: RobotModel, tp_guess: Any, noise: float, rng_seed: int = 1,
+                       eval_poses: int = EVAL_POSES) -> dict[str, float]:
+    """Cramér-Rao bounds (m) of the RMS TP prediction error at ``eval_poses`` random held-out poses within
+    the limits, on the nominal model with the TP guess as tool, for tracker ``noise`` (m per axis per
+    reading; a step averages ``samples_per_step`` readings, so its noise is ``noise / √samples``).
+
+    Keys: ``with_free`` (the plan's sweeps and fitted free poses), ``sweeps_only`` (without the free
+    poses), ``partial`` (±20° revolute sweeps, no free poses), ``partial_with_free`` (those plus the
+    free poses), ``noise``, ``step_noise`` (m), ``eval_poses``. ``inf`` where the data leave the
+    predictions undetermined. Home checks and check poses are not counted as fitted data.
+    """
+    model = tp_model(robot, tp_guess)
+    step_noise = noise / math.sqrt(max(plan.samples_per_step, 1))
+    q_eval = random_poses(robot.limits, eval_poses, np.random.default_rng(rng_seed))
+    sweeps = np.array([s.q for s in plan.steps if s.kind == "sweep"]).reshape(-1, robot.n_joints)
+    free = np.array([s.q for s in plan.steps if s.kind == "free" and s.role == "fit"]).reshape(-1, robot.n_joints)
+    partial = _partial_sweeps(plan, robot)
+
+    def bound(q: Array) -> float:
+        return prediction_bound(model, q, q_eval, step_noise) if len(q) else math.inf
+
+    return {
+        "with_free": bound(np.vstack([sweeps, free])),
+        "sweeps_only": bound(sweeps),
+        "partial": bound(partial),
+        "partial_with_free": bound(np.vstack([partial, free])),
+        "noise": float(noise),
+        "step_noise": step_noise,
+        "eval_poses": float(eval_poses),
+    }
+
+
+def _hms(seconds: float) -> str:
+    total = round(seconds)
+    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
+
+
+def _per_joint_text(values: tuple[float, ...], types: str, unit_r: str, unit_p: str) -> str:
+    return ", ".join(f"{math.degrees(v):.1f}{unit_r}" if t == "R" else f"{v * 1e3:.0f}{unit_p}"
+                     for v, t in zip(values, types, strict=False))
+
+
+def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict[str, float] | None) -> str:
+    """The dry-run summary an operator reads: one line per sweep, counts, duration, accuracy, notes."""
+    types = plan.joint_types
+    lines = [f"Plan for {plan.robot} ({types}), {len(plan.steps)} steps", "",
+             f"{'sweep':>5}  {'joint':>5}  {'from':>10}  {'to':>10}  {'steps':>5}"]
+    sweeps: dict[int, list[Step]] = {}
+    for s in plan.steps:
+        if s.kind == "sweep":
+            sweeps.setdefault(s.sweep, []).append(s)
+    for sweep, steps in sweeps.items():
+        j = steps[0].joint
+        values = [s.q[j - 1] for s in steps]
+        kind = types[j - 1] if 0 < j <= len(types) else "P"
+        lines.append(f"{sweep:>5}  {j:>5}  {_fmt(min(values), kind):>10}  {_fmt(max(values), kind):>10}  "
+                     f"{len(steps):>5}")
+    count = {k: sum(1 for s in plan.steps if s.kind == k) for k in STEP_KINDS}
+    check = sum(1 for s in plan.steps if s.kind == "free" and s.role == "check")
+    lines += ["",
+              f"free poses: {count['free'] - check} fitted + {check} held out for checking; "
+              f"home checks: {count['home']}",
+              f"total: {len(plan.steps)} steps x {plan.samples_per_step} samples = "
+              f"{len(plan.steps) * plan.samples_per_step} samples; settle {plan.settle_time:g} s per step",
+              f"speed: {_per_joint_text(plan.speed, types, '°/s', ' mm/s')}",
+              f"acceleration: {_per_joint_text(plan.acceleration, types, '°/s²', ' mm/s²')}",
+              f"estimated duration: {_hms(duration_s)}"]
+    if accuracy:
+        step = accuracy["step_noise"]
+        lines += ["",
+                  f"predicted accuracy (Cramér-Rao bound, RMS TP error at {int(accuracy['eval_poses'])} random "
+                  f"held-out poses; tracker noise {accuracy['noise'] * 1e3:.4g} mm per axis, "
+                  f"{plan.samples_per_step} samples per step: {step * 1e3:.4g} mm per step):"]
+        rows = (("with_free", "this plan"), ("sweeps_only", "without its free poses"),
+                ("partial", "±20° sweeps, no free poses"), ("partial_with_free", "±20° sweeps + free poses"))
+        for key, label in rows:
+            value = accuracy[key]
+            shown = (f"{value * 1e3:.4f} mm = {value / step:.1f} x the noise per step" if math.isfinite(value)
+                     else "undetermined (the data do not fix every parameter)")
+            lines.append(f"  {label:<28} {shown}")
+    if plan.notes:
+        lines += ["", "notes:", *(f"  - {note}" for note in plan.notes)]
+    return "\n".join(lines)

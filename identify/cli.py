@@ -17,7 +17,7 @@ import yaml
 
 from identify import __version__
 from identify.cpa import DEFAULT_PARALLEL_TOL
-from identify.csvio import UNITS, read_measurements
+from identify.csvio import UNITS, CsvContent, read_measurements
 from identify.kinematics import DHModel
 from identify.measurements import InputError
 from identify.pipeline import identify, split_holdout
@@ -38,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Identify a robot's DH parameters, base and tracked point from a measurement CSV "
         "(sweeps of one joint at a time; see README for the format).",
     )
-    parser.add_argument("input", help="measurement CSV (sweep,joint,q1..qN,x,y,z)")
+    parser.add_argument("input", help="measurement CSV (sweep,joint,q1..qN,x,y,z) or an acquisition session file")
     parser.add_argument("--out", metavar="FILE", help="write the result YAML (DESIGN.md contract) to FILE")
     parser.add_argument("--json", action="store_true", help="print the full result as JSON instead of a table")
     parser.add_argument("--joints", metavar="TYPES", help="joint types base to tip, e.g. RRPR (overrides the file)")
@@ -64,6 +64,26 @@ def _load_nominal(name: str) -> tuple[DHModel, str]:
     return robot.nominal, robot.name
 
 
+def _is_session(path: Path) -> bool:
+    """True for an SQLite file (an acquisition session) rather than a CSV."""
+    try:
+        with path.open("rb") as fh:
+            return fh.read(16) == b"SQLite format 3\x00"
+    except OSError:
+        return False
+
+
+def _read_session(path: Path) -> CsvContent:
+    """The measurements of an acquisition session (the session format belongs to ``acquire``)."""
+    from acquire.session import Session, SessionError
+
+    try:
+        with Session.open(path) as session:
+            return CsvContent(session.to_measurements(), {"session": str(path)}, [])
+    except SessionError as exc:
+        raise InputError(str(exc)) from None
+
+
 def _write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` via a temporary file in the same folder, so a crash leaves no half file."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -83,7 +103,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Identify per ``args``; returns the result document. Raises InputError for bad input."""
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
-    content = read_measurements(args.input, args.joints, args.units)
+    if _is_session(Path(args.input)):
+        content = _read_session(Path(args.input))
+    else:
+        content = read_measurements(args.input, args.joints, args.units)
     meas = split_holdout(content.measurements, args.holdout, args.seed)
     nominal, nominal_name = (None, None)
     if args.robot:

@@ -1,0 +1,232 @@
+"""The acquisition loop: move, wait until still, read the joints, measure, reject outliers, record.
+
+A plain loop over the plan's unrecorded steps (so a resumed session continues where it stopped). Each
+step is committed to the session before the next move. Tracker failures are retried a bounded number
+of times, then the step is recorded as missing and the run goes on; robot faults and lost connections
+stop the motion, end the run as failed and return (the session says how to resume); Ctrl-C stops the
+motion at once and ends the run as aborted. Every device call has a timeout.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from acquire.plan import Plan, Step
+from acquire.session import Session, StepRecord
+from drivers.base import Robot, RobotState, Tracker, TrackerReading
+from drivers.clock import Clock
+from drivers.errors import ConnectionFailed, DeviceTimeout, MeasurementError, RobotFault
+from identify.geometry import circle_from_points
+
+Array = NDArray[np.float64]
+
+OUTLIER_SIGMAS = 5.0  # a sample farther than this many robust sigmas from the step's median is rejected
+CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise (chi, 3 dof)
+SPREAD_FLOOR = 1e-6  # m: below this the readings' spread is resolution, not noise
+
+
+@dataclass(frozen=True)
+class Timeouts:
+    """Seconds allowed for each kind of wait."""
+
+    move: float = 120.0
+    settle: float = 10.0
+    measure: float = 10.0
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """How a run ended: ``outcome`` complete / aborted / failed, with ``reason``; steps recorded in
+    this run and how many of them are missing."""
+
+    outcome: str
+    reason: str
+    recorded: int
+    missing: int
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What the progress display shows after each step."""
+
+    step: Step
+    done: int
+    total: int
+    elapsed: float
+    remaining: float
+    samples: int
+    status: str
+    residual: float | None
+
+
+def average_readings(readings: list[TrackerReading]) -> tuple[Array, float | None, NDArray[np.bool_]]:
+    """Mean TP (m) of the readings kept after rejecting outliers, its per-axis standard uncertainty
+    (m; None for a single reading without a device sigma), and the mask of kept readings."""
+    pts = np.array([r.position for r in readings], dtype=float)
+    median = np.median(pts, axis=0)
+    dist = np.linalg.norm(pts - median, axis=1)
+    sigma = max(float(np.median(dist)) / CHI3_MEDIAN, SPREAD_FLOOR)  # robust per-axis noise of the readings
+    used = dist <= OUTLIER_SIGMAS * sigma if len(pts) >= 3 else np.ones(len(pts), dtype=bool)
+    kept = pts[used]
+    device = [r.sigma for r in readings if r.sigma is not None]
+    # the device's own figure is steadier than the spread of a handful of readings; use the spread only
+    # when the device gives none
+    if device:
+        per_sample = float(np.median(device))
+    elif len(kept) >= 3:
+        per_sample = float(np.sqrt(np.mean(np.var(kept, axis=0, ddof=1))))
+    else:
+        return kept.mean(axis=0), None, used
+    return kept.mean(axis=0), per_sample / np.sqrt(len(kept)), used
+
+
+class StopRequest:
+    """Set by Ctrl-C (first press); the loop checks it between phases. A second press raises at once."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.on_request: Callable[[], None] | None = None
+
+    def request(self) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        if self.on_request is not None:
+            self.on_request()
+
+    @contextmanager
+    def installed(self) -> Iterator[StopRequest]:
+        """Route SIGINT to :meth:`request` while inside the block (main thread only)."""
+        if threading.current_thread() is not threading.main_thread():
+            yield self
+            return
+        previous = signal.signal(signal.SIGINT, lambda *_: self.request())
+        try:
+            yield self
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+
+class Orchestrator:
+    """Runs a session's remaining steps on a robot and a tracker."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        tracker: Tracker,
+        session: Session,
+        clock: Clock,
+        timeouts: Timeouts = Timeouts(),
+        retries: int = 3,
+        on_progress: Callable[[Progress], None] | None = None,
+        stop: StopRequest | None = None,
+    ) -> None:
+        self.robot, self.tracker, self.session, self.clock = robot, tracker, session, clock
+        self.timeouts, self.retries = timeouts, retries
+        self.on_progress = on_progress
+        self.stop = stop or StopRequest()
+        self.plan: Plan = session.plan
+
+    def run(self) -> RunResult:
+        """Record every remaining step of the plan; returns how the run ended (the session has it too)."""
+        self.stop.on_request = self.robot.stop
+        self.session.begin_run()
+        recorded = missing = 0
+        todo = [s for s in self.plan.steps if s.index not in self.session.recorded_indices()]
+        started = self.clock.now()
+        sweep_points: dict[int, list[Array]] = {}
+        try:
+            for count, step in enumerate(todo, start=1):
+                if self.stop.requested:
+                    return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
+                record = self._do_step(step)
+                if self.stop.requested and record.status != "ok":
+                    return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
+                self.session.record_step(record)
+                recorded += 1
+                missing += record.status != "ok"
+                if self.on_progress is not None:
+                    self.on_progress(self._progress(step, record, count, len(todo), started, sweep_points))
+        except RobotFault as exc:
+            self.robot.stop()
+            self.session.event("fault", str(exc))
+            return self._end("failed", f"robot fault: {exc}", recorded, missing)
+        except ConnectionFailed as exc:
+            self.robot.stop()
+            self.session.event("connection", str(exc))
+            return self._end("failed", f"connection lost: {exc}", recorded, missing)
+        except DeviceTimeout as exc:
+            self.robot.stop()
+            self.session.event("timeout", str(exc))
+            return self._end("failed", f"timeout: {exc}", recorded, missing)
+        except KeyboardInterrupt:
+            self.robot.stop()
+            return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
+        return self._end("complete", "", recorded, missing)
+
+    def _end(self, outcome: str, reason: str, recorded: int, missing: int) -> RunResult:
+        self.session.end_run(outcome, reason)
+        return RunResult(outcome, reason, recorded, missing)
+
+    def _do_step(self, step: Step) -> StepRecord:
+        t_start = self.clock.now()
+        state = self.robot.state()
+        if state is not RobotState.READY:
+            raise RobotFault(f"robot is not ready ({state.value}) before step {step.index}")
+        self.robot.move_joints(step.q, self.plan.speed, self.plan.acceleration, self.timeouts.move)
+        if self.stop.requested:
+            return self._missing(step, t_start, "stopped by the operator")
+        self.robot.wait_until_still(self.plan.settle_time, self.timeouts.settle)
+        q_act = tuple(float(v) for v in self.robot.read_joints())
+        readings, reason = self._measure(step)
+        if not readings:
+            return StepRecord(step.index, step.kind, step.sweep, step.joint, step.role, tuple(step.q), q_act, None,
+                              None, 0, 0, "missing", reason, t_start, self.clock.now(), [], [])
+        position, sigma, used = average_readings(readings)
+        return StepRecord(step.index, step.kind, step.sweep, step.joint, step.role, tuple(step.q), q_act,
+                          tuple(float(v) for v in position), sigma, int(used.sum()), int((~used).sum()), "ok", "",
+                          t_start, self.clock.now(), readings, [bool(u) for u in used])
+
+    def _missing(self, step: Step, t_start: float, reason: str) -> StepRecord:
+        return StepRecord(step.index, step.kind, step.sweep, step.joint, step.role, tuple(step.q), None, None, None,
+                          0, 0, "missing", reason, t_start, self.clock.now(), [], [])
+
+    def _measure(self, step: Step) -> tuple[list[TrackerReading], str]:
+        """Readings of the step, retried up to ``retries`` times on measurement errors and timeouts."""
+        reason = ""
+        for attempt in range(self.retries + 1):
+            try:
+                return self.tracker.measure(self.plan.samples_per_step, self.timeouts.measure), ""
+            except (MeasurementError, DeviceTimeout) as exc:
+                reason = f"{type(exc).__name__}: {exc}"
+                self.session.event("retry", f"step {step.index}, attempt {attempt + 1}: {reason}")
+                if self.stop.requested:
+                    break
+        return [], f"tracker failed {self.retries + 1} times ({reason})"
+
+    def _progress(self, step: Step, record: StepRecord, count: int, total: int, started: float,
+                  sweep_points: dict[int, list[Array]]) -> Progress:
+        elapsed = self.clock.now() - started
+        remaining = elapsed / count * (total - count)
+        residual = None
+        if record.position is not None and step.kind == "sweep" and self.plan.joint_types[step.joint - 1] == "R":
+            pts = sweep_points.setdefault(step.sweep, [])
+            pts.append(np.array(record.position))
+            if len(pts) >= 5:
+                residual = _circle_residual(np.array(pts))
+        return Progress(step, count, total, elapsed, remaining, record.samples, record.status, residual)
+
+
+def _circle_residual(points: Array) -> float | None:
+    """RMS distance (m) of a sweep's points so far from their best circle: a live sanity check."""
+    try:
+        return circle_from_points(points).rms
+    except (ValueError, np.linalg.LinAlgError):
+        return None

@@ -1,0 +1,579 @@
+"""A session: one SQLite file holding everything an acquisition recorded, durable and resumable.
+
+The file (stdlib ``sqlite3``, WAL journal, ``synchronous=FULL``, foreign keys on) holds:
+
+- ``meta(key, value)``: the header, each value JSON: ``schema`` (int), ``created`` (s since the epoch),
+  ``software`` (``identify.__version__``), ``config`` (the resolved configuration, an object), ``robot`` and
+  ``tracker`` (``DeviceIdentity.as_dict()``), ``plan`` (``Plan.to_json()``). ``PRAGMA user_version`` holds
+  the schema too; a file of a newer schema is refused, never modified.
+- ``runs(id, started, ended, outcome, reason)``: one row per run (start or resume); ``outcome`` is
+  ``running``, ``complete``, ``aborted`` (by the operator) or ``failed`` (with the reason). A run left
+  ``running`` by a process that died is closed as ``failed`` ("interrupted") by the next ``begin_run``.
+- ``steps(plan_index PRIMARY KEY, ...)``: one row per plan step, commanded and actual joints, averaged TP,
+  its per-axis sigma, sample counts, status (``ok``/``missing``), reason, timestamps and run id. The
+  primary key makes recording a step twice impossible.
+- ``readings(id, plan_index, x, y, z, sigma, t, status, used)``: every raw tracker reading of a step and
+  whether it was kept after outlier rejection. SQLite stores NaN as NULL; NULL coordinates read back NaN.
+- ``events(id, t, run_id, kind, message)``: pauses, faults, retries, resumes.
+
+Drift is not a table: home re-measurements are steps of kind ``home``, and :meth:`Session.drift`
+computes their displacement from the first one on read (one source of truth, nothing to keep in sync).
+
+Durability: a step and all its readings are written in one transaction, committed (fsync'd) before
+:meth:`Session.record_step` returns; a ``kill -9`` at any moment leaves the whole step or none of it.
+Creation is atomic too: the file is built under a temporary name and linked into place complete.
+
+Units: metres (positions, sigma), radians / metres (joints), seconds since the epoch (times).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import sqlite3
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import numpy as np
+
+from acquire.plan import Plan, Step
+from drivers.base import DeviceIdentity, TrackerReading
+from identify import __version__
+from identify.csvio import format_measurements
+from identify.measurements import Measurements
+
+SCHEMA_VERSION = 1
+OUTCOMES = ("running", "complete", "aborted", "failed")
+STATUSES = ("ok", "missing")
+_MAGIC = b"SQLite format 3\x00"
+_STEP_COLUMNS = ("plan_index", "kind", "sweep", "joint", "role", "q_cmd", "q_act", "x", "y", "z", "sigma", "samples",
+                 "rejected", "status", "reason", "t_start", "t_end")
+
+_SCHEMA = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE runs (
+    id INTEGER PRIMARY KEY, started REAL NOT NULL, ended REAL,
+    outcome TEXT NOT NULL CHECK (outcome IN ('running', 'complete', 'aborted', 'failed')),
+    reason TEXT NOT NULL DEFAULT '');
+CREATE TABLE steps (
+    plan_index INTEGER PRIMARY KEY, kind TEXT NOT NULL, sweep INTEGER NOT NULL, joint INTEGER NOT NULL,
+    role TEXT NOT NULL, q_cmd TEXT NOT NULL, q_act TEXT, x REAL, y REAL, z REAL, sigma REAL,
+    samples INTEGER NOT NULL, rejected INTEGER NOT NULL,
+    status TEXT NOT NULL CHECK (status IN ('ok', 'missing')), reason TEXT NOT NULL DEFAULT '',
+    t_start REAL NOT NULL, t_end REAL NOT NULL, run_id INTEGER NOT NULL REFERENCES runs (id));
+CREATE TABLE readings (
+    id INTEGER PRIMARY KEY, plan_index INTEGER NOT NULL REFERENCES steps (plan_index),
+    x REAL, y REAL, z REAL, sigma REAL, t REAL, status TEXT NOT NULL, used INTEGER NOT NULL CHECK (used IN (0, 1)));
+CREATE INDEX readings_by_step ON readings (plan_index);
+CREATE TABLE events (
+    id INTEGER PRIMARY KEY, t REAL NOT NULL, run_id INTEGER REFERENCES runs (id), kind TEXT NOT NULL,
+    message TEXT NOT NULL);
+"""
+
+
+class SessionError(Exception):
+    """A session file that cannot be created, read or written; the message is one line for the operator."""
+
+
+@dataclass(frozen=True, eq=False)
+class StepRecord:
+    """What happened at one plan step.
+
+    ``q_cmd``: commanded joints; ``q_act``: joints read after settling (rad / m), None if never read;
+    ``position``: averaged TP (x, y, z) in the tracker frame, m, None for a missing step; ``sigma``:
+    per-axis standard uncertainty of that average, m, or None; ``samples``/``rejected``: readings kept /
+    rejected (they add up to ``len(readings)``); ``status``: "ok" or "missing" (then ``reason`` says why);
+    ``t_start``/``t_end``: s since the epoch; ``readings``: every raw reading, ``used`` parallel flags.
+    Equality compares values (NaN equals NaN), so a record read back equals the one written.
+    """
+
+    plan_index: int
+    kind: str
+    sweep: int
+    joint: int
+    role: str
+    q_cmd: tuple[float, ...]
+    q_act: tuple[float, ...] | None
+    position: tuple[float, float, float] | None
+    sigma: float | None
+    samples: int
+    rejected: int
+    status: str
+    reason: str
+    t_start: float
+    t_end: float
+    readings: tuple[TrackerReading, ...] = ()
+    used: tuple[bool, ...] = ()
+
+    def __post_init__(self) -> None:
+        put = object.__setattr__
+        put(self, "q_cmd", tuple(float(v) for v in self.q_cmd))
+        if self.q_act is not None:
+            put(self, "q_act", tuple(float(v) for v in self.q_act))
+        if self.position is not None:
+            put(self, "position", tuple(float(v) for v in self.position))
+        if self.sigma is not None:
+            put(self, "sigma", float(self.sigma))
+        put(self, "readings", tuple(self.readings))
+        put(self, "used", tuple(bool(u) for u in self.used))
+        if self.status not in STATUSES:
+            raise ValueError(f"step {self.plan_index}: status must be 'ok' or 'missing', got {self.status!r}")
+        if self.status == "ok":
+            if self.position is None or len(self.position) != 3 or not all(map(math.isfinite, self.position)):
+                raise ValueError(f"step {self.plan_index}: an ok step needs a finite position (x, y, z)")
+            if self.q_act is None:
+                raise ValueError(f"step {self.plan_index}: an ok step needs the actual joints q_act")
+        elif self.position is not None and len(self.position) != 3:
+            raise ValueError(f"step {self.plan_index}: position must have 3 coordinates")
+        if len(self.used) != len(self.readings):
+            raise ValueError(f"step {self.plan_index}: {len(self.readings)} readings but {len(self.used)} used flags")
+        if self.samples != sum(self.used) or self.samples + self.rejected != len(self.readings):
+            raise ValueError(f"step {self.plan_index}: samples {self.samples} + rejected {self.rejected} must match "
+                             f"the {sum(self.used)} used of {len(self.readings)} readings")
+
+    @classmethod
+    def from_step(cls, step: Step, **fields: Any) -> StepRecord:
+        """A record of the plan ``step`` (index, kind, sweep, joint, role, commanded q taken from it)."""
+        return cls(plan_index=step.index, kind=step.kind, sweep=step.sweep, joint=step.joint, role=step.role,
+                   q_cmd=step.q, **fields)
+
+    def _key(self) -> tuple[Any, ...]:
+        readings = tuple((_floats(r.position), _nan_none(r.timestamp), _nan_none(r.sigma), r.status)
+                         for r in self.readings)
+        return (self.plan_index, self.kind, self.sweep, self.joint, self.role, _floats(self.q_cmd),
+                _floats(self.q_act), _floats(self.position), _nan_none(self.sigma), self.samples, self.rejected,
+                self.status, self.reason, self.t_start, self.t_end, readings, self.used)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, StepRecord):
+            return NotImplemented
+        return self._key() == other._key()
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """One run: ``started``/``ended`` s since the epoch (``ended`` None while running)."""
+
+    id: int
+    started: float
+    ended: float | None
+    outcome: str
+    reason: str
+
+
+class Session:
+    """An open session file. Create with :meth:`create`, reopen with :meth:`open`; use as a context manager."""
+
+    def __init__(self, path: Path, conn: sqlite3.Connection, header: dict[str, Any], plan: Plan) -> None:
+        """Internal: use :meth:`create` or :meth:`open`."""
+        self.path = path
+        self._conn: sqlite3.Connection | None = conn
+        self._header = header
+        self._plan = plan
+        self._run_id: int | None = None
+
+    # --- creating and opening -------------------------------------------------------------------------------
+
+    @classmethod
+    def create(cls, path: str | Path, plan: Plan, config: dict[str, Any], robot: DeviceIdentity,
+               tracker: DeviceIdentity) -> Session:
+        """A new session file at ``path`` with its header; refuses to overwrite anything (SessionError).
+
+        The file appears complete or not at all: it is written under a temporary name, then linked into place.
+        """
+        path = Path(path)
+        if path.exists():
+            raise SessionError(f"{path} already exists; a session file is never overwritten (choose another name)")
+        if any(step.index != i for i, step in enumerate(plan.steps)):
+            raise SessionError(f"{path}: plan step indices must be 0..{len(plan.steps) - 1} in order")
+        header = {"schema": SCHEMA_VERSION, "created": time.time(), "software": __version__, "config": config,
+                  "robot": robot.as_dict(), "tracker": tracker.as_dict()}
+        try:
+            rows = [(key, json.dumps(value, allow_nan=False)) for key, value in header.items()]
+        except (TypeError, ValueError) as exc:
+            raise SessionError(f"{path}: the configuration cannot be stored as JSON ({exc})") from None
+        rows.append(("plan", plan.to_json()))
+        temp = path.with_name(f".{path.name}.creating-{os.getpid()}")
+        try:
+            temp.unlink(missing_ok=True)
+            conn = sqlite3.connect(temp, isolation_level=None)
+            try:
+                _configure(conn)
+                conn.execute("BEGIN IMMEDIATE")
+                for statement in _SCHEMA.split(";"):
+                    if statement.strip():
+                        conn.execute(statement)
+                conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", rows)
+                conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                conn.execute("COMMIT")
+            finally:
+                conn.close()  # the last connection checkpoints the WAL into the file and removes it
+            _fsync(temp)
+            try:
+                os.link(temp, path)  # fails if path exists: no overwrite, even in a race
+            except FileExistsError:
+                raise SessionError(f"{path} already exists; a session file is never overwritten") from None
+            except OSError:  # a file system without hard links: rename (checked above that path is free)
+                os.replace(temp, path)
+            _fsync(path.parent, directory=True)
+        except sqlite3.Error as exc:
+            raise SessionError(f"{path}: cannot create the session ({exc})") from None
+        except OSError as exc:
+            raise SessionError(f"{path}: cannot create the session ({exc.strerror or exc})") from None
+        finally:
+            with contextlib.suppress(OSError):
+                temp.unlink()
+        return cls.open(path)
+
+    @classmethod
+    def open(cls, path: str | Path) -> Session:
+        """Open an existing session to read it or continue it. SessionError (one line) for a missing, corrupt,
+        non-SQLite or foreign file, or one written by a newer schema."""
+        path = Path(path)
+        not_session = SessionError(f"{path} is not a session file (corrupt or not SQLite)")
+        try:
+            with path.open("rb") as f:
+                magic = f.read(len(_MAGIC))
+        except FileNotFoundError:
+            raise SessionError(f"{path}: no such session file") from None
+        except OSError as exc:
+            raise SessionError(f"{path}: cannot be read ({exc.strerror or exc})") from None
+        if magic != _MAGIC:
+            raise not_session
+        try:
+            conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=rw", uri=True, isolation_level=None)
+        except sqlite3.Error as exc:
+            raise SessionError(f"{path}: cannot be opened ({exc})") from None
+        try:
+            version = conn.execute("PRAGMA user_version").fetchone()[0]
+            if version > SCHEMA_VERSION:
+                raise _newer(path, version)
+            if conn.execute("PRAGMA quick_check").fetchone()[0] != "ok":
+                raise not_session
+            tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            if version < 1 or not {"meta", "runs", "steps", "readings", "events"} <= tables:
+                raise not_session
+            meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
+            header = {key: json.loads(value) for key, value in meta.items()}
+            if int(header.get("schema", 0)) > SCHEMA_VERSION:
+                raise _newer(path, int(header["schema"]))
+            plan = Plan.from_json(meta["plan"])
+            _configure(conn)
+        except SessionError:
+            conn.close()
+            raise
+        except (sqlite3.Error, ValueError, KeyError, TypeError):
+            conn.close()
+            raise not_session from None
+        return cls(path, conn, header, plan)
+
+    def close(self) -> None:
+        """Close the file. A run this object began and did not end is ended as failed."""
+        if self._conn is None:
+            return
+        try:
+            if self._run_id is not None:
+                self.end_run("failed", "the session was closed before the run ended")
+        finally:
+            self._conn.close()
+            self._conn = None
+
+    def __enter__(self) -> Session:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if self._run_id is not None and exc is not None and self._conn is not None:
+            with contextlib.suppress(SessionError):  # never hide the exception that is propagating
+                if isinstance(exc, KeyboardInterrupt):
+                    self.end_run("aborted", "stopped by the operator (Ctrl-C)")
+                else:
+                    self.end_run("failed", f"{type(exc).__name__}: {exc}")
+        if exc is None:
+            self.close()
+        else:
+            with contextlib.suppress(SessionError):
+                self.close()
+
+    # --- header ---------------------------------------------------------------------------------------------
+
+    @property
+    def plan(self) -> Plan:
+        """The plan the session was created with."""
+        return self._plan
+
+    @property
+    def header(self) -> dict[str, Any]:
+        """schema, created (s), software, config, robot, tracker (dicts), plan (as a dict)."""
+        return json.loads(json.dumps(self._header))
+
+    # --- runs and events ------------------------------------------------------------------------------------
+
+    def begin_run(self) -> int:
+        """Start a run (a first start or a resume) and return its id. Runs left ``running`` by a process
+        that died are closed as failed first."""
+        if self._run_id is not None:
+            raise SessionError(f"{self.path}: run {self._run_id} is still running; end it first")
+        now = time.time()
+        with self._transaction("start a run"):
+            stale = [row[0] for row in self._db.execute("SELECT id FROM runs WHERE outcome = 'running'")]
+            self._db.execute("UPDATE runs SET outcome = 'failed', ended = ?, reason = ? WHERE outcome = 'running'",
+                             (now, "interrupted: the process ended without closing the run"))
+            cur = self._db.execute("INSERT INTO runs (started, outcome) VALUES (?, 'running')", (now,))
+            run_id = int(cur.lastrowid)
+            if stale:
+                message = f"resuming after interrupted run(s) {', '.join(map(str, stale))}"
+                self._db.execute("INSERT INTO events (t, run_id, kind, message) VALUES (?, ?, 'resume', ?)",
+                                 (now, run_id, message))
+        self._run_id = run_id
+        return run_id
+
+    def end_run(self, outcome: str, reason: str = "") -> None:
+        """End the current run: ``outcome`` is "complete", "aborted" (by the operator) or "failed" (give a reason)."""
+        if outcome not in OUTCOMES[1:]:
+            raise ValueError(f"outcome must be one of {', '.join(OUTCOMES[1:])}, got {outcome!r}")
+        if outcome == "failed" and not reason:
+            raise ValueError("a failed run needs a reason")
+        if self._run_id is None:
+            raise SessionError(f"{self.path}: no run to end (call begin_run first)")
+        with self._transaction("end the run"):
+            self._db.execute("UPDATE runs SET outcome = ?, reason = ?, ended = ? WHERE id = ?",
+                             (outcome, " ".join(reason.split()), time.time(), self._run_id))
+        self._run_id = None
+
+    def event(self, kind: str, message: str) -> None:
+        """Log an event (pause, fault, retry, resume...) of the current run, time-stamped now."""
+        with self._transaction("log an event"):
+            self._db.execute("INSERT INTO events (t, run_id, kind, message) VALUES (?, ?, ?, ?)",
+                             (time.time(), self._run_id, kind, message))
+
+    def events(self) -> list[tuple[float, int | None, str, str]]:
+        """Every event as (t, run_id, kind, message), oldest first."""
+        return [tuple(row) for row in self._db.execute("SELECT t, run_id, kind, message FROM events ORDER BY id")]
+
+    def runs(self) -> list[RunInfo]:
+        """Every run, oldest first."""
+        rows = self._db.execute("SELECT id, started, ended, outcome, reason FROM runs ORDER BY id")
+        return [RunInfo(*row) for row in rows]
+
+    def outcome(self) -> str | None:
+        """How the last run ended ("running" if it has not, or if its process died), None before any run."""
+        row = self._db.execute("SELECT outcome FROM runs ORDER BY id DESC LIMIT 1").fetchone()
+        return None if row is None else row[0]
+
+    # --- steps ----------------------------------------------------------------------------------------------
+
+    def record_step(self, record: StepRecord) -> None:
+        """Store a step and all its readings in one transaction, durable when this returns.
+
+        Raises SessionError if the step was already recorded, does not match the plan, or no run is going.
+        """
+        i = record.plan_index
+        if not 0 <= i < len(self._plan.steps):
+            raise SessionError(f"{self.path}: step {i} is not in the plan (0..{len(self._plan.steps) - 1})")
+        step = self._plan.steps[i]
+        planned = (step.kind, step.sweep, step.joint, step.role)
+        if (record.kind, record.sweep, record.joint, record.role) != planned:
+            raise SessionError(f"{self.path}: step {i} does not match the plan (kind, sweep, joint, role {planned})")
+        if self._run_id is None:
+            raise SessionError(f"{self.path}: no run is going (call begin_run before recording steps)")
+        n = len(self._plan.joint_types)
+        for name, q in (("q_cmd", record.q_cmd), ("q_act", record.q_act)):
+            if q is not None and len(q) != n:
+                raise SessionError(f"{self.path}: step {i}: {name} has {len(q)} values; the robot has {n} joints")
+        x, y, z = record.position if record.position is not None else (None, None, None)
+        readings = []
+        for reading, used in zip(record.readings, record.used, strict=True):
+            p = np.asarray(reading.position, dtype=float).reshape(-1)
+            if p.shape != (3,):
+                raise SessionError(f"{self.path}: step {i}: a reading's position has {p.size} values, not 3")
+            sigma = None if reading.sigma is None else float(reading.sigma)
+            readings.append((i, *map(float, p), sigma, float(reading.timestamp), reading.status, int(used)))
+        try:
+            with self._transaction(f"record step {i}"):
+                self._db.execute(
+                    "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
+                    " rejected, status, reason, t_start, t_end, run_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,"
+                    " ?, ?, ?, ?, ?)",
+                    (i, record.kind, record.sweep, record.joint, record.role, _dump_q(record.q_cmd),
+                     _dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
+                     record.reason, record.t_start, record.t_end, self._run_id))
+                self._db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used)"
+                                     " VALUES (?, ?, ?, ?, ?, ?, ?, ?)", readings)
+        except SessionError as exc:
+            if self._db.execute("SELECT 1 FROM steps WHERE plan_index = ?", (i,)).fetchone():
+                raise SessionError(f"{self.path}: step {i} already recorded") from None
+            raise exc from None
+
+    def recorded_indices(self) -> set[int]:
+        """Plan indices of every recorded step (ok or missing)."""
+        return {row[0] for row in self._db.execute("SELECT plan_index FROM steps")}
+
+    def next_index(self) -> int | None:
+        """The first plan index not yet recorded; None when every step is."""
+        done = self.recorded_indices()
+        return next((i for i in range(len(self._plan.steps)) if i not in done), None)
+
+    def steps(self) -> list[StepRecord]:
+        """Every recorded step in plan order, with its raw readings."""
+        by_step: dict[int, list[tuple[Any, ...]]] = {}
+        for row in self._db.execute("SELECT plan_index, x, y, z, sigma, t, status, used FROM readings ORDER BY id"):
+            by_step.setdefault(row[0], []).append(row[1:])
+        out = []
+        for row in self._step_rows():
+            raw = by_step.get(row["plan_index"], [])
+            readings = tuple(TrackerReading(np.array([_nan(x), _nan(y), _nan(z)]), _nan(t), sigma, status)
+                             for x, y, z, sigma, t, status, _ in raw)
+            try:
+                out.append(StepRecord(**row, readings=readings, used=tuple(bool(r[-1]) for r in raw)))
+            except ValueError as exc:
+                raise SessionError(f"{self.path}: inconsistent record ({exc})") from None
+        return out
+
+    def _step_rows(self, where: str = "") -> list[dict[str, Any]]:
+        """Step columns (no readings) as StepRecord keyword arguments, in plan order."""
+        cur = self._db.execute(f"SELECT {', '.join(_STEP_COLUMNS)} FROM steps {where} ORDER BY plan_index")
+        out = []
+        for values in cur:
+            row = dict(zip(_STEP_COLUMNS, values, strict=True))
+            x, y, z = row.pop("x"), row.pop("y"), row.pop("z")
+            row.update(q_cmd=_load_q(row["q_cmd"]), q_act=_load_q(row["q_act"]),
+                       position=None if x is None else (x, y, z))
+            out.append(row)
+        return out
+
+    # --- export ---------------------------------------------------------------------------------------------
+
+    def to_measurements(self) -> Measurements:
+        """The ok steps as measurement-CSV rows, in plan order: q = ACTUAL joints, points = averaged TP.
+
+        Sweeps and free poses keep the plan's sweep id, joint and role. Home re-measurements become free poses
+        (joint 0) with role "check": held out, they validate the model at home and never bias the fit. Missing
+        steps are skipped. ``sigma`` is given only when every exported step has one.
+        """
+        rows = self._step_rows("WHERE status = 'ok'")
+        n = len(self._plan.joint_types)
+        q = np.array([r["q_act"] for r in rows], dtype=float).reshape(len(rows), n)
+        points = np.array([r["position"] for r in rows], dtype=float).reshape(len(rows), 3)
+        home = np.array([r["kind"] == "home" for r in rows], dtype=bool)
+        joint = np.where(home, 0, np.array([r["joint"] for r in rows], dtype=np.int64)).astype(np.int64)
+        sweep = np.array([r["sweep"] for r in rows], dtype=np.int64)
+        check = home | np.array([r["role"] == "check" for r in rows], dtype=bool)
+        sigmas = [r["sigma"] for r in rows]
+        sigma = np.array(sigmas, dtype=float) if rows and None not in sigmas else None
+        return Measurements(self._plan.joint_types, q, points, sweep, joint, sigma, check, has_role=True)
+
+    def export_csv(self, path: str | Path) -> int:
+        """Write :meth:`to_measurements` as the measurement CSV (with session, robot and tracker metadata lines);
+        returns the number of rows. The file is replaced atomically."""
+        path = Path(path)
+        meas = self.to_measurements()
+        metadata = {"session": str(self.path), "robot": _identity_line(self._header.get("robot", {})),
+                    "tracker": _identity_line(self._header.get("tracker", {})),
+                    "software": str(self._header.get("software", "")), "exported by": f"dh-calib {__version__}"}
+        temp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+        try:
+            temp.write_text(format_measurements(meas, metadata), encoding="utf-8")
+            os.replace(temp, path)
+        except OSError as exc:
+            with contextlib.suppress(OSError):
+                temp.unlink()
+            raise SessionError(f"{path}: cannot write the CSV ({exc.strerror or exc})") from None
+        return len(meas)
+
+    def drift(self) -> list[tuple[float, float]]:
+        """Home re-measurements as (t, displacement) relative to the first ok one: t = the step's end time (s),
+        displacement = distance of its averaged TP from the first's (m)."""
+        homes = self._step_rows("WHERE kind = 'home' AND status = 'ok'")
+        if not homes:
+            return []
+        first = np.array(homes[0]["position"])
+        return [(r["t_end"], float(np.linalg.norm(np.array(r["position"]) - first))) for r in homes]
+
+    # --- internals ------------------------------------------------------------------------------------------
+
+    @property
+    def _db(self) -> sqlite3.Connection:
+        if self._conn is None:
+            raise SessionError(f"{self.path}: the session is closed")
+        return self._conn
+
+    @contextlib.contextmanager
+    def _transaction(self, what: str):
+        db = self._db
+        try:
+            db.execute("BEGIN IMMEDIATE")
+            try:
+                yield
+            except BaseException:
+                db.execute("ROLLBACK")
+                raise
+            db.execute("COMMIT")
+        except sqlite3.Error as exc:
+            raise SessionError(f"{self.path}: cannot {what} ({exc})") from None
+
+
+def _configure(conn: sqlite3.Connection) -> None:
+    mode = conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+    if str(mode).lower() != "wal":
+        raise sqlite3.OperationalError(f"cannot use WAL journal (got {mode})")
+    conn.execute("PRAGMA synchronous = FULL")
+    conn.execute("PRAGMA foreign_keys = ON")
+    conn.execute("PRAGMA busy_timeout = 5000")
+
+
+def _newer(path: Path, version: int) -> SessionError:
+    return SessionError(f"{path} was written by schema {version}; this version reads up to {SCHEMA_VERSION}: "
+                        "upgrade dh-calib")
+
+
+def _fsync(path: Path, directory: bool = False) -> None:
+    """Flush ``path`` to disk; a directory that cannot be flushed (some platforms) is skipped."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        if directory:
+            return
+        raise
+    try:
+        os.fsync(fd)
+    except OSError:
+        if not directory:
+            raise
+    finally:
+        os.close(fd)
+
+
+def _dump_q(q: Sequence[float] | None) -> str | None:
+    return None if q is None else json.dumps([v if math.isfinite(v) else None for v in q])
+
+
+def _load_q(text: str | None) -> tuple[float, ...] | None:
+    return None if text is None else tuple(math.nan if v is None else float(v) for v in json.loads(text))
+
+
+def _nan(v: float | None) -> float:
+    return math.nan if v is None else float(v)
+
+
+def _nan_none(v: float | None) -> float | None:
+    return None if v is None or math.isnan(v) else float(v)
+
+
+def _floats(values: Any) -> tuple[float | None, ...] | None:
+    return None if values is None else tuple(_nan_none(float(v)) for v in np.asarray(values, dtype=float).ravel())
+
+
+def _identity_line(identity: dict[str, Any]) -> str:
+    parts = [str(identity.get("model", ""))]
+    if identity.get("serial"):
+        parts.append(f"serial {identity['serial']}")
+    if identity.get("firmware"):
+        parts.append(f"firmware {identity['firmware']}")
+    return " ".join(" ".join(parts).split())

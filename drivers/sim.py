@@ -1,0 +1,498 @@
+"""The simulated rig (mock mode): a simulated robot and a simulated tracker that see one simulated world.
+
+Units and frames: joint values rad (revolute) / m (prismatic); speeds rad/s (m/s), accelerations rad/s²
+(m/s²); TP positions metres in the tracker frame; times seconds on the rig's clock (a ``VirtualClock``
+advances at once when a device "sleeps", so a whole session runs in seconds with the timestamps and
+durations of a real one; a ``WallClock`` plays it at real speed for ``--realtime``).
+
+The world (:class:`SimulatedRig`):
+
+- the true robot: ``random_truth(nominal, home, default_rng(seed))`` of the model's nominal DH table (seeded
+  perturbations, a random base pose in the tracker frame, a random TP off every axis); the tracker sees
+  ``identify.kinematics.points_from_joints(truth, q)`` of the arm's actual joints ``q``, never its own model;
+- a move is synchronised: every joint follows the trapezoidal profile of the slowest one
+  (:func:`move_duration`); the arm comes to rest at the target plus a repeatability error
+  N(0, ``repeatability``) per joint, then rings: ``q(t) = rest + A·exp(-Δt/ring_tau)·cos(2π·f·Δt)`` with
+  ``|A_i|`` in [0.5, 1]·``ring`` and f = :data:`RING_FREQUENCY`; the joint readings are the actual values;
+- the tracker's ``k``-th reading of a ``measure`` call is sampled at ``t0 + k·latency`` and delivered
+  ``latency`` later, with isotropic Gaussian noise ``noise`` (m per axis, reported as ``sigma``); a reading
+  is lost with probability ``dropout`` (the call raises TargetLost).
+
+Faults (spec option ``fault=NAME[@N][xK],...`` or :meth:`SimulatedRig.inject`), counted per ``move_joints``
+call (robot) or ``measure`` call (tracker), 1-based from the rig's creation:
+
+- ``protective_stop`` / ``emergency_stop``: move N stops halfway; state PROTECTIVE_STOP / EMERGENCY_STOP;
+  ProtectiveStop / EmergencyStop now and on every move until ``rig.clear_faults()``;
+- ``disconnect``: move / measurement N raises ConnectionFailed, and so does every call until ``connect()``;
+- ``slow``: move N never finishes, measurement N takes longer than its timeout: DeviceTimeout once the
+  timeout has passed on the clock (a VirtualClock advances by it; nothing sleeps for real);
+- ``unsettled``: after move N the arm keeps ringing, so ``wait_until_still`` raises DeviceTimeout (until the
+  next move or ``rig.clear_faults()``);
+- ``target_lost`` / ``bad_reading``: measurements N to N+K-1 raise TargetLost / BadReading (garbage reply).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from config.robots import ConfigError, RobotModel, load_robot
+from drivers.base import Array, DeviceIdentity, RobotState, TrackerReading
+from drivers.clock import Clock, VirtualClock
+from drivers.errors import (
+    BadReading,
+    ConnectionFailed,
+    DeviceTimeout,
+    EmergencyStop,
+    ProtectiveStop,
+    RobotFault,
+    SpecError,
+    TargetLost,
+)
+from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
+from identify.kinematics import points_from_joints
+from identify.simulate import random_truth
+
+RING_FREQUENCY = 8.0  # Hz, of the oscillation after a move
+POLL_PERIOD = 0.01  # s between joint readings in wait_until_still
+STILL_TOLERANCE = 1e-6  # rad (m): joints within this of each other count as still
+MOTION_CHUNK = 0.05  # s of motion between checks for stop()
+_EPS = 1e-9  # s: time comparisons on the clock (large epoch values carry rounding errors)
+# When several faults fall on one move / measurement, the first of these happens (the others are dropped).
+_PRIORITY = ("disconnect", "emergency_stop", "protective_stop", "slow", "unsettled", "target_lost", "bad_reading")
+
+
+def move_duration(start: Sequence[float], target: Sequence[float], speed: Sequence[float],
+                  acceleration: Sequence[float]) -> float:
+    """Duration (s) of a synchronised joint move: the trapezoidal profile (triangular for short moves) of
+    the slowest joint, accelerating at ``acceleration`` up to ``speed`` and braking at ``acceleration``."""
+    return float(np.max(_durations(start, target, speed, acceleration), initial=0.0))
+
+
+def _durations(start: Sequence[float], target: Sequence[float], speed: Sequence[float],
+               acceleration: Sequence[float]) -> Array:
+    distance = np.abs(np.asarray(target, dtype=float) - np.asarray(start, dtype=float))
+    v, a = np.asarray(speed, dtype=float), np.asarray(acceleration, dtype=float)
+    cruise = distance >= v * v / a
+    return np.where(cruise, distance / v + v / a, 2.0 * np.sqrt(distance / a))
+
+
+def _fraction(t: float, duration: float, speed: float, acceleration: float, distance: float) -> float:
+    """Share of the distance covered at time ``t`` of a trapezoidal profile lasting ``duration``."""
+    if duration <= 0 or distance <= 0 or t >= duration:
+        return 1.0
+    ramp = min(speed / acceleration, duration / 2)
+    peak = acceleration * ramp
+    if t < ramp:
+        covered = 0.5 * acceleration * t * t
+    elif t <= duration - ramp:
+        covered = 0.5 * acceleration * ramp * ramp + peak * (t - ramp)
+    else:
+        covered = distance - 0.5 * acceleration * (duration - t) ** 2
+    return min(max(covered / distance, 0.0), 1.0)
+
+
+@dataclass
+class _Fault:
+    device: str  # "robot" or "tracker"
+    name: str
+    numbers: list[int]  # the moves / measurements it still affects
+    started: bool = False
+
+
+def _setting(name: str, value: float, upper: float = math.inf) -> float:
+    if not (math.isfinite(value := float(value)) and 0 <= value < upper):
+        raise ValueError(f"simulated rig: {name} must be a finite number in [0, {upper:g})")
+    return value
+
+
+class SimulatedRig:
+    """One simulated world: the true robot, the arm's actual state, the clock and the fault schedule.
+
+    ``model``: a bundled robot name or a RobotModel; ``seed`` seeds the truth (``random_truth``) and the
+    robot's random errors, ``tracker_seed`` (default: ``seed``) the tracker's noise and dropouts. The other
+    settings are those of :data:`drivers.spec.MOCK_ROBOT_OPTIONS` and ``MOCK_TRACKER_OPTIONS``.
+    Attributes: ``model``, ``truth`` (DHModel), ``clock``, ``moves`` and ``measurements`` (calls so far).
+    """
+
+    def __init__(self, model: str | RobotModel = "ur5e", *, clock: Clock | None = None, seed: int = 0,
+                 repeatability: float = 2e-6, ring: float = 1e-5, ring_tau: float = 0.1,
+                 noise: float = 5e-5, latency: float = 0.002, dropout: float = 0.0, tracker_seed: int | None = None,
+                 robot_faults: Iterable[FaultSpec] = (), tracker_faults: Iterable[FaultSpec] = ()) -> None:
+        self.model = model if isinstance(model, RobotModel) else load_robot(model)
+        self.clock: Clock = VirtualClock() if clock is None else clock
+        self.seed = int(seed)
+        self.tracker_seed = self.seed if tracker_seed is None else int(tracker_seed)
+        self.repeatability = _setting("repeatability", repeatability)
+        self.ring = _setting("ring", ring)
+        self.ring_tau = _setting("ring_tau", ring_tau)
+        self.noise = _setting("noise", noise)
+        self.latency = _setting("latency", latency)
+        self.dropout = _setting("dropout", dropout, upper=1.0)
+        home = np.array(self.model.home, dtype=float)
+        self.truth = random_truth(self.model.nominal, home, np.random.default_rng(self.seed))
+        self._robot_rng = np.random.default_rng([self.seed, 1])
+        self._tracker_rng = np.random.default_rng([self.tracker_seed, 2])
+        self._rest = home  # where the arm came to rest (actual values)
+        self._ring_amp, self._ring_start, self._ring_decays = np.zeros(self.model.n_joints), self.clock.now(), True
+        self.moves = self.measurements = 0  # move_joints / measure calls so far
+        self.robot_connected = self.tracker_connected = False
+        self._latched: RobotState | None = None  # PROTECTIVE_STOP / EMERGENCY_STOP until clear_faults()
+        self._moving = self._stop_requested = False
+        self._faults: list[_Fault] = []
+        self.robot_spec: RobotSpec | None = None
+        self.tracker_spec: TrackerSpec | None = None
+        for fault in robot_faults:
+            self.inject(fault.name, at_move=fault.at, count=fault.count, device="robot")
+        for fault in tracker_faults:
+            self.inject(fault.name, at_measure=fault.at, count=fault.count, device="tracker")
+
+    @classmethod
+    def from_spec(cls, robot: RobotSpec | str, tracker: TrackerSpec | str | None = None,
+                  clock: Clock | None = None) -> SimulatedRig:
+        """The rig of ``mock:MODEL?...`` and ``mock?...`` (options, faults included); clock default VirtualClock."""
+        robot = robot if isinstance(robot, RobotSpec) else RobotSpec.parse(robot)
+        tracker = tracker if tracker is None or isinstance(tracker, TrackerSpec) else TrackerSpec.parse(tracker)
+        if not robot.is_mock or (tracker is not None and not tracker.is_mock):
+            raise SpecError(f"a simulated rig needs mock devices (mock:MODEL and mock), got {str(robot)!r} and "
+                            f"{str(tracker)!r}")
+        r = robot.mock_settings()
+        t = tracker.mock_settings() if tracker is not None else TrackerSpec("mock").mock_settings()
+        try:
+            model = load_robot(robot.model)
+        except ConfigError as exc:
+            raise SpecError(f"robot spec {str(robot)!r}: {exc}") from exc
+        rig = cls(model, clock=clock, seed=r["seed"], repeatability=r["repeatability"], ring=r["ring"],
+                  ring_tau=r["ring_tau"], noise=t["noise"], latency=t["latency"], dropout=t["dropout"],
+                  tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"])
+        rig.robot_spec, rig.tracker_spec = robot, tracker
+        return rig
+
+    # --- the physical world -------------------------------------------------------------------------------
+
+    def actual_joints(self, t: float | Array | None = None) -> Array:
+        """The arm's actual joint values at clock time ``t`` (default now): (n,), or (m, n) for m times."""
+        dt = np.maximum(np.asarray(self.clock.now() if t is None else t, dtype=float) - self._ring_start, 0.0)
+        if not self._ring_decays:
+            envelope = np.ones_like(dt)
+        elif self.ring_tau > 0:
+            envelope = np.exp(-dt / self.ring_tau)
+        else:
+            envelope = np.zeros_like(dt)
+        wave = envelope * np.cos(2 * np.pi * RING_FREQUENCY * dt)
+        return self._rest + np.multiply.outer(wave, self._ring_amp)
+
+    def true_point(self, t: float | None = None) -> Array:
+        """The true TP (3,), m in the tracker frame, at clock time ``t`` (default now)."""
+        return points_from_joints(self.truth, self.actual_joints(t))[0]
+
+    @property
+    def rest_joints(self) -> Array:
+        """Where the arm comes to rest once it stops ringing (n,): the last target plus repeatability error."""
+        return self._rest.copy()
+
+    @property
+    def robot_state(self) -> RobotState:
+        if not self.robot_connected:
+            return RobotState.DISCONNECTED
+        if self._latched is not None:
+            return self._latched
+        return RobotState.MOVING if self._moving else RobotState.READY
+
+    def _run(self, start: Array, target: Array, speed: Array, acceleration: Array, until: float) -> bool:
+        """Move from ``start`` towards ``target`` for ``until`` s of the move's profile (clock advanced in
+        chunks so that ``stop()`` can cut in), then let the arm come to rest. Returns True if stopped early."""
+        durations = _durations(start, target, speed, acceleration)
+        k = int(np.argmax(durations))
+        duration, distance = float(durations[k]), abs(float(target[k] - start[k]))
+        elapsed, remaining = 0.0, until
+        self._moving, self._stop_requested = True, False
+        try:
+            while remaining > 0 and not self._stop_requested:
+                step = min(MOTION_CHUNK, remaining)
+                self.clock.sleep(step)
+                elapsed, remaining = elapsed + step, remaining - step
+        finally:  # also on KeyboardInterrupt: the arm stops where it is
+            self._moving = False
+            share = _fraction(elapsed, duration, float(speed[k]), float(acceleration[k]), distance)
+            if duration > 0:
+                n = len(start)
+                reached = start + share * (target - start)
+                self._rest = reached + self._robot_rng.normal(0.0, self.repeatability, n)
+                signs = self._robot_rng.choice([-1.0, 1.0], n)
+                self._ring_amp = self.ring * self._robot_rng.uniform(0.5, 1.0, n) * signs
+                self._ring_start = self.clock.now()
+                self._ring_decays = True
+        return self._stop_requested
+
+    # --- faults ---------------------------------------------------------------------------------------------
+
+    def inject(self, fault: str, *, at_move: int | None = None, at_measure: int | None = None, count: int = 1,
+               device: str | None = None) -> None:
+        """Schedule ``fault`` at move ``at_move`` (robot) or measurement ``at_measure`` (tracker), 1-based and
+        counted from the rig's creation; without either, at the next one of ``device`` (needed only for the
+        names both devices have: disconnect, slow). ``count``: how many moves / measurements a transient
+        fault lasts. E.g. ``rig.inject("protective_stop", at_move=40)``, ``rig.inject("target_lost", count=3)``.
+        """
+        if device is None:
+            if at_move is None and at_measure is None and fault in ROBOT_FAULTS and fault in TRACKER_FAULTS:
+                raise ValueError(f"fault {fault!r} exists for both devices: say device='robot' or 'tracker'")
+            device = "robot" if at_move is not None or fault not in TRACKER_FAULTS else "tracker"
+        dev = device
+        if dev not in ("robot", "tracker") or (at_measure if dev == "robot" else at_move) is not None:
+            raise ValueError(f"at_move is for the robot and at_measure for the tracker (device {dev!r})")
+        known = ROBOT_FAULTS if dev == "robot" else TRACKER_FAULTS
+        if fault not in known:
+            raise ValueError(f"unknown {dev} fault {fault!r} (known: {', '.join(known)})")
+        if count < 1 or (count != 1 and fault in PERSISTENT_FAULTS):
+            raise ValueError(f"count must be >= 1, and 1 for {', '.join(PERSISTENT_FAULTS)}; got {count}")
+        done = self.moves if dev == "robot" else self.measurements
+        at = at_move if dev == "robot" else at_measure
+        at = done + 1 if at is None else int(at)
+        if at <= done:
+            raise ValueError(f"{dev} {'move' if dev == 'robot' else 'measurement'} {at} has already happened")
+        self._faults.append(_Fault(dev, fault, list(range(at, at + count))))
+
+    def clear_faults(self, pending: bool = False) -> None:
+        """Recover: release a protective or emergency stop, end a persistent ringing and the rest of a running
+        transient fault (``pending=True``: drop the scheduled ones too). A lost link needs ``connect()``."""
+        self._latched = None
+        if not self._ring_decays:
+            self._ring_decays, self._ring_start = True, self.clock.now()
+        self._faults = [] if pending else [f for f in self._faults if not f.started]
+
+    def pending_faults(self) -> list[str]:
+        """The scheduled faults, e.g. ``["robot: protective_stop@40", "tracker: target_lost@10x3"]``."""
+        return [f"{f.device}: {FaultSpec(f.name, f.numbers[0], len(f.numbers))}" for f in self._faults]
+
+    def _take(self, device: str, number: int) -> str | None:
+        """The fault (if any) of ``device`` at move / measurement ``number``; consumes it."""
+        hits = []
+        for fault in self._faults:
+            if fault.device == device and number in fault.numbers:
+                fault.numbers.remove(number)
+                fault.started = True
+                hits.append(fault.name)
+        self._faults = [f for f in self._faults if f.numbers]
+        return min(hits, key=_PRIORITY.index) if hits else None
+
+    def _check_settings(self, spec: RobotSpec | TrackerSpec, ours: dict[str, Any], given: dict[str, Any],
+                        made_from: RobotSpec | TrackerSpec | None) -> None:
+        if given["fault"] and spec != made_from:
+            raise ValueError(f"the faults of {str(spec)!r} must be given to SimulatedRig.from_spec, not open_*")
+        differ = [key for key in ours if ours[key] != given[key]]
+        if differ:
+            raise ValueError(f"spec {str(spec)!r} disagrees with the simulated rig on {', '.join(differ)}; "
+                             "open the devices with the specs the rig was made from")
+
+
+class SimulatedRobot:
+    """The simulated robot arm (implements :class:`drivers.base.Robot`); a view of ``rig``'s arm."""
+
+    def __init__(self, rig: SimulatedRig) -> None:
+        self.rig, self.joint_types = rig, rig.model.joint_types
+        self.poll_period, self.still_tolerance = POLL_PERIOD, STILL_TOLERANCE  # s, rad (m)
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joint_types)
+
+    def connect(self, timeout: float) -> None:
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
+        self.rig.robot_connected = True
+
+    def close(self) -> None:
+        self.rig.robot_connected = False
+
+    def identity(self) -> DeviceIdentity:
+        rig = self.rig
+        details = {"truth_seed": str(rig.seed), "repeatability": f"{rig.repeatability:g}", "ring": f"{rig.ring:g}",
+                   "ring_tau": f"{rig.ring_tau:g}"}
+        return DeviceIdentity("robot", f"simulated {rig.model.name}", serial=f"SIM-R{rig.seed}", firmware="sim",
+                              details=details)
+
+    def state(self) -> RobotState:
+        return self.rig.robot_state
+
+    def read_joints(self) -> Array:
+        """Actual joint values (n,), rad / m, including the repeatability error and any ringing."""
+        self._require_link()
+        return self.rig.actual_joints()
+
+    def move_joints(self, q: Sequence[float], speed: Sequence[float], acceleration: Sequence[float],
+                    timeout: float) -> None:
+        """Move to ``q`` (blocking; the clock advances by the move's duration). ValueError for a target out of
+        the limits or a speed above the model's maximum; faults as in the module docstring."""
+        rig = self.rig
+        self._require_link()
+        if rig._latched is not None:
+            error = ProtectiveStop if rig._latched is RobotState.PROTECTIVE_STOP else EmergencyStop
+            raise error(f"the simulated robot is in {rig._latched.value}: clear it (rig.clear_faults()), then resume")
+        target, v, a = self._checked(q, speed, acceleration, timeout)
+        number = rig.moves = rig.moves + 1
+        fault = rig._take("robot", number)
+        start = rig.rest_joints
+        duration = move_duration(start, target, v, a)
+        if fault == "disconnect":
+            rig.robot_connected = False
+            raise ConnectionFailed(f"lost the connection to the simulated robot at move {number}")
+        if fault == "slow":
+            rig.clock.sleep(timeout)
+            raise DeviceTimeout(f"move {number} did not finish within its timeout of {timeout:g} s")
+        stops = fault in ("protective_stop", "emergency_stop")
+        stopped = rig._run(start, target, v, a, min(duration / 2 if stops else duration, timeout))
+        if stops and duration / 2 <= timeout:
+            rig._latched = RobotState.PROTECTIVE_STOP if fault == "protective_stop" else RobotState.EMERGENCY_STOP
+            error = ProtectiveStop if fault == "protective_stop" else EmergencyStop
+            raise error(f"simulated {rig._latched.value} during move {number}: clear it (rig.clear_faults()), "
+                        "then resume")
+        if stopped:
+            raise RobotFault(f"move {number} was stopped (stop()) before it reached its target")
+        if duration > timeout:
+            raise DeviceTimeout(f"move {number} needs {duration:.3f} s, more than its timeout of {timeout:g} s; "
+                                "the robot was stopped")
+        if fault == "unsettled":
+            rig._ring_decays = False
+
+    def wait_until_still(self, settle_time: float, timeout: float) -> None:
+        """Poll the joints every ``poll_period`` s until they have stayed within ``still_tolerance`` for
+        ``settle_time`` s; DeviceTimeout once ``timeout`` s have passed (the clock advanced by the timeout)."""
+        clock = self.rig.clock
+        since = clock.now()
+        deadline, anchor = since + timeout, self.read_joints()
+        while True:
+            now = clock.now()
+            if now - since >= settle_time - _EPS:
+                return
+            if now >= deadline - _EPS:
+                raise DeviceTimeout(f"the simulated robot did not settle ({settle_time:g} s still) within "
+                                    f"{timeout:g} s")
+            clock.sleep(min(self.poll_period, deadline - now, since + settle_time - now))
+            q = self.read_joints()
+            if np.max(np.abs(q - anchor), initial=0.0) > self.still_tolerance:
+                anchor, since = q, clock.now()
+
+    def stop(self) -> None:
+        """Stop a move in progress (from another thread or a signal handler). Never raises."""
+        self.rig._stop_requested = self.rig._moving  # a plain assignment: cannot fail
+
+    def _require_link(self) -> None:
+        if not self.rig.robot_connected:
+            raise ConnectionFailed("the simulated robot is not connected (call connect(); after a lost link, "
+                                   "connect again)")
+
+    def _checked(self, q: Sequence[float], speed: Sequence[float], acceleration: Sequence[float],
+                 timeout: float) -> tuple[Array, Array, Array]:
+        model, n = self.rig.model, self.n_joints
+        target, v, a = (np.asarray(x, dtype=float).reshape(-1) for x in (q, speed, acceleration))
+        for name, values in (("target", target), ("speed", v), ("acceleration", a)):
+            if values.shape != (n,) or not np.all(np.isfinite(values)):
+                raise ValueError(f"{name} must be {n} finite numbers, got {values.tolist()}")
+        for i, (value, (lo, hi)) in enumerate(zip(target, model.limits, strict=True)):
+            if not lo <= value <= hi:
+                raise ValueError(f"joint {i + 1} target {value:.6g} is outside its limits [{lo:.6g}, {hi:.6g}] "
+                                 "(the plan should have caught it)")
+        for i, (value, top, acc) in enumerate(zip(v, model.max_speed, a, strict=True)):
+            if not 0 < value <= top * (1 + 1e-9) or not acc > 0:
+                raise ValueError(f"joint {i + 1}: speed {value:.6g} must be in (0, {top:.6g}] and acceleration "
+                                 f"{acc:.6g} > 0")
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
+        return target, v, a
+
+
+class SimulatedTracker:
+    """The simulated tracker (implements :class:`drivers.base.Tracker`): sees the rig's true TP."""
+
+    def __init__(self, rig: SimulatedRig) -> None:
+        self.rig = rig
+
+    def connect(self, timeout: float) -> None:
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
+        self.rig.tracker_connected = True
+
+    def close(self) -> None:
+        self.rig.tracker_connected = False
+
+    def identity(self) -> DeviceIdentity:
+        rig = self.rig
+        details = {"noise": f"{rig.noise:g}", "latency": f"{rig.latency:g}", "dropout": f"{rig.dropout:g}"}
+        return DeviceIdentity("tracker", "simulated tracker", serial=f"SIM-T{rig.tracker_seed}", firmware="sim",
+                              details=details)
+
+    def measure(self, count: int, timeout: float) -> list[TrackerReading]:
+        """``count`` readings of the TP (m, tracker frame) with ``sigma`` = the noise; the clock advances by
+        ``count · latency``. Raises TargetLost, BadReading, DeviceTimeout, ConnectionFailed."""
+        rig = self.rig
+        if not rig.tracker_connected:
+            raise ConnectionFailed("the simulated tracker is not connected (call connect(); after a lost link, "
+                                   "connect again)")
+        if int(count) != count or count < 1 or not timeout > 0:
+            raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
+        number = rig.measurements = rig.measurements + 1
+        fault = rig._take("tracker", number)
+        clock, latency = rig.clock, rig.latency
+        if fault == "disconnect":
+            rig.tracker_connected = False
+            raise ConnectionFailed(f"lost the connection to the simulated tracker at measurement {number}")
+        if fault == "slow" or count * latency > timeout:
+            clock.sleep(timeout)
+            raise DeviceTimeout(f"measurement {number} ({count} readings) got no answer within {timeout:g} s")
+        if fault == "target_lost":
+            clock.sleep(latency)
+            raise TargetLost(f"simulated tracker lost the target (line of sight) at measurement {number}")
+        if fault == "bad_reading":
+            clock.sleep(latency)
+            raise BadReading(f"simulated tracker sent garbage at measurement {number}: '#?!\\x00 1.2e+9?'")
+        t0 = clock.now()
+        times = t0 + latency * np.arange(count)
+        points = points_from_joints(rig.truth, rig.actual_joints(times))
+        points += rig._tracker_rng.normal(0.0, rig.noise, points.shape)
+        if rig.dropout > 0:
+            lost = np.flatnonzero(rig._tracker_rng.random(count) < rig.dropout)
+            if lost.size:
+                clock.sleep(latency * (lost[0] + 1))
+                raise TargetLost(f"simulated tracker lost the target in reading {lost[0] + 1} of measurement "
+                                 f"{number}")
+        clock.sleep(latency * count)
+        return [TrackerReading(points[i], float(times[i]), sigma=rig.noise) for i in range(count)]
+
+
+def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock: Clock | None = None,
+               site: object = None) -> SimulatedRobot:
+    """The simulated robot of ``mock:MODEL?...`` on ``rig`` (made from the spec, with ``clock``, when None).
+    ``site`` (the site configuration every factory is given) is not needed by a simulated device."""
+    spec = spec if isinstance(spec, RobotSpec) else RobotSpec.parse(spec)
+    if not spec.is_mock:
+        raise SpecError(f"drivers.sim opens mock robots only (mock:MODEL), got {str(spec)!r}")
+    if rig is None:
+        return SimulatedRobot(SimulatedRig.from_spec(spec, None, clock))
+    if clock is not None and clock is not rig.clock:
+        raise ValueError("the clock belongs to the rig: give it to SimulatedRig.from_spec, not open_robot")
+    if spec.model.lower() != rig.model.name.lower():
+        raise ValueError(f"spec {str(spec)!r} names model {spec.model!r} but the rig simulates {rig.model.name!r}")
+    ours = {key: getattr(rig, key) for key in ("seed", "repeatability", "ring", "ring_tau")}
+    rig._check_settings(spec, ours, spec.mock_settings(), rig.robot_spec)
+    return SimulatedRobot(rig)
+
+
+def open_tracker(spec: TrackerSpec | str, *, rig: SimulatedRig | None = None, site: object = None) -> SimulatedTracker:
+    """The simulated tracker of ``mock?...``, looking at ``rig``'s robot (required); ``site`` is not needed."""
+    spec = spec if isinstance(spec, TrackerSpec) else TrackerSpec.parse(spec)
+    if not spec.is_mock:
+        raise SpecError(f"drivers.sim opens the mock tracker only, got {str(spec)!r}")
+    if rig is None:
+        raise ValueError("a mock tracker needs the simulated robot it looks at: pass "
+                         "rig=SimulatedRig.from_spec(robot_spec, tracker_spec, clock)")
+    given = spec.mock_settings()
+    given["seed"] = rig.seed if given["seed"] is None else given["seed"]
+    ours = {"noise": rig.noise, "latency": rig.latency, "dropout": rig.dropout, "seed": rig.tracker_seed}
+    rig._check_settings(spec, ours, given, rig.tracker_spec)
+    return SimulatedTracker(rig)
+
