@@ -219,6 +219,12 @@ def _finish(result: RunResult, session: Session, path: Path, robot: RobotModel) 
         return 130 if result.outcome == "aborted" else 1
     if result.missing:
         print(f"note: {result.missing} step(s) missing (tracker failures); the identification uses the rest")
+    drift = session.drift()
+    if len(drift) > 1:
+        worst = max(d for _, d in drift)
+        minutes = (drift[-1][0] - drift[0][0]) / 60
+        print(f"home drift: {len(drift)} re-measurements over {minutes:.1f} min, largest {worst * 1e3:.4f} mm "
+              "from the first")
     _identify_session(session, path, robot)
     return 0
 

@@ -23,7 +23,7 @@ from acquire.session import Session, StepRecord
 from drivers.base import Robot, RobotState, Tracker, TrackerReading
 from drivers.clock import Clock
 from drivers.errors import ConnectionFailed, DeviceTimeout, MeasurementError, RobotFault
-from identify.geometry import circle_from_points
+from identify.geometry import circle_2d_algebraic, perpendicular_basis, plane_from_points
 
 Array = NDArray[np.float64]
 
@@ -154,18 +154,14 @@ class Orchestrator:
                 missing += record.status != "ok"
                 if self.on_progress is not None:
                     self.on_progress(self._progress(step, record, count, len(todo), started, sweep_points))
-        except RobotFault as exc:
+        except (RobotFault, ConnectionFailed, DeviceTimeout) as exc:
             self.robot.stop()
-            self.session.event("fault", str(exc))
-            return self._end("failed", f"robot fault: {exc}", recorded, missing)
-        except ConnectionFailed as exc:
-            self.robot.stop()
-            self.session.event("connection", str(exc))
-            return self._end("failed", f"connection lost: {exc}", recorded, missing)
-        except DeviceTimeout as exc:
-            self.robot.stop()
-            self.session.event("timeout", str(exc))
-            return self._end("failed", f"timeout: {exc}", recorded, missing)
+            if self.stop.requested:  # the operator's stop interrupted the motion: not a fault
+                return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
+            kind = {RobotFault: "robot fault", ConnectionFailed: "connection lost", DeviceTimeout: "timeout"}
+            label = next(v for k, v in kind.items() if isinstance(exc, k))
+            self.session.event(label, str(exc))
+            return self._end("failed", f"{label}: {exc}", recorded, missing)
         except KeyboardInterrupt:
             self.robot.stop()
             return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
@@ -225,8 +221,15 @@ class Orchestrator:
 
 
 def _circle_residual(points: Array) -> float | None:
-    """RMS distance (m) of a sweep's points so far from their best circle: a live sanity check."""
+    """RMS distance (m) of a sweep's points so far from a circle: a live sanity check, so the closed-form
+    plane + algebraic fit (microseconds) rather than the identification's iterative one."""
+    plane = plane_from_points(points)
+    e1, e2 = perpendicular_basis(plane.normal)
+    rel = points - plane.centroid
+    xy = np.column_stack([rel @ e1, rel @ e2])
     try:
-        return circle_from_points(points).rms
-    except (ValueError, np.linalg.LinAlgError):
+        centre, radius = circle_2d_algebraic(xy)
+    except (ValueError, np.linalg.LinAlgError, FloatingPointError):
         return None
+    radial = np.linalg.norm(xy - centre, axis=1) - radius
+    return float(np.sqrt(np.mean(radial**2 + (rel @ plane.normal) ** 2)))

@@ -185,3 +185,22 @@ def test_sigkill_at_random_moments_then_resume_equals_an_uninterrupted_run(tmp_p
     assert len(ok) == len(plan.steps)
     diff = np.array([np.subtract(g.position, w.position) for g, w in ok])
     assert np.abs(diff).max() < 8 * NOISE
+
+
+def test_ctrl_c_stops_motion_closes_the_session_and_prints_the_resume_command(tmp_path):
+    """SIGINT to a real-time mock run mid-plan: exit 130, the run recorded as aborted, resumable."""
+    path = tmp_path / "c.session"
+    proc = subprocess.Popen([sys.executable, "-m", "acquire.cli", "--robot", ROBOT, "--tracker", "mock", *SMALL,
+                             "--realtime", "--session", str(path)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while _recorded(path) < 1 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert f"acquire --resume {path}" in err
+    with Session.open(path) as session:
+        assert session.outcome() == "aborted"
+        done = len(session.recorded_indices())
+        assert 1 <= done < len(session.plan.steps)
