@@ -75,6 +75,16 @@ class RobotModel:
         return len(self.joint_types)
 
 
+def check_schema(source: object, schema: object, supported: int) -> None:
+    """Raise ConfigError unless ``schema`` is an integer file-format version this software reads."""
+    if isinstance(schema, bool) or not isinstance(schema, int) or schema < 1:
+        raise ConfigError(source, "schema", f"an integer schema version (supported: <= {supported})",
+                          _got(schema))
+    if schema > supported:
+        raise ConfigError(source, "schema", f"a schema version <= {supported} (the newest this software "
+                          "reads; a newer file needs a newer version)", _got(schema))
+
+
 def robot_names() -> list[str]:
     """Names of the bundled models (the file stems in ``config/robots/``), sorted."""
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
@@ -179,13 +189,7 @@ def _model_from_dict(path: Path, data: Any) -> RobotModel:
         if key not in data:
             raise ConfigError(path, key, "the key to be present", "nothing (missing key)")
 
-    schema = data["schema"]
-    if isinstance(schema, bool) or not isinstance(schema, int) or schema < 1:
-        raise ConfigError(path, "schema", f"an integer schema version (supported: <= {SCHEMA_VERSION})",
-                          _got(schema))
-    if schema > SCHEMA_VERSION:
-        raise ConfigError(path, "schema", f"a schema version <= {SCHEMA_VERSION} (the newest this software "
-                          "reads; a newer file needs a newer version)", _got(schema))
+    check_schema(path, data["schema"], SCHEMA_VERSION)
     for key in TEXT_KEYS:
         if not isinstance(data[key], str) or not data[key].strip():
             raise ConfigError(path, key, "a non-empty string", _got(data[key]))

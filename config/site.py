@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from config.robots import ConfigError, _got, _read_yaml
+from config.robots import ConfigError, _got, _read_yaml, check_schema
 
 SCHEMA_VERSION = 1
 
@@ -183,13 +183,7 @@ def site_from_dict(data: Any, source: str | Path = "<dict>") -> SiteConfig:
     v.known(None, data, TOP_KEYS)
     if "schema" not in data:
         raise ConfigError(source, "schema", f"the schema version ({SCHEMA_VERSION})", "nothing (missing key)")
-    schema = data["schema"]
-    if isinstance(schema, bool) or not isinstance(schema, int) or schema < 1:
-        raise ConfigError(source, "schema", f"an integer schema version (supported: <= {SCHEMA_VERSION})",
-                          _got(schema))
-    if schema > SCHEMA_VERSION:
-        raise ConfigError(source, "schema", f"a schema version <= {SCHEMA_VERSION} (a newer file needs a "
-                          "newer version of this software)", _got(schema))
+    check_schema(source, data["schema"], SCHEMA_VERSION)
     sections: dict[str, dict[str, Any]] = {}
     for name in SECTIONS:
         value = data.get(name)
