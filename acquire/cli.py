@@ -119,8 +119,7 @@ def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bo
 
 
 def _progress_printer(quiet: bool):
-    if quiet:
-        return None
+    """Progress to the log always, and to the terminal unless ``quiet``."""
     tty = sys.stderr.isatty()
 
     def show(p: Progress) -> None:
@@ -129,6 +128,8 @@ def _progress_printer(quiet: bool):
         line = (f"step {p.done}/{p.total} ({what}): {p.samples} samples, {p.status}; "
                 f"elapsed {_hms(p.elapsed)}, remaining {_hms(p.remaining)}{residual}")
         log.info(line)
+        if quiet:
+            return
         if tty:
             sys.stderr.write("\r" + line[:150].ljust(150))
             sys.stderr.flush()
@@ -155,8 +156,11 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.log:
-        logging.basicConfig(filename=args.log, level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s")
+    if args.log:  # our own handler: basicConfig would do nothing where logging is already configured
+        handler = logging.FileHandler(args.log, encoding="utf-8")
+        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
     if args.resume:
         session = Session.open(args.resume)
         header = session.header
@@ -212,6 +216,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -> int:
+    log.info("run %s%s; %d step(s) recorded, %d missing", result.outcome,
+             f" ({result.reason})" if result.reason else "", result.recorded, result.missing)
     if result.outcome != "complete":
         print(f"acquire: run {result.outcome}: {result.reason}", file=sys.stderr)
         print(f"acquire: {result.recorded} step(s) recorded this run; resume with: acquire --resume {path}",

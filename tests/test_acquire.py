@@ -204,3 +204,26 @@ def test_ctrl_c_stops_motion_closes_the_session_and_prints_the_resume_command(tm
         assert session.outcome() == "aborted"
         done = len(session.recorded_indices())
         assert 1 <= done < len(session.plan.steps)
+
+
+def test_a_real_robot_never_moves_without_confirmation(tmp_path, monkeypatch, capsys):
+    """No terminal and no --yes: refused before any driver is opened."""
+    import drivers.registry as registry
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("a driver was opened before the operator confirmed")
+
+    monkeypatch.setattr(registry, "open_robot", forbidden)
+    monkeypatch.setattr("sys.stdin.isatty", lambda: False)
+    assert main(["--robot", "ur5e@127.0.0.1", "--tracker", "mock", "--session", str(tmp_path / "r.session")]) == 2
+    assert "needs confirmation" in capsys.readouterr().err
+    assert not (tmp_path / "r.session").exists()
+
+
+def test_log_file_records_every_step(tmp_path):
+    log = tmp_path / "run.log"
+    code, path = _run(tmp_path, "--log", str(log))
+    assert code == 0
+    with Session.open(path) as session:
+        total = len(session.plan.steps)
+    assert sum(1 for line in log.read_text().splitlines() if " step " in line) == total
