@@ -26,7 +26,7 @@ Array = NDArray[np.float64]
 
 BASE_NAMES = ("base.rx", "base.ry", "base.rz", "base.x", "base.y", "base.z")
 TOOL_NAMES = ("tool.x", "tool.y", "tool.z")
-OUTLIER_PROBABILITY = 1e-4  # chance that a clean sample is flagged as an outlier
+OUTLIER_PROBABILITY = 0.01  # chance that a clean data set has any sample flagged as an outlier
 NOISE_FLOOR = 1e-8  # m: below this, residuals are rounding, not noise (no outlier is called on them)
 RANK_TOL = 1e-7
 RESIDUAL_FLOOR = 1e-12  # m: rounding level of residuals, floor of the noise in the significance test
@@ -286,11 +286,15 @@ def refine(
 
 
 def inlier_mask(weighted_residuals: Array, n_free: int) -> NDArray[np.bool_]:
-    """Samples whose residual norm is within the chi-square(3) limit of a robust noise estimate."""
+    """Samples whose residual norm is within the chi-square(3) limit of a robust noise estimate.
+
+    The limit makes OUTLIER_PROBABILITY the chance that a clean data set loses any sample, whatever its
+    size (Bonferroni), so a large session does not shed clean samples."""
     norms = np.linalg.norm(weighted_residuals, axis=1)
     count = weighted_residuals.size
     robust_sigma = 1.4826 * np.median(np.abs(weighted_residuals)) * np.sqrt(count / max(count - n_free, 1))
-    limit = max(robust_sigma, NOISE_FLOOR) * np.sqrt(chi2.ppf(1 - OUTLIER_PROBABILITY, 3))
+    per_sample = OUTLIER_PROBABILITY / len(weighted_residuals)
+    limit = max(robust_sigma, NOISE_FLOOR) * np.sqrt(chi2.isf(per_sample, 3))
     return norms <= limit
 
 
@@ -316,16 +320,25 @@ def _release_parallel(
     exact DH is used, unless a ``d`` would move more than ``max_offset`` from its conventional value:
     then the convention is kept and the returned note says what it costs.
     """
-    constrained = _Problem(model, q, points, weights, free)
-    cost_c = float(np.sum(constrained.residuals(constrained.template[free]) ** 2))
     exact = _Problem(model, q, points, weights, free_exact)
-    x = _solve(exact, exact.template[free_exact], "linear", 1.0)
-    cost_e = float(np.sum(exact.residuals(x) ** 2))
+    x0 = exact.template[free_exact]
+    residuals = exact.residuals(x0)
+    cost_c = float(residuals @ residuals)
     dof = max(3 * len(q) - int(free_exact.sum()), 1)
     floor = (RESIDUAL_FLOOR * float(np.median(weights))) ** 2
     extra = free_exact & ~free
+    limit = chi2.ppf(1 - RELEASE_PROBABILITY, int(extra.sum()))
+    # score test first: the cost one Gauss-Newton step of the exact model would remove (cheap, and
+    # asymptotically the likelihood-ratio statistic); only a significant one is worth the exact fit
+    jac = exact.jacobian(x0)
+    step, *_ = np.linalg.lstsq(jac / np.linalg.norm(jac, axis=0), residuals, rcond=None)
+    reduction = float(np.sum((jac / np.linalg.norm(jac, axis=0) @ step) ** 2))
+    if reduction / max((cost_c - reduction) / dof, floor) <= limit:
+        return model, free, None
+    x = _solve(exact, x0, "linear", 1.0)
+    cost_e = float(np.sum(exact.residuals(x) ** 2))
     statistic = (cost_c - cost_e) / max(cost_e / dof, floor)
-    if statistic <= chi2.ppf(1 - RELEASE_PROBABILITY, int(extra.sum())):
+    if statistic <= limit:
         return model, free, None
     candidate = model_from_vector(model, exact.full(x))
     n = model.n_joints
