@@ -21,6 +21,7 @@ from identify.csvio import UNITS, CsvContent, read_measurements
 from identify.kinematics import DHModel
 from identify.measurements import InputError
 from identify.pipeline import identify, split_holdout
+from identify.refine import DEFAULT_MAX_OFFSET
 from identify.report import format_report
 from identify.result_io import result_to_dict
 
@@ -49,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="seed of the hold-out draw (0)")
     parser.add_argument("--parallel-tol", type=float, default=DEFAULT_PARALLEL_TOL, metavar="RAD",
                         help=f"axes closer than this are treated as parallel ({DEFAULT_PARALLEL_TOL} rad)")
+    parser.add_argument("--max-offset", type=float, default=DEFAULT_MAX_OFFSET, metavar="M",
+                        help="exact DH for resolved near-parallel axes only if no d moves more than this "
+                        f"({DEFAULT_MAX_OFFSET} m)")
     parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return parser
@@ -114,7 +118,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         if nominal.joint_types != meas.joint_types:
             raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
                              f"{meas.joint_types}")
-    ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust)
+    ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset)
     ident.warnings[:0] = content.notes
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
     if args.out:

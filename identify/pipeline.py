@@ -15,6 +15,7 @@ from identify.kinematics import DHModel, points_from_joints
 from identify.measurements import Measurements, validate
 from identify.poe import AxisLines, fit_lines
 from identify.refine import (
+    DEFAULT_MAX_OFFSET,
     Refinement,
     dh_index,
     full_jacobian,
@@ -130,11 +131,13 @@ def identify(
     nominal: DHModel | None = None,
     parallel_tol: float = DEFAULT_PARALLEL_TOL,
     robust: bool = True,
+    max_offset: float = DEFAULT_MAX_OFFSET,
 ) -> Identification:
     """Identify the DH model from ``meas`` (fit rows; ``check`` rows are only used for validation).
 
     ``nominal`` (optional) supplies the conventional values of undetermined parameters and the signs
     of the x axes, so the result reads as deltas against it; identification never depends on it.
+    ``max_offset`` (m): how far a near-parallel pair's ``d`` may move when the data resolve its misalignment.
     """
     warnings = validate(meas)
     if nominal is not None and nominal.joint_types != meas.joint_types:
@@ -153,11 +156,12 @@ def identify(
     start = start_model([])
     parallel = parallel_links(start, parallel_tol)
     noise = max(geo.noise, 1e-9)
-    ref = refine(start, fit.q, fit.points, fit.sigma, conventional, parallel, noise, robust)
+    ref = refine(start, fit.q, fit.points, fit.sigma, conventional, parallel, noise, robust, max_offset)
     unresolved = _parallel_within_uncertainty(ref, parallel)
     if unresolved:  # short or noisy sweeps: axes look skew only by noise; redo under the convention
         parallel = sorted({*parallel, *unresolved})
-        ref = refine(start_model(parallel), fit.q, fit.points, fit.sigma, conventional, parallel, noise, robust)
+        ref = refine(start_model(parallel), fit.q, fit.points, fit.sigma, conventional, parallel, noise, robust,
+                     max_offset)
     names = parameter_names(meas.n_joints)
     fixed = [
         FixedParameter(name, float(value), _reason(name, meas.n_joints, meas.joint_types, parallel))
