@@ -152,6 +152,15 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
     out = session_path.with_suffix(".result.yaml")
     out.write_text(yaml.safe_dump(doc, sort_keys=False, width=120), encoding="utf-8")
     print(f"result written to {out}")
+    try:
+        from identify.report_html import report_html
+    except ImportError:
+        print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
+        return doc
+    report = session_path.with_suffix(".report.html")
+    report.write_text(report_html(ident, meas, robot.nominal, robot.name, session=session, source=str(session_path)),
+                      encoding="utf-8")
+    print(f"report written to {report}")
     return doc
 
 

@@ -15,12 +15,12 @@ from typing import Any
 
 import yaml
 
+from config.robots import RobotModel
 from identify import __version__
 from identify.cpa import DEFAULT_PARALLEL_TOL
-from identify.csvio import UNITS, CsvContent, read_measurements
-from identify.kinematics import DHModel
-from identify.measurements import InputError
-from identify.pipeline import identify, split_holdout
+from identify.csvio import UNITS, CsvContent, format_measurements, read_measurements
+from identify.measurements import InputError, Measurements
+from identify.pipeline import Identification, identify, split_holdout
 from identify.refine import DEFAULT_MAX_OFFSET
 from identify.report import format_report
 from identify.result_io import result_to_dict
@@ -42,6 +42,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("input", help="measurement CSV (sweep,joint,q1..qN,x,y,z) or an acquisition session file")
     parser.add_argument("--out", metavar="FILE", help="write the result YAML (DESIGN.md contract) to FILE")
     parser.add_argument("--json", action="store_true", help="print the full result as JSON instead of a table")
+    parser.add_argument("--report", metavar="FILE", help="write a self-contained HTML report (needs matplotlib)")
+    parser.add_argument("--urdf", metavar="FILE", help="write the identified robot as URDF")
+    parser.add_argument("--ur-calibration", metavar="FILE",
+                        help="write the UR ROS driver's kinematics calibration YAML (6R UR arms)")
+    parser.add_argument("--rtb", metavar="FILE", help="write a Robotics Toolbox for Python script (DHRobot)")
+    parser.add_argument("--json-out", metavar="FILE", help="write the full result as JSON")
+    parser.add_argument("--csv", metavar="FILE", help="write the measurements as the CSV contract (e.g. of a session)")
     parser.add_argument("--joints", metavar="TYPES", help="joint types base to tip, e.g. RRPR (overrides the file)")
     parser.add_argument("--units", choices=sorted(UNITS), help="unit of x, y, z and sigma (default: file or m)")
     parser.add_argument("--robot", metavar="MODEL", help="nominal model for comparison (e.g. ur5e, or a YAML path)")
@@ -58,14 +65,66 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _load_nominal(name: str) -> tuple[DHModel, str]:
+def _load_robot(name: str) -> RobotModel:
     from config.robots import ConfigError, load_robot
 
     try:
-        robot = load_robot(name)
+        return load_robot(name)
     except ConfigError as exc:
         raise InputError(str(exc)) from None
-    return robot.nominal, robot.name
+
+
+def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
+    """Refuse, before any work, exports that cannot be made."""
+    if args.ur_calibration and joint_types != "RRRRRR":
+        raise InputError(f"--ur-calibration needs a 6R UR arm; the data have joints {joint_types}")
+    if args.report:
+        try:
+            import identify.report_html  # noqa: F401
+        except ImportError:
+            raise InputError("--report needs matplotlib: pip install 'dh-calib[report]'") from None
+
+
+def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measurements, doc: dict[str, Any],
+                   robot: RobotModel | None) -> None:
+    """Every export asked for, each written atomically."""
+    name = robot.name if robot else "identified_robot"
+    limits = robot.limits if robot else None
+    comment = f"identified from {args.input} by dh-calib {__version__}"
+    if args.urdf:
+        from identify.export_urdf import urdf_from_model
+
+        velocities = robot.max_speed if robot else None
+        _write_atomic(Path(args.urdf), urdf_from_model(ident.model, name, limits, velocities, comment=comment))
+    if args.ur_calibration:
+        from identify.export_ur_calibration import calibration_from_model, format_calibration
+
+        try:
+            text = format_calibration(calibration_from_model(ident.model), comment=comment)
+        except ValueError as exc:
+            raise InputError(f"--ur-calibration: {exc}") from None
+        _write_atomic(Path(args.ur_calibration), text)
+    if args.rtb:
+        from identify.export_rtb import rtb_snippet
+
+        _write_atomic(Path(args.rtb), rtb_snippet(ident.model, name, limits))
+    if args.json_out:
+        from identify.export_rtb import result_json
+
+        _write_atomic(Path(args.json_out), result_json(doc))
+    if args.csv:
+        _write_atomic(Path(args.csv), format_measurements(meas, {"source": str(args.input)}))
+    if args.report:
+        from identify.report_html import report_html
+
+        session = _open_session(Path(args.input)) if _is_session(Path(args.input)) else None
+        try:
+            page = report_html(ident, meas, robot.nominal if robot else None, robot.name if robot else None,
+                               session=session, source=str(args.input))
+        finally:
+            if session is not None:
+                session.close()
+        _write_atomic(Path(args.report), page)
 
 
 def _is_session(path: Path) -> bool:
@@ -77,21 +136,29 @@ def _is_session(path: Path) -> bool:
         return False
 
 
-def _read_session(path: Path) -> CsvContent:
-    """The measurements of an acquisition session (the session format belongs to ``acquire``)."""
+def _open_session(path: Path):
+    """An acquisition session (the session format belongs to ``acquire``); InputError if it is not one."""
     from acquire.session import Session, SessionError
 
     try:
-        with Session.open(path) as session:
-            return CsvContent(session.to_measurements(), {"session": str(path)}, [])
+        return Session.open(path)
     except SessionError as exc:
         raise InputError(str(exc)) from None
+
+
+def _read_session(path: Path) -> CsvContent:
+    """The measurements of an acquisition session."""
+    with _open_session(path) as session:
+        return CsvContent(session.to_measurements(), {"session": str(path)}, [])
 
 
 def _write_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` via a temporary file in the same folder, so a crash leaves no half file."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; a result file is an ordinary file
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as fh:
             fh.write(text)
@@ -112,17 +179,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     else:
         content = read_measurements(args.input, args.joints, args.units)
     meas = split_holdout(content.measurements, args.holdout, args.seed)
-    nominal, nominal_name = (None, None)
-    if args.robot:
-        nominal, nominal_name = _load_nominal(args.robot)
-        if nominal.joint_types != meas.joint_types:
-            raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
-                             f"{meas.joint_types}")
+    robot = _load_robot(args.robot) if args.robot else None
+    nominal, nominal_name = (robot.nominal, robot.name) if robot else (None, None)
+    if nominal is not None and nominal.joint_types != meas.joint_types:
+        raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
+                         f"{meas.joint_types}")
+    _check_exports(args, meas.joint_types)
     ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset)
     ident.warnings[:0] = content.notes
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
     if args.out:
         _write_atomic(Path(args.out), yaml.safe_dump(doc, sort_keys=False, width=120))
+    _write_exports(args, ident, meas, doc, robot)
     if args.json:
         print(json.dumps(doc))
     else:
