@@ -1,0 +1,65 @@
+"""A Universal Robots controller emulator on loopback, for testing the UR driver with the real ``ur_rtde`` client.
+
+It speaks just enough of the controller's interfaces for ``rtde_control.RTDEControlInterface(host)`` and
+``rtde_receive.RTDEReceiveInterface(host)`` to connect and work:
+
+- RTDE on port 30004: protocol version (V), controller version (v), output / input recipes (O / I), start /
+  pause (S / P), data packages (U) both ways at up to ``rate`` Hz;
+- the dashboard server on 29999 (greeting, ``PolyscopeVersion``, ``is in remote control``, ``get robot model``,
+  ``get serial number``, ``robotmode``, ``safetystatus``, ``unlock protective stop``, ``stop``, ...);
+- the primary / secondary interface (30001 / 30002) first sends a version message and a robot state message
+  with the kinematics info (sub-package 5: checksums, DH theta, a, d, alpha, calibration status; here the rig's
+  true robot plays the factory calibration; ``kinematics=False``: none is sent);
+- the script ports 30001 / 30002 / 30003: a program ``def rtde_control(): ... end`` sent there "runs": the
+  emulator then plays the register handshake of ur_rtde's control script (below) instead of URScript.
+
+Register handshake (ur_rtde 1.6.5, lower register range): the client writes the command code in
+``input_int_register_0`` and its arguments in ``input_double_register_0..`` (``input_int_register_1``: async
+flag); the script reports in ``output_int_register_0``: 1 = ready for a command, 2 = done with it; the client
+then clears the command (writes 0) and the script goes back to 1. Codes used here: 1 moveJ (q in doubles 0-5,
+speed 6, acceleration 7), 34 stopJ (deceleration in double 0), 255 stop the script. ``output_int_register_2``
+is the async progress: 0 while an async move runs, then -1 / -2 alternately. Other codes are acknowledged
+(done) without effect. The client also reads ``robot_status_bits`` (bit 1: program running),
+``safety_status_bits`` (bit 2: protective stop, bit 7: emergency stop) and ``runtime_state`` (2 playing).
+
+Motion: the arm is a :class:`drivers.sim.SimulatedRig` on a wall clock; a moveJ is the rig's synchronised
+trapezoidal move (``SimulatedRobot.move_joints`` with the commanded speed / acceleration on every joint), and
+the streamed ``actual_q`` follows that profile during the move, then the rig's resting / ringing arm.
+
+Faults: :meth:`UREmulator.protective_stop`, :meth:`emergency_stop`, :meth:`clear_stop`, :meth:`drop_connections`,
+``remote_control=False``, ``stall=True`` (a moveJ that never finishes), ``kinematics=False`` (no factory
+calibration), or the rig's own fault schedule: ``EmulatorProcess(rig=SimulatedRig("ur5e", clock=WallClock(),
+robot_faults=parse_faults("protective_stop@2", "robot")))``: move 2 stops halfway in a protective stop.
+
+Each emulator binds its own loopback address (127.x.y.z), since the ports are fixed. Run it in a child process
+(:class:`EmulatorProcess`): the ur_rtde client holds the GIL while it connects, so an emulator in threads of the
+client's process starves and the connection hangs::
+
+    with EmulatorProcess() as emu:                       # a fresh 127.a.b.c, see free_loopback_address()
+        rtde_c = rtde_control.RTDEControlInterface(emu.host)
+        emu.protective_stop()                            # calls go to the UREmulator in the child
+        emu.get("log").commands                          # [1, 34, ...]: command codes the script executed
+
+Layout: ``protocol.py`` (RTDE packages, variables and their types, register codes, mode values),
+``controller.py`` (:class:`UREmulator`: servers, control-script handshake, motion), ``process.py``.
+"""
+
+from tests.ur_emulator.controller import UREmulator
+from tests.ur_emulator.process import EmulatorProcess, free_loopback_address
+from tests.ur_emulator.protocol import (
+    CMD_MOVEJ,
+    CMD_NONE,
+    CMD_STOP_SCRIPT,
+    CMD_STOPJ,
+    CMD_STOPL,
+    SAFETY_NORMAL,
+    SAFETY_PROTECTIVE_STOP,
+    SAFETY_ROBOT_EMERGENCY_STOP,
+    SCRIPT_DONE,
+    SCRIPT_READY,
+    VARIABLES,
+)
+
+__all__ = ["CMD_MOVEJ", "CMD_NONE", "CMD_STOPJ", "CMD_STOPL", "CMD_STOP_SCRIPT", "SAFETY_NORMAL",
+           "SAFETY_PROTECTIVE_STOP", "SAFETY_ROBOT_EMERGENCY_STOP", "SCRIPT_DONE", "SCRIPT_READY", "VARIABLES",
+           "EmulatorProcess", "UREmulator", "free_loopback_address"]

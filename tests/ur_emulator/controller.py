@@ -1,0 +1,492 @@
+"""The emulated controller (threads on one loopback address); see tests/ur_emulator/__init__.py."""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import struct
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from drivers.clock import WallClock
+from drivers.errors import EmergencyStop, ProtectiveStop, RobotFault
+from drivers.sim import SimulatedRig, SimulatedRobot, _durations, _fraction
+from tests.ur_emulator.protocol import (
+    _DOUBLES,
+    _FORMATS,
+    _UINT8,
+    _UINT32,
+    _V6,
+    _ZERO,
+    CMD_MOVEJ,
+    CMD_NONE,
+    CMD_STOP_SCRIPT,
+    CMD_STOPJ,
+    CMD_STOPL,
+    DASHBOARD_MODEL,
+    DASHBOARD_PORT,
+    ROBOT_MODE_POWER_OFF,
+    ROBOT_MODE_RUNNING,
+    RTDE_PORT,
+    RUNTIME_PLAYING,
+    RUNTIME_STOPPED,
+    SAFETY_BIT_ESTOP,
+    SAFETY_BIT_NORMAL,
+    SAFETY_BIT_PROTECTIVE,
+    SAFETY_BIT_ROBOT_ESTOP,
+    SAFETY_NORMAL,
+    SAFETY_PROTECTIVE_STOP,
+    SAFETY_ROBOT_EMERGENCY_STOP,
+    SCRIPT_BUSY,
+    SCRIPT_DONE,
+    SCRIPT_PORTS,
+    SCRIPT_READY,
+    STATUS_POWER_ON,
+    STATUS_PROGRAM_RUNNING,
+    VARIABLES,
+    I,
+    O,
+    P,
+    S,
+    U,
+    V,
+    _packet,
+    _recv_exact,
+    _take_program,
+    v,
+)
+
+
+@dataclass
+class _Motion:
+    start: np.ndarray
+    target: np.ndarray
+    speed: float
+    acceleration: float
+    t0: float
+    duration: float
+    thread: threading.Thread | None = None
+    done: bool = False
+
+
+@dataclass
+class _Log:
+    """What the clients did, for tests: commands executed, scripts received, dashboard lines."""
+
+    commands: list[int] = field(default_factory=list)
+    scripts: list[str] = field(default_factory=list)
+    dashboard: list[str] = field(default_factory=list)
+    unknown_variables: list[str] = field(default_factory=list)
+
+
+class UREmulator:
+    """The emulated controller of ``model`` at ``host`` (a loopback address). See the module docstring."""
+
+    def __init__(self, host: str = "127.0.0.1", model: str = "ur5e", *, rig: SimulatedRig | None = None,
+                 version: tuple[int, int, int, int] = (5, 11, 1, 108318), serial: str = "20205500001",
+                 remote_control: bool = True, rate: float = 125.0, stall: bool = False,
+                 kinematics: bool = True) -> None:
+        self.host, self.model, self.version, self.serial = host, model, version, serial
+        self.rig = rig if rig is not None else SimulatedRig(model, clock=WallClock(), ring=1e-5, ring_tau=0.05)
+        self.robot = SimulatedRobot(self.rig)
+        self.robot.connect(1.0)
+        self.remote_control, self.rate, self.stall, self.kinematics = remote_control, rate, stall, kinematics
+        self.log = _Log()
+        self._lock = threading.RLock()
+        self._inputs: dict[str, Any] = {}  # input registers, shared by all RTDE clients as on a controller
+        self._outputs: dict[str, Any] = {"output_int_register_0": SCRIPT_BUSY, "output_int_register_2": -1}
+        self.robot_mode, self.safety_mode = ROBOT_MODE_RUNNING, SAFETY_NORMAL
+        self._program_running, self._program_starts_at = False, 0.0
+        self._motion: _Motion | None = None
+        self._async_token = -1
+        self._prev_q, self._prev_t = self.rig.actual_joints(), time.monotonic()
+        self._servers: list[socket.socket] = []
+        self._connections: set[socket.socket] = set()
+        self._threads: list[threading.Thread] = []
+        self._running = False
+
+    # --- lifecycle ------------------------------------------------------------------------------------------
+
+    def start(self) -> UREmulator:
+        self._running = True
+        handlers = {RTDE_PORT: self._serve_rtde, DASHBOARD_PORT: self._serve_dashboard,
+                    **{p: self._serve_script for p in SCRIPT_PORTS}}
+        try:
+            for port, handler in handlers.items():
+                server = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+                server.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                server.bind((self.host, port))
+                server.listen(8)
+                server.settimeout(0.1)
+                self._servers.append(server)
+                self._spawn(self._accept_loop, server, handler)
+        except OSError:
+            self.close()
+            raise
+        self._spawn(self._tick_loop)
+        return self
+
+    def close(self) -> None:
+        self._running = False
+        self.rig._stop_requested = True
+        for s in [*self._servers, *list(self._connections)]:
+            with contextlib.suppress(OSError):
+                s.close()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        self._servers.clear()
+
+    def __enter__(self) -> UREmulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _spawn(self, target: Any, *args: Any) -> threading.Thread:
+        thread = threading.Thread(target=target, args=args, daemon=True, name=f"ur-emulator-{target.__name__}")
+        thread.start()
+        self._threads.append(thread)
+        return thread
+
+    # --- faults ---------------------------------------------------------------------------------------------
+
+    def protective_stop(self) -> None:
+        """A protective stop now: motion stops, the program stops, safety mode PROTECTIVE_STOP."""
+        self._latch(SAFETY_PROTECTIVE_STOP)
+
+    def emergency_stop(self) -> None:
+        self._latch(SAFETY_ROBOT_EMERGENCY_STOP)
+
+    def clear_stop(self) -> None:
+        """What the operator does on the teach pendant (unlock protective stop / release the e-stop)."""
+        with self._lock:
+            self.safety_mode, self.robot_mode = SAFETY_NORMAL, ROBOT_MODE_RUNNING
+            self.rig.clear_faults()
+
+    def drop_connections(self) -> None:
+        """Close every client connection (the servers keep listening)."""
+        for s in list(self._connections):
+            with contextlib.suppress(OSError):
+                s.shutdown(socket.SHUT_RDWR)
+                s.close()
+
+    def _latch(self, mode: int) -> None:
+        with self._lock:
+            self.safety_mode = mode
+            if mode == SAFETY_ROBOT_EMERGENCY_STOP:
+                self.robot_mode = ROBOT_MODE_POWER_OFF
+            self.rig._stop_requested = True
+            self._stop_program()
+
+    def _stop_program(self) -> None:
+        self._program_running = False
+        self._outputs["output_int_register_0"] = SCRIPT_BUSY
+
+    # --- state ----------------------------------------------------------------------------------------------
+
+    @property
+    def program_running(self) -> bool:
+        return self._program_running
+
+    def actual_q(self, t: float | None = None) -> np.ndarray:
+        now = self.rig.clock.now() if t is None else t
+        motion = self._motion
+        if motion is not None and not motion.done:
+            distance = np.abs(motion.target - motion.start)
+            k = int(np.argmax(distance))
+            share = _fraction(now - motion.t0, motion.duration, motion.speed, motion.acceleration, float(distance[k]))
+            return motion.start + share * (motion.target - motion.start)
+        return self.rig.actual_joints(now)
+
+    def _state(self) -> dict[str, Any]:
+        now = self.rig.clock.now()
+        q = self.actual_q(now)
+        qd = (self.actual_q(now + 1e-3) - q) / 1e-3
+        motion = self._motion
+        target = motion.target if motion is not None and not motion.done else q
+        status = STATUS_POWER_ON if self.robot_mode == ROBOT_MODE_RUNNING else 0
+        status |= STATUS_PROGRAM_RUNNING if self._program_running else 0
+        bits = {SAFETY_NORMAL: SAFETY_BIT_NORMAL, SAFETY_PROTECTIVE_STOP: SAFETY_BIT_PROTECTIVE,
+                SAFETY_ROBOT_EMERGENCY_STOP: SAFETY_BIT_ROBOT_ESTOP | SAFETY_BIT_ESTOP}[self.safety_mode]
+        return {"timestamp": now, "actual_q": tuple(q), "actual_qd": tuple(qd), "target_q": tuple(target),
+                "target_qd": tuple(qd), "robot_mode": self.robot_mode, "safety_mode": self.safety_mode,
+                "safety_status": self.safety_mode, "robot_status_bits": status, "safety_status_bits": bits,
+                "runtime_state": RUNTIME_PLAYING if self._program_running else RUNTIME_STOPPED,
+                "speed_scaling": 1.0, "target_speed_fraction": 1.0, "joint_mode": (253,) * 6,
+                "joint_temperatures": (30.0,) * 6, "actual_main_voltage": 48.0, "actual_robot_voltage": 48.0,
+                **self._outputs}
+
+    # --- the control script (register handshake) -------------------------------------------------------------
+
+    def _tick_loop(self) -> None:
+        while self._running:
+            time.sleep(0.002)
+            with self._lock:
+                self._tick()
+
+    def _tick(self) -> None:
+        if self._program_starts_at and time.monotonic() >= self._program_starts_at:
+            self._program_starts_at = 0.0
+            if self.safety_mode == SAFETY_NORMAL:
+                self._program_running = True
+                self._outputs["output_int_register_0"] = SCRIPT_READY
+        if not self._program_running:
+            return
+        cmd = int(self._inputs.get("input_int_register_0", 0))
+        state = self._outputs["output_int_register_0"]
+        if state == SCRIPT_DONE and cmd == CMD_NONE:
+            self._outputs["output_int_register_0"] = SCRIPT_READY
+        elif state == SCRIPT_READY and cmd != CMD_NONE:
+            self.log.commands.append(cmd)
+            self._outputs["output_int_register_0"] = SCRIPT_BUSY
+            self._execute(cmd)
+
+    def _execute(self, cmd: int) -> None:
+        regs = self._inputs
+        doubles = [float(regs.get(f"input_double_register_{k}", 0.0)) for k in range(8)]
+        if cmd == CMD_STOP_SCRIPT:
+            self._stop_program()
+            return
+        if cmd == CMD_MOVEJ:
+            asynchronous = int(regs.get("input_int_register_1", 0)) == 1
+            self._start_move(np.array(doubles[:6]), doubles[6], doubles[7], asynchronous)
+            return
+        if cmd in (CMD_STOPJ, CMD_STOPL):
+            self.rig._stop_requested = True
+            motion = self._motion
+            if motion is not None and motion.thread is not None and motion.thread is not threading.current_thread():
+                self._lock.release()
+                try:
+                    motion.thread.join(timeout=5.0)
+                finally:
+                    self._lock.acquire()
+        self._outputs["output_int_register_0"] = SCRIPT_DONE
+
+    def _start_move(self, target: np.ndarray, speed: float, acceleration: float, asynchronous: bool) -> None:
+        start = self.rig.rest_joints
+        duration = float(np.max(_durations(start, target, [speed] * 6, [acceleration] * 6), initial=0.0))
+        motion = _Motion(start, target, speed, acceleration, self.rig.clock.now(), duration)
+        if asynchronous:
+            self._outputs["output_int_register_2"] = 0
+            self._outputs["output_int_register_0"] = SCRIPT_DONE
+        motion.thread = threading.Thread(target=self._run_move, args=(motion, asynchronous), daemon=True)
+        self._motion = motion
+        motion.thread.start()
+
+    def _run_move(self, motion: _Motion, asynchronous: bool) -> None:
+        n = len(motion.target)
+        try:
+            if self.stall:  # a move that never finishes: the arm stays put, the script never reports done
+                motion.target, motion.duration = motion.start.copy(), float("inf")
+                while self._running and not self.rig._stop_requested:
+                    time.sleep(0.01)
+                return
+            self.robot.move_joints(motion.target, [motion.speed] * n, [motion.acceleration] * n,
+                                   timeout=max(motion.duration * 2 + 1.0, 1.0))
+        except ProtectiveStop:
+            self._latch(SAFETY_PROTECTIVE_STOP)
+        except EmergencyStop:
+            self._latch(SAFETY_ROBOT_EMERGENCY_STOP)
+        except (RobotFault, ValueError):
+            pass  # stopped by stopJ, or a target the script refuses: the move just ends
+        finally:
+            with self._lock:
+                motion.done = True
+                if asynchronous:
+                    self._async_token = -2 if self._async_token == -1 else -1
+                    self._outputs["output_int_register_2"] = self._async_token
+                elif self._program_running:
+                    self._outputs["output_int_register_0"] = SCRIPT_DONE
+
+    # --- servers --------------------------------------------------------------------------------------------
+
+    def _accept_loop(self, server: socket.socket, handler: Any) -> None:
+        while self._running:
+            try:
+                conn, _ = server.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            self._connections.add(conn)
+            self._spawn(self._guard, handler, conn)
+
+    def _guard(self, handler: Any, conn: socket.socket) -> None:
+        try:
+            handler(conn)
+        except (OSError, ConnectionError, struct.error):
+            pass
+        finally:
+            self._connections.discard(conn)
+            with contextlib.suppress(OSError):
+                conn.close()
+
+    def _serve_dashboard(self, conn: socket.socket) -> None:
+        conn.sendall(b"Connected: Universal Robots Dashboard Server\n")
+        buffer = b""
+        while self._running:
+            data = conn.recv(4096)
+            if not data:
+                return
+            buffer += data
+            while b"\n" in buffer:
+                line, buffer = buffer.split(b"\n", 1)
+                command = line.decode(errors="replace").strip()
+                self.log.dashboard.append(command)
+                reply = self._dashboard(command)
+                conn.sendall((reply + "\n").encode())
+                if command == "quit":
+                    return
+
+    def _dashboard(self, command: str) -> str:
+        major, minor, bugfix, build = self.version
+        c = command.lower()
+        if c == "polyscopeversion":
+            return f"URSoftware {major}.{minor}.{bugfix}.{build} (Jan 01 2024)"
+        if c == "is in remote control":
+            return "true" if self.remote_control else "false"
+        if c == "get robot model":
+            return DASHBOARD_MODEL.get(self.model.lower(), self.model.upper())
+        if c == "get serial number":
+            return self.serial
+        if c == "robotmode":
+            names = {ROBOT_MODE_RUNNING: "RUNNING", ROBOT_MODE_POWER_OFF: "POWER_OFF"}
+            return f"Robotmode: {names.get(self.robot_mode, 'IDLE')}"
+        if c == "safetystatus" or c == "safetymode":
+            names = {SAFETY_NORMAL: "NORMAL", SAFETY_PROTECTIVE_STOP: "PROTECTIVE_STOP",
+                     SAFETY_ROBOT_EMERGENCY_STOP: "ROBOT_EMERGENCY_STOP"}
+            return f"{command.capitalize()}: {names[self.safety_mode]}"
+        if c == "unlock protective stop":
+            if self.safety_mode == SAFETY_PROTECTIVE_STOP:
+                self.clear_stop()
+            return "Protective stop releasing"
+        if c == "stop":
+            with self._lock:
+                self.rig._stop_requested = True
+                self._stop_program()
+            return "Stopped"
+        if c == "programstate":
+            return "PLAYING <unnamed>" if self._program_running else "STOPPED <unnamed>"
+        if c == "running":
+            return f"Program running: {'true' if self._program_running else 'false'}"
+        if c in ("close popup", "close safety popup"):
+            return "closing popup" if c == "close popup" else "closing safety popup"
+        if c == "quit":
+            return "Disconnected"
+        return f"could not understand: '{command}'"
+
+    def _serve_script(self, conn: socket.socket) -> None:
+        if conn.getsockname()[1] in (30001, 30002) and self.kinematics:
+            conn.sendall(self._primary_greeting())
+        buffer = ""
+        while self._running:
+            data = conn.recv(65536)
+            if not data:
+                return
+            buffer += data.decode(errors="replace")
+            while True:
+                program, buffer = _take_program(buffer)
+                if program is None:
+                    break
+                self._run_program(program)
+
+    def _primary_greeting(self) -> bytes:
+        """What the primary / secondary interface sends first: a version message, then a robot state message
+        with the kinematics info (the controller's factory-calibrated DH values: here the rig's true robot)."""
+        major, minor, bugfix, build = self.version
+        name = b"URControl"
+        version = (struct.pack(">QbB", 0, -1, 3) + bytes([len(name)]) + name
+                   + struct.pack(">BBii", major, minor, bugfix, build) + b"01-01-2024, 00:00:00")
+        truth = self.rig.truth
+        body = (struct.pack(">6I", *[0x1234 + i for i in range(6)])
+                + b"".join(struct.pack(">6d", *getattr(truth, key)) for key in ("theta", "a", "d", "alpha"))
+                + struct.pack(">I", 1))
+        kinematics = struct.pack(">iB", len(body) + 5, 5) + body
+        return (struct.pack(">iB", len(version) + 5, 20) + version
+                + struct.pack(">iB", len(kinematics) + 5, 16) + kinematics)
+
+    def _run_program(self, program: str) -> None:
+        self.log.scripts.append(program)
+        with self._lock:
+            self._stop_program()  # a new program replaces the running one
+            if "def rtde_control" in program or "rtde_cmd" in program:
+                self._program_starts_at = time.monotonic() + 0.05
+
+    def _serve_rtde(self, conn: socket.socket) -> None:
+        outputs: list[tuple[str, str]] = []
+        recipes: dict[int, list[tuple[str, str]]] = {}
+        frequency = self.rate
+        streamer: threading.Thread | None = None
+        streaming = threading.Event()
+        send_lock = threading.Lock()
+
+        def send(kind: int, payload: bytes = b"") -> None:
+            with send_lock:
+                conn.sendall(_packet(kind, payload))
+
+        def stream() -> None:
+            period = 1.0 / min(frequency, self.rate)
+            next_time = time.monotonic()
+            while self._running and streaming.is_set():
+                with self._lock:
+                    state = self._state()
+                payload = bytearray(b"\x01")
+                for name, kind in outputs:
+                    value = state.get(name, _ZERO.get(kind, 0))
+                    fmt = ">" + _FORMATS[kind]
+                    payload += struct.pack(fmt, *value) if isinstance(value, tuple) else struct.pack(fmt, value)
+                try:
+                    send(U, bytes(payload))
+                except OSError:
+                    return
+                next_time += period
+                time.sleep(max(0.0, next_time - time.monotonic()))
+
+        while self._running:
+            size, kind = struct.unpack(">HB", _recv_exact(conn, 3))
+            payload = _recv_exact(conn, size - 3)
+            if kind == V:
+                send(V, b"\x01")
+            elif kind == v:
+                send(v, struct.pack(">IIII", *self.version))
+            elif kind == O:
+                (frequency,) = struct.unpack(">d", payload[:8])
+                names = [n for n in payload[8:].decode().strip("\x00").split(",") if n]
+                types = [VARIABLES.get(n, "NOT_FOUND") for n in names]
+                self.log.unknown_variables += [n for n, t in zip(names, types, strict=True) if t == "NOT_FOUND"]
+                outputs = list(zip(names, types, strict=True))
+                send(O, b"\x01" + ",".join(types).encode())
+            elif kind == I:
+                names = [n for n in payload.decode().strip("\x00").split(",") if n]
+                types = [VARIABLES.get(n, "NOT_FOUND") if n.startswith("input") or n in _UINT8 or n in _DOUBLES
+                         or n in _V6 or n in _UINT32 else "NOT_FOUND" for n in names]
+                recipe_id = len(recipes) + 1
+                recipes[recipe_id] = list(zip(names, types, strict=True))
+                send(I, bytes([recipe_id]) + ",".join(types).encode())
+            elif kind == S:
+                streaming.set()
+                send(S, b"\x01")
+                if streamer is None or not streamer.is_alive():
+                    streamer = threading.Thread(target=stream, daemon=True)
+                    streamer.start()
+            elif kind == P:
+                streaming.clear()
+                send(P, b"\x01")
+            elif kind == U:
+                recipe = recipes.get(payload[0])
+                if recipe is None:
+                    continue
+                offset, values = 1, {}
+                for name, kind_ in recipe:
+                    fmt = ">" + _FORMATS.get(kind_, "i")
+                    item = struct.unpack_from(fmt, payload, offset)
+                    offset += struct.calcsize(fmt)
+                    values[name] = item[0] if len(item) == 1 else item
+                with self._lock:
+                    self._inputs.update(values)
+        streaming.clear()
