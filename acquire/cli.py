@@ -5,6 +5,7 @@
     acquire --robot ur5e --tracker mock --dry-run      print the plan, its duration and accuracy; move nothing
     acquire --resume SESSION                            continue an interrupted session
     acquire export SESSION --csv out.csv                measurement CSV of a session
+    acquire --tracker serial:/dev/ttyUSB0?protocol=polled-xyz --probe   check the tracker on site
 
 Exit codes: 0 complete, 1 the run failed (robot fault, lost connection; resumable), 2 bad input or a
 plan that breaks a limit, 130 stopped by the operator (resumable).
@@ -64,6 +65,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=int, help="tracker samples per step (site default)")
     p.add_argument("--free-poses", type=int, help="free poses added for the fit and validation")
     p.add_argument("--noise", type=float, help="tracker noise per axis, m, for the predicted accuracy")
+    p.add_argument("--probe", action="store_true",
+                   help="open the tracker, take --count readings, print them with their spread, and exit")
+    p.add_argument("--count", type=int, default=10, help="readings taken by --probe (10)")
+    p.add_argument("--json", action="store_true", help="with --probe: one JSON object per reading")
+    p.add_argument("--trace-io", type=Path, metavar="FILE",
+                   help="log every byte to and from the tracker (serial and I++ trackers)")
     return p
 
 
@@ -102,8 +109,21 @@ def _confirm(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan) -> Non
         raise UsageError("not confirmed; nothing moved")
 
 
-def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bool, site: SiteConfig):
-    from drivers.registry import open_robot, open_tracker
+TRACED_BACKENDS = ("serial", "ipp")  # trackers whose byte stream --trace-io can log
+
+
+def _open_tracker(tracker_spec: TrackerSpec, rig, site: SiteConfig, trace_io: Path | None):
+    from drivers.registry import open_tracker
+
+    if trace_io is not None and tracker_spec.backend not in TRACED_BACKENDS:
+        raise UsageError(f"--trace-io logs the bytes of serial and I++ trackers, not of {tracker_spec.backend!r}")
+    extra = {"trace_io": trace_io} if trace_io is not None else {}
+    return open_tracker(tracker_spec, rig=rig, site=site, **extra)
+
+
+def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bool, site: SiteConfig,
+                  trace_io: Path | None = None):
+    from drivers.registry import open_robot
 
     clock = WallClock() if realtime or robot_spec.backend != "mock" else VirtualClock()
     rig = None
@@ -112,10 +132,64 @@ def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bo
 
         rig = SimulatedRig.from_spec(robot_spec, tracker_spec, clock)
     robot = open_robot(robot_spec, rig=rig, site=site)
-    tracker = open_tracker(tracker_spec, rig=rig, site=site)
+    tracker = _open_tracker(tracker_spec, rig, site, trace_io)
     robot.connect(site.timeouts.connect)
     tracker.connect(site.timeouts.connect)
     return robot, tracker, clock
+
+
+def probe(args: argparse.Namespace) -> int:
+    """The operator's first check on site: open the tracker, take readings, show them and their spread.
+
+    Exit 0 when every reading worked, 1 when any failed (each failure is one line), 2 for bad input."""
+    import json
+
+    import numpy as np
+
+    from drivers.errors import DeviceTimeout, MeasurementError
+
+    if args.count < 1:
+        raise UsageError(f"--count must be at least 1, got {args.count}")
+    site = _site(args)
+    tracker_spec = TrackerSpec.parse(args.tracker)
+    rig = None
+    if tracker_spec.backend == "mock":  # a simulated tracker looks at a simulated robot standing at home
+        from drivers.sim import SimulatedRig
+
+        robot_spec = RobotSpec.parse(args.robot)
+        robot_spec = robot_spec if robot_spec.backend == "mock" else RobotSpec.parse(f"mock:{robot_spec.model}")
+        rig = SimulatedRig.from_spec(robot_spec, tracker_spec, VirtualClock())
+    tracker = _open_tracker(tracker_spec, rig, site, args.trace_io)
+    tracker.connect(site.timeouts.connect)
+    points, failed = [], 0
+    try:
+        identity = tracker.identity()
+        if not args.json:
+            print(f"tracker: {identity.model}" + (f", serial {identity.serial}" if identity.serial else ""))
+        for k in range(1, args.count + 1):
+            try:
+                reading = tracker.measure(1, site.timeouts.measure)[0]
+            except (MeasurementError, DeviceTimeout) as exc:
+                failed += 1
+                print(f"reading {k}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+                continue
+            p = np.asarray(reading.position, dtype=float)
+            points.append(p)
+            if args.json:
+                print(json.dumps({"x": p[0], "y": p[1], "z": p[2], "timestamp": reading.timestamp,
+                                  "sigma": reading.sigma, "status": reading.status}))
+            else:
+                print(f"reading {k}: x {p[0] * 1e3:.4f}  y {p[1] * 1e3:.4f}  z {p[2] * 1e3:.4f} mm  "
+                      f"({reading.status})")
+    finally:
+        tracker.close()
+    if points and not args.json:
+        pts = np.array(points)
+        spread = np.std(pts, axis=0, ddof=1) if len(pts) > 1 else np.zeros(3)
+        worst = np.linalg.norm(pts - pts.mean(axis=0), axis=1).max()
+        print(f"{len(pts)} of {args.count} readings; spread (std) x {spread[0] * 1e3:.4f}, y {spread[1] * 1e3:.4f}, "
+              f"z {spread[2] * 1e3:.4f} mm; largest distance from the mean {worst * 1e3:.4f} mm")
+    return 1 if failed else 0
 
 
 def _progress_printer(quiet: bool):
@@ -165,6 +239,8 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.probe:
+        return probe(args)
     if args.log:  # our own handler: basicConfig would do nothing where logging is already configured
         handler = logging.FileHandler(args.log, encoding="utf-8")
         handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
@@ -199,7 +275,7 @@ def run(args: argparse.Namespace) -> int:
         print("dry run: nothing was connected or moved")
         return 0
     _confirm(robot_spec, args, plan)
-    robot, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site)
+    robot, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
     try:
         if session is None:
             path = args.session or Path("sessions") / f"{robot_model.name}-{time.strftime('%Y%m%d-%H%M%S')}.session"

@@ -1,0 +1,113 @@
+"""Tracker protocol benchmarks: ASCII parser throughput and the serial driver's per-measurement overhead.
+
+    python -m bench.trackers [--lines 50000] [--readings 300] [--latency 0.005]
+
+1. Parser throughput: ``--lines`` valid reply lines of each bundled profile (random points, mixed line
+   endings) fed in 4 kB chunks through ``LineSplitter`` and ``parse_line``. Target: >= 20,000 lines/s.
+2. Per-measurement overhead: the polled profiles' simulated devices (tests/tracker_devices.py) on a real
+   pseudo-terminal, answering each trigger after ``--latency`` s; the driver's ``measure(1)`` repeated
+   ``--readings`` times. Overhead = wall time per reading minus the device's own time per trigger (its
+   sleep, formatting and write); it includes the driver (flush, write, read, parse) and the pty's transit
+   both ways. Target: < 1 ms. The same for the I++ client against the loopback server (no device latency).
+"""
+
+from __future__ import annotations
+
+import argparse
+import random
+import statistics
+import time
+
+from drivers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
+from drivers.ipp import IppTracker
+from drivers.registry import open_tracker
+from tests.tracker_devices import AsciiDevice, IppServer
+
+PROFILES = ("polled-xyz", "stream-csv", "tracker-checksum")
+
+
+def _lines(name: str, n: int, rng: random.Random) -> bytes:
+    profile = load_profile(name)
+    sim, out = profile.simulation, []
+    for _ in range(n):
+        values = {k: rng.uniform(-2.0, 2.0) / profile.scale for k in "xyz"}
+        values["status"] = sim.get("ok", "OK")
+        if "payload" in sim:
+            payload = str(sim["payload"]).format(**values)
+            line = str(sim["reply"]).format(payload=payload, checksum=checksum_of(payload, profile.checksum or "xor"))
+        else:
+            line = str(sim["reply"]).format(**values)
+        out.append(line.encode() + rng.choice([b"\r\n", b"\n", b"\r"]))
+    return b"".join(out)
+
+
+def parser_throughput(name: str, n: int) -> float:
+    """Lines per second through splitter + parser (best of 3)."""
+    profile, data = load_profile(name), _lines(name, n, random.Random(1))
+    best = 0.0
+    for _ in range(3):
+        splitter, parsed = LineSplitter(), 0
+        started = time.perf_counter()
+        for i in range(0, len(data), 4096):
+            for line in splitter.feed(data[i:i + 4096]):
+                parse_line(profile, line)
+                parsed += 1
+        elapsed = time.perf_counter() - started
+        assert parsed == n, (parsed, n)
+        best = max(best, n / elapsed)
+    return best
+
+
+def serial_overhead(name: str, readings: int, latency: float) -> tuple[float, float, float]:
+    """(median wall ms per reading, median device ms per trigger, median overhead ms) over the pty."""
+    with AsciiDevice(name, latency=latency) as device:
+        tracker = open_tracker(f"serial:{device.port}?protocol={name}&timeout=1")
+        tracker.connect(2.0)
+        for _ in range(10):
+            tracker.measure(1, 2.0)
+        device.busy.clear()
+        walls = []
+        for _ in range(readings):
+            started = time.perf_counter()
+            tracker.measure(1, 2.0)
+            walls.append(time.perf_counter() - started)
+        tracker.close()
+        busy = list(device.busy)
+    overhead = [w - b for w, b in zip(walls, busy, strict=True)]
+    return statistics.median(walls) * 1e3, statistics.median(busy) * 1e3, statistics.median(overhead) * 1e3
+
+
+def ipp_round_trip(readings: int) -> float:
+    """Median ms per Get(X(), Y(), Z()) against the loopback I++ server."""
+    with IppServer() as server:
+        tracker = IppTracker(server.host, server.port)
+        tracker.connect(2.0)
+        walls = []
+        for _ in range(readings):
+            started = time.perf_counter()
+            tracker.measure(1, 2.0)
+            walls.append(time.perf_counter() - started)
+        tracker.close()
+    return statistics.median(walls) * 1e3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--lines", type=int, default=50_000)
+    parser.add_argument("--readings", type=int, default=300)
+    parser.add_argument("--latency", type=float, default=0.005, help="device response time, s")
+    args = parser.parse_args()
+    print("parser throughput (target >= 20,000 lines/s)")
+    for name in PROFILES:
+        rate = parser_throughput(name, args.lines)
+        print(f"  {name:18s} {rate:10,.0f} lines/s  {'ok' if rate >= 20_000 else 'MISSED'}")
+    print(f"per-measurement overhead over a pty, device latency {args.latency * 1e3:g} ms (target < 1 ms)")
+    for name in ("polled-xyz", "tracker-checksum"):
+        wall, busy, overhead = serial_overhead(name, args.readings, args.latency)
+        print(f"  {name:18s} wall {wall:6.3f} ms  device {busy:6.3f} ms  overhead {overhead:6.3f} ms  "
+              f"{'ok' if overhead < 1.0 else 'MISSED'}")
+    print(f"I++ Get(X(), Y(), Z()) round trip on loopback: {ipp_round_trip(args.readings):.3f} ms (median)")
+
+
+if __name__ == "__main__":
+    main()
