@@ -31,6 +31,7 @@ import numpy as np
 from drivers.base import DeviceIdentity, TrackerReading
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, SpecError
 from drivers.spec import TrackerSpec
+from drivers.trace import ByteTrace, one_line
 
 DEFAULT_PORT = 1294
 OPTIONS = ("timeout", "retries", "trace")
@@ -57,8 +58,7 @@ class IppTracker:
                  trace_io: str | Path | IO[str] | None = None) -> None:
         self.host, self.port = host, port
         self.reply_timeout, self.retries = float(timeout), int(retries)
-        self._trace_target = trace_io
-        self._trace: IO[str] | None = None
+        self._trace = ByteTrace(trace_io)
         self._sock: socket.socket | None = None
         self._buffer = b""
         self._tag = 0
@@ -74,15 +74,13 @@ class IppTracker:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
         self._drop()
-        if self._trace_target is not None and self._trace is None:
-            target = self._trace_target
-            self._trace = target if hasattr(target, "write") else open(target, "a", encoding="utf-8")  # type: ignore[arg-type]  # noqa: SIM115
-        self._log_event(f"connect {self.where}")
+        self._trace.open()
+        self._trace.event(f"connect {self.where}")
         try:
             self._sock = socket.create_connection((self.host, self.port), timeout=timeout)
             self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         except OSError as exc:
-            raise ConnectionFailed(f"cannot connect to the I++ server {self.where}: {_one_line(exc)} (is the "
+            raise ConnectionFailed(f"cannot connect to the I++ server {self.where}: {one_line(exc)} (is the "
                                    "server running and reachable?)") from exc
         self._buffer = b""
         deadline = time.monotonic() + timeout
@@ -99,9 +97,7 @@ class IppTracker:
             with contextlib.suppress(Exception):  # closing a dead link must not raise
                 self.command("EndSession()", time.monotonic() + min(self.reply_timeout, 1.0))
         self._drop()
-        if self._trace is not None and self._trace is not self._trace_target:
-            self._trace.close()
-        self._trace = None
+        self._trace.close()
 
     def identity(self) -> DeviceIdentity:
         return DeviceIdentity("tracker", "I++ DME server", firmware=self.version,
@@ -138,7 +134,7 @@ class IppTracker:
                 self._drop()
             except (MeasurementError, DeviceTimeout) as exc:
                 last = exc
-            self._log_event(f"retry after: {last}")
+            self._trace.event(f"retry after: {last}")
             if time.monotonic() >= deadline:
                 break
         assert last is not None
@@ -185,12 +181,12 @@ class IppTracker:
         self._tag = self._tag % 99999 + 1
         tag = f"{self._tag:05d}"
         data = f"{tag} {text}\r\n".encode("ascii")
-        self._trace_bytes(">", data)
+        self._trace.data(">", data)
         try:
             self._sock.sendall(data)
         except OSError as exc:
             self._drop()
-            raise ConnectionFailed(f"lost the connection to {self.where}: {_one_line(exc)}") from exc
+            raise ConnectionFailed(f"lost the connection to {self.where}: {one_line(exc)}") from exc
         return tag
 
     def _reply(self, tag: str, deadline: float, what: str) -> tuple[str, str]:
@@ -199,13 +195,13 @@ class IppTracker:
             line = self._line(deadline, what)
             match = _REPLY.match(line)
             if match is None:
-                self._log_event(f"skipped malformed line {line!r}")
+                self._trace.event(f"skipped malformed line {line!r}")
                 continue
             if match.group("tag").startswith("E"):
                 self.events.append(line)
                 continue
             if match.group("tag") != tag:
-                self._log_event(f"skipped reply of another tag: {line!r}")
+                self._trace.event(f"skipped reply of another tag: {line!r}")
                 continue
             return match.group("kind"), match.group("body").strip()
 
@@ -233,32 +229,19 @@ class IppTracker:
                 continue
             except OSError as exc:
                 self._drop()
-                raise ConnectionFailed(f"lost the connection to {self.where}: {_one_line(exc)}") from exc
+                raise ConnectionFailed(f"lost the connection to {self.where}: {one_line(exc)}") from exc
             if not chunk:
                 self._drop()
                 raise ConnectionFailed(f"the I++ server {self.where} closed the connection")
-            self._trace_bytes("<", chunk)
+            self._trace.data("<", chunk)
             self._buffer += chunk
 
     def _drop(self) -> None:
         sock, self._sock = self._sock, None
         if sock is not None:
             sock.close()
-            self._log_event("disconnected")
+            self._trace.event("disconnected")
 
-    def _trace_bytes(self, direction: str, data: bytes) -> None:
-        if self._trace is not None and data:
-            self._trace.write(f"{time.time():.6f} {direction} {data!r}\n")
-            self._trace.flush()
-
-    def _log_event(self, text: str) -> None:
-        if self._trace is not None:
-            self._trace.write(f"{time.time():.6f} # {text}\n")
-            self._trace.flush()
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def open_tracker(spec: TrackerSpec | str, rig: Any = None, site: Any = None, *,

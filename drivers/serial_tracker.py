@@ -32,6 +32,7 @@ from drivers.ascii_profile import DeviceReset, LineSplitter, ParsedLine, Profile
 from drivers.base import DeviceIdentity, TrackerReading
 from drivers.errors import BackendUnavailable, BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, SpecError
 from drivers.spec import TrackerSpec
+from drivers.trace import ByteTrace, one_line
 
 OPTIONS = ("protocol", "baud", "parity", "bytesize", "stopbits", "eol", "timeout", "retries", "trace")
 EOLS = {"crlf": "\r\n", "lf": "\n", "cr": "\r"}
@@ -93,8 +94,7 @@ class SerialTracker:
         self.stopbits = stopbits or ser.get("stopbits", 1)
         self.eol = (eol or profile.line_ending).encode("ascii")
         self.reply_timeout, self.retries = float(timeout), int(retries)
-        self._trace_target = trace_io
-        self._trace: IO[str] | None = None
+        self._trace = ByteTrace(trace_io)
         self._port: Any = None
         self._splitter = LineSplitter()
         self._lines: list[str] = []
@@ -113,10 +113,8 @@ class SerialTracker:
         except ImportError as exc:
             raise BackendUnavailable("the serial tracker needs pyserial: pip install 'dh-calib[serial]'") from exc
         self.close()
-        if self._trace_target is not None and self._trace is None:
-            target = self._trace_target
-            self._trace = target if hasattr(target, "write") else open(target, "a", encoding="utf-8")  # type: ignore[arg-type]  # noqa: SIM115
-        self._log_event(f"open {self.url} profile={self.profile.name} baud={self.baud} parity={self.parity}")
+        self._trace.open()
+        self._trace.event(f"open {self.url} profile={self.profile.name} baud={self.baud} parity={self.parity}")
         try:
             port = serial.serial_for_url(self.url, do_not_open=True, baudrate=self.baud, parity=self.parity,
                                          bytesize=self.bytesize, stopbits=self.stopbits, timeout=0.05,
@@ -125,7 +123,7 @@ class SerialTracker:
                 port.exclusive = True
             port.open()
         except (serial.SerialException, OSError, ValueError) as exc:
-            raise ConnectionFailed(f"cannot open serial port {self.url!r}: {_one_line(exc)} (check that it exists, "
+            raise ConnectionFailed(f"cannot open serial port {self.url!r}: {one_line(exc)} (check that it exists, "
                                    "that no other program uses it, and your permissions)") from exc
         self._port = port
         self._initialise(time.monotonic() + timeout, identify=True)
@@ -139,10 +137,8 @@ class SerialTracker:
                 port.close()
             except Exception:  # closing a dead link must not raise
                 pass
-            self._log_event("close")
-        if self._trace is not None and self._trace is not self._trace_target:
-            self._trace.close()
-        self._trace = None
+            self._trace.event("close")
+        self._trace.close()
 
     def identity(self) -> DeviceIdentity:
         ident = self._identity
@@ -183,7 +179,7 @@ class SerialTracker:
                 self._recover("device reset")
             except (MeasurementError, DeviceTimeout) as exc:
                 last = exc
-                self._log_event(f"retry after: {exc}")
+                self._trace.event(f"retry after: {exc}")
                 if isinstance(exc, DeviceTimeout) and self.profile.mode == "streaming":
                     self._initialise(deadline)  # a silent reboot stops the stream: start it again
             if time.monotonic() >= deadline:
@@ -234,7 +230,7 @@ class SerialTracker:
 
     def _recover(self, why: str) -> None:
         self.resets += 1
-        self._log_event(f"{why}: initialising again")
+        self._trace.event(f"{why}: initialising again")
         self._initialise(time.monotonic() + max(self.reply_timeout, 1.0))
 
     def _flush(self, recover: bool = True) -> None:
@@ -244,8 +240,8 @@ class SerialTracker:
             stale = self._port.read(waiting) if waiting else b""
             self._port.reset_input_buffer()
         except Exception as exc:
-            raise ConnectionFailed(f"lost the link to {self.url}: {_one_line(exc)}") from exc
-        self._trace_bytes("<", stale)
+            raise ConnectionFailed(f"lost the link to {self.url}: {one_line(exc)}") from exc
+        self._trace.data("<", stale)
         lines = self._lines + (self._splitter.feed(stale) if stale else [])
         self._lines = []
         reset = self.profile.reset
@@ -259,13 +255,13 @@ class SerialTracker:
         try:
             self._write(self._port, command)
         except Exception as exc:
-            raise ConnectionFailed(f"lost the link to {self.url} while sending {command!r}: {_one_line(exc)}") \
+            raise ConnectionFailed(f"lost the link to {self.url} while sending {command!r}: {one_line(exc)}") \
                 from exc
 
     def _write(self, port: Any, command: str) -> None:
         data = command.encode("ascii") + self.eol
         self._last_sent = command
-        self._trace_bytes(">", data)
+        self._trace.data(">", data)
         port.write(data)
         port.flush()
 
@@ -279,9 +275,9 @@ class SerialTracker:
                 port = self._port
                 data = port.read(max(1, min(port.in_waiting, READ_CHUNK)))
             except Exception as exc:
-                raise ConnectionFailed(f"lost the link to {self.url}: {_one_line(exc)}") from exc
+                raise ConnectionFailed(f"lost the link to {self.url}: {one_line(exc)}") from exc
             if data:
-                self._trace_bytes("<", data)
+                self._trace.data("<", data)
                 self._lines.extend(self._splitter.feed(data))
         line = self._lines.pop(0)
         if self._discard_first:
@@ -298,19 +294,6 @@ class SerialTracker:
             if line != self._last_sent:
                 return line
 
-    def _trace_bytes(self, direction: str, data: bytes) -> None:
-        if self._trace is not None and data:
-            self._trace.write(f"{time.time():.6f} {direction} {data!r}\n")
-            self._trace.flush()
-
-    def _log_event(self, text: str) -> None:
-        if self._trace is not None:
-            self._trace.write(f"{time.time():.6f} # {text}\n")
-            self._trace.flush()
-
-
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
 
 
 def open_tracker(spec: TrackerSpec | str, rig: Any = None, site: Any = None, *,
