@@ -49,7 +49,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="acquire", description=__doc__.splitlines()[0],
+    p = _Parser(prog="acquire", description=__doc__.splitlines()[0].replace("``", ""),
                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:8]))
     p.add_argument("--robot", default="mock:ur5e", help="robot spec: ur5e, ur5e@HOST, mock:ur5e (mock:ur5e)")
     p.add_argument("--tracker", default="mock", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock")
