@@ -81,7 +81,7 @@ def _export(argv: list[str]) -> int:
     args = p.parse_args(argv)
     with Session.open(args.session) as session:
         rows = session.export_csv(args.csv)
-    print(f"wrote {args.csv}" + (f" ({rows} rows)" if isinstance(rows, int) else ""))
+    print(f"wrote {args.csv} ({rows} rows)")
     return 0
 
 

@@ -183,16 +183,17 @@ class Orchestrator:
         q_act = tuple(float(v) for v in self.robot.read_joints())
         readings, reason = self._measure(step)
         if not readings:
-            return StepRecord(step.index, step.kind, step.sweep, step.joint, step.role, tuple(step.q), q_act, None,
-                              None, 0, 0, "missing", reason, t_start, self.clock.now(), [], [])
+            return self._missing(step, t_start, reason, q_act)
         position, sigma, used = average_readings(readings)
-        return StepRecord(step.index, step.kind, step.sweep, step.joint, step.role, tuple(step.q), q_act,
-                          tuple(float(v) for v in position), sigma, int(used.sum()), int((~used).sum()), "ok", "",
-                          t_start, self.clock.now(), readings, [bool(u) for u in used])
+        return StepRecord.from_step(
+            step, q_act=q_act, position=tuple(float(v) for v in position), sigma=sigma, samples=int(used.sum()),
+            rejected=int((~used).sum()), status="ok", reason="", t_start=t_start, t_end=self.clock.now(),
+            readings=readings, used=[bool(u) for u in used],
+        )
 
-    def _missing(self, step: Step, t_start: float, reason: str) -> StepRecord:
-        return StepRecord(step.index, step.kind, step.sweep, step.joint, step.role, tuple(step.q), None, None, None,
-                          0, 0, "missing", reason, t_start, self.clock.now(), [], [])
+    def _missing(self, step: Step, t_start: float, reason: str, q_act: tuple[float, ...] | None = None) -> StepRecord:
+        return StepRecord.from_step(step, q_act=q_act, position=None, sigma=None, samples=0, rejected=0,
+                                    status="missing", reason=reason, t_start=t_start, t_end=self.clock.now())
 
     def _measure(self, step: Step) -> tuple[list[TrackerReading], str]:
         """Readings of the step, retried up to ``retries`` times on measurement errors and timeouts."""

@@ -23,6 +23,7 @@ from identify.refine import (
     parallel_links,
     parameter_names,
     refine,
+    vector_from_model,
 )
 
 Array = NDArray[np.float64]
@@ -165,7 +166,7 @@ def identify(
     names = parameter_names(meas.n_joints)
     fixed = [
         FixedParameter(name, float(value), _reason(name, meas.n_joints, meas.joint_types, parallel))
-        for name, value, is_free in zip(names, _values(ref.model), ref.free, strict=True)
+        for name, value, is_free in zip(names, vector_from_model(ref.model), ref.free, strict=True)
         if not is_free
     ]
     sweeps = []
@@ -222,10 +223,6 @@ def _parallel_within_uncertainty(ref: Refinement, parallel: list[int]) -> list[i
         if near_zero or (ref.model.joint_types[i - 1] == "R" and std[d] > UNDETERMINED_D):
             out.append(i)
     return out
-
-
-def _values(model: DHModel) -> Array:
-    return np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
 
 
 def _sweep_fit(sweep: int, joint: int, ref: Refinement, rows: NDArray[np.bool_]) -> SweepFit:

@@ -331,8 +331,9 @@ def _release_parallel(
     # score test first: the cost one Gauss-Newton step of the exact model would remove (cheap, and
     # asymptotically the likelihood-ratio statistic); only a significant one is worth the exact fit
     jac = exact.jacobian(x0)
-    step, *_ = np.linalg.lstsq(jac / np.linalg.norm(jac, axis=0), residuals, rcond=None)
-    reduction = float(np.sum((jac / np.linalg.norm(jac, axis=0) @ step) ** 2))
+    jac /= np.linalg.norm(jac, axis=0)
+    step, *_ = np.linalg.lstsq(jac, residuals, rcond=None)
+    reduction = float(np.sum((jac @ step) ** 2))
     if reduction / max((cost_c - reduction) / dof, floor) <= limit:
         return model, free, None
     x = _solve(exact, x0, "linear", 1.0)
