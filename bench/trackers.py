@@ -17,6 +17,7 @@ import argparse
 import random
 import statistics
 import time
+from typing import Any
 
 from drivers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
 from drivers.ipp import IppTracker
@@ -63,14 +64,9 @@ def serial_overhead(name: str, readings: int, latency: float) -> tuple[float, fl
     with AsciiDevice(name, latency=latency) as device:
         tracker = open_tracker(f"serial:{device.port}?protocol={name}&timeout=1")
         tracker.connect(2.0)
-        for _ in range(10):
-            tracker.measure(1, 2.0)
+        _timed_measurements(tracker, 10)
         device.busy.clear()
-        walls = []
-        for _ in range(readings):
-            started = time.perf_counter()
-            tracker.measure(1, 2.0)
-            walls.append(time.perf_counter() - started)
+        walls = _timed_measurements(tracker, readings)
         tracker.close()
         busy = list(device.busy)
     overhead = [w - b for w, b in zip(walls, busy, strict=True)]
@@ -82,13 +78,19 @@ def ipp_round_trip(readings: int) -> float:
     with IppServer() as server:
         tracker = IppTracker(server.host, server.port)
         tracker.connect(2.0)
-        walls = []
-        for _ in range(readings):
-            started = time.perf_counter()
-            tracker.measure(1, 2.0)
-            walls.append(time.perf_counter() - started)
+        walls = _timed_measurements(tracker, readings)
         tracker.close()
     return statistics.median(walls) * 1e3
+
+
+def _timed_measurements(tracker: Any, count: int) -> list[float]:
+    """Wall time (s) of each of ``count`` single measurements."""
+    walls = []
+    for _ in range(count):
+        started = time.perf_counter()
+        tracker.measure(1, 2.0)
+        walls.append(time.perf_counter() - started)
+    return walls
 
 
 def main() -> None:

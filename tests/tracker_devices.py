@@ -67,6 +67,18 @@ class _Served:
     def _serve(self) -> None:
         raise NotImplementedError
 
+    def _accept_each(self, server: socket.socket, serve: Any) -> None:
+        """Accept loopback connections on ``server`` until stopped, ``serve(conn)`` each, then close it."""
+        server.settimeout(0.05)
+        while not self._stop.is_set():
+            try:
+                conn, _ = server.accept()
+            except TimeoutError:
+                continue
+            with conn:
+                serve(conn)
+        server.close()
+
 
 class AsciiDevice(_Served):
     """An ASCII tracker speaking ``profile`` (name or Profile) on a pty (``transport="pty"``, then ``port``
@@ -117,22 +129,17 @@ class AsciiDevice(_Served):
 
     def _serve(self) -> None:
         if self.transport == "tcp":
-            self._server.settimeout(0.05)
-            while not self._stop.is_set():
-                try:
-                    conn, _ = self._server.accept()
-                except TimeoutError:
-                    continue
-                with conn:
-                    self.fd = conn.fileno()
-                    self._loop()
-            self._server.close()
+            self._accept_each(self._server, self._serve_connection)
         else:
             try:
                 self._loop()
             finally:
                 os.close(self.fd)
                 os.close(self._slave)
+
+    def _serve_connection(self, conn: socket.socket) -> None:
+        self.fd = conn.fileno()
+        self._loop()
 
     def _loop(self) -> None:
         period = float(self.sim.get("period", 0.0)) if self.profile.mode == "streaming" else 0.0
@@ -278,30 +285,25 @@ class IppServer(_Served):
         self.faults.extend([fault] * count)
 
     def _serve(self) -> None:
-        self._server.settimeout(0.05)
+        self._accept_each(self._server, self._serve_connection)
+
+    def _serve_connection(self, conn: socket.socket) -> None:
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        conn.settimeout(0.05)
+        buffer = b""
         while not self._stop.is_set():
             try:
-                conn, _ = self._server.accept()
+                data = conn.recv(4096)
             except TimeoutError:
                 continue
-            with conn:
-                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-                conn.settimeout(0.05)
-                buffer = b""
-                while not self._stop.is_set():
-                    try:
-                        data = conn.recv(4096)
-                    except TimeoutError:
-                        continue
-                    except OSError:
-                        break
-                    if not data:
-                        break
-                    buffer += data
-                    *lines, buffer = buffer.split(b"\r\n")
-                    if any(not self._handle(conn, raw.decode("ascii", "replace")) for raw in lines if raw):
-                        break
-        self._server.close()
+            except OSError:
+                break
+            if not data:
+                break
+            buffer += data
+            *lines, buffer = buffer.split(b"\r\n")
+            if any(not self._handle(conn, raw.decode("ascii", "replace")) for raw in lines if raw):
+                break
 
     def _handle(self, conn: socket.socket, line: str) -> bool:
         """Answer one command; False to drop the connection."""
