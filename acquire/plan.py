@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from config.robots import RobotModel
 from config.site import SiteConfig
+from drivers.motion import motion_time
 from identify.kinematics import DHModel, frames_from_joints
 from identify.refine import full_jacobian
 from identify.simulate import axis_distances, random_poses
@@ -399,13 +400,6 @@ def check_plan(plan: Plan, robot: RobotModel) -> list[str]:
             out.append(f"{where}: a sweep must name a joint 1..{n}")
         pose(where, step.q)
     return out
-
-
-def motion_time(distance: Any, speed: Any, acceleration: Any) -> Array:
-    """Time (s) of a trapezoidal (or, when too short to reach ``speed``, triangular) velocity profile
-    over ``distance`` from rest to rest; elementwise."""
-    d, v, a = (np.abs(np.asarray(x, dtype=float)) for x in (distance, speed, acceleration))
-    return np.where(d * a >= v * v, d / v + v / a, 2 * np.sqrt(d / a))
 
 
 def estimate_duration(plan: Plan, robot: RobotModel, measure_time_per_sample: float) -> float:

@@ -53,6 +53,7 @@ from drivers.errors import (
     SpecError,
     TargetLost,
 )
+from drivers.motion import motion_time
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
 from identify.kinematics import points_from_joints
 from identify.simulate import random_truth
@@ -75,10 +76,7 @@ def move_duration(start: Sequence[float], target: Sequence[float], speed: Sequen
 
 def _durations(start: Sequence[float], target: Sequence[float], speed: Sequence[float],
                acceleration: Sequence[float]) -> Array:
-    distance = np.abs(np.asarray(target, dtype=float) - np.asarray(start, dtype=float))
-    v, a = np.asarray(speed, dtype=float), np.asarray(acceleration, dtype=float)
-    cruise = distance >= v * v / a
-    return np.where(cruise, distance / v + v / a, 2.0 * np.sqrt(distance / a))
+    return motion_time(np.asarray(target, dtype=float) - np.asarray(start, dtype=float), speed, acceleration)
 
 
 def _fraction(t: float, duration: float, speed: float, acceleration: float, distance: float) -> float:
