@@ -62,7 +62,8 @@ def test_persistent_error_gives_one_line(rig: SimulatedRig) -> None:
         server.inject("error", 2)
         with pytest.raises(BadReading) as info:
             tracker.measure(1, 3.0)
-        assert "1006" in str(info.value) and "\n" not in str(info.value)
+        assert "0511" in str(info.value) and "severity 2" in str(info.value) and "\n" not in str(info.value)
+        assert info.value.severity == 2 and info.value.code == "0511"
         assert len(tracker.measure(1, 2.0)) == 1
         tracker.close()
 
@@ -123,3 +124,7 @@ def test_default_port_and_option_checks() -> None:
         open_tracker("ipp://cmm.local?speed=3")
     with pytest.raises(SpecError, match="timeout=-1"):
         open_tracker("ipp://cmm.local?timeout=-1")
+    for bad in ("average=0", "average=two", "averaging=Tool..X", "averaging=1x"):
+        with pytest.raises(SpecError, match=bad.partition("=")[0]) as info:
+            open_tracker(f"ipp://cmm.local?{bad}")
+        assert "\n" not in str(info.value)

@@ -1,0 +1,41 @@
+"""Client-side averaging of raw tracker samples into one reading, with outlier rejection.
+
+Used by drivers whose device cannot average by itself (e.g. an I++ DME server without an averaging
+property): the driver takes N raw samples of a still target and reports their robust mean.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+REJECT_SIGMAS = 5.0  # a sample farther than this many robust sigmas from the median is an outlier
+CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise (chi, 3 degrees of freedom)
+SPREAD_FLOOR = 1e-7  # m: below this a spread is the reply's resolution (0.1 µm), not noise
+
+
+def robust_mean(points: Array, reject_sigmas: float = REJECT_SIGMAS) -> tuple[Array, float | None, NDArray[np.bool_]]:
+    """Mean (3,) of ``points`` (n, 3), m, after rejecting outliers; its per-axis standard uncertainty, m;
+    and the mask (n,) of the samples kept.
+
+    The noise per axis is estimated robustly from the median 3D distance to the median point; samples
+    farther than ``reject_sigmas`` of it are dropped (only with at least 3 samples). The uncertainty is the
+    kept samples' RMS per-axis standard deviation divided by sqrt(kept), floored at the reply resolution
+    (:data:`SPREAD_FLOOR`); None for fewer than 2 kept samples (one sample has no spread).
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    if len(pts) == 0:
+        raise ValueError("robust_mean needs at least one sample")
+    used = np.ones(len(pts), dtype=bool)
+    if len(pts) >= 3:
+        median = np.median(pts, axis=0)
+        dist = np.linalg.norm(pts - median, axis=1)
+        noise = max(float(np.median(dist)) / CHI3_MEDIAN, SPREAD_FLOOR)
+        used = dist <= reject_sigmas * noise
+    kept = pts[used]
+    if len(kept) < 2:
+        return kept.mean(axis=0), None, used
+    per_axis = float(np.sqrt(np.mean(np.var(kept, axis=0, ddof=1))))
+    return kept.mean(axis=0), max(per_axis, SPREAD_FLOOR) / np.sqrt(len(kept)), used
