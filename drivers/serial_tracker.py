@@ -12,6 +12,9 @@ settings; ``eol`` the line ending of commands; ``timeout`` s to wait for one rep
 extra attempts per reading after a bad line, a timeout or a reset (default 2); ``trace`` a file that logs
 every byte in both directions (``<time> > b'...'`` sent, ``<time> < b'...'`` received). Any other option is
 rejected with one line. ``site.tracker_settings`` (same names) gives defaults below the spec's options.
+With ``rfc2217://`` the port settings travel to the remote port over RFC 2217; the negotiation waits at most
+the connect timeout (unless the URL gives pyserial's own ``?timeout=``), and writes have no timeout of their
+own (pyserial's RFC 2217 client has none).
 
 Faults: a missing or busy port raises ConnectionFailed; a lost link ConnectionFailed; no reply within the
 reply timeout (after ``retries`` re-sent triggers) DeviceTimeout; bad lines are retried, then BadReading;
@@ -115,14 +118,20 @@ class SerialTracker:
         self.close()
         self._trace.open()
         self._trace.event(f"open {self.url} profile={self.profile.name} baud={self.baud} parity={self.parity}")
+        url, write_timeout = self.url, timeout
+        if url.startswith("rfc2217://"):
+            # pyserial's RFC 2217 client has no write timeout; its network timeout (negotiation, s) is a URL
+            # option, bounded here by the connect timeout unless the URL sets it
+            write_timeout = None
+            url += "" if "?" in url else f"?timeout={timeout:g}"
         try:
-            port = serial.serial_for_url(self.url, do_not_open=True, baudrate=self.baud, parity=self.parity,
+            port = serial.serial_for_url(url, do_not_open=True, baudrate=self.baud, parity=self.parity,
                                          bytesize=self.bytesize, stopbits=self.stopbits, timeout=0.05,
-                                         write_timeout=timeout)
+                                         write_timeout=write_timeout)
             if self.url.startswith("/") or self.url.upper().startswith("COM"):
                 port.exclusive = True
             port.open()
-        except (serial.SerialException, OSError, ValueError) as exc:
+        except (serial.SerialException, OSError, ValueError, NotImplementedError) as exc:
             raise ConnectionFailed(f"cannot open serial port {self.url!r}: {one_line(exc)} (check that it exists, "
                                    "that no other program uses it, and your permissions)") from exc
         self._port = port
