@@ -41,3 +41,14 @@ def test_probe_reports_each_failed_reading_in_one_line_and_exits_1(capsys):
 def test_trace_io_is_refused_for_trackers_without_a_byte_stream(capsys):
     assert main(["--tracker", "mock", "--probe", "--trace-io", "x.log"]) == 2
     assert "serial and I++" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("spec", "words"), [
+    ("serial:/dev/does-not-exist-7?protocol=polled-xyz", "cannot open serial port '/dev/does-not-exist-7'"),
+    ("serial:/dev/ttyS0?protocol=nonesuch", "nonesuch"),
+    ("ipp://127.0.0.1:1?timeout=0.5", "cannot connect to the I++ server ipp://127.0.0.1:1"),
+])
+def test_probe_of_a_missing_device_is_one_line_and_exit_2(spec, words, capsys):
+    assert main(["--tracker", spec, "--probe"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err and "Traceback" not in err

@@ -87,15 +87,20 @@ def test_transient_faults_are_retried(fault: str, rig: SimulatedRig) -> None:
         assert tracker.resets == 1
 
 
-@pytest.mark.parametrize(("fault", "error"), [("bad_checksum", BadReading), ("garbage", BadReading),
-                                              ("target_lost", TargetLost), ("silence", DeviceTimeout)])
-def test_persistent_faults_give_one_clear_error(fault: str, error: type, rig: SimulatedRig) -> None:
+@pytest.mark.parametrize(("fault", "error", "words"), [
+    ("bad_checksum", BadReading, "checksum"), ("garbage", BadReading, ""), ("truncated", BadReading, ""),
+    ("out_of_range", BadReading, "range"), ("target_lost", TargetLost, ""), ("silence", DeviceTimeout, "no answer"),
+    ("reset", BadReading, "kept resetting"),
+])
+def test_persistent_faults_give_one_clear_error(fault: str, error: type, words: str, rig: SimulatedRig) -> None:
     with AsciiDevice("tracker-checksum", rig) as device:
         tracker = _open(device, retries="2")
         device.inject(fault, 3)
         with pytest.raises(error) as info:
             tracker.measure(1, 5.0)
-        assert "\n" not in str(info.value) and "3 attempts" in str(info.value)
+        message = str(info.value)
+        assert "\n" not in message and words in message
+        assert "3 attempts" in message or fault == "reset"
         assert len(tracker.measure(1, 2.0)) == 1  # the device recovered, so does the driver
         tracker.close()
 
@@ -181,9 +186,10 @@ def test_busy_port_is_connection_failed(rig: SimulatedRig) -> None:
     with AsciiDevice("polled-xyz", rig) as device:
         first = _open(device)
         second = open_tracker(f"serial:{device.port}?protocol=polled-xyz")
-        with pytest.raises(ConnectionFailed):
+        with pytest.raises(ConnectionFailed) as info:
             second.connect(1.0)
         first.close()
+    assert device.port in str(info.value) and "no other program" in str(info.value) and "\n" not in str(info.value)
 
 
 def test_silent_device_at_connect_times_out(rig: SimulatedRig) -> None:
@@ -278,3 +284,11 @@ def test_streaming_garbage_and_lost_target_are_skipped_or_reported(rig: Simulate
         with pytest.raises(TargetLost):
             tracker.measure(1, 3.0)
         tracker.close()
+
+
+def test_polled_device_with_mixed_line_endings(rig: SimulatedRig) -> None:
+    with AsciiDevice("tracker-checksum", rig, mixed_endings=True) as device:
+        tracker = _open(device, retries="0")
+        readings = tracker.measure(20, 5.0)
+        tracker.close()
+    assert all(np.allclose(r.position, rig.true_point(), atol=TOL) for r in readings)
