@@ -1,6 +1,6 @@
 """Tracker protocol benchmarks: ASCII parser throughput and the serial driver's per-measurement overhead.
 
-    python -m bench.trackers [--lines 50000] [--readings 300] [--latency 0.005]
+    python -m bench.trackers [--lines 50000] [--readings 300] [--latency 0.005] [--average 10]
 
 1. Parser throughput: ``--lines`` valid reply lines of each bundled profile (random points, mixed line
    endings) fed in 4 kB chunks through ``LineSplitter`` and ``parse_line``. Target: >= 20,000 lines/s.
@@ -8,7 +8,10 @@
    pseudo-terminal, answering each trigger after ``--latency`` s; the driver's ``measure(1)`` repeated
    ``--readings`` times. Overhead = wall time per reading minus the device's own time per trigger (its
    sleep, formatting and write); it includes the driver (flush, write, read, parse) and the pty's transit
-   both ways. Target: < 1 ms. The same for the I++ client against the loopback server (no device latency).
+   both ways. Target: < 1 ms. The same through an RFC 2217 server (``serial:rfc2217://``, pyserial's
+   PortManager bridging loopback TCP to the pty): the overhead then includes the bridge's transit.
+3. I++ DME on loopback (no device latency): ms per reading for one ``Get(X(), Y(), Z())``, for a reading
+   the client averages from ``--average`` points, and for one the server averages (its averaging property).
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from typing import Any
 from drivers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
 from drivers.ipp import IppTracker
 from drivers.registry import open_tracker
-from tests.tracker_devices import AsciiDevice, IppServer
+from tests.tracker_devices import AsciiDevice, IppServer, Rfc2217Bridge
 
 PROFILES = ("polled-xyz", "stream-csv", "tracker-checksum")
 
@@ -59,24 +62,32 @@ def parser_throughput(name: str, n: int) -> float:
     return best
 
 
-def serial_overhead(name: str, readings: int, latency: float) -> tuple[float, float, float]:
-    """(median wall ms per reading, median device ms per trigger, median overhead ms) over the pty."""
+def serial_overhead(name: str, readings: int, latency: float, rfc2217: bool = False) -> tuple[float, float, float]:
+    """(median wall ms per reading, median device ms per trigger, median overhead ms) over the pty, directly
+    or through an RFC 2217 server (``rfc2217``)."""
     with AsciiDevice(name, latency=latency) as device:
-        tracker = open_tracker(f"serial:{device.port}?protocol={name}&timeout=1")
-        tracker.connect(2.0)
-        _timed_measurements(tracker, 10)
-        device.busy.clear()
-        walls = _timed_measurements(tracker, readings)
-        tracker.close()
+        bridge = Rfc2217Bridge(device.port) if rfc2217 else None
+        url = bridge.url if bridge is not None else device.port
+        try:
+            tracker = open_tracker(f"serial:{url}?protocol={name}&timeout=1")
+            tracker.connect(3.0)
+            _timed_measurements(tracker, 10)
+            device.busy.clear()
+            walls = _timed_measurements(tracker, readings)
+            tracker.close()
+        finally:
+            if bridge is not None:
+                bridge.stop()
         busy = list(device.busy)
     overhead = [w - b for w, b in zip(walls, busy, strict=True)]
     return statistics.median(walls) * 1e3, statistics.median(busy) * 1e3, statistics.median(overhead) * 1e3
 
 
-def ipp_round_trip(readings: int) -> float:
-    """Median ms per Get(X(), Y(), Z()) against the loopback I++ server."""
-    with IppServer() as server:
-        tracker = IppTracker(server.host, server.port)
+def ipp_round_trip(readings: int, average: int = 1, server_averaging: bool = False) -> float:
+    """Median ms per reading against the loopback I++ server: ``average`` points per reading, averaged by
+    the server (its averaging property) or by the client."""
+    with IppServer(averaging="XX.Average" if server_averaging else None) as server:
+        tracker = IppTracker(server.host, server.port, average=average)
         tracker.connect(2.0)
         walls = _timed_measurements(tracker, readings)
         tracker.close()
@@ -98,6 +109,7 @@ def main() -> None:
     parser.add_argument("--lines", type=int, default=50_000)
     parser.add_argument("--readings", type=int, default=300)
     parser.add_argument("--latency", type=float, default=0.005, help="device response time, s")
+    parser.add_argument("--average", type=int, default=10, help="I++ points per averaged reading")
     args = parser.parse_args()
     print("parser throughput (target >= 20,000 lines/s)")
     for name in PROFILES:
@@ -108,8 +120,16 @@ def main() -> None:
         wall, busy, overhead = serial_overhead(name, args.readings, args.latency)
         print(f"  {name:18s} wall {wall:6.3f} ms  device {busy:6.3f} ms  overhead {overhead:6.3f} ms  "
               f"{'ok' if overhead < 1.0 else 'MISSED'}")
-    print(f"I++ Get(X(), Y(), Z()) round trip on loopback: {ipp_round_trip(args.readings):.3f} ms (median)")
-
+    for name in ("polled-xyz",):
+        wall, busy, overhead = serial_overhead(name, args.readings, args.latency, rfc2217=True)
+        print(f"  {name + ' rfc2217':18s} wall {wall:6.3f} ms  device {busy:6.3f} ms  overhead {overhead:6.3f} ms  "
+              f"{'ok' if overhead < 1.0 else 'MISSED'}")
+    print("I++ DME on loopback, ms per reading (median)")
+    print(f"  one Get(X(), Y(), Z())             {ipp_round_trip(args.readings):6.3f}")
+    print(f"  client average of {args.average:3d} points      "
+          f"{ipp_round_trip(args.readings // 4, args.average):6.3f}")
+    print(f"  server average of {args.average:3d} points      "
+          f"{ipp_round_trip(args.readings, args.average, server_averaging=True):6.3f}")
 
 if __name__ == "__main__":
     main()

@@ -247,7 +247,10 @@ class SerialTracker:
         try:
             waiting = self._port.in_waiting
             stale = self._port.read(waiting) if waiting else b""
-            self._port.reset_input_buffer()
+            # over RFC 2217 a purge is a round trip of >= 50 ms (pyserial polls for its acknowledgement every
+            # 50 ms): the drain above is enough there
+            if not self.url.startswith("rfc2217://"):
+                self._port.reset_input_buffer()
         except Exception as exc:
             raise ConnectionFailed(f"lost the link to {self.url}: {one_line(exc)}") from exc
         self._trace.data("<", stale)
