@@ -20,6 +20,7 @@ import argparse
 import random
 import statistics
 import time
+import warnings
 from typing import Any
 
 from drivers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
@@ -111,6 +112,7 @@ def main() -> None:
     parser.add_argument("--latency", type=float, default=0.005, help="device response time, s")
     parser.add_argument("--average", type=int, default=10, help="I++ points per averaged reading")
     args = parser.parse_args()
+    warnings.filterwarnings("ignore", r"set(Daemon|Name)\(\) is deprecated", DeprecationWarning)  # pyserial 3.5
     print("parser throughput (target >= 20,000 lines/s)")
     for name in PROFILES:
         rate = parser_throughput(name, args.lines)
