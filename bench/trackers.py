@@ -26,7 +26,8 @@ from typing import Any
 from drivers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
 from drivers.ipp import IppTracker
 from drivers.registry import open_tracker
-from tests.tracker_devices import AsciiDevice, IppServer, Rfc2217Bridge
+from tests.rfc2217_bridge import Rfc2217Bridge
+from tests.tracker_devices import AsciiDevice, IppServer
 
 PROFILES = ("polled-xyz", "stream-csv", "tracker-checksum")
 

@@ -341,7 +341,7 @@ class IppTracker:
     def _notice(self, notice: IppNotice) -> None:
         self.warnings.append(notice)
         self._trace.event(f"I++ {notice}")
-        log.log(logging.WARNING if notice.severity < 2 or not notice.command else logging.ERROR, "%s: %s",
+        log.log(logging.WARNING if notice.severity < 2 else logging.ERROR, "%s: %s",
                 self.where, notice)
 
     def _send(self, text: str) -> str:

@@ -15,7 +15,8 @@ from drivers.errors import ConnectionFailed, DeviceTimeout
 from drivers.registry import open_tracker
 from drivers.serial_tracker import SerialTracker
 from drivers.sim import SimulatedRig
-from tests.tracker_devices import AsciiDevice, Rfc2217Bridge
+from tests.rfc2217_bridge import Rfc2217Bridge
+from tests.tracker_devices import AsciiDevice
 
 # pyserial 3.5's RFC 2217 client calls Thread.setDaemon()/setName()
 pytestmark = pytest.mark.filterwarnings("ignore:set(Daemon|Name)\\(\\) is deprecated:DeprecationWarning")
