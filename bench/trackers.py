@@ -6,7 +6,7 @@
    endings) fed in 4 kB chunks through ``LineSplitter`` and ``parse_line``. Target: >= 20,000 lines/s.
 2. Per-measurement overhead: the polled profiles' simulated devices (tests/tracker_devices.py) on a real
    pseudo-terminal, answering each trigger after ``--latency`` s; the driver's ``measure(1)`` repeated
-   ``--readings`` times. Overhead = wall time per reading minus the device's own time per trigger (its
+   ``--readings`` times. Overhead = median wall time per reading minus the device's median time per trigger (its
    sleep, formatting and write); it includes the driver (flush, write, read, parse) and the pty's transit
    both ways. Target: < 1 ms. The same through an RFC 2217 server (``serial:rfc2217://``, pyserial's
    PortManager bridging loopback TCP to the pty): the overhead then includes the bridge's transit.
@@ -81,8 +81,9 @@ def serial_overhead(name: str, readings: int, latency: float, rfc2217: bool = Fa
             if bridge is not None:
                 bridge.stop()
         busy = list(device.busy)
-    overhead = [w - b for w, b in zip(walls, busy, strict=True)]
-    return statistics.median(walls) * 1e3, statistics.median(busy) * 1e3, statistics.median(overhead) * 1e3
+    # medians taken apart: the device may log a trigger's time just after the reading returned
+    wall, device_time = statistics.median(walls), statistics.median(busy)
+    return wall * 1e3, device_time * 1e3, (wall - device_time) * 1e3
 
 
 def ipp_round_trip(readings: int, average: int = 1, server_averaging: bool = False) -> float:
