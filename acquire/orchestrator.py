@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from acquire.plan import Plan, Step
 from acquire.session import Session, StepRecord
+from drivers.averaging import robust_mean
 from drivers.base import Robot, RobotState, Tracker, TrackerReading
 from drivers.clock import Clock
 from drivers.errors import ConnectionFailed, DeviceTimeout, MeasurementError, RobotFault
@@ -28,8 +29,6 @@ from identify.geometry import circle_2d_algebraic, perpendicular_basis, plane_fr
 Array = NDArray[np.float64]
 
 OUTLIER_SIGMAS = 5.0  # a sample farther than this many robust sigmas from the step's median is rejected
-CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise (chi, 3 dof)
-SPREAD_FLOOR = 1e-6  # m: below this the readings' spread is resolution, not noise
 
 
 @dataclass(frozen=True)
@@ -67,24 +66,16 @@ class Progress:
 
 
 def average_readings(readings: list[TrackerReading]) -> tuple[Array, float | None, NDArray[np.bool_]]:
-    """Mean TP (m) of the readings kept after rejecting outliers, its per-axis standard uncertainty
-    (m; None for a single reading without a device sigma), and the mask of kept readings."""
-    pts = np.array([r.position for r in readings], dtype=float)
-    median = np.median(pts, axis=0)
-    dist = np.linalg.norm(pts - median, axis=1)
-    sigma = max(float(np.median(dist)) / CHI3_MEDIAN, SPREAD_FLOOR)  # robust per-axis noise of the readings
-    used = dist <= OUTLIER_SIGMAS * sigma if len(pts) >= 3 else np.ones(len(pts), dtype=bool)
-    kept = pts[used]
+    """Mean TP (m) of the readings kept after rejecting outliers (:func:`drivers.averaging.robust_mean`), its
+    per-axis standard uncertainty (m; None for fewer than 3 kept readings without a device sigma), and the mask
+    of kept readings."""
+    mean, spread_sigma, used = robust_mean(np.array([r.position for r in readings], dtype=float), OUTLIER_SIGMAS)
     device = [r.sigma for r in readings if r.sigma is not None]
     # the device's own figure is steadier than the spread of a handful of readings; use the spread only
     # when the device gives none
     if device:
-        per_sample = float(np.median(device))
-    elif len(kept) >= 3:
-        per_sample = float(np.sqrt(np.mean(np.var(kept, axis=0, ddof=1))))
-    else:
-        return kept.mean(axis=0), None, used
-    return kept.mean(axis=0), per_sample / np.sqrt(len(kept)), used
+        return mean, float(np.median(device)) / np.sqrt(int(used.sum())), used
+    return mean, (spread_sigma if used.sum() >= 3 else None), used
 
 
 class StopRequest:
