@@ -38,6 +38,9 @@ REFINEMENTS = {"none": cv2.aruco.CORNER_REFINE_NONE, "subpix": cv2.aruco.CORNER_
 #: centres at half-integers (apriltag's own convention), the rest of OpenCV at integers. Measured on clean
 #: renders by bench/aruco.py (mean corner error of the AprilTag refinement with and without it).
 APRILTAG_SHIFT = -0.5
+#: Gaussian blur (pixels) before the AprilTag quad segmentation: without it, sensor noise of 2 grey levels
+#: makes the segmentation ~10x slower (many noise clusters); the corners are still fitted on the original.
+APRILTAG_QUAD_SIGMA = 0.8
 
 
 class DuplicateMarker(BadReading):
@@ -88,11 +91,8 @@ class Target:
         size = (round(w * pixels_per_metre), round(h * pixels_per_metre))
         if self.kind == "marker":
             (marker_id,) = self.corners
-            bits = cv2.aruco.getPredefinedDictionary(self.dictionary).markerSize + 2
-            side = max(size[0] // bits, 1) * bits  # whole pixels per bit keep the edges sharp
             image = cv2.aruco.generateImageMarker(cv2.aruco.getPredefinedDictionary(self.dictionary), marker_id,
-                                                  side, borderBits=1)
-            size = (side, side)
+                                                  size[0], borderBits=1)
         elif self.board is not None:
             image = self.board.generateImage(size, marginSize=0, borderBits=1)
         else:
@@ -179,11 +179,13 @@ def _check_ids(ids: object, dictionary: int) -> None:
 @dataclass(frozen=True)
 class Observation:
     """The target's points seen in one frame: ``object_points`` (N, 3) m in the target frame,
-    ``image_points`` (N, 2) pixels, ``ids`` the marker ids seen (sorted)."""
+    ``image_points`` (N, 2) pixels, ``ids`` the marker ids seen (sorted); ``corner_ids`` the ChArUco
+    corner id of each point (ChArUco boards only)."""
 
     object_points: Array
     image_points: Array
     ids: tuple[int, ...]
+    corner_ids: tuple[int, ...] = ()
 
 
 class Detector:
@@ -197,6 +199,7 @@ class Detector:
         params.cornerRefinementMethod = REFINEMENTS[refine]
         params.cornerRefinementMaxIterations = 50
         params.cornerRefinementMinAccuracy = 0.01
+        params.aprilTagQuadSigma = APRILTAG_QUAD_SIGMA
         dictionary = cv2.aruco.getPredefinedDictionary(target.dictionary)
         self._aruco = cv2.aruco.ArucoDetector(dictionary, params)
         self._charuco = None
@@ -250,4 +253,5 @@ class Detector:
         if ch_ids is None or len(ch_ids) == 0:
             return Observation(np.zeros((0, 3)), np.zeros((0, 2)), seen)
         index = ch_ids.reshape(-1)
-        return Observation(self._charuco_points[index], np.asarray(ch_corners, dtype=float).reshape(-1, 2), seen)
+        return Observation(self._charuco_points[index], np.asarray(ch_corners, dtype=float).reshape(-1, 2), seen,
+                           tuple(int(i) for i in index))
