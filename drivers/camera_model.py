@@ -89,7 +89,7 @@ def read_intrinsics(path: str | Path) -> CameraIntrinsics:
         raise IntrinsicsError(f"camera file {path}: no such file")
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
+    except (cv2.error, SystemError) as exc:  # OpenCV 5 wraps some parse errors in SystemError
         reason = " ".join(str(exc).split())[-160:]
         raise IntrinsicsError(f"camera file {path}: not an OpenCV FileStorage file ({reason})") from None
     try:
