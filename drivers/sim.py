@@ -14,6 +14,9 @@ The world (:class:`SimulatedRig`):
   (:func:`move_duration`); the arm comes to rest at the target plus a repeatability error
   N(0, ``repeatability``) per joint, then rings: ``q(t) = rest + A·exp(-Δt/ring_tau)·cos(2π·f·Δt)`` with
   ``|A_i|`` in [0.5, 1]·``ring`` and f = :data:`RING_FREQUENCY`; the joint readings are the actual values;
+- with ``aruco:sim?...`` as the tracker (drivers/aruco.py) the rig takes that spec's faults and seed, and
+  :meth:`SimulatedRig.face_tracker` re-places the true base in front of the camera; the camera renders the
+  target at :meth:`SimulatedRig.flange_pose` and OpenCV detects it (only the pixels are simulated);
 - the tracker's ``k``-th reading of a ``measure`` call is sampled at ``t0 + k·latency`` and delivered
   ``latency`` later, with isotropic Gaussian noise ``noise`` (m per axis, reported as ``sigma``); a reading
   is lost with probability ``dropout`` (the call raises TargetLost).
