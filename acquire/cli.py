@@ -153,7 +153,8 @@ def probe(args: argparse.Namespace) -> int:
     site = _site(args)
     tracker_spec = TrackerSpec.parse(args.tracker)
     rig = None
-    if tracker_spec.backend == "mock":  # a simulated tracker looks at a simulated robot standing at home
+    if tracker_spec.backend == "mock" or str(tracker_spec).startswith("aruco:sim"):  # a simulated tracker
+        # looks at a simulated robot standing at home
         from drivers.sim import SimulatedRig
 
         robot_spec = RobotSpec.parse(args.robot)
@@ -325,6 +326,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if argv[:1] == ["export"]:
             return _export(argv[1:])
+        if argv[:1] in (["calibrate-camera"], ["print-board"]):  # camera tools: acquire/camera_cli.py
+            from acquire.camera_cli import main as camera_main
+
+            return camera_main(argv)
         return run(build_parser().parse_args(argv))
     except (UsageError, ConfigError, SessionError, InputError, DriverError, ValueError) as exc:
         print(f"acquire: error: {exc}", file=sys.stderr)

@@ -14,6 +14,9 @@ The world (:class:`SimulatedRig`):
   (:func:`move_duration`); the arm comes to rest at the target plus a repeatability error
   N(0, ``repeatability``) per joint, then rings: ``q(t) = rest + A·exp(-Δt/ring_tau)·cos(2π·f·Δt)`` with
   ``|A_i|`` in [0.5, 1]·``ring`` and f = :data:`RING_FREQUENCY`; the joint readings are the actual values;
+- with ``aruco:sim?...`` as the tracker (drivers/aruco.py) the rig takes that spec's faults and seed, and
+  :meth:`SimulatedRig.face_tracker` re-places the true base in front of the camera; the camera renders the
+  target at :meth:`SimulatedRig.flange_pose` and OpenCV detects it (only the pixels are simulated);
 - the tracker's ``k``-th reading of a ``measure`` call is sampled at ``t0 + k·latency`` and delivered
   ``latency`` later, with isotropic Gaussian noise ``noise`` (m per axis, reported as ``sigma``); a reading
   is lost with probability ``dropout`` (the call raises TargetLost).
@@ -35,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -44,6 +47,7 @@ from config.robots import ConfigError, RobotModel, load_robot
 from drivers.base import Array, DeviceIdentity, RobotState, TrackerReading
 from drivers.clock import Clock, VirtualClock
 from drivers.errors import (
+    BackendUnavailable,
     BadReading,
     ConnectionFailed,
     DeviceTimeout,
@@ -55,7 +59,7 @@ from drivers.errors import (
 )
 from drivers.motion import motion_time
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
-from identify.kinematics import points_from_joints
+from identify.kinematics import frames_from_joints, points_from_joints
 from identify.simulate import random_truth
 
 RING_FREQUENCY = 8.0  # Hz, of the oscillation after a move
@@ -155,11 +159,20 @@ class SimulatedRig:
         """The rig of ``mock:MODEL?...`` and ``mock?...`` (options, faults included); clock default VirtualClock."""
         robot = robot if isinstance(robot, RobotSpec) else RobotSpec.parse(robot)
         tracker = tracker if tracker is None or isinstance(tracker, TrackerSpec) else TrackerSpec.parse(tracker)
-        if not robot.is_mock or (tracker is not None and not tracker.is_mock):
-            raise SpecError(f"a simulated rig needs mock devices (mock:MODEL and mock), got {str(robot)!r} and "
-                            f"{str(tracker)!r}")
+        camera = tracker is not None and is_simulated_camera(tracker)
+        if not robot.is_mock or (tracker is not None and not tracker.is_mock and not camera):
+            raise SpecError(f"a simulated rig needs mock devices (mock:MODEL and mock or aruco:sim), got "
+                            f"{str(robot)!r} and {str(tracker)!r}")
         r = robot.mock_settings()
-        t = tracker.mock_settings() if tracker is not None else TrackerSpec("mock").mock_settings()
+        t = tracker.mock_settings() if tracker is not None and not camera else TrackerSpec("mock").mock_settings()
+        view = None
+        if camera:  # only the camera's pixels are simulated: the rig takes its faults, seed and placement
+            assert tracker is not None
+            try:
+                from drivers.aruco import rig_settings
+            except ImportError as exc:
+                raise BackendUnavailable("the simulated camera needs OpenCV: pip install 'dh-calib[vision]'") from exc
+            t["fault"], t["seed"], view = rig_settings(tracker)
         try:
             model = load_robot(robot.model)
         except ConfigError as exc:
@@ -168,6 +181,8 @@ class SimulatedRig:
                   ring_tau=r["ring_tau"], noise=t["noise"], latency=t["latency"], dropout=t["dropout"],
                   tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"])
         rig.robot_spec, rig.tracker_spec = robot, tracker
+        if view is not None:
+            rig.face_tracker(*view)
         return rig
 
     # --- the physical world -------------------------------------------------------------------------------
@@ -187,6 +202,27 @@ class SimulatedRig:
     def true_point(self, t: float | None = None) -> Array:
         """The true TP (3,), m in the tracker frame, at clock time ``t`` (default now)."""
         return points_from_joints(self.truth, self.actual_joints(t))[0]
+
+    def flange_pose(self, t: float | None = None) -> Array:
+        """The true last DH frame (the flange; the TP is ``truth.tool`` in it) at clock time ``t`` (default
+        now): 4x4, tracker frame <- flange frame, metres."""
+        return frames_from_joints(self.truth, self.actual_joints(t))[0, -1]
+
+    def face_tracker(self, distance: float, tilt: float = 0.0, roll: float = 0.0) -> None:
+        """Re-place the true robot's base for a camera tracker: at home the TP lies ``distance`` m down the
+        tracker's z axis and the flange's z axis points back at the tracker, turned by ``tilt`` rad about
+        the tracker's x axis and then by ``roll`` rad about its z axis (a marker on the flange faces the
+        camera). The DH table and the TP stay as they were."""
+        home = np.array(self.model.home, dtype=float)
+        at_home = frames_from_joints(replace(self.truth, base=np.eye(4)), home)[0, -1]  # base <- flange
+        cr, sr, ct, st = math.cos(roll), math.sin(roll), math.cos(tilt), math.sin(tilt)
+        facing = np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])  # flange z towards the tracker
+        rotation = np.array([[cr, -sr, 0], [sr, cr, 0], [0, 0, 1]]) @ np.array(
+            [[1, 0, 0], [0, ct, -st], [0, st, ct]]) @ facing
+        flange = np.eye(4)
+        flange[:3, :3] = rotation
+        flange[:3, 3] = np.array([0.0, 0.0, distance]) - rotation @ self.truth.tool
+        self.truth = replace(self.truth, base=flange @ np.linalg.inv(at_home))
 
     @property
     def rest_joints(self) -> Array:
@@ -460,6 +496,11 @@ class SimulatedTracker:
                                  f"{number}")
         clock.sleep(latency * count)
         return [TrackerReading(points[i], float(times[i]), sigma=rig.noise) for i in range(count)]
+
+
+def is_simulated_camera(spec: TrackerSpec) -> bool:
+    """True for ``aruco:sim?...``: real detection on images rendered from the rig (drivers/camera_sim.py)."""
+    return spec.backend == "aruco" and spec.target == "sim"
 
 
 def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock: Clock | None = None,
