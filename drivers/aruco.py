@@ -4,7 +4,7 @@ URL form (``--tracker``)::
 
     aruco:SOURCE?camera=FILE[&marker=ID&size=M | &board=grid&cols=N&rows=N&size=M&gap=M
                  | &board=charuco&cols=N&rows=N&square=M&size=M | &layout=FILE][&dict=NAME][&first=ID]
-                 [&tp=X,Y,Z][&refine=apriltag|subpix|contour|none][&frames=N][&max_rms=PX]
+                 [&tp=X,Y,Z][&refine=edges|apriltag|subpix|contour|none][&frames=N][&max_rms=PX]
                  [&timeout=S][&retries=N]
 
 ``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a video file, an image folder or a
@@ -24,8 +24,10 @@ Target (units: metres):
 Camera and measurement:
   ``camera``  the intrinsics file (OpenCV FileStorage: camera_matrix, distortion_coefficients,
               image_width, image_height); required except for ``sim``
-  ``refine``  corner refinement (default ``apriltag``, the most accurate on clean and noisy renders; see
-              docs/benchmarks.md); ChArUco chessboard corners are always refined by ``cornerSubPix``
+  ``refine``  marker corner refinement (default ``edges``: lines fitted to the marker's outer edges,
+              drivers/aruco_refine.py, the most accurate and fast; OpenCV's ``apriltag``, ``subpix``,
+              ``contour``, ``none`` compared in docs/benchmarks.md); ChArUco chessboard corners are always
+              refined by ``cornerSubPix``
   ``frames``  frames averaged into one reading (default 5); ``max_rms`` pixels: a frame whose reprojection
               RMS exceeds it is rejected (motion blur, a bent print; default 1.0)
   ``timeout`` s to wait for one frame (default 2); ``retries`` failed frames tolerated per reading beyond
@@ -60,6 +62,7 @@ import numpy as np
 
 from drivers.aruco_pose import Pose, estimate_pose
 from drivers.aruco_target import (
+    REFINEMENTS,
     DuplicateMarker,
     Target,
     charuco_board,
@@ -74,7 +77,7 @@ from drivers.errors import BadReading, DeviceTimeout, MeasurementError, SpecErro
 from drivers.spec import TrackerSpec, parse_faults
 
 FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
-        "or layout=FILE)&tp=X,Y,Z&refine=apriltag|subpix|contour|none&frames=N")
+        "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
            "refine", "frames", "max_rms", "timeout", "retries")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "distance", "tilt", "roll", "seed",
@@ -138,9 +141,9 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
         tp = np.zeros(0)
     if tp.shape != (3,) or not np.all(np.isfinite(tp)):
         raise _fail(spec, f"option tp={raw.get('tp')} must be X,Y,Z in metres")
-    refine = str(raw.get("refine", "apriltag"))
-    if refine not in ("apriltag", "subpix", "contour", "none"):
-        raise _fail(spec, f"option refine={refine} must be apriltag, subpix, contour or none")
+    refine = str(raw.get("refine", "edges"))
+    if refine not in REFINEMENTS:
+        raise _fail(spec, f"option refine={refine} must be one of {', '.join(REFINEMENTS)}")
     camera = raw.get("camera")
     if camera is None and not simulated:
         raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera")
@@ -220,7 +223,7 @@ class ArucoTracker:
         from drivers.aruco_target import Detector
 
         self.spec, self.settings, self.source, self.camera = spec, settings, source, camera
-        self.detector = Detector(settings.target, settings.refine)
+        self.detector = Detector(settings.target, settings.refine, camera)
         self.reference: Array | None = None  # rotation of the last pose: keeps IPPE solutions on one branch
         self.frames_used = self.frames_failed = 0
 

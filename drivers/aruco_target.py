@@ -27,13 +27,16 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
+from drivers.aruco_refine import refine_corners
+from drivers.camera_model import CameraIntrinsics
 from drivers.errors import BadReading
 
 Array = NDArray[np.float64]
 
 #: Corner refinement methods (spec option ``refine``).
 REFINEMENTS = {"none": cv2.aruco.CORNER_REFINE_NONE, "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
-               "contour": cv2.aruco.CORNER_REFINE_CONTOUR, "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG}
+               "contour": cv2.aruco.CORNER_REFINE_CONTOUR, "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG,
+               "edges": cv2.aruco.CORNER_REFINE_NONE}  # edges: drivers/aruco_refine.py after a plain detection
 #: Offset (pixels) added to corners refined by the AprilTag method: OpenCV's AprilTag quad fit puts pixel
 #: centres at half-integers (apriltag's own convention), the rest of OpenCV at integers. Measured on clean
 #: renders by bench/aruco.py (mean corner error of the AprilTag refinement with and without it).
@@ -191,16 +194,17 @@ class Observation:
 class Detector:
     """The OpenCV detector for ``target`` with corner refinement ``refine`` (a key of :data:`REFINEMENTS`)."""
 
-    def __init__(self, target: Target, refine: str = "subpix") -> None:
+    def __init__(self, target: Target, refine: str = "edges", camera: CameraIntrinsics | None = None) -> None:
         if refine not in REFINEMENTS:
             raise ValueError(f"unknown corner refinement {refine!r} (known: {', '.join(REFINEMENTS)})")
-        self.target, self.refine = target, refine
+        self.target, self.refine, self.camera = target, refine, camera
         params = cv2.aruco.DetectorParameters()
         params.cornerRefinementMethod = REFINEMENTS[refine]
         params.cornerRefinementMaxIterations = 50
         params.cornerRefinementMinAccuracy = 0.01
         params.aprilTagQuadSigma = APRILTAG_QUAD_SIGMA
         dictionary = cv2.aruco.getPredefinedDictionary(target.dictionary)
+        self._modules = int(dictionary.markerSize) + 2 * params.markerBorderBits
         self._aruco = cv2.aruco.ArucoDetector(dictionary, params)
         self._charuco = None
         if target.kind == "charuco":
@@ -216,7 +220,12 @@ class Detector:
         if ids is None:
             return [], []
         shift = APRILTAG_SHIFT if self.refine == "apriltag" else 0.0
-        return [np.asarray(c, dtype=float).reshape(4, 2) + shift for c in corners], [int(i) for i in ids.reshape(-1)]
+        found = [np.asarray(c, dtype=float).reshape(4, 2) + shift for c in corners]
+        if self.refine == "edges":
+            cam = self.camera
+            found = refine_corners(gray, found, self._modules, None if cam is None else cam.matrix,
+                                   None if cam is None else cam.distortion)
+        return found, [int(i) for i in ids.reshape(-1)]
 
     def detect(self, image: NDArray[np.uint8]) -> Observation:
         """The target's visible points in ``image`` (possibly none); DuplicateMarker for an id seen twice."""

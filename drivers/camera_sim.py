@@ -62,6 +62,29 @@ class _Rays:
         self.shape, self.supersample = (h, w), s
 
 
+def texture_scale(target: Target, approximate: float) -> float:
+    """Texels per metre near ``approximate`` (and not below it) that put every edge of the printed target on
+    a texel boundary: a whole number of texels per module (marker bit), per gap of a grid board, per square
+    and per square-to-marker margin of a ChArUco board. Otherwise ``generateImage`` rounds each marker's
+    position to a texel, which moved the corners of a 3x3 grid board by up to 0.35 texel (0.14 px at
+    0.5 m). Falls back to ``approximate`` when no scale within a factor 2 fits (a layout, odd sizes)."""
+    modules = cv2.aruco.getPredefinedDictionary(target.dictionary).markerSize + 2
+    side = float(np.linalg.norm(np.diff(next(iter(target.corners.values()))[:2], axis=0)))
+    lengths = [side / modules]
+    board = target.board
+    if isinstance(board, cv2.aruco.CharucoBoard):
+        lengths += [board.getSquareLength(), (board.getSquareLength() - board.getMarkerLength()) / 2]
+    elif isinstance(board, cv2.aruco.GridBoard):
+        lengths.append(board.getMarkerSeparation())
+    lengths += list(target.extent)
+    base = lengths[0]
+    for per_module in range(max(int(np.ceil(approximate * base - 1e-9)), 1), int(2 * approximate * base) + 2):
+        ppm = per_module / base
+        if all(abs(q * ppm - round(q * ppm)) < 1e-3 for q in lengths):  # OpenCV keeps float32 lengths
+            return ppm
+    return approximate
+
+
 class Renderer:
     """Renders one target through one camera (the rays and the texture are prepared once)."""
 
@@ -69,7 +92,7 @@ class Renderer:
                  pixels_per_metre: float | None = None) -> None:
         self.target, self.camera, self.optics = target, camera, optics or Optics()
         self._rays = _Rays(camera, self.optics.supersample)
-        ppm = pixels_per_metre or 40.0 / (min(target.extent) / 10)  # ~40 texels per marker bit
+        ppm = texture_scale(target, pixels_per_metre or 40.0 / (min(target.extent) / 10))
         margin = max(int(0.15 * min(target.extent) * ppm), 2)  # the white quiet zone around the print
         texture, self._affine = target.texture(ppm, margin)
         self._texture = (BLACK + (WHITE - BLACK) * (texture.astype(np.float32) / 255.0)).astype(np.float32)
