@@ -25,7 +25,7 @@ CAMERA = CameraIntrinsics.from_fov(1280, 720, 60)
 D4 = dictionary_id("4X4_50")
 TARGETS = {"marker 50 mm": single_marker(3, 0.05, D4), "marker 100 mm": single_marker(3, 0.10, D4),
            "grid 3x3 100 mm": grid_board(3, 3, 0.03, 0.005, D4)}
-METHODS = ("none", "subpix", "contour", "apriltag")
+METHODS = ("none", "subpix", "contour", "apriltag", "edges")
 
 
 def poses(rng: np.random.Generator, distance: float, count: int) -> list[np.ndarray]:
@@ -48,7 +48,7 @@ def speed() -> None:
         frames = [renderer.render([p], rng) for p in poses(rng, 1.0, 5)]
         row = []
         for method in METHODS:
-            detector = Detector(target, method)
+            detector = Detector(target, method, CAMERA)
             detector.detect(frames[0])
             start, n = time.perf_counter(), 0
             while time.perf_counter() - start < 2.0:
@@ -64,7 +64,7 @@ def accuracy(count: int = 6) -> None:
     print("  target            distance  " + "  ".join(f"{m:>9}" for m in METHODS))
     for name, target in TARGETS.items():
         renderer = Renderer(target, CAMERA, Optics(noise=0.0, blur=0.0))
-        detectors = {m: Detector(target, m) for m in METHODS}
+        detectors = {m: Detector(target, m, CAMERA) for m in METHODS}
         for distance in (0.5, 1.0, 1.5):
             rng = np.random.default_rng(int(distance * 10))
             errors: dict[str, list[float]] = {m: [] for m in METHODS}

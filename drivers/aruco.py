@@ -40,10 +40,18 @@ motion streak (0), ``fps`` (30), ``distance`` m from the camera to the TP at hom
 ``disconnect`` loses the camera). Any other option is rejected with one line.
 
 A reading: the TP of every frame (pose by drivers/aruco_pose.py), frames farther than 5 robust sigmas
-from the median rejected, the rest averaged. Its ``sigma`` (m per axis, the RMS over x, y, z) is the larger
-of the propagated pose uncertainty (corner noise estimated from the pooled reprojection residuals, never
-below ``SIGMA_PX_FLOOR``) and the frame-to-frame spread, each divided by sqrt(frames kept). A depth error is
-typically 5-20 times a lateral one; sigma, one number, is an average over the axes.
+from the median rejected, the rest averaged. Its ``sigma`` is the standard uncertainty per axis (m), one
+number as the measurement contract has it: ``sqrt(trace(C) / 3)`` of the mean's covariance C. C is the
+pose covariance propagated to the TP, divided by the frames kept. With ``refine=edges`` the corners'
+covariance comes from the edge-line fits (drivers/aruco_refine.py: corners of one side are correlated),
+scaled up when the reprojection residuals are larger than it predicts; otherwise the corners are taken as
+independent with the noise of the pooled reprojection residuals (never below ``SIGMA_PX_FLOOR``). If
+the frames scatter significantly more than C says (F-test), their spread is used instead. A camera's
+error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
+the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights (1 / sigma² per sample): the sum of squared weighted
+residuals has the expectation of an isotropic sigma (reduced chi-square ~1), the relative weights of the
+samples are right, but the fit cannot down-weight depth against lateral errors (unbiased, not minimum
+variance), and identify's outlier test must allow anisotropic residuals (identify/refine.py inlier_mask).
 
 Faults: no frame within ``timeout`` -> the camera is reopened once, then DeviceTimeout; target not seen
 -> TargetLost; an id seen twice -> BadReading (DuplicateMarker); too few points, no pose, or a reprojection
@@ -52,6 +60,7 @@ error above ``max_rms`` -> BadReading; each after ``retries`` failed frames, nam
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -59,6 +68,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from scipy.stats import f as f_dist
 
 from drivers.aruco_pose import Pose, estimate_pose
 from drivers.aruco_target import (
@@ -82,7 +92,8 @@ OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square",
            "refine", "frames", "max_rms", "timeout", "retries")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "distance", "tilt", "roll", "seed",
                "fault")
-SIGMA_PX_FLOOR = 0.05  # pixels: corner noise assumed at least this (residuals of 4-8 corners underestimate it)
+SIGMA_PX_FLOOR = 0.01  # pixels: corner noise assumed at least this (clean renders reach 0.005-0.01 px)
+SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
 OUTLIER_SIGMAS = 5.0
 CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
 
@@ -240,7 +251,11 @@ class ArucoTracker:
         target = s.target
         details = {"source": self.source.description, "target": target.kind, "markers": str(len(target.corners)),
                    "refine": s.refine, "frames": str(s.frames), "image": f"{self.camera.width}x{self.camera.height}",
-                   "fx": f"{k[0, 0]:.2f}", "fy": f"{k[1, 1]:.2f}", "tp": ",".join(f"{v:g}" for v in s.tp)}
+                   "tp": ",".join(f"{v!r}" for v in s.tp),
+                   # the intrinsics used, at full precision, so that a recorded session can be replayed
+                   "camera_matrix": json.dumps(k.tolist()),
+                   "distortion_coefficients": json.dumps(self.camera.distortion.tolist()),
+                   "camera_file": "" if s.camera_file is None else str(s.camera_file)}
         return DeviceIdentity("tracker", "ArUco camera (OpenCV)", serial=str(self.spec.target),
                               firmware=f"opencv {cv2.__version__}", details=details)
 
@@ -305,19 +320,37 @@ class ArucoTracker:
         pts = np.array([p.point(tp) for p, _ in poses])
         dof = sum(max(p.dof, 0) for p, _ in poses)
         rss = sum(p.rms**2 * 2 * p.points for p, _ in poses)
-        sigma_px = max(math.sqrt(rss / dof) if dof else 0.0, SIGMA_PX_FLOOR)
-        covs = np.array([p.point_covariance(tp, sigma_px) for p, _ in poses])
+        expected = [p.expected_rss for p, _ in poses]
+        if all(e is not None for e in expected):  # corner covariances from the edge-line fits
+            scale = max(rss / max(sum(expected), 1e-30), 1.0)  # corners scatter more than their edges say
+            covs = np.array([p.point_covariance(tp, 0.0) * scale for p, _ in poses])
+        else:
+            sigma_px = max(math.sqrt(rss / dof) if dof else 0.0, SIGMA_PX_FLOOR)
+            covs = np.array([p.point_covariance(tp, sigma_px) for p, _ in poses])
         model = math.sqrt(float(np.trace(covs.mean(axis=0))) / 3)  # per-axis RMS, one frame
         median = np.median(pts, axis=0)
         dist = np.linalg.norm(pts - median, axis=1)
         robust = max(float(np.median(dist)) / CHI3_MEDIAN, model)
         kept = dist <= OUTLIER_SIGMAS * robust if len(pts) >= 3 else np.ones(len(pts), dtype=bool)
         n = int(kept.sum())
-        spread = math.sqrt(float(np.mean(np.var(pts[kept], axis=0, ddof=1)))) if n >= 3 else 0.0
-        sigma = max(model, spread) / math.sqrt(n)
+        sigma = _frame_sigma(model, pts[kept], dof) / math.sqrt(n)
         stamp = float(np.mean([t for (_, t), k in zip(poses, kept, strict=True) if k]))
         status = "ok" if n == len(pts) else f"ok ({len(pts) - n} of {len(pts)} frames rejected)"
         return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=sigma, status=status)
+
+
+def _frame_sigma(model: float, pts: Array, dof: int) -> float:
+    """One frame's per-axis standard uncertainty (m): the propagated ``model`` (``dof`` residual degrees of
+    freedom behind it), unless the kept frames ``pts`` (n, 3) scatter significantly more than it (an
+    F-test at SPREAD_SIGNIFICANCE: vibration, flicker, a target still moving), then their spread."""
+    n = len(pts)
+    if n < 2 or dof < 1 or model <= 0:
+        return model
+    spread2 = float(np.mean(np.var(pts, axis=0, ddof=1)))
+    # one axis (depth) dominates the spread: n - 1 degrees of freedom, not 3 (n - 1)
+    if spread2 > model**2 * f_dist.isf(SPREAD_SIGNIFICANCE, n - 1, dof):
+        return math.sqrt(spread2)
+    return model
 
 
 def _summary(failures: list[MeasurementError], tried: int) -> MeasurementError:

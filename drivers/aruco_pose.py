@@ -35,7 +35,8 @@ class Pose:
     """One frame's target pose: ``rotation`` (3, 3) and ``translation`` (3,) m, camera frame <- target frame;
     ``rms`` reprojection RMS (pixels, per coordinate) over ``points`` points; ``jacobian`` (2N, 6) of the
     projections by (rotation vector, translation); ``ambiguous`` True when the IPPE alternative was close
-    and a reference chose."""
+    and a reference chose; ``image_covariance`` (2N, 2N) pixels² of the points, when the detection gave
+    one (else the points are taken as independent with a common noise)."""
 
     rotation: Array
     translation: Array
@@ -43,6 +44,16 @@ class Pose:
     points: int
     jacobian: Array
     ambiguous: bool = False
+    image_covariance: Array | None = None
+
+    @property
+    def expected_rss(self) -> float | None:
+        """Expected sum of squared reprojection residuals (pixels²) under :attr:`image_covariance`:
+        ``tr((I - J N⁻¹ Jᵀ) Σ)``; None without one. Compare with ``2 N rms²``, the observed sum."""
+        if self.image_covariance is None:
+            return None
+        hat = self.jacobian @ np.linalg.pinv(self.jacobian.T @ self.jacobian) @ self.jacobian.T
+        return float(np.trace(self.image_covariance) - np.trace(hat @ self.image_covariance))
 
     @property
     def dof(self) -> int:
@@ -54,9 +65,15 @@ class Pose:
         return self.rotation @ np.asarray(tp, dtype=float) + self.translation
 
     def point_covariance(self, tp: Array, sigma_px: float) -> Array:
-        """Covariance (3, 3) m² of :meth:`point` for corner noise ``sigma_px`` pixels per coordinate."""
-        normal = self.jacobian.T @ self.jacobian
-        pose_cov = sigma_px**2 * np.linalg.pinv(normal)
+        """Covariance (3, 3) m² of :meth:`point`: from :attr:`image_covariance` when there is one (the
+        least-squares pose's sandwich ``N⁻¹ Jᵀ Σ J N⁻¹``, N = JᵀJ), else for independent corner noise
+        ``sigma_px`` pixels per coordinate (``sigma_px² N⁻¹``)."""
+        inverse = np.linalg.pinv(self.jacobian.T @ self.jacobian)
+        if self.image_covariance is not None:
+            gain = inverse @ self.jacobian.T
+            pose_cov = gain @ self.image_covariance @ gain.T
+        else:
+            pose_cov = sigma_px**2 * inverse
         rvec = cv2.Rodrigues(self.rotation)[0]
         _, d_r = cv2.Rodrigues(rvec)  # (3, 9): d vec(R) (row-major) / d rvec
         tp = np.asarray(tp, dtype=float)
@@ -103,7 +120,8 @@ def estimate_pose(obs: Observation, matrix: Array, distortion: Array, square: bo
             if reference is not None:
                 best = min(candidates[:2], key=lambda c: _angle(cv2.Rodrigues(c[1])[0], reference))
     rms, rvec, tvec, jac = best
-    return Pose(cv2.Rodrigues(rvec)[0], tvec.reshape(3), rms, n, np.asarray(jac, dtype=float), ambiguous)
+    return Pose(cv2.Rodrigues(rvec)[0], tvec.reshape(3), rms, n, np.asarray(jac, dtype=float), ambiguous,
+                obs.covariance)
 
 
 def _angle(a: Array, b: Array) -> float:

@@ -26,6 +26,7 @@ import cv2
 import numpy as np
 import yaml
 from numpy.typing import NDArray
+from scipy.linalg import block_diag
 
 from drivers.aruco_refine import refine_corners
 from drivers.camera_model import CameraIntrinsics
@@ -183,12 +184,14 @@ def _check_ids(ids: object, dictionary: int) -> None:
 class Observation:
     """The target's points seen in one frame: ``object_points`` (N, 3) m in the target frame,
     ``image_points`` (N, 2) pixels, ``ids`` the marker ids seen (sorted); ``corner_ids`` the ChArUco
-    corner id of each point (ChArUco boards only)."""
+    corner id of each point (ChArUco boards only); ``covariance`` (2N, 2N) pixels² of the image points
+    (x0 y0 x1 y1 ...), when the refinement gives one (``edges``)."""
 
     object_points: Array
     image_points: Array
     ids: tuple[int, ...]
     corner_ids: tuple[int, ...] = ()
+    covariance: Array | None = None
 
 
 class Detector:
@@ -215,22 +218,28 @@ class Detector:
 
     def markers(self, image: NDArray[np.uint8]) -> tuple[list[Array], list[int]]:
         """All markers of the dictionary in ``image``: corners (4, 2) pixels each and their ids."""
+        corners, ids, _ = self._markers(image)
+        return corners, ids
+
+    def _markers(self, image: NDArray[np.uint8]) -> tuple[list[Array], list[int], list[Array | None]]:
+        """:meth:`markers` and each marker's (8, 8) corner covariance (pixels², ``refine=edges`` only)."""
         gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         corners, ids, _ = self._aruco.detectMarkers(gray)
         if ids is None:
-            return [], []
+            return [], [], []
         shift = APRILTAG_SHIFT if self.refine == "apriltag" else 0.0
         found = [np.asarray(c, dtype=float).reshape(4, 2) + shift for c in corners]
+        covariances: list[Array | None] = [None] * len(found)
         if self.refine == "edges":
             cam = self.camera
-            found = refine_corners(gray, found, self._modules, None if cam is None else cam.matrix,
-                                   None if cam is None else cam.distortion)
-        return found, [int(i) for i in ids.reshape(-1)]
+            found, covariances = refine_corners(gray, found, self._modules, None if cam is None else cam.matrix,
+                                                None if cam is None else cam.distortion)
+        return found, [int(i) for i in ids.reshape(-1)], covariances
 
     def detect(self, image: NDArray[np.uint8]) -> Observation:
         """The target's visible points in ``image`` (possibly none); DuplicateMarker for an id seen twice."""
         gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        corners, ids = self.markers(gray)
+        corners, ids, covariances = self._markers(gray)
         mine = [i for i in ids if i in self.target.corners]
         twice = sorted({i for i in mine if mine.count(i) > 1})
         if twice:
@@ -238,15 +247,17 @@ class Detector:
                                   "(a second copy in view?)")
         if self._charuco is not None:
             return self._detect_charuco(gray, corners, ids)
-        obj, img, seen = [], [], []
-        for c, i in zip(corners, ids, strict=True):
+        obj, img, seen, covs = [], [], [], []
+        for c, i, v in zip(corners, ids, covariances, strict=True):
             if i in self.target.corners:
                 obj.append(self.target.corners[i])
                 img.append(c)
                 seen.append(i)
+                covs.append(v)
         if not seen:
             return Observation(np.zeros((0, 3)), np.zeros((0, 2)), ())
-        return Observation(np.concatenate(obj), np.concatenate(img), tuple(sorted(seen)))
+        cov = None if any(v is None for v in covs) else block_diag(*covs)
+        return Observation(np.concatenate(obj), np.concatenate(img), tuple(sorted(seen)), covariance=cov)
 
     def _detect_charuco(self, gray: NDArray[np.uint8], corners: list[Array], ids: list[int]) -> Observation:
         assert self._charuco is not None

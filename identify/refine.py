@@ -27,6 +27,7 @@ Array = NDArray[np.float64]
 BASE_NAMES = ("base.rx", "base.ry", "base.rz", "base.x", "base.y", "base.z")
 TOOL_NAMES = ("tool.x", "tool.y", "tool.z")
 OUTLIER_PROBABILITY = 0.01  # chance that a clean data set has any sample flagged as an outlier
+ROBUST_CORE = 0.975  # share of clean samples the robust noise covariance is estimated from
 NOISE_FLOOR = 1e-8  # m: below this, residuals are rounding, not noise (no outlier is called on them)
 RANK_TOL = 1e-7
 RESIDUAL_FLOOR = 1e-12  # m: rounding level of residuals, floor of the noise in the significance test
@@ -286,16 +287,31 @@ def refine(
 
 
 def inlier_mask(weighted_residuals: Array, n_free: int) -> NDArray[np.bool_]:
-    """Samples whose residual norm is within the chi-square(3) limit of a robust noise estimate.
+    """Samples whose residual is within the chi-square(3) limit of a robust estimate of the noise.
 
-    The limit makes OUTLIER_PROBABILITY the chance that a clean data set loses any sample, whatever its
-    size (Bonferroni), so a large session does not shed clean samples."""
-    norms = np.linalg.norm(weighted_residuals, axis=1)
-    count = weighted_residuals.size
-    robust_sigma = 1.4826 * np.median(np.abs(weighted_residuals)) * np.sqrt(count / max(count - n_free, 1))
-    per_sample = OUTLIER_PROBABILITY / len(weighted_residuals)
-    limit = max(robust_sigma, NOISE_FLOOR) * np.sqrt(chi2.isf(per_sample, 3))
-    return norms <= limit
+    The noise may be anisotropic even after weighting: one sigma per sample cannot say that a camera's
+    error is mostly along its line of sight (5-10x a lateral one). So the residuals' 3x3 covariance is
+    estimated robustly (per-axis median absolute deviation, then two passes over the samples within the
+    97.5 % chi-square(3) quantile, corrected for that truncation and for the fitted parameters) and each
+    sample's Mahalanobis distance is tested; for isotropic noise this is the usual test on the norm. The
+    limit makes OUTLIER_PROBABILITY the chance that a clean data set loses any sample, whatever its size
+    (Bonferroni), so a large session does not shed clean samples."""
+    res = np.asarray(weighted_residuals, dtype=float).reshape(-1, 3)
+    count = res.size
+    inflate = count / max(count - n_free, 1)  # residuals of a fit are smaller than the noise
+    floor = NOISE_FLOOR**2 * np.eye(3)
+    cov = np.diag((1.4826 * np.median(np.abs(res), axis=0)) ** 2) * inflate + floor
+    core = chi2.ppf(ROBUST_CORE, 3)
+    truncation = ROBUST_CORE / chi2.cdf(core, 5)  # E[r rᵀ | d² < core] = cov · cdf5(core) / cdf3(core)
+    for _ in range(2):
+        distance2 = np.einsum("ij,jk,ik->i", res, np.linalg.inv(cov), res)
+        core_rows = res[distance2 <= core]
+        if len(core_rows) <= 3:
+            break
+        cov = core_rows.T @ core_rows / len(core_rows) * truncation * inflate + floor
+    distance2 = np.einsum("ij,jk,ik->i", res, np.linalg.inv(cov), res)
+    per_sample = OUTLIER_PROBABILITY / len(res)
+    return distance2 <= chi2.isf(per_sample, 3)
 
 
 def _with_conventions(model: DHModel, free: NDArray[np.bool_], conventional: Array | None) -> tuple[DHModel, int]:
