@@ -48,10 +48,12 @@ scaled up when the reprojection residuals are larger than it predicts; otherwise
 independent with the noise of the pooled reprojection residuals (never below ``SIGMA_PX_FLOOR``). If
 the frames scatter significantly more than C says (F-test), their spread is used instead. A camera's
 error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
-the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights (1 / sigma² per sample): the sum of squared weighted
-residuals has the expectation of an isotropic sigma (reduced chi-square ~1), the relative weights of the
-samples are right, but the fit cannot down-weight depth against lateral errors (unbiased, not minimum
-variance), and identify's outlier test must allow anisotropic residuals (identify/refine.py inlier_mask).
+the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights
+(1 / sigma² per sample): the sum of squared weighted residuals has the expectation it would have for
+isotropic noise of that sigma (reduced chi-square ~1), the relative weights of the samples are right
+(an oblique or distant view weighs less), but the fit cannot down-weight depth against lateral errors
+(unbiased, not minimum variance), and identify's outlier test must allow anisotropic residuals
+(identify/refine.py ``inlier_mask``).
 
 Faults: no frame within ``timeout`` -> the camera is reopened once, then DeviceTimeout; target not seen
 -> TargetLost; an id seen twice -> BadReading (DuplicateMarker); too few points, no pose, or a reprojection
