@@ -5,12 +5,14 @@
 Speed: frames per second of detection + pose (one thread of work per frame, as the driver runs it) on
 pre-rendered 1280x720 frames with sensor noise (2 grey levels) and blur (0.5 px). Accuracy: mean 3D error
 (mm) of the target centre against the rendered truth, over random poses (tilt up to 30 deg, any roll),
-for each distance, target (single marker 50 / 100 mm, grid board 100 mm) and corner refinement, on clean
-renders (no noise, no blur). Camera: 1280x720, 60 deg horizontal field of view, no distortion.
+for each distance, target (single marker 50 / 100 mm, grid board 100 mm) and corner refinement (OpenCV's
+four and ``edges``, drivers/aruco_refine.py), on clean renders (no noise, no blur). Camera: 1280x720,
+60 deg horizontal field of view, no distortion. The machine's load average is printed with the speeds.
 """
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -40,7 +42,8 @@ def poses(rng: np.random.Generator, distance: float, count: int) -> list[np.ndar
 
 
 def speed() -> None:
-    print("detection + pose, 1280x720, noise 2, blur 0.5: frames/s")
+    print(f"detection + pose, 1280x720, noise 2, blur 0.5: frames/s (load average {os.getloadavg()[0]:.2f} "
+          f"on {os.cpu_count()} cores)")
     rng = np.random.default_rng(0)
     for name in ("marker 100 mm", "grid 3x3 100 mm"):
         target = TARGETS[name]

@@ -176,3 +176,31 @@ def test_image_folder_replay_measures_the_recorded_frames(tmp_path):
         assert np.linalg.norm(reading.position - pose[:3, 3]) < max(5 * reading.sigma, 3e-4)
     with pytest.raises(Exception, match="all 6 images were used"):
         tracker.measure(1, 5.0)
+
+
+def test_video_file_replay_measures_the_recorded_frames(tmp_path):
+    """Offline replay of a video (MJPG in AVI, written by cv2.VideoWriter) through aruco:FILE.avi."""
+    from drivers.camera_model import write_intrinsics
+
+    target = grid_board(2, 2, 0.04, 0.008, D4)
+    renderer = Renderer(target, CAMERA, Optics(noise=1.0, blur=0.5))
+    rng = np.random.default_rng(9)
+    poses = [_pose(rng, 0.6, tilt=20) for _ in range(2)]
+    video = tmp_path / "run.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (CAMERA.width, CAMERA.height))
+    assert writer.isOpened(), "this OpenCV build cannot write MJPG/AVI"
+    for pose in poses:
+        for _ in range(3):
+            writer.write(cv2.cvtColor(renderer.render([pose], rng), cv2.COLOR_GRAY2BGR))
+    writer.release()
+    write_intrinsics(tmp_path / "cam.yaml", CAMERA)
+    spec = f"aruco:{video}?board=grid&cols=2&rows=2&size=0.04&gap=0.008&frames=3&camera={tmp_path / 'cam.yaml'}"
+    tracker = open_tracker(spec)
+    tracker.connect(1.0)
+    assert tracker.identity().details["source"] == f"video {video}"
+    for pose in poses:
+        reading = tracker.measure(1, 5.0)[0]
+        # JPEG blocks move the edges a little more than the sensor noise does
+        assert np.linalg.norm(reading.position - pose[:3, 3]) < max(6 * reading.sigma, 5e-4), reading
+    with pytest.raises(Exception, match="ended after 6 frames"):
+        tracker.measure(1, 5.0)
