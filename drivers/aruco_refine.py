@@ -53,13 +53,14 @@ def refine_corners(gray: NDArray[np.uint8], corners: list[Array], modules: int, 
     image = gray.astype(np.float32)
     undistort = matrix is not None and distortion is not None and bool(np.any(distortion))
     out: list[tuple[Array, Array | None]] = [(np.asarray(c, dtype=float).reshape(4, 2), None) for c in corners]
-    for _ in range(PASSES):
-        out = _one_pass(image, [c for c, _ in out], modules, matrix if undistort else None, distortion)
+    for k in range(PASSES):
+        out = _one_pass(image, [c for c, _ in out], modules, matrix if undistort else None, distortion,
+                        covariance=k == PASSES - 1)
     return [c for c, _ in out], [v for _, v in out]
 
 
 def _one_pass(image: NDArray[np.float32], corners: list[Array], modules: int, matrix: Array | None,
-              distortion: Array | None) -> list[tuple[Array, Array | None]]:
+              distortion: Array | None, covariance: bool) -> list[tuple[Array, Array | None]]:
     quads = np.stack(corners)  # (M, 4, 2)
     start, end = quads, np.roll(quads, -1, axis=1)  # side k runs from corner k to corner k+1
     length = np.linalg.norm(end - start, axis=2)  # (M, 4)
@@ -92,16 +93,16 @@ def _one_pass(image: NDArray[np.float32], corners: list[Array], modules: int, ma
     valid = (contrast >= MIN_CONTRAST) & (np.abs(edge) < reach[:, None, None] * 0.9)
     refined: list[tuple[Array, Array | None]] = []
     for m in range(len(corners)):
-        fitted = _corners_from_edges(found[m], valid[m], matrix, distortion)
+        fitted = _corners_from_edges(found[m], valid[m], matrix, distortion, covariance)
         refined.append((corners[m], None) if fitted is None else fitted)
     return refined
 
 
 def _corners_from_edges(points: Array, valid: NDArray[np.bool_], matrix: Array | None,
-                        distortion: Array | None) -> tuple[Array, Array] | None:
+                        distortion: Array | None, covariance: bool = True) -> tuple[Array, Array | None] | None:
     """(4, A, 2) edge points of the four sides (pixels) -> (4, 2) corners, corner k = side k-1 x side k,
     and their (8, 8) covariance (pixels², x0 y0 x1 y1 ...) from the scatter of the edge points about the
-    lines (see :func:`_corner_covariance`)."""
+    lines (see :func:`_corner_covariance`; None unless ``covariance``)."""
     lines = []
     for k in range(4):
         pts = points[k][valid[k]]
@@ -119,7 +120,7 @@ def _corners_from_edges(points: Array, valid: NDArray[np.bool_], matrix: Array |
         if abs(np.linalg.det(a)) < 1e-9:
             return None
         out[k] = np.linalg.solve(a, [c1, c2])
-    cov = _corner_covariance(lines, out)
+    cov = _corner_covariance(lines, out) if covariance else None
     if matrix is not None:
         rays = np.column_stack([out, np.ones(4)]) @ np.linalg.inv(matrix).T
         out = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), matrix, distortion)[0].reshape(4, 2)

@@ -66,8 +66,9 @@ def test_noisy_readings_scatter_as_their_own_sigma_says():
     errors = np.array([r.position for r in readings]) - rig.true_point()
     sigma = np.array([r.sigma for r in readings])
     z = np.sqrt(np.mean(np.sum(errors**2, axis=1) / 3 / sigma**2))
-    assert 0.25 < z < 2.5, (z, errors, sigma)
-    assert np.linalg.norm(errors.mean(axis=0)) < 1.5e-3  # m: unbiased to within the depth noise
+    assert 0.5 < z < 2.0, (z, errors, sigma)  # measured 0.87 (seeds 6, 7: 0.84, 1.44)
+    # unbiased: the mean of 12 readings is within 4 of its own standard uncertainties (depth ~sqrt(3) sigma)
+    assert np.linalg.norm(errors.mean(axis=0)) < 4 * np.sqrt(3) * np.mean(sigma) / np.sqrt(12)
 
 
 def test_ippe_ambiguity_is_resolved_by_the_previous_pose():

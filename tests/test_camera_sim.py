@@ -39,7 +39,7 @@ def _left_edge_errors(image: np.ndarray, camera: CameraIntrinsics, pose: np.ndar
     errors = []
     for v in rows:
         u_true = np.interp(v, edge[:, 1], edge[:, 0])
-        a, b = int(np.floor(u_true)) - 4, int(np.floor(np.interp(v, inner[:, 1], inner[:, 0])))
+        a, b = int(np.floor(u_true)) - 2, int(np.floor(np.interp(v, inner[:, 1], inner[:, 0])))
         coverage = (image[v, a:b + 1].astype(float) - BLACK) / (WHITE - BLACK)
         errors.append(a - 0.5 + coverage.sum() - u_true)
     return np.array(errors)
