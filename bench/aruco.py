@@ -1,4 +1,4 @@
-"""ArUco camera tracker: detection + pose speed at 1280x720, and 3D accuracy on clean renders.
+"""ArUco camera tracker: detection + pose speed at 1280x720, and 3D accuracy on rendered images.
 
     .venv/bin/python -m bench.aruco            # prints the tables recorded in docs/benchmarks.md
 
@@ -6,8 +6,9 @@ Speed: frames per second of detection + pose (one thread of work per frame, as t
 pre-rendered 1280x720 frames with sensor noise (2 grey levels) and blur (0.5 px). Accuracy: mean 3D error
 (mm) of the target centre against the rendered truth, over random poses (tilt up to 30 deg, any roll),
 for each distance, target (single marker 50 / 100 mm, grid board 100 mm) and corner refinement (OpenCV's
-four and ``edges``, drivers/aruco_refine.py), on clean renders (no noise, no blur). Camera: 1280x720,
-60 deg horizontal field of view, no distortion. The machine's load average is printed with the speeds.
+four and ``edges``, drivers/aruco_refine.py): on clean renders (no noise, no blur, 6 poses) at 0.5, 1.0
+and 1.5 m, and at 1 m with noise 2 and blur 0.5 (12 poses). Camera: 1280x720, 60 deg horizontal field of
+view, no distortion. The machine's load average is printed with the speeds.
 """
 
 from __future__ import annotations
@@ -62,17 +63,19 @@ def speed() -> None:
         print(f"  {name}: " + ", ".join(row))
 
 
-def accuracy(count: int = 6) -> None:
-    print(f"mean 3D error of the centre, mm, clean renders, {count} poses each (lost: frames without a pose)")
+def accuracy(count: int = 6, optics: Optics | None = None, distances: tuple[float, ...] = (0.5, 1.0, 1.5)) -> None:
+    optics = optics or Optics(noise=0.0, blur=0.0)
+    print(f"mean 3D error of the centre, mm, noise {optics.noise:g}, blur {optics.blur:g}, {count} poses each "
+          "(lost: frames without a pose)")
     print("  target            distance  " + "  ".join(f"{m:>9}" for m in METHODS))
     for name, target in TARGETS.items():
-        renderer = Renderer(target, CAMERA, Optics(noise=0.0, blur=0.0))
+        renderer = Renderer(target, CAMERA, optics)
         detectors = {m: Detector(target, m, CAMERA) for m in METHODS}
-        for distance in (0.5, 1.0, 1.5):
+        for distance in distances:
             rng = np.random.default_rng(int(distance * 10))
             errors: dict[str, list[float]] = {m: [] for m in METHODS}
             for truth in poses(rng, distance, count):
-                image = renderer.render([truth])
+                image = renderer.render([truth], rng)
                 for method, detector in detectors.items():
                     pose = estimate_pose(detector.detect(image), CAMERA.matrix, CAMERA.distortion,
                                          target.kind == "marker", reference=truth[:3, :3])
@@ -86,3 +89,4 @@ def accuracy(count: int = 6) -> None:
 if __name__ == "__main__":
     speed()
     accuracy()
+    accuracy(12, Optics(noise=2.0, blur=0.5), (1.0,))
