@@ -173,4 +173,5 @@ def test_mock_session_with_the_rendered_camera_is_identified(tmp_path, capsys):
     q_check = rng.uniform(lo, hi, (100, 6))
     err = points_from_joints(model, q_check) - points_from_joints(truth, q_check)
     rms = np.sqrt(np.mean(np.sum(err**2, axis=1)))
-    assert rms < 3 * prediction_rms_bound(truth, fit_q, q_check, sigma), rms
+    bound = prediction_rms_bound(truth, fit_q, q_check, sigma)
+    assert rms < 2 * bound, (rms, bound)  # measured 0.044 mm against a bound of 0.039 mm
