@@ -39,8 +39,10 @@ REFINEMENTS = {"none": cv2.aruco.CORNER_REFINE_NONE, "subpix": cv2.aruco.CORNER_
                "contour": cv2.aruco.CORNER_REFINE_CONTOUR, "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG,
                "edges": cv2.aruco.CORNER_REFINE_NONE}  # edges: drivers/aruco_refine.py after a plain detection
 #: Offset (pixels) added to corners refined by the AprilTag method: OpenCV's AprilTag quad fit puts pixel
-#: centres at half-integers (apriltag's own convention), the rest of OpenCV at integers. Measured on clean
-#: renders by bench/aruco.py (mean corner error of the AprilTag refinement with and without it).
+#: centres at half-integers (apriltag's own convention), the rest of OpenCV at integers. Measured against
+#: ``projectPoints`` on renders whose edges are proven to 0.01 px (tests/test_camera_sim.py): after this
+#: shift the AprilTag corners are still off by -0.04 px in x and y at every distance and blur tried, the
+#: quad fit's own bias (not corrected: the default refinement is ``edges``).
 APRILTAG_SHIFT = -0.5
 #: Gaussian blur (pixels) before the AprilTag quad segmentation: without it, sensor noise of 2 grey levels
 #: makes the segmentation ~10x slower (many noise clusters); the corners are still fitted on the original.
