@@ -10,7 +10,8 @@ along each marker's border:
 1. Along each side, between 15 % and 85 % of its length, the image is sampled (``cv2.remap``, bilinear,
    OpenCV's pixel convention: pixel centres at integers) on short profiles across the edge, from the white
    quiet zone outside to the middle of the black border inside (half a module in, at most
-   ``MAX_REACH_PX``).
+   ``MAX_REACH_PX``; the module measured across each side, so a foreshortened marker's profiles stay
+   within its border).
 2. The edge on each profile is where the step is: ``s0 + ∫ f ds`` with ``f`` the profile scaled to 1
    outside and 0 inside. For a straight edge under any symmetric blur (defocus, the pixel's own area)
    this integral is exactly the edge position; thresholds and gradient peaks are not.
@@ -69,13 +70,15 @@ def _one_pass(image: NDArray[np.float32], corners: list[Array], modules: int, ma
     centre = quads.mean(axis=1, keepdims=True)
     flip = np.sum(inward * (centre - (start + end) / 2), axis=-1) < 0
     inward[flip] *= -1
-    module = np.median(length, axis=1) / modules  # (M,) pixels per module
-    reach = np.clip(0.5 * module, MIN_REACH_PX, MAX_REACH_PX)
+    # a module across each side (the marker may be foreshortened): its distance to the opposite side / modules
+    middle = (start + end) / 2
+    width = np.abs(np.sum(inward * (np.roll(middle, -2, axis=1) - middle), axis=-1))  # (M, 4) pixels
+    reach = np.clip(0.5 * width / modules, MIN_REACH_PX, MAX_REACH_PX)  # (M, 4)
     n_along = int(np.clip((SPAN[1] - SPAN[0]) * np.max(length) / SPACING_PX, 6, 40))
     t = np.linspace(SPAN[0], SPAN[1], n_along)
     n_prof = int(np.ceil(MAX_REACH_PX / STEP_PX))
     s = np.arange(-n_prof, n_prof + 1) * STEP_PX  # (P,) positive = inward
-    scale = (reach / MAX_REACH_PX)[:, None, None, None]  # each marker's profile spans +-reach
+    scale = (reach / MAX_REACH_PX)[:, :, None, None]  # each side's profiles span +-reach
     base = start[:, :, None, :] + t[None, None, :, None] * (end - start)[:, :, None, :]  # (M, 4, A, 2)
     offsets = s[None, None, None, :, None] * scale[..., None] * inward[:, :, None, None, :]  # (M, 4, 1, P, 2)
     points = base[:, :, :, None, :] + offsets  # (M, 4, A, P, 2)
@@ -86,11 +89,11 @@ def _one_pass(image: NDArray[np.float32], corners: list[Array], modules: int, ma
     inside = profiles[..., -2:].mean(axis=-1)
     contrast = outside - inside
     f = np.clip((profiles - inside[..., None]) / np.where(contrast > 0, contrast, 1.0)[..., None], 0.0, 1.0)
-    ds = STEP_PX * (reach / MAX_REACH_PX)[:, None, None]  # (M, 1, 1) profile step of each marker, pixels
+    ds = STEP_PX * (reach / MAX_REACH_PX)[:, :, None]  # (M, 4, 1) profile step of each side, pixels
     area = (f[..., 1:] + f[..., :-1]).sum(axis=-1) / 2 * ds  # trapezoid integral of f over the profile
     edge = -n_prof * ds + area  # (M, 4, A) offset of the edge from the base point along ``inward``
     found = base + edge[..., None] * inward[:, :, None, :]
-    valid = (contrast >= MIN_CONTRAST) & (np.abs(edge) < reach[:, None, None] * 0.9)
+    valid = (contrast >= MIN_CONTRAST) & (np.abs(edge) < reach[:, :, None] * 0.9)
     refined: list[tuple[Array, Array | None]] = []
     for m in range(len(corners)):
         fitted = _corners_from_edges(found[m], valid[m], matrix, distortion, covariance)

@@ -163,11 +163,12 @@ def test_mock_session_with_the_rendered_camera_is_identified(tmp_path, capsys):
     assert len(meas.q) == 37 and len(fit_q) >= 30
     sigma = float(np.median(meas.sigma))
     assert 1e-5 < sigma < 1e-3  # m: a camera, not a laser tracker
-    # one sample may fall out: the board 47 deg oblique at 1.1 m on a free pose (4.8 sigma in depth)
-    assert len(result["residuals"]["rejected_rows"]) <= 2
+    # measured: none (the first pass lost 13 of 37: sigma 2x too large, and an outlier test that took the
+    # 7-9x larger depth errors for outliers); one is tolerated, a 1 % false alarm by design
+    assert len(result["residuals"]["rejected_rows"]) <= 1
     (chi2,) = [float(re.search(r"reduced chi-square ([0-9.]+)", w).group(1)) for w in result["warnings"]
                if "reduced chi-square" in w]
-    assert 0.5 < chi2 < 2.0, chi2  # measured 0.91
+    assert 0.5 < chi2 < 2.0, chi2  # measured 0.98
     rng = np.random.default_rng(0)
     lo, hi = np.array(yaml.safe_load(SITE)["plan"]["sweep_ranges"]).T
     q_check = rng.uniform(lo, hi, (100, 6))
