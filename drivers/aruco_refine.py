@@ -3,7 +3,7 @@
 OpenCV's own refinements, measured on clean renders (bench/aruco.py, tests/test_aruco.py): ``subpix``
 (``cornerSubPix``) pulls the convex outer corner of a marker 0.1-0.2 px inwards; ``contour`` and ``none``
 0.5-0.7 px; ``apriltag`` is unbiased in scale but off by ~0.04 px in x and y after its half-pixel
-convention shift, scatters 0.07-0.12 px, and segments the whole image again (22-27 frames/s at 1280x720).
+convention shift, scatters 0.07-0.12 px, and segments the whole image again (24-34 frames/s at 1280x720).
 This refinement starts from the fast detection's corners (no refinement) and only looks at the pixels
 along each marker's border:
 

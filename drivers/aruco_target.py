@@ -239,7 +239,9 @@ class Detector:
         return found, [int(i) for i in ids.reshape(-1)], covariances
 
     def detect(self, image: NDArray[np.uint8]) -> Observation:
-        """The target's visible points in ``image`` (possibly none); DuplicateMarker for an id seen twice."""
+        """The target's visible points in ``image`` (possibly none); DuplicateMarker for an id seen twice.
+        With ``refine=edges`` a marker whose edges cannot be fitted is left out (its unrefined corners are
+        off by up to a pixel), except as a ChArUco board's anchor for its chessboard corners."""
         gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         corners, ids, covariances = self._markers(gray)
         mine = [i for i in ids if i in self.target.corners]
@@ -251,6 +253,8 @@ class Detector:
             return self._detect_charuco(gray, corners, ids)
         obj, img, seen, covs = [], [], [], []
         for c, i, v in zip(corners, ids, covariances, strict=True):
+            if self.refine == "edges" and v is None:
+                continue  # its edges could not be fitted (cut by the image border, too little contrast)
             if i in self.target.corners:
                 obj.append(self.target.corners[i])
                 img.append(c)
