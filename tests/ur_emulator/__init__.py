@@ -44,7 +44,7 @@ Layout: ``protocol.py`` (RTDE packages, variables and their types, register code
 ``controller.py`` (:class:`UREmulator`: servers, control-script handshake, motion), ``process.py``.
 """
 
-from tests.ur_emulator.controller import UREmulator
+from tests.ur_emulator.controller import ScaledClock, UREmulator
 from tests.ur_emulator.process import EmulatorProcess, free_loopback_address
 from tests.ur_emulator.protocol import (
     CMD_MOVEJ,
@@ -62,4 +62,4 @@ from tests.ur_emulator.protocol import (
 
 __all__ = ["CMD_MOVEJ", "CMD_NONE", "CMD_STOPJ", "CMD_STOPL", "CMD_STOP_SCRIPT", "SAFETY_NORMAL",
            "SAFETY_PROTECTIVE_STOP", "SAFETY_ROBOT_EMERGENCY_STOP", "SCRIPT_DONE", "SCRIPT_READY", "VARIABLES",
-           "EmulatorProcess", "UREmulator", "free_loopback_address"]
+           "EmulatorProcess", "ScaledClock", "UREmulator", "free_loopback_address"]

@@ -12,8 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.clock import WallClock
-from drivers.errors import EmergencyStop, ProtectiveStop, RobotFault
+from drivers.errors import ConnectionFailed, EmergencyStop, ProtectiveStop, RobotFault
 from drivers.sim import SimulatedRig, SimulatedRobot, _durations, _fraction
 from tests.ur_emulator.protocol import (
     _DOUBLES,
@@ -61,6 +60,24 @@ from tests.ur_emulator.protocol import (
 )
 
 
+class ScaledClock:
+    """Simulated time running ``scale`` times faster than the wall clock: ``now()`` s since the epoch,
+    ``sleep(s)`` waits s / scale wall seconds. An emulated move of 1 s takes 1 / scale s."""
+
+    def __init__(self, scale: float = 1.0) -> None:
+        if not scale > 0:
+            raise ValueError(f"time scale must be > 0, got {scale!r}")
+        self.scale = float(scale)
+        self._epoch, self._mono = time.time(), time.monotonic()
+
+    def now(self) -> float:
+        return self._epoch + self.scale * (time.monotonic() - self._mono)
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds / self.scale)
+
+
 @dataclass
 class _Motion:
     start: np.ndarray
@@ -89,9 +106,10 @@ class UREmulator:
     def __init__(self, host: str = "127.0.0.1", model: str = "ur5e", *, rig: SimulatedRig | None = None,
                  version: tuple[int, int, int, int] = (5, 11, 1, 108318), serial: str = "20205500001",
                  remote_control: bool = True, rate: float = 125.0, stall: bool = False,
-                 kinematics: bool = True) -> None:
+                 kinematics: bool = True, time_scale: float = 1.0) -> None:
         self.host, self.model, self.version, self.serial = host, model, version, serial
-        self.rig = rig if rig is not None else SimulatedRig(model, clock=WallClock(), ring=1e-5, ring_tau=0.05)
+        clock = ScaledClock(time_scale)
+        self.rig = rig if rig is not None else SimulatedRig(model, clock=clock, ring=1e-5, ring_tau=0.05)
         self.robot = SimulatedRobot(self.rig)
         self.robot.connect(1.0)
         self.remote_control, self.rate, self.stall, self.kinematics = remote_control, rate, stall, kinematics
@@ -108,6 +126,8 @@ class UREmulator:
         self._connections: set[socket.socket] = set()
         self._threads: list[threading.Thread] = []
         self._running = False
+        self._frozen: dict[str, Any] | None = None  # the state the stream repeats while frozen
+        self._trackers: list[Any] = []
 
     # --- lifecycle ------------------------------------------------------------------------------------------
 
@@ -133,7 +153,11 @@ class UREmulator:
     def close(self) -> None:
         self._running = False
         self.rig._stop_requested = True
+        for tracker in self._trackers:
+            tracker.stop()
         for s in [*self._servers, *list(self._connections)]:
+            with contextlib.suppress(OSError):
+                s.shutdown(socket.SHUT_RDWR)  # wakes a thread blocked in recv (close alone does not)
             with contextlib.suppress(OSError):
                 s.close()
         for t in self._threads:
@@ -173,6 +197,29 @@ class UREmulator:
             with contextlib.suppress(OSError):
                 s.shutdown(socket.SHUT_RDWR)
                 s.close()
+
+    def freeze_stream(self, frozen: bool = True) -> None:
+        """Frozen: every RTDE stream keeps sending the same state (the timestamp stands still), the links stay
+        up. ``False`` thaws it."""
+        with self._lock:
+            self._frozen = self._state() if frozen else None
+
+    def truth(self) -> Any:
+        """The emulated arm's true DHModel (base, tool: the simulated tracker's view); also its factory calibration."""
+        return self.rig.truth
+
+    def serve_tracker(self, profile: str = "polled-xyz", noise: float = 2e-5, seed: int = 0) -> str:
+        """Start a simulated ASCII tracker (tests/tracker_devices.py, loopback TCP) that measures this
+        emulator's true TP; returns its pyserial URL ``socket://127.0.0.1:PORT``."""
+        from tests.tracker_devices import AsciiDevice
+
+        device = AsciiDevice(profile, self.rig, noise=noise, seed=seed, transport="tcp")
+        self._trackers.append(device)
+        return str(device.port)
+
+    def tracker_replies(self) -> int:
+        """Measurements the simulated trackers answered so far."""
+        return sum(t.replies for t in self._trackers)
 
     def _latch(self, mode: int) -> None:
         with self._lock:
@@ -291,6 +338,9 @@ class UREmulator:
             self._latch(SAFETY_PROTECTIVE_STOP)
         except EmergencyStop:
             self._latch(SAFETY_ROBOT_EMERGENCY_STOP)
+        except ConnectionFailed:  # the rig's "disconnect" fault: the network drops, the arm stays put
+            self.rig.robot_connected = True
+            self.drop_connections()
         except (RobotFault, ValueError):
             pass  # stopped by stopJ, or a target the script refuses: the move just ends
         finally:
@@ -381,7 +431,7 @@ class UREmulator:
         return f"could not understand: '{command}'"
 
     def _serve_script(self, conn: socket.socket) -> None:
-        if conn.getsockname()[1] in (30001, 30002) and self.kinematics:
+        if conn.getsockname()[1] in (30001, 30002):
             conn.sendall(self._primary_greeting())
         buffer = ""
         while self._running:
@@ -407,8 +457,12 @@ class UREmulator:
                 + b"".join(struct.pack(">6d", *getattr(truth, key)) for key in ("theta", "a", "d", "alpha"))
                 + struct.pack(">I", 1))
         kinematics = struct.pack(">iB", len(body) + 5, 5) + body
-        return (struct.pack(">iB", len(version) + 5, 20) + version
-                + struct.pack(">iB", len(kinematics) + 5, 16) + kinematics)
+        greeting = struct.pack(">iB", len(version) + 5, 20) + version
+        if self.kinematics:
+            return greeting + struct.pack(">iB", len(kinematics) + 5, 16) + kinematics
+        # a controller without the kinematics info: robot state messages with only a robot mode sub-package
+        robot_mode = struct.pack(">iB", 5 + 8, 0) + bytes(8)
+        return greeting + (struct.pack(">iB", len(robot_mode) + 5, 16) + robot_mode) * 3
 
     def _run_program(self, program: str) -> None:
         self.log.scripts.append(program)
@@ -434,7 +488,7 @@ class UREmulator:
             next_time = time.monotonic()
             while self._running and streaming.is_set():
                 with self._lock:
-                    state = self._state()
+                    state = self._frozen or self._state()
                 payload = bytearray(b"\x01")
                 for name, kind in outputs:
                     value = state.get(name, _ZERO.get(kind, 0))
