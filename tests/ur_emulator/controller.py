@@ -217,6 +217,11 @@ class UREmulator:
         self._trackers.append(device)
         return str(device.port)
 
+    def last_motion(self) -> tuple[float, float] | None:
+        """(start, duration) of the latest move on the emulator's clock (s since the epoch, s), or None."""
+        motion = self._motion
+        return None if motion is None else (motion.t0, motion.duration)
+
     def tracker_replies(self) -> int:
         """Measurements the simulated trackers answered so far."""
         return sum(t.replies for t in self._trackers)
