@@ -225,7 +225,8 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
     print(format_report(ident, robot.nominal, robot.name))
     calibration, why = factory_calibration(session.header)  # the controller's own, for comparison
     reference, note = factory_reference(calibration, why, robot.joint_types)
-    print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
+    if reference is not None or note:
+        print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
     doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path))
     out = session_path.with_suffix(".result.yaml")
     out.write_text(yaml.safe_dump(doc, sort_keys=False, width=120), encoding="utf-8")

@@ -574,10 +574,11 @@ def _floats(values: Any) -> tuple[float | None, ...] | None:
 def factory_calibration(header: dict[str, Any]) -> tuple[dict[str, Any] | None, str]:
     """The robot controller's factory calibration recorded in a session ``header`` (the robot identity's
     ``details.factory_calibration``: JSON of UR's DH values, or ``unavailable (reason)``), and a note saying
-    why there is none. Sessions of robots that do not report one (and older sessions) give (None, note)."""
+    why there is none. Robots that have none to report (simulated ones, other makes) and sessions older than
+    this field give (None, "")."""
     text = ((header.get("robot") or {}).get("details") or {}).get("factory_calibration")
     if text is None:
-        return None, "the robot reported no factory calibration"
+        return None, ""
     try:
         value = json.loads(text)
     except (TypeError, ValueError):

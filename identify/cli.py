@@ -209,7 +209,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         print(json.dumps(doc))
     else:
         print(format_report(ident, nominal, nominal_name))
-        if header is not None:
+        if reference is not None or note:
             print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
         if args.out:
             print(f"result written to {args.out}")

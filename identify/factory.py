@@ -51,9 +51,10 @@ def factory_model(calibration: Mapping[str, Any], joint_types: str) -> DHModel:
 def factory_reference(calibration: Mapping[str, Any] | None, note: str,
                       joint_types: str) -> tuple[tuple[str, DHModel] | None, str]:
     """``(("factory calibration", model), "")`` for a recorded calibration, else ``(None, why not)``: what
-    the reports show next to the nominal model. ``note``: why there is none when ``calibration`` is None."""
+    the reports show next to the nominal model. ``note``: why there is none when ``calibration`` is None
+    (empty: the robot has none to report, and the reports say nothing)."""
     if calibration is None:
-        return None, f"factory calibration: not available ({note})"
+        return None, f"factory calibration: not available ({note})" if note else ""
     try:
         return ("factory calibration", factory_model(calibration, joint_types)), ""
     except ValueError as exc:

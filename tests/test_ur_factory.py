@@ -64,7 +64,8 @@ def test_session_header_calibration_old_sessions_and_robots_without_one() -> Non
     value, note = factory_calibration(unavailable)
     assert value is None and "sends no kinematics info" in note
     for old in ({"robot": {"model": "simulated ur5e", "details": {}}}, {"robot": {"model": "ur5e"}}, {}):
-        assert factory_calibration(old) == (None, "the robot reported no factory calibration")
+        assert factory_calibration(old) == (None, "")  # nothing to report, nothing said
+        assert factory_reference(*factory_calibration(old), "RRRRRR") == (None, "")
     reference, note = factory_reference(*factory_calibration(header), "RRRRRR")
     assert reference is not None and reference[0] == "factory calibration" and note == ""
     assert factory_reference(None, "why", "RRRRRR") == (None, "factory calibration: not available (why)")
