@@ -11,9 +11,10 @@ ConnectionFailed. The driver process survives either way.
 
 - The worker ignores SIGINT: Ctrl-C in the terminal reaches the whole process group, and the driver must
   still be able to send stopJ through its worker after the operator's Ctrl-C.
-- Each request runs with SIGINT blocked in the calling thread, so a Ctrl-C handler (which calls the
-  driver's ``stop()``) never runs half-way through a request on the shared socket; the signal is delivered
-  right after the request (at most ``timeout`` s later).
+- One I/O thread per worker does every exchange on the socket, one request at a time, and the caller waits
+  for its answer. A Ctrl-C handler that calls the driver's ``stop()`` while a request is in flight (Python
+  runs signal handlers in the main thread, between any two bytecodes) only queues its stopJ behind it, and a
+  KeyboardInterrupt that abandons a wait cannot leave half a message on the socket.
 - A request is one round trip of small pickled tuples (about 0.1 ms on loopback; ``bench/ur.py``).
 
 Requests (``Worker.call(name, *args)``): ``snapshot`` → :data:`Snapshot` tuple, ``move`` (q, speed rad/s,
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import queue
 import signal
 import socket
 import subprocess
@@ -147,8 +149,9 @@ class Worker:
     def __init__(self, host: str, timeout: float = START_TIMEOUT, frequency: float = -1.0) -> None:
         self.host = host
         ours, theirs = socket.socketpair()
-        self._lock = threading.Lock()
         self._number = 0
+        self._requests: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._closed = False
         root = str(Path(__file__).resolve().parent.parent)  # the folder holding the drivers package
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH"))))}
         command = [sys.executable, "-m", "drivers.ur_worker", host, str(theirs.fileno()), repr(float(frequency))]
@@ -170,6 +173,8 @@ class Worker:
         if status != "ok":
             self.kill()
             raise LinkLost(str(detail))
+        self._io = threading.Thread(target=self._serve_requests, daemon=True, name=f"ur-rtde-io-{host}")
+        self._io.start()
 
     @property
     def alive(self) -> bool:
@@ -181,23 +186,50 @@ class Worker:
 
     def call(self, name: str, *args: Any, timeout: float = CALL_TIMEOUT) -> Any:
         """The worker's answer to request ``name``. LinkLost (the worker is killed) when it died or did not
-        answer within ``timeout`` s; WorkerError when ur_rtde raised."""
-        if not self._lock.acquire(timeout=timeout):
-            raise LinkLost(f"the ur_rtde worker is busy for more than {timeout:g} s")
-        try:
-            with _sigint_blocked():
+        answer within ``timeout`` s (after the requests queued before it); WorkerError when ur_rtde raised."""
+        if self._closed:
+            raise LinkLost("the ur_rtde worker was ended")
+        answer: list[tuple[str, Any]] = []
+        done = threading.Event()
+        self._requests.put((name, args, timeout, answer, done))
+        if not done.wait(2 * timeout + 1.0):  # its own timeout, and one request in flight before it
+            self.kill()
+            raise LinkLost(f"the ur_rtde worker did not answer within {timeout:g} s")
+        status, result = answer[0]
+        if status == "ok":
+            return result
+        if status == "error":
+            raise WorkerError(str(result))
+        raise result  # LinkLost
+
+    def _serve_requests(self) -> None:
+        """The I/O thread: every exchange on the socket, in order, until the worker is ended."""
+        while True:
+            item = self._requests.get()
+            if item is None:  # ended: whatever is still queued gets LinkLost at once
+                while True:
+                    try:
+                        item = self._requests.get_nowait()
+                    except queue.Empty:
+                        return
+                    if item is not None:
+                        item[3].append(("lost", LinkLost("the ur_rtde worker was ended")))
+                        item[4].set()
+            name, args, timeout, answer, done = item
+            try:
+                if self._closed:
+                    raise LinkLost("the ur_rtde worker was ended")
                 self._number += 1
                 try:
                     self._conn.send((self._number, name, args))
                 except (OSError, ValueError) as exc:
                     self.kill()
                     raise LinkLost(f"the ur_rtde worker is gone ({exc})") from None
-                status, result = self._reply(self._number, timeout)
-        finally:
-            self._lock.release()
-        if status != "ok":
-            raise WorkerError(str(result))
-        return result
+                answer.append(self._reply(self._number, timeout))
+            except LinkLost as exc:
+                answer.append(("lost", exc))
+            finally:
+                done.set()
 
     def _reply(self, number: int, timeout: float) -> tuple[str, Any]:
         try:
@@ -218,7 +250,7 @@ class Worker:
 
     def close(self, timeout: float = CLOSE_TIMEOUT) -> None:
         """Stop ur_rtde's control script and end the worker (killed if it does not end in ``timeout`` s)."""
-        if self.alive:
+        if self.alive and not self._closed:
             with contextlib.suppress(LinkLost, WorkerError):
                 self.call("close", timeout=timeout)
             with contextlib.suppress(subprocess.TimeoutExpired):
@@ -226,13 +258,15 @@ class Worker:
         self.kill()
 
     def kill(self) -> None:
-        """End the worker now (SIGKILL); never raises."""
+        """End the worker now (SIGKILL) and its I/O thread; never raises."""
+        self._closed = True
         with contextlib.suppress(Exception):
             if self._process.poll() is None:
                 self._process.kill()
             self._process.wait(1.0)
         with contextlib.suppress(Exception):
             self._conn.close()
+        self._requests.put(None)
 
 
 def main(argv: list[str]) -> None:

@@ -144,7 +144,7 @@ def test_stop_cuts_a_move_short(emulator: EmulatorProcess) -> None:
             robot.move_joints(LONG, SLOW, SLOW_ACC, timeout=60.0)
         robot.wait_until_still(0.05, 5.0)
         q = robot.read_joints()
-        assert HOME[0] + 0.05 < q[0] < LONG[0] - 1.0
+        assert HOME[0] + 0.01 < q[0] < LONG[0] - 1.0  # stopped on the way
         assert CMD_STOPJ in emulator.get("log").commands
         robot.move_joints(HOME, SPEED, ACC, timeout=10.0)  # the next move works
         np.testing.assert_allclose(robot.read_joints(), HOME, atol=1e-3)

@@ -150,6 +150,6 @@ def test_ctrl_c_stops_the_arm_through_the_worker(emulator: EmulatorProcess) -> N
         assert CMD_STOPJ in emulator.get("log").commands
         assert robot._worker.pid == worker and robot.reconnections == 0  # the worker survived Ctrl-C
         robot.wait_until_still(0.05, 5.0)
-        assert HOME[0] + 0.05 < robot.read_joints()[0] < HOME[0] + 2.0
+        assert HOME[0] + 0.01 < robot.read_joints()[0] < HOME[0] + 2.0  # stopped on the way
     finally:
         robot.close()
