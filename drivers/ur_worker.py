@@ -190,9 +190,10 @@ class Worker:
         if self._closed:
             raise LinkLost("the ur_rtde worker was ended")
         answer: list[tuple[str, Any]] = []
-        done = threading.Event()
+        done = threading.Lock()  # released by the I/O thread when the answer is in (lighter than an Event)
+        done.acquire()
         self._requests.put((name, args, timeout, answer, done))
-        if not done.wait(2 * timeout + 1.0):  # its own timeout, and one request in flight before it
+        if not done.acquire(timeout=2 * timeout + 1.0):  # its own timeout, and one request in flight before it
             self.kill()
             raise LinkLost(f"the ur_rtde worker did not answer within {timeout:g} s")
         status, result = answer[0]
@@ -214,7 +215,7 @@ class Worker:
                         return
                     if item is not None:
                         item[3].append(("lost", LinkLost("the ur_rtde worker was ended")))
-                        item[4].set()
+                        item[4].release()
             name, args, timeout, answer, done = item
             try:
                 if self._closed:
@@ -229,7 +230,7 @@ class Worker:
             except LinkLost as exc:
                 answer.append(("lost", exc))
             finally:
-                done.set()
+                done.release()
 
     def _reply(self, number: int, timeout: float) -> tuple[str, Any]:
         try:
