@@ -51,7 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--csv", metavar="FILE", help="write the measurements as the CSV contract (e.g. of a session)")
     parser.add_argument("--joints", metavar="TYPES", help="joint types base to tip, e.g. RRPR (overrides the file)")
     parser.add_argument("--units", choices=sorted(UNITS), help="unit of x, y, z and sigma (default: file or m)")
-    parser.add_argument("--robot", metavar="MODEL", help="nominal model for comparison (e.g. ur5e, or a YAML path)")
+    parser.add_argument("--robot", metavar="MODEL",
+                        help="nominal model for comparison (e.g. ur5e, or a YAML path; a session: its robot)")
     parser.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
                         help="share of free poses held out for validation when there is no role column (0.3)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the hold-out draw (0)")

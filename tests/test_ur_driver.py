@@ -1,4 +1,4 @@
-"""The UR driver (drivers/ur.py) with the real ur_rtde client against the controller emulator (tests/ur_emulator.py).
+"""The UR driver (drivers/ur.py) with the real ur_rtde client against the controller emulator (tests/ur_emulator/).
 
 Each test gets its own emulator process on its own loopback address (the UR ports are fixed).
 """
