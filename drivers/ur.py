@@ -70,6 +70,7 @@ RECONNECT_TIMEOUT = 5.0  # s, at most, for a fresh worker to open the interfaces
 POLL_PERIOD = 0.008  # s, about one RTDE package at 125 Hz
 POSITION_TOLERANCE = 1e-3  # rad: a move has arrived when every joint is this close to its target
 STOP_DECELERATION = 2.0  # rad/s², stopJ
+REFUSAL_WAIT = 0.05  # s after a refused moveJ before the state is judged (several RTDE packages)
 
 #: Option -> (default, meaning).
 OPTIONS: dict[str, tuple[object, str]] = {
@@ -395,11 +396,13 @@ class URRobot:
                 accepted, why = False, str(exc)
             if accepted:
                 break
-            self._checked_snapshot()  # a fault explains the refusal
+            time.sleep(REFUSAL_WAIT)  # let the state stream catch up with what the controller did
+            if max(map(abs, self._checked_snapshot()[5])) > self.still_speed:  # a fault explains the refusal,
+                break  # or the arm runs the move after all (e.g. a fault is being latched): watch it
             if attempt == 2:
                 raise RobotFault(f"the UR controller at {self.host} refused the move twice ({why}); check the "
                                  "teach pendant for a message")
-            # once more: the script may have been replaced mid-command (e.g. by a client reconnecting)
+            # the arm is still: once more, the script may have been replaced mid-command (a client reconnecting)
         while True:
             _, _, _, _, actual, qd, _ = self._checked_snapshot()
             self._raise_if_stopped(stops)

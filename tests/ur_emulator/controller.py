@@ -290,17 +290,24 @@ class UREmulator(ControllerServers):
             self._start_move(np.array(doubles[:6]), doubles[6], doubles[7], asynchronous)
             return
         if cmd in (CMD_STOPJ, CMD_STOPL):
-            self.rig._stop_requested = True
-            motion = self._motion
-            if motion is not None and motion.thread is not None and motion.thread is not threading.current_thread():
-                self._lock.release()
-                try:
-                    motion.thread.join(timeout=5.0)
-                finally:
-                    self._lock.acquire()
+            self._halt()
         self._outputs["output_int_register_0"] = SCRIPT_DONE
 
+    def _halt(self) -> None:
+        """Stop the running move (if any) and wait until the arm rests (called with the lock held)."""
+        motion = self._motion
+        if motion is None or motion.thread is None or not motion.thread.is_alive():
+            return
+        self.rig._stop_requested = True
+        if motion.thread is not threading.current_thread():
+            self._lock.release()
+            try:
+                motion.thread.join(timeout=5.0)
+            finally:
+                self._lock.acquire()
+
     def _start_move(self, target: np.ndarray, speed: float, acceleration: float, asynchronous: bool) -> None:
+        self._halt()  # a new moveJ replaces the running one (the arm stops, then goes to the new target)
         start = self.rig.rest_joints
         duration = float(np.max(_durations(start, target, [speed] * 6, [acceleration] * 6), initial=0.0))
         motion = _Motion(start, target, speed, acceleration, self.rig.clock.now(), duration)
