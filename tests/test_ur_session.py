@@ -60,8 +60,9 @@ def test_acquire_against_the_emulator_identifies_its_true_robot(tmp_path, capsys
     the identified robot matches the emulated truth within what the tracker noise allows."""
     with _emulator("disconnect@9") as emu:
         tracker = emu.serve_tracker("polled-xyz", NOISE, 1)
-        assert acquire(_args(emu, tracker, tmp_path)) == 0
-        out = capsys.readouterr().out
+        code = acquire(_args(emu, tracker, tmp_path))
+        out, err = capsys.readouterr()
+        assert code == 0, err
         truth = emu.truth()
         assert emu.get("log").commands.count(CMD_MOVEJ) > 1
     path = tmp_path / "ur.session"
@@ -133,9 +134,10 @@ def test_ctrl_c_mid_run_stops_the_arm_resume_completes_and_the_report_says_no_fa
         with Session.open(path) as session:
             before = {s.plan_index: s for s in session.steps()}
             assert session.outcome() == "aborted" and before
-        assert acquire(["--resume", str(path), "--yes", "--quiet"]) == 0
-    assert "note: factory calibration: not available (the factory calibration could not be read" in (
-        capsys.readouterr().out)
+        code = acquire(["--resume", str(path), "--yes", "--quiet"])
+        out, err = capsys.readouterr()
+        assert code == 0, err
+    assert "note: factory calibration: not available (the factory calibration could not be read" in out
     with Session.open(path) as session:
         after = session.steps()
         assert [s.plan_index for s in after] == list(range(len(session.plan.steps)))  # none lost, none twice

@@ -41,6 +41,8 @@ from tests.ur_emulator.protocol import (
 )
 from tests.ur_emulator.servers import ControllerServers
 
+APPROACH = 2e-3  # rad: how far short of its target the streamed arm stays until the rig has finished the move
+
 
 class ScaledClock:
     """Simulated time running ``scale`` times faster than the wall clock: ``now()`` s since the epoch,
@@ -233,6 +235,11 @@ class UREmulator(ControllerServers):
             distance = np.abs(motion.target - motion.start)
             k = int(np.argmax(distance))
             share = _fraction(now - motion.t0, motion.duration, motion.speed, motion.acceleration, float(distance[k]))
+            # the rig (whose arm the simulated tracker measures) settles the move in its own thread, which a
+            # loaded machine delays: until it has, the streamed arm stays short of the target, so a client never
+            # sees an arrival the rig has not made
+            if distance[k] > 0:
+                share = min(share, max(0.0, 1.0 - APPROACH / float(distance[k])))
             return motion.start + share * (motion.target - motion.start)
         return self.rig.actual_joints(now)
 
