@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.speed || status=1; \
 	$(BIN)/python -m bench.trust || status=1; \
 	$(BIN)/python -m bench.acquisition || status=1; \
+	$(BIN)/python -m bench.ur || status=1; \
 	exit $$status
 
 clean:

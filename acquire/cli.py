@@ -25,15 +25,16 @@ import yaml
 
 from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
 from acquire.plan import Plan, build_plan, check_plan, estimate_duration, format_plan, predicted_accuracy
-from acquire.session import Session, SessionError
+from acquire.session import Session, SessionError, factory_calibration
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
 from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
+from identify.factory import factory_reference
 from identify.measurements import InputError
 from identify.pipeline import identify
-from identify.report import format_report
+from identify.report import format_reference, format_report
 from identify.result_io import result_to_dict
 
 log = logging.getLogger("acquire")
@@ -223,6 +224,10 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
     meas = session.to_measurements()
     ident = identify(meas, robot.nominal)
     print(format_report(ident, robot.nominal, robot.name))
+    calibration, why = factory_calibration(session.header)  # the controller's own, for comparison
+    reference, note = factory_reference(calibration, why, robot.joint_types)
+    if reference is not None or note:
+        print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
     doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path))
     out = session_path.with_suffix(".result.yaml")
     out.write_text(yaml.safe_dump(doc, sort_keys=False, width=120), encoding="utf-8")
@@ -233,8 +238,8 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
         print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
         return doc
     report = session_path.with_suffix(".report.html")
-    report.write_text(report_html(ident, meas, robot.nominal, robot.name, session=session, source=str(session_path)),
-                      encoding="utf-8")
+    report.write_text(report_html(ident, meas, robot.nominal, robot.name, session=session, source=str(session_path),
+                                  reference=reference, reference_note=note or None), encoding="utf-8")
     print(f"report written to {report}")
     return doc
 

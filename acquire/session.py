@@ -4,8 +4,9 @@ The file (stdlib ``sqlite3``, WAL journal, ``synchronous=FULL``, foreign keys on
 
 - ``meta(key, value)``: the header, each value JSON: ``schema`` (int), ``created`` (s since the epoch),
   ``software`` (``identify.__version__``), ``config`` (the resolved configuration, an object), ``robot`` and
-  ``tracker`` (``DeviceIdentity.as_dict()``), ``plan`` (``Plan.to_json()``). ``PRAGMA user_version`` holds
-  the schema too; a file of a newer schema is refused, never modified.
+  ``tracker`` (``DeviceIdentity.as_dict()``; a UR robot's ``details.factory_calibration`` holds the
+  controller's DH values, see :func:`factory_calibration`), ``plan`` (``Plan.to_json()``). ``PRAGMA
+  user_version`` holds the schema too; a file of a newer schema is refused, never modified.
 - ``runs(id, started, ended, outcome, reason)``: one row per run (start or resume); ``outcome`` is
   ``running``, ``complete``, ``aborted`` (by the operator) or ``failed`` (with the reason). A run left
   ``running`` by a process that died is closed as ``failed`` ("interrupted") by the next ``begin_run``.
@@ -568,6 +569,23 @@ def _nan_none(v: float | None) -> float | None:
 
 def _floats(values: Any) -> tuple[float | None, ...] | None:
     return None if values is None else tuple(_nan_none(float(v)) for v in np.asarray(values, dtype=float).ravel())
+
+
+def factory_calibration(header: dict[str, Any]) -> tuple[dict[str, Any] | None, str]:
+    """The robot controller's factory calibration recorded in a session ``header`` (the robot identity's
+    ``details.factory_calibration``: JSON of UR's DH values, or ``unavailable (reason)``), and a note saying
+    why there is none. Robots that have none to report (simulated ones, other makes) and sessions older than
+    this field give (None, "")."""
+    text = ((header.get("robot") or {}).get("details") or {}).get("factory_calibration")
+    if text is None:
+        return None, ""
+    try:
+        value = json.loads(text)
+    except (TypeError, ValueError):
+        return None, f"the factory calibration could not be read from the controller: {text}"
+    if not isinstance(value, dict):
+        return None, f"the recorded factory calibration is not a table: {text[:80]}"
+    return value, ""
 
 
 def _identity_line(identity: dict[str, Any]) -> str:

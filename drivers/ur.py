@@ -4,28 +4,36 @@ Spec form (see drivers/spec.py)::
 
     ur5e@192.168.1.10[?key=value&...]     or  ur5e  (host from the site file: robot.hosts / robot.host)
 
-Options (unknown ones are refused): ``reconnects`` (int >= 0, default 3: attempts after a lost link),
-``still_speed`` (rad/s, default 2e-3: joints slower than this count as still), ``max_speed`` (rad/s, default
-1.0: the highest joint speed a move may ask for, at most the model's maximum), ``max_acceleration`` (rad/s²,
-default 2.0), ``remote_check`` (``on``/``off``, default on: refuse a controller not in remote control).
-The port cannot be chosen: ur_rtde uses the controller's fixed ports (30004 RTDE, 29999 dashboard, 30003 script).
+Options (unknown ones are refused): ``reconnects`` (int >= 0, default 3: fresh connections tried after a
+lost link, per operation), ``still_speed`` (rad/s, default 2e-3: joints slower than this count as still),
+``max_speed`` (rad/s, default 1.0: the highest joint speed a move may ask for, at most the model's maximum),
+``max_acceleration`` (rad/s², default 2.0), ``remote_check`` (``on``/``off``, default on: refuse a controller
+not in remote control), ``stream_timeout`` (s, default 1.0: a state stream whose timestamp stands still this
+long is a lost link). The port cannot be chosen: the controller's ports are fixed (30004 RTDE, 29999
+dashboard, 30003 script, 30001 primary interface).
 
 How it drives the arm:
 
 - ``connect`` first probes the dashboard server (a plain socket, a few seconds at most), so a wrong or
   unreachable host fails fast with one line; there it checks the model (``get robot model`` and the PolyScope
-  major version: 5 = e-Series, 3 = CB3) and, on e-Series, remote control. Then it opens
-  ``RTDEReceiveInterface`` (state stream) and ``RTDEControlInterface`` (which uploads ur_rtde's control script).
+  major version: 5 = e-Series, 3 = CB3) and, on e-Series, remote control. It reads the factory calibration
+  (drivers/ur_info.py; ``factory_calibration``, None when the controller does not give it). Then it starts
+  the ur_rtde worker process (drivers/ur_worker.py), which opens ``RTDEReceiveInterface`` (state stream) and
+  ``RTDEControlInterface`` (which uploads ur_rtde's control script). ur_rtde never runs in this process: a
+  crash or hang of ur_rtde is a lost link here, not a crash of the acquisition.
+- every check reads one snapshot of the state stream (link, timestamp, robot and safety mode, actual q and qd,
+  program running) in one request to the worker.
 - ``move_joints`` sends ``moveJ(q, speed, acceleration, asynchronous=True)`` and watches the state stream until
-  the arm is at the target and still, so that a timeout, ``stop()`` or Ctrl-C can cut in with ``stopJ`` (a
-  blocking moveJ holds the control interface, and a stopJ from elsewhere would wait for it to finish). UR's
+  the arm is at the target and still, so that a timeout, ``stop()`` or Ctrl-C can cut in with ``stopJ``. UR's
   moveJ takes one speed for the leading joint: the smallest of the per-joint values is used.
 - readings are ``getActualQ`` (encoder values); ``wait_until_still`` watches ``getActualQd``.
 - robot mode and safety mode are checked before every move and while moving and settling; a protective stop,
   emergency stop, safeguard stop or a powered-off arm raises with what to do on the teach pendant.
-- a lost link is retried ``reconnects`` times, then ConnectionFailed.
+- a lost link (the worker died or hung, ur_rtde lost the connection, or the stream's timestamp stood still
+  for ``stream_timeout`` s) is retried with a fresh worker ``reconnects`` times, then ConnectionFailed. A move
+  cut by a lost link is commanded again to the same target after the reconnection.
 
-The ur_rtde import happens in :func:`open_robot` (BackendUnavailable with the pip command without it).
+The ur_rtde import check happens in :func:`open_robot` (BackendUnavailable with the pip command without it).
 """
 
 from __future__ import annotations
@@ -33,8 +41,6 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import socket
-import struct
 import threading
 import time
 from collections.abc import Sequence
@@ -54,14 +60,17 @@ from drivers.errors import (
     SpecError,
 )
 from drivers.spec import ROBOT_FORMS, RobotSpec
+from drivers.ur_info import DASHBOARD_PORT, Dashboard, dashboard_model, polyscope_major, read_factory_calibration
+from drivers.ur_worker import CALL_TIMEOUT, LinkLost, Snapshot, Worker, WorkerError
 
-RTDE_PORT, DASHBOARD_PORT, PRIMARY_PORT = 30004, 29999, 30001
 CALIBRATION_TIMEOUT = 1.5  # s, at most, to read the kinematics info on the primary interface
 INSTALL_HINT = "pip install 'dh-calib[ur]'"
 PROBE_TIMEOUT = 3.0  # s, at most, for the first contact with the controller
+RECONNECT_TIMEOUT = 5.0  # s, at most, for a fresh worker to open the interfaces after a lost link
 POLL_PERIOD = 0.008  # s, about one RTDE package at 125 Hz
 POSITION_TOLERANCE = 1e-3  # rad: a move has arrived when every joint is this close to its target
 STOP_DECELERATION = 2.0  # rad/s², stopJ
+REFUSAL_WAIT = 0.05  # s after a refused moveJ before the state is judged (several RTDE packages)
 
 #: Option -> (default, meaning).
 OPTIONS: dict[str, tuple[object, str]] = {
@@ -70,6 +79,7 @@ OPTIONS: dict[str, tuple[object, str]] = {
     "max_speed": (1.0, "highest joint speed a move may ask for, rad/s"),
     "max_acceleration": (2.0, "highest joint acceleration a move may ask for, rad/s^2"),
     "remote_check": ("on", "refuse a controller that is not in remote control (on/off)"),
+    "stream_timeout": (1.0, "seconds a standing state-stream timestamp may last before the link counts as lost"),
 }
 
 # RTDE robot_mode and safety_mode values (UR's RTDE guide)
@@ -95,15 +105,14 @@ POWER_HELP = ("on the teach pendant: power on and release the brakes (Initialize
               "Remote Control, then resume the run")
 
 
-def _rtde_modules() -> tuple[Any, Any]:
-    """(rtde_control, rtde_receive), imported now; BackendUnavailable without ur_rtde."""
+def _check_ur_rtde() -> None:
+    """BackendUnavailable (with the pip command) unless ur_rtde can be imported; the worker process imports it."""
     try:
-        import rtde_control
-        import rtde_receive
+        import rtde_control  # noqa: F401
+        import rtde_receive  # noqa: F401
     except ImportError as exc:
         raise BackendUnavailable(f"the 'ur' robot backend needs the ur_rtde package, which is not installed: "
                                  f"{INSTALL_HINT}") from exc
-    return rtde_control, rtde_receive
 
 
 def _options(spec: RobotSpec) -> dict[str, Any]:
@@ -153,108 +162,30 @@ def open_robot(spec: RobotSpec | str, rig: object = None, site: Any = None) -> U
         raise SpecError(f"robot spec {str(spec)!r}: {exc}") from exc
     if not model.vendor.lower().startswith("universal"):
         raise SpecError(f"robot spec {str(spec)!r}: {model.name} is not a Universal Robots model")
-    modules = _rtde_modules()
-    return URRobot(model, host, options, modules)
+    _check_ur_rtde()
+    return URRobot(model, host, options)
 
-
-class _Dashboard:
-    """A minimal dashboard-server client (port 29999): one command, one reply line."""
-
-    def __init__(self, host: str, timeout: float) -> None:
-        self.sock = socket.create_connection((host, DASHBOARD_PORT), timeout=timeout)
-        self.file = self.sock.makefile("rb")
-        self.greeting = self._line()
-
-    def _line(self) -> str:
-        line = self.file.readline()
-        if not line:
-            raise ConnectionError("the dashboard server closed the connection")
-        return line.decode(errors="replace").strip()
-
-    def ask(self, command: str) -> str:
-        self.sock.sendall(command.encode() + b"\n")
-        return self._line()
-
-    def close(self) -> None:
-        with contextlib.suppress(OSError):
-            self.sock.sendall(b"quit\n")
-        with contextlib.suppress(OSError):
-            self.file.close()
-            self.sock.close()
-
-
-def _dashboard_model(name: str) -> str:
-    """ur5e -> UR5 (what ``get robot model`` answers; e-Series and CB3 alike)."""
-    name = name.upper()
-    return name[:-1] if name.endswith("E") else name
-
-
-def _polyscope_major(text: str) -> int | None:
-    for word in text.split():
-        head = word.split(".")[0]
-        if "." in word and head.isdigit():
-            return int(head)
-    return None
-
-
-def read_factory_calibration(host: str, timeout: float) -> dict[str, Any]:
-    """The controller's own calibrated DH values, from the kinematics info (robot state sub-package 5) that the
-    primary client interface (port 30001) sends after connecting: ``{"theta": [6], "a": [6], "d": [6],
-    "alpha": [6], "checksum": [6], "status": int}`` in UR's convention (rad, m). OSError / ValueError when it
-    cannot be read within ``timeout`` s."""
-    deadline = time.monotonic() + timeout
-    with socket.create_connection((host, PRIMARY_PORT), timeout=timeout) as sock:
-        buffer = b""
-        while time.monotonic() < deadline:
-            sock.settimeout(max(deadline - time.monotonic(), 0.01))
-            chunk = sock.recv(65536)
-            if not chunk:
-                break
-            buffer += chunk
-            while len(buffer) >= 5:
-                size, kind = struct.unpack_from(">iB", buffer)
-                if size < 5 or size > 1 << 20:
-                    raise ValueError(f"garbled primary-interface message (length {size})")
-                if len(buffer) < size:
-                    break
-                message, buffer = buffer[5:size], buffer[size:]
-                if kind == 16 and (found := _kinematics_info(message)) is not None:
-                    return found
-    raise ValueError(f"no kinematics info from port {PRIMARY_PORT} within {timeout:g} s")
-
-
-def _kinematics_info(message: bytes) -> dict[str, Any] | None:
-    offset = 0
-    while offset + 5 <= len(message):
-        size, kind = struct.unpack_from(">iB", message, offset)
-        if size < 5:
-            return None
-        if kind == 5 and size >= 5 + 24 + 192:
-            body = message[offset + 5:offset + size]
-            checksum = list(struct.unpack_from(">6I", body))
-            values = struct.unpack_from(">24d", body, 24)
-            status = struct.unpack_from(">I", body, 216)[0] if len(body) >= 220 else -1
-            keys = ("theta", "a", "d", "alpha")
-            return {**{key: list(values[6 * i:6 * i + 6]) for i, key in enumerate(keys)}, "checksum": checksum,
-                    "status": status}
-        offset += size
-    return None
 
 
 class URRobot:
-    """A UR arm through ur_rtde (implements :class:`drivers.base.Robot`). See the module docstring."""
+    """A UR arm through ur_rtde in a worker process (implements :class:`drivers.base.Robot`); see the module
+    docstring. ``factory_calibration``: the controller's DH values read at connect (dict of UR's theta, a, d,
+    alpha per joint, rad and m), or None when it could not be read."""
 
-    def __init__(self, model: RobotModel, host: str, options: dict[str, Any], modules: tuple[Any, Any]) -> None:
+    def __init__(self, model: RobotModel, host: str, options: dict[str, Any]) -> None:
         self.model, self.host, self.options = model, host, options
         self.joint_types = model.joint_types
-        self._control_module, self._receive_module = modules
-        self._control: Any = None
-        self._receive: Any = None
+        self._worker: Worker | None = None
         self._identity = DeviceIdentity("robot", model.name, details={"host": host})
-        self._stop = threading.Event()
-        self.factory_calibration: dict[str, Any] | None = None  # by connect(): theta, a, d, alpha, ... or None
+        self._stops = 0  # stop() calls so far; a move that sees the count change was stopped
+        self._stops_lock = threading.Lock()
+        self.factory_calibration: dict[str, Any] | None = None
         self.still_speed = float(options["still_speed"])
+        self.stream_timeout = float(options["stream_timeout"])
         self.poll_period = POLL_PERIOD
+        self.call_timeout = CALL_TIMEOUT  # s, for one request to the worker (a hung worker is killed after it)
+        self.reconnections = 0  # fresh workers started after a lost link, since connect()
+        self._stamp: tuple[float, float] = (math.nan, 0.0)  # last stream timestamp, when it was first seen
 
     # --- connection -------------------------------------------------------------------------------------------
 
@@ -272,17 +203,34 @@ class URRobot:
         self._identity = DeviceIdentity(identity.kind, identity.model, identity.serial, identity.firmware,
                                         {**identity.details, "factory_calibration": calibration})
         try:
-            self._receive = self._receive_module.RTDEReceiveInterface(self.host)
-            self._control = self._control_module.RTDEControlInterface(self.host)
-        except (RuntimeError, ValueError, OSError) as exc:
-            self.close()
-            raise ConnectionFailed(f"the UR controller at {self.host} refused the RTDE connection: "
-                                   f"{' '.join(str(exc).split())}") from exc
+            self._start_worker(timeout)
+        except LinkLost as exc:
+            self._drop_worker(graceful=False)
+            raise ConnectionFailed(f"the UR controller at {self.host} refused the RTDE connection: {exc}") from None
+        self.reconnections = 0
+
+    def _start_worker(self, timeout: float) -> None:
+        """A fresh worker whose state stream is seen advancing; LinkLost if not."""
+        self._drop_worker(graceful=False)
+        self._worker = Worker(self.host, timeout)
+        self._stamp = (math.nan, time.monotonic())
+        deadline = time.monotonic() + self.stream_timeout + timeout
+        first = self._snapshot()[1]
+        while self._snapshot()[1] == first:
+            if time.monotonic() > deadline:
+                raise LinkLost(f"the state stream of {self.host} does not advance")
+            time.sleep(self.poll_period)
+
+    def _drop_worker(self, graceful: bool = True) -> None:
+        """End the worker: ``graceful`` stops ur_rtde's control script first (bounded), else it is killed."""
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.close() if graceful else worker.kill()
 
     def _check_dashboard(self, timeout: float) -> DeviceIdentity:
         where = f"the UR controller at {self.host}"
         try:
-            dashboard = _Dashboard(self.host, timeout)
+            dashboard = Dashboard(self.host, timeout)
         except OSError as exc:
             reason = "no answer" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
             raise ConnectionFailed(f"cannot reach {where} (dashboard port {DASHBOARD_PORT}: {reason}); check the "
@@ -290,7 +238,7 @@ class URRobot:
         try:
             answers = {key: dashboard.ask(command) for key, command in (
                 ("version", "PolyscopeVersion"), ("model", "get robot model"), ("serial", "get serial number"))}
-            major = _polyscope_major(answers["version"])
+            major = polyscope_major(answers["version"])
             if major is not None and major >= 5 and self.options["remote_check"] == "on":
                 answers["remote"] = dashboard.ask("is in remote control")
         except OSError as exc:
@@ -307,7 +255,7 @@ class URRobot:
                               details=details)
 
     def _check_model(self, reported: str, major: int | None) -> None:
-        expected = _dashboard_model(self.model.name)
+        expected = dashboard_model(self.model.name)
         reported_name = reported.strip().upper()
         if not reported_name.startswith("UR"):
             return  # an old controller without "get robot model": it cannot tell
@@ -321,31 +269,74 @@ class URRobot:
                                    f"spec says {self.model.name}; give the right model (e.g. {suggestion}@{self.host})")
 
     def close(self) -> None:
-        control, receive = self._control, self._receive
-        self._control = self._receive = None
+        """Stop ur_rtde's control script and end the worker; never raises."""
         with contextlib.suppress(Exception):
-            if control is not None:
-                control.stopScript()
-        for device in (control, receive):
-            with contextlib.suppress(Exception):
-                if device is not None:
-                    device.disconnect()
+            self._drop_worker()
 
     def identity(self) -> DeviceIdentity:
         return self._identity
 
+    # --- the link ---------------------------------------------------------------------------------------------
+
+    def _call(self, name: str, *args: Any) -> Any:
+        worker = self._worker
+        if worker is None:
+            raise LinkLost("not connected")
+        return worker.call(name, *args, timeout=self.call_timeout)
+
+    def _snapshot(self) -> Snapshot:
+        """One snapshot of the state stream; LinkLost when ur_rtde lost the link, the worker died or hung, or
+        the stream's timestamp has stood still for ``stream_timeout`` s (a frozen controller stream)."""
+        try:
+            snap: Snapshot = self._call("snapshot")
+        except WorkerError as exc:
+            raise LinkLost(f"ur_rtde: {exc}") from None
+        if not snap[0]:
+            raise LinkLost("ur_rtde lost the connection")
+        now = time.monotonic()
+        stamp, seen = self._stamp
+        if snap[1] != stamp:
+            self._stamp = (snap[1], now)
+        elif now - seen > self.stream_timeout:
+            raise LinkLost(f"the state stream stopped: its timestamp has stood at {stamp:.3f} s for "
+                           f"{now - seen:.1f} s")
+        return snap
+
+    def _linked(self, operation: Any) -> Any:
+        """``operation()``, reconnecting with a fresh worker after a lost link (at most ``reconnects`` times
+        for this operation), then ConnectionFailed."""
+        if self._worker is None:
+            raise ConnectionFailed(f"the UR robot at {self.host} is not connected (call connect())")
+        attempts, budget = 0, int(self.options["reconnects"])
+        while True:
+            try:
+                return operation()
+            except LinkLost as exc:
+                lost, reason = str(exc), ""
+            while True:
+                self._drop_worker(graceful=False)  # a worker on a lost link may hang in ur_rtde: no goodbyes
+                if attempts >= budget:
+                    last = f" (last: {reason})" if reason and reason != lost else ""
+                    raise ConnectionFailed(
+                        f"lost the connection to the UR controller at {self.host} ({lost}) and {budget} "
+                        f"reconnection attempt(s) failed{last}: check the network and the controller, then "
+                        "resume the run")
+                attempts += 1
+                time.sleep(min(0.2 * attempts, 1.0))
+                try:
+                    self._start_worker(RECONNECT_TIMEOUT)
+                except LinkLost as exc:
+                    reason = str(exc)
+                    continue
+                self.reconnections += 1
+                break
+
     # --- state ------------------------------------------------------------------------------------------------
 
     def state(self) -> RobotState:
-        receive = self._receive
-        if receive is None or self._control is None:
-            return RobotState.DISCONNECTED
         try:
-            if not receive.isConnected():
-                return RobotState.DISCONNECTED
-            robot_mode, safety_mode = int(receive.getRobotMode()), int(receive.getSafetyMode())
-            qd = np.asarray(receive.getActualQd(), dtype=float)
-        except RuntimeError:
+            _, _, robot_mode, safety_mode, _, qd, _ = self._snapshot()
+        except LinkLost:
             return RobotState.DISCONNECTED
         if safety_mode in SAFETY_PROTECTIVE:
             return RobotState.PROTECTIVE_STOP
@@ -353,12 +344,12 @@ class URRobot:
             return RobotState.EMERGENCY_STOP
         if safety_mode not in SAFETY_OK or robot_mode != ROBOT_MODE_RUNNING:
             return RobotState.FAULT
-        return RobotState.MOVING if np.max(np.abs(qd), initial=0.0) > self.still_speed else RobotState.READY
+        return RobotState.MOVING if max(map(abs, qd), default=0.0) > self.still_speed else RobotState.READY
 
-    def _check(self) -> None:
-        """Raise the RobotFault that fits the controller's state (nothing when it can be commanded)."""
-        receive = self._require_link()
-        robot_mode, safety_mode = int(receive.getRobotMode()), int(receive.getSafetyMode())
+    def _checked_snapshot(self) -> Snapshot:
+        """A snapshot; raises the RobotFault that fits the controller's state (none when it can be commanded)."""
+        snap = self._snapshot()
+        robot_mode, safety_mode = snap[2], snap[3]
         mode = SAFETY_MODES.get(safety_mode, str(safety_mode))
         if safety_mode in (5, 12):
             raise ProtectiveStop(f"UR safeguard stop ({mode}) at {self.host}: {SAFEGUARD_HELP}")
@@ -372,68 +363,51 @@ class URRobot:
         if robot_mode != ROBOT_MODE_RUNNING:
             name = ROBOT_MODES.get(robot_mode, str(robot_mode))
             raise RobotFault(f"the UR arm at {self.host} is not running (robot mode {name}): {POWER_HELP}")
-
-    def _require_link(self) -> Any:
-        receive = self._receive
-        if receive is None or self._control is None:
-            raise ConnectionFailed(f"the UR robot at {self.host} is not connected (call connect())")
-        if not receive.isConnected() or not self._control.isConnected():
-            self._reconnect()
-        return self._receive
-
-    def _reconnect(self) -> None:
-        attempts = int(self.options["reconnects"])
-        for attempt in range(attempts):
-            time.sleep(min(0.5 * (attempt + 1), 2.0))
-            with contextlib.suppress(RuntimeError):
-                if not self._receive.isConnected():
-                    self._receive.reconnect()
-                if not self._control.isConnected():
-                    self._control.reconnect()
-                if self._receive.isConnected() and self._control.isConnected():
-                    return
-        raise ConnectionFailed(f"lost the connection to the UR controller at {self.host} and {attempts} "
-                               "reconnection attempts failed: check the network, then resume the run")
+        return snap
 
     # --- motion -----------------------------------------------------------------------------------------------
 
     def read_joints(self) -> Array:
-        """Actual joint positions (6,), rad: the encoder values of the last RTDE package."""
-        receive = self._require_link()
-        try:
-            return np.asarray(receive.getActualQ(), dtype=float)
-        except RuntimeError as exc:
-            raise ConnectionFailed(f"cannot read the joints of the UR robot at {self.host}: {exc}") from exc
+        """Actual joint positions (6,), rad: the encoder values of the latest RTDE package."""
+        return np.asarray(self._linked(lambda: self._snapshot()[4]), dtype=float)
 
     def move_joints(self, q: Sequence[float], speed: Sequence[float], acceleration: Sequence[float],
                     timeout: float) -> None:
+        stops = self._stops
         target, v, a = self._checked(q, speed, acceleration, timeout)
-        self._check()
-        control = self._control
-        if not control.isProgramRunning():  # e.g. after a cleared protective stop
-            control.reuploadScript()
-            self._wait(lambda: control.isProgramRunning(), 2.0, "the ur_rtde control script did not start")
-        self._stop.clear()
-        started = time.monotonic()
+        deadline = time.monotonic() + timeout
         try:
-            if not control.moveJ(target.tolist(), v, a, True):
-                self._check()
-                raise RobotFault(f"the UR controller at {self.host} refused the move (moveJ returned false); "
-                                 "check the teach pendant for a message")
-            self._watch_move(target, started + timeout, timeout)
+            self._linked(lambda: self._move(target, v, a, deadline, timeout, stops))
         except KeyboardInterrupt:
             self.stop()
             raise
 
-    def _watch_move(self, target: Array, deadline: float, timeout: float) -> None:
-        receive = self._receive
+    def _move(self, target: Array, v: float, a: float, deadline: float, timeout: float, stops: int) -> None:
+        """Command the move and watch it to the end (run again after a reconnection: same target)."""
+        for attempt in (1, 2):
+            if not self._checked_snapshot()[6]:  # ur_rtde's control script is not running, e.g. after a
+                with contextlib.suppress(WorkerError):  # cleared protective stop or another script
+                    self._call("reupload")
+                self._wait_program(2.0)
+            self._raise_if_stopped(stops)
+            try:
+                accepted, why = self._call("move", target.tolist(), v, a), "moveJ returned false"
+            except WorkerError as exc:
+                accepted, why = False, str(exc)
+            if accepted:
+                break
+            time.sleep(REFUSAL_WAIT)  # let the state stream catch up with what the controller did
+            if max(map(abs, self._checked_snapshot()[5])) > self.still_speed:  # a fault explains the refusal,
+                break  # or the arm runs the move after all (e.g. a fault is being latched): watch it
+            if attempt == 2:
+                raise RobotFault(f"the UR controller at {self.host} refused the move twice ({why}); check the "
+                                 "teach pendant for a message")
+            # the arm is still: once more, the script may have been replaced mid-command (a client reconnecting)
         while True:
-            self._check()
-            if self._stop.is_set():
-                raise RobotFault(f"the move of the UR robot at {self.host} was stopped (stop()) before it arrived")
-            q = np.asarray(receive.getActualQ(), dtype=float)
-            qd = np.asarray(receive.getActualQd(), dtype=float)
-            if np.max(np.abs(q - target)) < POSITION_TOLERANCE and np.max(np.abs(qd)) < self.still_speed:
+            _, _, _, _, actual, qd, _ = self._checked_snapshot()
+            self._raise_if_stopped(stops)
+            if (np.max(np.abs(np.asarray(actual) - target)) < POSITION_TOLERANCE
+                    and max(map(abs, qd)) < self.still_speed):
                 return
             if time.monotonic() >= deadline:
                 self.stop()
@@ -441,16 +415,30 @@ class URRobot:
                                     "it was stopped (stopJ)")
             time.sleep(self.poll_period)
 
+    def _raise_if_stopped(self, stops: int) -> None:
+        if self._stops != stops:
+            self._send_stop()  # a stop() from a signal handler may have found the worker busy
+            raise RobotFault(f"the move of the UR robot at {self.host} was stopped (stop()) before it arrived")
+
+    def _wait_program(self, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while not self._checked_snapshot()[6]:
+            if time.monotonic() > deadline:
+                raise RobotFault(f"the ur_rtde control script did not start on the UR controller at {self.host} "
+                                 f"within {timeout:g} s; check the teach pendant for a message")
+            time.sleep(0.01)
+
     def wait_until_still(self, settle_time: float, timeout: float) -> None:
         """Return once every actual joint speed has stayed below ``still_speed`` for ``settle_time`` s."""
         start = time.monotonic()
+        self._linked(lambda: self._settle(settle_time, timeout, start))
+
+    def _settle(self, settle_time: float, timeout: float, start: float) -> None:
         since: float | None = None
-        receive = self._receive
         while True:
-            self._check()
+            qd = self._checked_snapshot()[5]
             now = time.monotonic()
-            qd = np.asarray(receive.getActualQd(), dtype=float)
-            if np.max(np.abs(qd), initial=0.0) < self.still_speed:
+            if max(map(abs, qd), default=0.0) < self.still_speed:
                 since = now if since is None else since
                 if now - since >= settle_time:
                     return
@@ -462,19 +450,14 @@ class URRobot:
             time.sleep(self.poll_period)
 
     def stop(self) -> None:
-        """Stop any motion now (stopJ); never raises."""
-        self._stop.set()
-        control = self._control
-        with contextlib.suppress(Exception):
-            if control is not None:
-                control.stopJ(STOP_DECELERATION, False)
+        """Stop any motion now (stopJ); never raises. Safe from a signal handler and from other threads."""
+        with self._stops_lock:
+            self._stops += 1
+        self._send_stop()
 
-    def _wait(self, condition: Any, timeout: float, message: str) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            if time.monotonic() > deadline:
-                raise RobotFault(f"{message} on the UR controller at {self.host} within {timeout:g} s")
-            time.sleep(0.01)
+    def _send_stop(self) -> None:
+        with contextlib.suppress(Exception):
+            self._call("stop", STOP_DECELERATION)
 
     def _checked(self, q: Sequence[float], speed: Sequence[float], acceleration: Sequence[float],
                  timeout: float) -> tuple[Array, float, float]:

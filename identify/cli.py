@@ -22,7 +22,7 @@ from identify.csvio import UNITS, CsvContent, format_measurements, read_measurem
 from identify.measurements import InputError, Measurements
 from identify.pipeline import Identification, identify, split_holdout
 from identify.refine import DEFAULT_MAX_OFFSET
-from identify.report import format_report
+from identify.report import format_reference, format_report
 from identify.result_io import result_to_dict
 
 
@@ -51,7 +51,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--csv", metavar="FILE", help="write the measurements as the CSV contract (e.g. of a session)")
     parser.add_argument("--joints", metavar="TYPES", help="joint types base to tip, e.g. RRPR (overrides the file)")
     parser.add_argument("--units", choices=sorted(UNITS), help="unit of x, y, z and sigma (default: file or m)")
-    parser.add_argument("--robot", metavar="MODEL", help="nominal model for comparison (e.g. ur5e, or a YAML path)")
+    parser.add_argument("--robot", metavar="MODEL",
+                        help="nominal model for comparison (e.g. ur5e, or a YAML path; a session: its robot)")
     parser.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
                         help="share of free poses held out for validation when there is no role column (0.3)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the hold-out draw (0)")
@@ -86,7 +87,7 @@ def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
 
 
 def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measurements, doc: dict[str, Any],
-                   robot: RobotModel | None) -> None:
+                   robot: RobotModel | None, reference: tuple[str, Any] | None = None, note: str = "") -> None:
     """Every export asked for, each written atomically."""
     name = robot.name if robot else "identified_robot"
     limits = robot.limits if robot else None
@@ -120,7 +121,8 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
         session = _open_session(Path(args.input)) if _is_session(Path(args.input)) else None
         try:
             page = report_html(ident, meas, robot.nominal if robot else None, robot.name if robot else None,
-                               session=session, source=str(args.input))
+                               session=session, source=str(args.input), reference=reference,
+                               reference_note=note or None)
         finally:
             if session is not None:
                 session.close()
@@ -146,10 +148,20 @@ def _open_session(path: Path):
         raise InputError(str(exc)) from None
 
 
-def _read_session(path: Path) -> CsvContent:
-    """The measurements of an acquisition session."""
+def _read_session(path: Path) -> tuple[CsvContent, dict[str, Any]]:
+    """The measurements of an acquisition session, and its header (with the plan's robot as ``robot_model``)."""
     with _open_session(path) as session:
-        return CsvContent(session.to_measurements(), {"session": str(path)}, [])
+        header = {**session.header, "robot_model": session.plan.robot}
+        return CsvContent(session.to_measurements(), {"session": str(path)}, []), header
+
+
+def _factory_reference(header: dict[str, Any], joint_types: str) -> tuple[tuple[str, Any] | None, str]:
+    """The session robot's factory calibration as a comparison model, or None and why not."""
+    from acquire.session import factory_calibration
+    from identify.factory import factory_reference
+
+    calibration, note = factory_calibration(header)
+    return factory_reference(calibration, note, joint_types)
 
 
 def _write_atomic(path: Path, text: str) -> None:
@@ -174,12 +186,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Identify per ``args``; returns the result document. Raises InputError for bad input."""
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
+    header = None
     if _is_session(Path(args.input)):
-        content = _read_session(Path(args.input))
+        content, header = _read_session(Path(args.input))
     else:
         content = read_measurements(args.input, args.joints, args.units)
     meas = split_holdout(content.measurements, args.holdout, args.seed)
-    robot = _load_robot(args.robot) if args.robot else None
+    robot_name = args.robot or (header or {}).get("robot_model")  # a session knows its robot
+    robot = _load_robot(robot_name) if robot_name else None
     nominal, nominal_name = (robot.nominal, robot.name) if robot else (None, None)
     if nominal is not None and nominal.joint_types != meas.joint_types:
         raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
@@ -190,11 +204,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
     if args.out:
         _write_atomic(Path(args.out), yaml.safe_dump(doc, sort_keys=False, width=120))
-    _write_exports(args, ident, meas, doc, robot)
+    reference, note = _factory_reference(header, meas.joint_types) if header is not None else (None, "")
+    _write_exports(args, ident, meas, doc, robot, reference, note)
     if args.json:
         print(json.dumps(doc))
     else:
         print(format_report(ident, nominal, nominal_name))
+        if reference is not None or note:
+            print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
         if args.out:
             print(f"result written to {args.out}")
     return doc

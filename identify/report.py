@@ -70,3 +70,16 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     for warning in ident.warnings + ref.notes:
         lines.append(f"note: {warning}")
     return "\n".join(lines)
+
+
+def format_reference(ident: Identification, label: str, reference: DHModel) -> str:
+    """Lines of the identified DH table's deltas against ``reference`` (e.g. the controller's factory
+    calibration): d, a in mm; theta, alpha in deg (theta wrapped to ±180)."""
+    names = ("theta", "d", "a", "alpha")
+    lines = [f"Δ identified vs {label} (d, a mm; theta, alpha deg):"]
+    for i in range(ident.model.n_joints):
+        delta = ident.model.dh_table()[i] - reference.dh_table()[i]
+        delta[0] = np.angle(np.exp(1j * delta[0]))
+        lines.append(f"{i + 1:>5}  " + " ".join(f"{name} {d * _SCALE[name]:+9.4f}"
+                                            for d, name in zip(delta, names, strict=True)))
+    return "\n".join(lines)

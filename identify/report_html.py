@@ -315,7 +315,8 @@ def _acquisition_section(session: Session) -> tuple[str, Figure | None]:
     devices = []
     for key in ("robot", "tracker"):
         d = header.get(key) or {}
-        details = ", ".join(f"{k}: {v}" for k, v in (d.get("details") or {}).items())
+        details = ", ".join(f"{k}: {v}" for k, v in (d.get("details") or {}).items()
+                            if k != "factory_calibration")  # shown against the DH table
         devices.append([_e(key), _e(d.get("model", "")), _e(d.get("serial", "")), _e(d.get("firmware", "")),
                         _e(details)])
     parts = [_table(["device", "model", "serial", "firmware", "details"], devices, left=5)]
@@ -377,12 +378,14 @@ def report_html(
     reference: tuple[str, DHModel] | None = None,
     title: str | None = None,
     source: str | None = None,
+    reference_note: str | None = None,
 ) -> str:
     """The report as one HTML document (str).
 
     ``meas``: the measurements given to :func:`identify.pipeline.identify` (after the hold-out split), so
     fitted and held-out rows can be told apart. ``nominal``: deltas against it. ``reference``: (label, model)
-    for another comparison, e.g. the controller's factory calibration. ``session``: adds the acquisition record.
+    for another comparison, e.g. the controller's factory calibration; ``reference_note``: shown with the DH
+    table, e.g. why there is no factory calibration. ``session``: adds the acquisition record.
     """
     fit = meas.subset(_fit_rows(meas))
     if len(fit) != len(ident.refinement.residuals):
@@ -399,7 +402,8 @@ def report_html(
         body.append('<section id="warnings"><h2>Warnings</h2><ul>'
                     + "".join(f'<li class="warn">{_e(w)}</li>' for w in notes) + "</ul></section>")
     body.append('<section id="dh-table"><h2>DH parameters</h2><p>Standard DH (lengths mm, angles deg, ± one '
-                "standard uncertainty).</p>" + _dh_section(ident, references) + "</section>")
+                "standard uncertainty).</p>" + _dh_section(ident, references)
+                + (f'<p class="warn">{_e(reference_note)}</p>' if reference_note else "") + "</section>")
     body.append('<section id="joints"><h2>Per joint</h2>')
     for axis in ident.geometric.axes:
         a = axis

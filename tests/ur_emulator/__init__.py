@@ -9,7 +9,7 @@ It speaks just enough of the controller's interfaces for ``rtde_control.RTDECont
   ``get serial number``, ``robotmode``, ``safetystatus``, ``unlock protective stop``, ``stop``, ...);
 - the primary / secondary interface (30001 / 30002) first sends a version message and a robot state message
   with the kinematics info (sub-package 5: checksums, DH theta, a, d, alpha, calibration status; here the rig's
-  true robot plays the factory calibration; ``kinematics=False``: none is sent);
+  true robot plays the factory calibration; ``kinematics=False``: robot state messages without it);
 - the script ports 30001 / 30002 / 30003: a program ``def rtde_control(): ... end`` sent there "runs": the
   emulator then plays the register handshake of ur_rtde's control script (below) instead of URScript.
 
@@ -22,14 +22,25 @@ is the async progress: 0 while an async move runs, then -1 / -2 alternately. Oth
 (done) without effect. The client also reads ``robot_status_bits`` (bit 1: program running),
 ``safety_status_bits`` (bit 2: protective stop, bit 7: emergency stop) and ``runtime_state`` (2 playing).
 
-Motion: the arm is a :class:`drivers.sim.SimulatedRig` on a wall clock; a moveJ is the rig's synchronised
-trapezoidal move (``SimulatedRobot.move_joints`` with the commanded speed / acceleration on every joint), and
-the streamed ``actual_q`` follows that profile during the move, then the rig's resting / ringing arm.
+Motion: the arm is a :class:`drivers.sim.SimulatedRig` on a :class:`ScaledClock` (``time_scale``: emulated
+seconds per wall second, default 1; the tests run at 10 to 100, so a move of seconds takes a fraction of a
+second while the RTDE stream keeps its wall-clock rate); a moveJ is the rig's synchronised trapezoidal move
+(``SimulatedRobot.move_joints`` with the commanded speed / acceleration on every joint), and the streamed
+``actual_q`` follows that profile during the move, then the rig's resting / ringing arm.
 
 Faults: :meth:`UREmulator.protective_stop`, :meth:`emergency_stop`, :meth:`clear_stop`, :meth:`drop_connections`,
-``remote_control=False``, ``stall=True`` (a moveJ that never finishes), ``kinematics=False`` (no factory
-calibration), or the rig's own fault schedule: ``EmulatorProcess(rig=SimulatedRig("ur5e", clock=WallClock(),
-robot_faults=parse_faults("protective_stop@2", "robot")))``: move 2 stops halfway in a protective stop.
+:meth:`freeze_stream` (the stream repeats one state: the timestamp stands still), ``remote_control=False``,
+``stall=True`` (a moveJ that never finishes), ``kinematics=False`` (the primary interface sends robot state
+messages without the kinematics info: no factory calibration), or the rig's own fault schedule, counted in
+moves: ``EmulatorProcess(rig=SimulatedRig("ur5e", clock=ScaledClock(10), robot_faults=parse_faults(
+"protective_stop@2", "robot")))``: move 2 stops halfway in a protective stop; ``disconnect@N``: the network
+drops every client connection at move N, which does not start. Tests trigger the others at a position of the
+emulated arm, not after a wall-clock delay, so that a loaded machine cannot move them.
+
+Tracker: :meth:`UREmulator.serve_tracker` starts a simulated ASCII tracker (``tests/tracker_devices.py``,
+loopback TCP) measuring this emulator's true TP, for whole acquisitions with the real serial driver
+(``serial:socket://127.0.0.1:PORT?protocol=polled-xyz``); :meth:`truth` is the true robot (DH, base, tool),
+which the primary interface also reports as the controller's factory calibration.
 
 Each emulator binds its own loopback address (127.x.y.z), since the ports are fixed. Run it in a child process
 (:class:`EmulatorProcess`): the ur_rtde client holds the GIL while it connects, so an emulator in threads of the
@@ -44,7 +55,7 @@ Layout: ``protocol.py`` (RTDE packages, variables and their types, register code
 ``controller.py`` (:class:`UREmulator`: servers, control-script handshake, motion), ``process.py``.
 """
 
-from tests.ur_emulator.controller import UREmulator
+from tests.ur_emulator.controller import ScaledClock, UREmulator
 from tests.ur_emulator.process import EmulatorProcess, free_loopback_address
 from tests.ur_emulator.protocol import (
     CMD_MOVEJ,
@@ -62,4 +73,4 @@ from tests.ur_emulator.protocol import (
 
 __all__ = ["CMD_MOVEJ", "CMD_NONE", "CMD_STOPJ", "CMD_STOPL", "CMD_STOP_SCRIPT", "SAFETY_NORMAL",
            "SAFETY_PROTECTIVE_STOP", "SAFETY_ROBOT_EMERGENCY_STOP", "SCRIPT_DONE", "SCRIPT_READY", "VARIABLES",
-           "EmulatorProcess", "UREmulator", "free_loopback_address"]
+           "EmulatorProcess", "ScaledClock", "UREmulator", "free_loopback_address"]

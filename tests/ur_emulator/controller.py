@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import socket
-import struct
 import threading
 import time
 from dataclasses import dataclass, field
@@ -12,22 +11,14 @@ from typing import Any
 
 import numpy as np
 
-from drivers.clock import WallClock
-from drivers.errors import EmergencyStop, ProtectiveStop, RobotFault
+from drivers.errors import ConnectionFailed, EmergencyStop, ProtectiveStop, RobotFault
 from drivers.sim import SimulatedRig, SimulatedRobot, _durations, _fraction
 from tests.ur_emulator.protocol import (
-    _DOUBLES,
-    _FORMATS,
-    _UINT8,
-    _UINT32,
-    _V6,
-    _ZERO,
     CMD_MOVEJ,
     CMD_NONE,
     CMD_STOP_SCRIPT,
     CMD_STOPJ,
     CMD_STOPL,
-    DASHBOARD_MODEL,
     DASHBOARD_PORT,
     ROBOT_MODE_POWER_OFF,
     ROBOT_MODE_RUNNING,
@@ -47,18 +38,28 @@ from tests.ur_emulator.protocol import (
     SCRIPT_READY,
     STATUS_POWER_ON,
     STATUS_PROGRAM_RUNNING,
-    VARIABLES,
-    I,
-    O,
-    P,
-    S,
-    U,
-    V,
-    _packet,
-    _recv_exact,
-    _take_program,
-    v,
 )
+from tests.ur_emulator.servers import ControllerServers
+
+APPROACH = 2e-3  # rad: how far short of its target the streamed arm stays until the rig has finished the move
+
+
+class ScaledClock:
+    """Simulated time running ``scale`` times faster than the wall clock: ``now()`` s since the epoch,
+    ``sleep(s)`` waits s / scale wall seconds. An emulated move of 1 s takes 1 / scale s."""
+
+    def __init__(self, scale: float = 1.0) -> None:
+        if not scale > 0:
+            raise ValueError(f"time scale must be > 0, got {scale!r}")
+        self.scale = float(scale)
+        self._epoch, self._mono = time.time(), time.monotonic()
+
+    def now(self) -> float:
+        return self._epoch + self.scale * (time.monotonic() - self._mono)
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds / self.scale)
 
 
 @dataclass
@@ -83,15 +84,16 @@ class _Log:
     unknown_variables: list[str] = field(default_factory=list)
 
 
-class UREmulator:
+class UREmulator(ControllerServers):
     """The emulated controller of ``model`` at ``host`` (a loopback address). See the module docstring."""
 
     def __init__(self, host: str = "127.0.0.1", model: str = "ur5e", *, rig: SimulatedRig | None = None,
                  version: tuple[int, int, int, int] = (5, 11, 1, 108318), serial: str = "20205500001",
                  remote_control: bool = True, rate: float = 125.0, stall: bool = False,
-                 kinematics: bool = True) -> None:
+                 kinematics: bool = True, time_scale: float = 1.0) -> None:
         self.host, self.model, self.version, self.serial = host, model, version, serial
-        self.rig = rig if rig is not None else SimulatedRig(model, clock=WallClock(), ring=1e-5, ring_tau=0.05)
+        clock = ScaledClock(time_scale)
+        self.rig = rig if rig is not None else SimulatedRig(model, clock=clock, ring=1e-5, ring_tau=0.05)
         self.robot = SimulatedRobot(self.rig)
         self.robot.connect(1.0)
         self.remote_control, self.rate, self.stall, self.kinematics = remote_control, rate, stall, kinematics
@@ -108,6 +110,8 @@ class UREmulator:
         self._connections: set[socket.socket] = set()
         self._threads: list[threading.Thread] = []
         self._running = False
+        self._frozen: dict[str, Any] | None = None  # the state the stream repeats while frozen
+        self._trackers: list[Any] = []
 
     # --- lifecycle ------------------------------------------------------------------------------------------
 
@@ -133,7 +137,11 @@ class UREmulator:
     def close(self) -> None:
         self._running = False
         self.rig._stop_requested = True
+        for tracker in self._trackers:
+            tracker.stop()
         for s in [*self._servers, *list(self._connections)]:
+            with contextlib.suppress(OSError):
+                s.shutdown(socket.SHUT_RDWR)  # wakes a thread blocked in recv (close alone does not)
             with contextlib.suppress(OSError):
                 s.close()
         for t in self._threads:
@@ -174,6 +182,34 @@ class UREmulator:
                 s.shutdown(socket.SHUT_RDWR)
                 s.close()
 
+    def freeze_stream(self, frozen: bool = True) -> None:
+        """Frozen: every RTDE stream keeps sending the same state (the timestamp stands still), the links stay
+        up. ``False`` thaws it."""
+        with self._lock:
+            self._frozen = self._state() if frozen else None
+
+    def truth(self) -> Any:
+        """The emulated arm's true DHModel (base, tool: the simulated tracker's view); also its factory calibration."""
+        return self.rig.truth
+
+    def serve_tracker(self, profile: str = "polled-xyz", noise: float = 2e-5, seed: int = 0) -> str:
+        """Start a simulated ASCII tracker (tests/tracker_devices.py, loopback TCP) that measures this
+        emulator's true TP; returns its pyserial URL ``socket://127.0.0.1:PORT``."""
+        from tests.tracker_devices import AsciiDevice
+
+        device = AsciiDevice(profile, self.rig, noise=noise, seed=seed, transport="tcp")
+        self._trackers.append(device)
+        return str(device.port)
+
+    def last_motion(self) -> tuple[float, float] | None:
+        """(start, duration) of the latest move on the emulator's clock (s since the epoch, s), or None."""
+        motion = self._motion
+        return None if motion is None else (motion.t0, motion.duration)
+
+    def tracker_replies(self) -> int:
+        """Measurements the simulated trackers answered so far."""
+        return sum(t.replies for t in self._trackers)
+
     def _latch(self, mode: int) -> None:
         with self._lock:
             self.safety_mode = mode
@@ -199,6 +235,11 @@ class UREmulator:
             distance = np.abs(motion.target - motion.start)
             k = int(np.argmax(distance))
             share = _fraction(now - motion.t0, motion.duration, motion.speed, motion.acceleration, float(distance[k]))
+            # the rig (whose arm the simulated tracker measures) settles the move in its own thread, which a
+            # loaded machine delays: until it has, the streamed arm stays short of the target, so a client never
+            # sees an arrival the rig has not made
+            if distance[k] > 0:
+                share = min(share, max(0.0, 1.0 - APPROACH / float(distance[k])))
             return motion.start + share * (motion.target - motion.start)
         return self.rig.actual_joints(now)
 
@@ -256,17 +297,24 @@ class UREmulator:
             self._start_move(np.array(doubles[:6]), doubles[6], doubles[7], asynchronous)
             return
         if cmd in (CMD_STOPJ, CMD_STOPL):
-            self.rig._stop_requested = True
-            motion = self._motion
-            if motion is not None and motion.thread is not None and motion.thread is not threading.current_thread():
-                self._lock.release()
-                try:
-                    motion.thread.join(timeout=5.0)
-                finally:
-                    self._lock.acquire()
+            self._halt()
         self._outputs["output_int_register_0"] = SCRIPT_DONE
 
+    def _halt(self) -> None:
+        """Stop the running move (if any) and wait until the arm rests (called with the lock held)."""
+        motion = self._motion
+        if motion is None or motion.thread is None or not motion.thread.is_alive():
+            return
+        self.rig._stop_requested = True
+        if motion.thread is not threading.current_thread():
+            self._lock.release()
+            try:
+                motion.thread.join(timeout=5.0)
+            finally:
+                self._lock.acquire()
+
     def _start_move(self, target: np.ndarray, speed: float, acceleration: float, asynchronous: bool) -> None:
+        self._halt()  # a new moveJ replaces the running one (the arm stops, then goes to the new target)
         start = self.rig.rest_joints
         duration = float(np.max(_durations(start, target, [speed] * 6, [acceleration] * 6), initial=0.0))
         motion = _Motion(start, target, speed, acceleration, self.rig.clock.now(), duration)
@@ -291,6 +339,9 @@ class UREmulator:
             self._latch(SAFETY_PROTECTIVE_STOP)
         except EmergencyStop:
             self._latch(SAFETY_ROBOT_EMERGENCY_STOP)
+        except ConnectionFailed:  # the rig's "disconnect" fault: the network drops, the arm stays put
+            self.rig.robot_connected = True
+            self.drop_connections()
         except (RobotFault, ValueError):
             pass  # stopped by stopJ, or a target the script refuses: the move just ends
         finally:
@@ -301,192 +352,3 @@ class UREmulator:
                     self._outputs["output_int_register_2"] = self._async_token
                 elif self._program_running:
                     self._outputs["output_int_register_0"] = SCRIPT_DONE
-
-    # --- servers --------------------------------------------------------------------------------------------
-
-    def _accept_loop(self, server: socket.socket, handler: Any) -> None:
-        while self._running:
-            try:
-                conn, _ = server.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._connections.add(conn)
-            self._spawn(self._guard, handler, conn)
-
-    def _guard(self, handler: Any, conn: socket.socket) -> None:
-        try:
-            handler(conn)
-        except (OSError, ConnectionError, struct.error):
-            pass
-        finally:
-            self._connections.discard(conn)
-            with contextlib.suppress(OSError):
-                conn.close()
-
-    def _serve_dashboard(self, conn: socket.socket) -> None:
-        conn.sendall(b"Connected: Universal Robots Dashboard Server\n")
-        buffer = b""
-        while self._running:
-            data = conn.recv(4096)
-            if not data:
-                return
-            buffer += data
-            while b"\n" in buffer:
-                line, buffer = buffer.split(b"\n", 1)
-                command = line.decode(errors="replace").strip()
-                self.log.dashboard.append(command)
-                reply = self._dashboard(command)
-                conn.sendall((reply + "\n").encode())
-                if command == "quit":
-                    return
-
-    def _dashboard(self, command: str) -> str:
-        major, minor, bugfix, build = self.version
-        c = command.lower()
-        if c == "polyscopeversion":
-            return f"URSoftware {major}.{minor}.{bugfix}.{build} (Jan 01 2024)"
-        if c == "is in remote control":
-            return "true" if self.remote_control else "false"
-        if c == "get robot model":
-            return DASHBOARD_MODEL.get(self.model.lower(), self.model.upper())
-        if c == "get serial number":
-            return self.serial
-        if c == "robotmode":
-            names = {ROBOT_MODE_RUNNING: "RUNNING", ROBOT_MODE_POWER_OFF: "POWER_OFF"}
-            return f"Robotmode: {names.get(self.robot_mode, 'IDLE')}"
-        if c == "safetystatus" or c == "safetymode":
-            names = {SAFETY_NORMAL: "NORMAL", SAFETY_PROTECTIVE_STOP: "PROTECTIVE_STOP",
-                     SAFETY_ROBOT_EMERGENCY_STOP: "ROBOT_EMERGENCY_STOP"}
-            return f"{command.capitalize()}: {names[self.safety_mode]}"
-        if c == "unlock protective stop":
-            if self.safety_mode == SAFETY_PROTECTIVE_STOP:
-                self.clear_stop()
-            return "Protective stop releasing"
-        if c == "stop":
-            with self._lock:
-                self.rig._stop_requested = True
-                self._stop_program()
-            return "Stopped"
-        if c == "programstate":
-            return "PLAYING <unnamed>" if self._program_running else "STOPPED <unnamed>"
-        if c == "running":
-            return f"Program running: {'true' if self._program_running else 'false'}"
-        if c in ("close popup", "close safety popup"):
-            return "closing popup" if c == "close popup" else "closing safety popup"
-        if c == "quit":
-            return "Disconnected"
-        return f"could not understand: '{command}'"
-
-    def _serve_script(self, conn: socket.socket) -> None:
-        if conn.getsockname()[1] in (30001, 30002) and self.kinematics:
-            conn.sendall(self._primary_greeting())
-        buffer = ""
-        while self._running:
-            data = conn.recv(65536)
-            if not data:
-                return
-            buffer += data.decode(errors="replace")
-            while True:
-                program, buffer = _take_program(buffer)
-                if program is None:
-                    break
-                self._run_program(program)
-
-    def _primary_greeting(self) -> bytes:
-        """What the primary / secondary interface sends first: a version message, then a robot state message
-        with the kinematics info (the controller's factory-calibrated DH values: here the rig's true robot)."""
-        major, minor, bugfix, build = self.version
-        name = b"URControl"
-        version = (struct.pack(">QbB", 0, -1, 3) + bytes([len(name)]) + name
-                   + struct.pack(">BBii", major, minor, bugfix, build) + b"01-01-2024, 00:00:00")
-        truth = self.rig.truth
-        body = (struct.pack(">6I", *[0x1234 + i for i in range(6)])
-                + b"".join(struct.pack(">6d", *getattr(truth, key)) for key in ("theta", "a", "d", "alpha"))
-                + struct.pack(">I", 1))
-        kinematics = struct.pack(">iB", len(body) + 5, 5) + body
-        return (struct.pack(">iB", len(version) + 5, 20) + version
-                + struct.pack(">iB", len(kinematics) + 5, 16) + kinematics)
-
-    def _run_program(self, program: str) -> None:
-        self.log.scripts.append(program)
-        with self._lock:
-            self._stop_program()  # a new program replaces the running one
-            if "def rtde_control" in program or "rtde_cmd" in program:
-                self._program_starts_at = time.monotonic() + 0.05
-
-    def _serve_rtde(self, conn: socket.socket) -> None:
-        outputs: list[tuple[str, str]] = []
-        recipes: dict[int, list[tuple[str, str]]] = {}
-        frequency = self.rate
-        streamer: threading.Thread | None = None
-        streaming = threading.Event()
-        send_lock = threading.Lock()
-
-        def send(kind: int, payload: bytes = b"") -> None:
-            with send_lock:
-                conn.sendall(_packet(kind, payload))
-
-        def stream() -> None:
-            period = 1.0 / min(frequency, self.rate)
-            next_time = time.monotonic()
-            while self._running and streaming.is_set():
-                with self._lock:
-                    state = self._state()
-                payload = bytearray(b"\x01")
-                for name, kind in outputs:
-                    value = state.get(name, _ZERO.get(kind, 0))
-                    fmt = ">" + _FORMATS[kind]
-                    payload += struct.pack(fmt, *value) if isinstance(value, tuple) else struct.pack(fmt, value)
-                try:
-                    send(U, bytes(payload))
-                except OSError:
-                    return
-                next_time += period
-                time.sleep(max(0.0, next_time - time.monotonic()))
-
-        while self._running:
-            size, kind = struct.unpack(">HB", _recv_exact(conn, 3))
-            payload = _recv_exact(conn, size - 3)
-            if kind == V:
-                send(V, b"\x01")
-            elif kind == v:
-                send(v, struct.pack(">IIII", *self.version))
-            elif kind == O:
-                (frequency,) = struct.unpack(">d", payload[:8])
-                names = [n for n in payload[8:].decode().strip("\x00").split(",") if n]
-                types = [VARIABLES.get(n, "NOT_FOUND") for n in names]
-                self.log.unknown_variables += [n for n, t in zip(names, types, strict=True) if t == "NOT_FOUND"]
-                outputs = list(zip(names, types, strict=True))
-                send(O, b"\x01" + ",".join(types).encode())
-            elif kind == I:
-                names = [n for n in payload.decode().strip("\x00").split(",") if n]
-                types = [VARIABLES.get(n, "NOT_FOUND") if n.startswith("input") or n in _UINT8 or n in _DOUBLES
-                         or n in _V6 or n in _UINT32 else "NOT_FOUND" for n in names]
-                recipe_id = len(recipes) + 1
-                recipes[recipe_id] = list(zip(names, types, strict=True))
-                send(I, bytes([recipe_id]) + ",".join(types).encode())
-            elif kind == S:
-                streaming.set()
-                send(S, b"\x01")
-                if streamer is None or not streamer.is_alive():
-                    streamer = threading.Thread(target=stream, daemon=True)
-                    streamer.start()
-            elif kind == P:
-                streaming.clear()
-                send(P, b"\x01")
-            elif kind == U:
-                recipe = recipes.get(payload[0])
-                if recipe is None:
-                    continue
-                offset, values = 1, {}
-                for name, kind_ in recipe:
-                    fmt = ">" + _FORMATS.get(kind_, "i")
-                    item = struct.unpack_from(fmt, payload, offset)
-                    offset += struct.calcsize(fmt)
-                    values[name] = item[0] if len(item) == 1 else item
-                with self._lock:
-                    self._inputs.update(values)
-        streaming.clear()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import threading
 from typing import Any
 
@@ -23,7 +24,9 @@ def free_loopback_address() -> str:
 
 
 def _child(host: str, options: dict[str, Any], conn: Any) -> None:
-    """The emulator process: start, then serve calls from the parent until "close"."""
+    """The emulator process: start, then serve calls from the parent until "close". It ignores SIGINT, as a
+    controller would (tests deliver Ctrl-C to the driver's processes)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         emulator = UREmulator(host, **options).start()
     except Exception as exc:  # e.g. the address is in use
