@@ -30,7 +30,9 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.speed || status=1; \
 	$(BIN)/python -m bench.trust || status=1; \
 	$(BIN)/python -m bench.acquisition || status=1; \
+	$(BIN)/python -m bench.trackers || status=1; \
 	$(BIN)/python -m bench.ur || status=1; \
+	$(BIN)/python -m bench.aruco || status=1; \
 	exit $$status
 
 clean:

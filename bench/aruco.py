@@ -14,6 +14,7 @@ view, no distortion. The machine's load average is printed with the speeds.
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import numpy as np
@@ -42,15 +43,22 @@ def poses(rng: np.random.Generator, distance: float, count: int) -> list[np.ndar
     return out
 
 
-def speed() -> None:
+TARGET_FPS = 30.0  # detection + pose at 1280x720, default refinement, board
+TARGET_ERROR = 0.3e-3  # m: mean 3D error of the 100 mm board at 1 m on clean renders, default refinement
+DEFAULT_METHOD = "edges"
+
+
+def speed() -> dict[str, dict[str, float]]:
+    """Print and return frames/s per target and refinement method."""
     print(f"detection + pose, 1280x720, noise 2, blur 0.5: frames/s (load average {os.getloadavg()[0]:.2f} "
           f"on {os.cpu_count()} cores)")
     rng = np.random.default_rng(0)
+    rates: dict[str, dict[str, float]] = {}
     for name in ("marker 100 mm", "grid 3x3 100 mm"):
         target = TARGETS[name]
         renderer = Renderer(target, CAMERA, Optics(noise=2.0, blur=0.5, supersample=2))
         frames = [renderer.render([p], rng) for p in poses(rng, 1.0, 5)]
-        row = []
+        row, rates[name] = [], {}
         for method in METHODS:
             detector = Detector(target, method, CAMERA)
             detector.detect(frames[0])
@@ -59,11 +67,16 @@ def speed() -> None:
                 obs = detector.detect(frames[n % len(frames)])
                 estimate_pose(obs, CAMERA.matrix, CAMERA.distortion, target.kind == "marker")
                 n += 1
-            row.append(f"{method} {n / (time.perf_counter() - start):.0f}")
+            rates[name][method] = n / (time.perf_counter() - start)
+            row.append(f"{method} {rates[name][method]:.0f}")
         print(f"  {name}: " + ", ".join(row))
+    return rates
 
 
-def accuracy(count: int = 6, optics: Optics | None = None, distances: tuple[float, ...] = (0.5, 1.0, 1.5)) -> None:
+def accuracy(count: int = 6, optics: Optics | None = None,
+             distances: tuple[float, ...] = (0.5, 1.0, 1.5)) -> dict[tuple[str, float, str], float]:
+    """Print and return the mean 3D error (m) per (target, distance, method)."""
+    means: dict[tuple[str, float, str], float] = {}
     optics = optics or Optics(noise=0.0, blur=0.0)
     print(f"mean 3D error of the centre, mm, noise {optics.noise:g}, blur {optics.blur:g}, {count} poses each "
           "(lost: frames without a pose)")
@@ -81,12 +94,23 @@ def accuracy(count: int = 6, optics: Optics | None = None, distances: tuple[floa
                                          target.kind == "marker", reference=truth[:3, :3])
                     if pose is not None:
                         errors[method].append(float(np.linalg.norm(pose.translation - truth[:3, 3])))
+            means.update({(name, distance, m): float(np.mean(e)) for m, e in errors.items() if e})
             cells = [f"{np.mean(e) * 1e3:9.3f}" + (f" ({count - len(e)} lost)" if len(e) < count else "")
                      if e else "     lost" for e in errors.values()]
             print(f"  {name:<17} {distance:5.1f} m  " + "  ".join(cells))
+    return means
+
+
+def main() -> int:
+    """Print the tables; exit status 1 if the speed or the accuracy target is missed."""
+    fps = speed()["grid 3x3 100 mm"][DEFAULT_METHOD]
+    error = accuracy().get(("grid 3x3 100 mm", 1.0, DEFAULT_METHOD), float("inf"))
+    accuracy(12, Optics(noise=2.0, blur=0.5), (1.0,))
+    print(f"targets ({DEFAULT_METHOD}, 3x3 board): {fps:.0f} frames/s (>= {TARGET_FPS:g}: "
+          f"{'ok' if fps >= TARGET_FPS else 'MISSED'}), mean error at 1 m {error * 1e3:.3f} mm "
+          f"(< {TARGET_ERROR * 1e3:g} mm: {'ok' if error < TARGET_ERROR else 'MISSED'})")
+    return 0 if fps >= TARGET_FPS and error < TARGET_ERROR else 1
 
 
 if __name__ == "__main__":
-    speed()
-    accuracy()
-    accuracy(12, Optics(noise=2.0, blur=0.5), (1.0,))
+    sys.exit(main())

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import random
 import statistics
+import sys
 import time
 import warnings
 from typing import Any
@@ -107,7 +108,8 @@ def _timed_measurements(tracker: Any, count: int) -> list[float]:
     return walls
 
 
-def main() -> None:
+def main() -> int:
+    """Print the measurements; exit status 1 if any target is missed."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--lines", type=int, default=50_000)
     parser.add_argument("--readings", type=int, default=300)
@@ -115,17 +117,21 @@ def main() -> None:
     parser.add_argument("--average", type=int, default=10, help="I++ points per averaged reading")
     args = parser.parse_args()
     warnings.filterwarnings("ignore", r"set(Daemon|Name)\(\) is deprecated", DeprecationWarning)  # pyserial 3.5
+    missed = False
     print("parser throughput (target >= 20,000 lines/s)")
     for name in PROFILES:
         rate = parser_throughput(name, args.lines)
+        missed |= rate < 20_000
         print(f"  {name:18s} {rate:10,.0f} lines/s  {'ok' if rate >= 20_000 else 'MISSED'}")
     print(f"per-measurement overhead over a pty, device latency {args.latency * 1e3:g} ms (target < 1 ms)")
     for name in ("polled-xyz", "tracker-checksum"):
         wall, busy, overhead = serial_overhead(name, args.readings, args.latency)
+        missed |= overhead >= 1.0
         print(f"  {name:18s} wall {wall:6.3f} ms  device {busy:6.3f} ms  overhead {overhead:6.3f} ms  "
               f"{'ok' if overhead < 1.0 else 'MISSED'}")
     for name in ("polled-xyz",):
         wall, busy, overhead = serial_overhead(name, args.readings, args.latency, rfc2217=True)
+        missed |= overhead >= 1.0
         print(f"  {name + ' rfc2217':18s} wall {wall:6.3f} ms  device {busy:6.3f} ms  overhead {overhead:6.3f} ms  "
               f"{'ok' if overhead < 1.0 else 'MISSED'}")
     print("I++ DME on loopback, ms per reading (median)")
@@ -134,6 +140,8 @@ def main() -> None:
           f"{ipp_round_trip(args.readings // 4, args.average):6.3f}")
     print(f"  server average of {args.average:3d} points      "
           f"{ipp_round_trip(args.readings, args.average, server_averaging=True):6.3f}")
+    return 1 if missed else 0
+
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
