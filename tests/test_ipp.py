@@ -3,18 +3,18 @@
 from __future__ import annotations
 
 import io
-import socket
 
 import numpy as np
 import pytest
 
 from drivers.base import Tracker
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, SpecError
-from drivers.ipp import DEFAULT_PORT, IppTracker
+from drivers.ipp import DEFAULT_PORT
 from drivers.ipp import open_tracker as open_ipp
 from drivers.registry import open_tracker
 from drivers.sim import SimulatedRig
-from tests.tracker_devices import IppServer
+from tests.tracker_devices import IppServer, free_port
+from tests.tracker_devices import open_ipp as _open
 
 TOL = 2e-4
 
@@ -22,13 +22,6 @@ TOL = 2e-4
 @pytest.fixture
 def rig() -> SimulatedRig:
     return SimulatedRig("ur5e", seed=2)
-
-
-def _open(server: IppServer, **options: str) -> IppTracker:
-    query = "&".join(f"{k}={v}" for k, v in {"timeout": "0.5", **options}.items())
-    tracker = open_tracker(f"ipp://{server.host}:{server.port}?{query}")
-    tracker.connect(2.0)
-    return tracker
 
 
 def test_session_identity_and_points(rig: SimulatedRig) -> None:
@@ -109,9 +102,7 @@ def test_trace_io_records_both_directions(rig: SimulatedRig) -> None:
 
 
 def test_nobody_listening_is_connection_failed() -> None:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_port()
     tracker = open_tracker(f"ipp://127.0.0.1:{port}")
     with pytest.raises(ConnectionFailed) as info:
         tracker.connect(1.0)

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from drivers.errors import BadReading, ConnectionFailed
-from drivers.ipp import IppTracker
 from drivers.registry import open_tracker
 from drivers.sim import SimulatedRig
 from tests.tracker_devices import IppServer
+from tests.tracker_devices import open_ipp as _open
 
 NOISE = 1e-4  # m per axis, large against the 1 nm resolution of the server's replies
 
@@ -18,13 +18,6 @@ NOISE = 1e-4  # m per axis, large against the 1 nm resolution of the server's re
 @pytest.fixture
 def rig() -> SimulatedRig:
     return SimulatedRig("ur5e", seed=5)
-
-
-def _open(server: IppServer, **options: str) -> IppTracker:
-    query = "&".join(f"{k}={v}" for k, v in {"timeout": "0.5", **options}.items())
-    tracker = open_tracker(f"ipp://{server.host}:{server.port}?{query}")
-    tracker.connect(2.0)
-    return tracker
 
 
 def _spread(readings) -> float:

@@ -3,7 +3,6 @@ bridging a loopback TCP port to a simulated device on a pseudo-terminal, with fa
 
 from __future__ import annotations
 
-import socket
 import time
 
 import numpy as np
@@ -16,7 +15,7 @@ from drivers.registry import open_tracker
 from drivers.serial_tracker import SerialTracker
 from drivers.sim import SimulatedRig
 from tests.rfc2217_bridge import Rfc2217Bridge
-from tests.tracker_devices import AsciiDevice
+from tests.tracker_devices import AsciiDevice, free_port
 
 # pyserial 3.5's RFC 2217 client calls Thread.setDaemon()/setName()
 pytestmark = pytest.mark.filterwarnings("ignore:set(Daemon|Name)\\(\\) is deprecated:DeprecationWarning")
@@ -79,9 +78,7 @@ def test_a_restarted_rfc2217_server_is_connection_failed_and_a_new_connect_works
 
 
 def test_nobody_listening_is_one_line() -> None:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = free_port()
     tracker = open_tracker(f"serial:rfc2217://127.0.0.1:{port}?protocol=polled-xyz")
     with pytest.raises(ConnectionFailed) as info:
         tracker.connect(1.0)

@@ -32,6 +32,7 @@ from drivers.registry import open_robot
 from drivers.sim import SimulatedRig
 from drivers.spec import parse_faults
 from tests.ur_emulator import CMD_MOVEJ, CMD_STOPJ, EmulatorProcess, ScaledClock, free_loopback_address
+from tests.ur_emulator import connected_robot as connected
 
 PINNED_UR_RTDE = "1.6.5"  # the version whose handshake the emulator follows
 HOME = np.array(load_robot("ur5e").home, dtype=float)
@@ -48,12 +49,6 @@ def emulator():
         yield emu
     finally:
         emu.close()
-
-
-def connected(emu: EmulatorProcess, spec: str = "ur5e"):
-    robot = open_robot(f"{spec}@{emu.host}")
-    robot.connect(5.0)
-    return robot
 
 
 def wait_for(condition, timeout: float = 5.0) -> None:

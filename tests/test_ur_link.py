@@ -16,10 +16,10 @@ pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip instal
 from acquire.orchestrator import StopRequest
 from config.robots import load_robot
 from drivers.errors import ConnectionFailed, RobotFault
-from drivers.registry import open_robot
 from drivers.sim import SimulatedRig
 from drivers.spec import parse_faults
 from tests.ur_emulator import CMD_STOPJ, EmulatorProcess, ScaledClock
+from tests.ur_emulator import connected_robot as connected
 
 HOME = np.array(load_robot("ur5e").home, dtype=float)
 SPEED, ACC = [0.8] * 6, [1.5] * 6
@@ -34,12 +34,6 @@ def emulator():
         yield emu
     finally:
         emu.close()
-
-
-def connected(emu: EmulatorProcess, options: str = ""):
-    robot = open_robot(f"ur5e@{emu.host}{'?' + options if options else ''}")
-    robot.connect(5.0)
-    return robot
 
 
 def test_a_killed_worker_is_replaced_and_the_run_goes_on(emulator: EmulatorProcess) -> None:
@@ -99,7 +93,7 @@ def test_connection_drop_while_idle_recovers(emulator: EmulatorProcess) -> None:
 
 def test_a_controller_gone_for_good_ends_in_connection_failed() -> None:
     emu = EmulatorProcess(time_scale=SCALE)
-    robot = connected(emu, "reconnects=2")
+    robot = connected(emu, options="reconnects=2")
     try:
         emu.close()  # the controller is switched off
         with pytest.raises(ConnectionFailed, match="2 reconnection attempt") as info:
@@ -112,7 +106,7 @@ def test_a_controller_gone_for_good_ends_in_connection_failed() -> None:
 
 
 def test_a_frozen_state_stream_is_a_lost_link(emulator: EmulatorProcess) -> None:
-    robot = connected(emulator, "stream_timeout=0.3&reconnects=0")  # a fresh worker would wait for the stream
+    robot = connected(emulator, options="stream_timeout=0.3&reconnects=0")  # a fresh worker would wait for the stream
     try:
         robot.wait_until_still(0.05, 5.0)
         emulator.freeze_stream()  # links up, packages keep coming, the timestamp stands still

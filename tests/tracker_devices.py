@@ -418,3 +418,19 @@ class IppServer(_Served):
         send("%")
         return True
 
+
+def free_port() -> int:
+    """A loopback TCP port nobody listens on (bound, then released)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def open_ipp(server: IppServer, **options: str) -> Any:
+    """The I++ tracker driver connected to ``server`` (options as in the spec; reply timeout 0.5 s by default)."""
+    from drivers.registry import open_tracker
+
+    query = "&".join(f"{k}={v}" for k, v in {"timeout": "0.5", **options}.items())
+    tracker = open_tracker(f"ipp://{server.host}:{server.port}?{query}")
+    tracker.connect(2.0)
+    return tracker

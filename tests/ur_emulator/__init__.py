@@ -56,7 +56,7 @@ Layout: ``protocol.py`` (RTDE packages, variables and their types, register code
 """
 
 from tests.ur_emulator.controller import ScaledClock, UREmulator
-from tests.ur_emulator.process import EmulatorProcess, free_loopback_address
+from tests.ur_emulator.process import EmulatorProcess, connected_robot, free_loopback_address
 from tests.ur_emulator.protocol import (
     CMD_MOVEJ,
     CMD_NONE,
@@ -71,6 +71,21 @@ from tests.ur_emulator.protocol import (
     VARIABLES,
 )
 
-__all__ = ["CMD_MOVEJ", "CMD_NONE", "CMD_STOPJ", "CMD_STOPL", "CMD_STOP_SCRIPT", "SAFETY_NORMAL",
-           "SAFETY_PROTECTIVE_STOP", "SAFETY_ROBOT_EMERGENCY_STOP", "SCRIPT_DONE", "SCRIPT_READY", "VARIABLES",
-           "EmulatorProcess", "ScaledClock", "UREmulator", "free_loopback_address"]
+__all__ = [
+    "CMD_MOVEJ",
+    "CMD_NONE",
+    "CMD_STOPJ",
+    "CMD_STOPL",
+    "CMD_STOP_SCRIPT",
+    "SAFETY_NORMAL",
+    "SAFETY_PROTECTIVE_STOP",
+    "SAFETY_ROBOT_EMERGENCY_STOP",
+    "SCRIPT_DONE",
+    "SCRIPT_READY",
+    "VARIABLES",
+    "EmulatorProcess",
+    "ScaledClock",
+    "UREmulator",
+    "connected_robot",
+    "free_loopback_address",
+]

@@ -121,3 +121,12 @@ class EmulatorProcess:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def connected_robot(emu: EmulatorProcess, spec: str = "ur5e", options: str = ""):
+    """The UR driver for model ``spec`` connected to ``emu`` (``options``: the spec's query, e.g. "reconnects=2")."""
+    from drivers.registry import open_robot
+
+    robot = open_robot(f"{spec}@{emu.host}{'?' + options if options else ''}")
+    robot.connect(5.0)
+    return robot
