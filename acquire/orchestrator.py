@@ -19,7 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acquire.plan import Plan, Step
-from acquire.session import Session, StepRecord
+from acquire.records import StepRecord
+from acquire.session import Session
 from drivers.averaging import robust_mean
 from drivers.base import Robot, RobotState, Tracker, TrackerReading
 from drivers.clock import Clock

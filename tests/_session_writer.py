@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from acquire.plan import Plan, Step
-from acquire.session import Session, StepRecord
+from acquire.records import StepRecord
+from acquire.session import Session
 from drivers.base import DeviceIdentity, TrackerReading
 
 JOINT_TYPES = "RRR"

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from acquire.plan import Plan
-from acquire.session import SCHEMA_VERSION, Session, SessionError, StepRecord
+from acquire.records import StepRecord
+from acquire.session import SCHEMA_VERSION, Session, SessionError
 from drivers.base import TrackerReading
 from identify import __version__
 from identify.csvio import read_measurements
