@@ -65,20 +65,24 @@ def calibrate_main(argv: list[str]) -> int:
     k = result.camera.matrix
     print(f"{result.used} of {len(images)} views used ({result.skipped} without enough corners, "
           f"{result.dropped} dropped as outliers); RMS reprojection error {result.rms:.3f} px")
-    print(f"fx {k[0, 0]:.2f}  fy {k[1, 1]:.2f}  cx {k[0, 2]:.2f}  cy {k[1, 2]:.2f} px; distortion "
-          + " ".join(f"{v:.5g}" for v in result.camera.distortion))
+    sd = result.std
+    print(f"fx {k[0, 0]:.2f} ± {sd[0]:.2f}  fy {k[1, 1]:.2f} ± {sd[1]:.2f}  cx {k[0, 2]:.2f} ± {sd[2]:.2f}  "
+          f"cy {k[1, 2]:.2f} ± {sd[3]:.2f} px; distortion "
+          + " ".join(f"{v:.5g} ± {e:.2g}" for v, e in zip(result.camera.distortion, sd[4:], strict=False)))
     print(f"wrote {args.out}")
     return 0
 
 
 class Calibration:
     """A calibration's outcome: ``camera``, ``rms`` (px), views ``used``, ``skipped`` and ``dropped``,
-    ``per_view`` RMS (px) of the used views."""
+    ``per_view`` RMS (px) of the used views, and ``std``: the standard uncertainty of fx, fy, cx, cy (px) and
+    of the distortion coefficients k1, k2, p1, p2, k3, as OpenCV's calibrateCameraExtended estimates them
+    from the residuals."""
 
     def __init__(self, camera: CameraIntrinsics, rms: float, used: int, skipped: int, dropped: int,
-                 per_view: np.ndarray) -> None:
+                 per_view: np.ndarray, std: np.ndarray) -> None:
         self.camera, self.rms, self.used, self.skipped, self.dropped = camera, rms, used, skipped, dropped
-        self.per_view = per_view
+        self.per_view, self.std = per_view, std
 
 
 def calibrate(images: list[np.ndarray], target: Target, min_corners: int = 8) -> Calibration:
@@ -109,21 +113,21 @@ def calibrate(images: list[np.ndarray], target: Target, min_corners: int = 8) ->
                               f"(>= {min_corners} corners, not in a line); at least 4 are needed")
     size = (shape[1], shape[0])
 
-    def fit(objs: list, pts: list) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
-        rms, k, d, _, _, _, _, per_view = cv2.calibrateCameraExtended(objs, pts, size, None, None)
-        return rms, k, d, np.asarray(per_view).reshape(-1)
+    def fit(objs: list, pts: list) -> tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        rms, k, d, _, _, std, _, per_view = cv2.calibrateCameraExtended(objs, pts, size, None, None)
+        return rms, k, d, np.asarray(per_view).reshape(-1), np.asarray(std, dtype=float).reshape(-1)[:9]
 
-    rms, k, d, per_view = fit(objects, points)
+    rms, k, d, per_view, std = fit(objects, points)
     keep = per_view <= DROP_FACTOR * np.median(per_view)
     dropped = int((~keep).sum())
     if dropped and keep.sum() >= 4:
         objects = [o for o, ok in zip(objects, keep, strict=True) if ok]
         points = [q for q, ok in zip(points, keep, strict=True) if ok]
-        rms, k, d, per_view = fit(objects, points)
+        rms, k, d, per_view, std = fit(objects, points)
     else:
         dropped = 0
     return Calibration(CameraIntrinsics(k, d.reshape(-1), size[0], size[1]), float(rms), len(objects), skipped,
-                       dropped, per_view)
+                       dropped, per_view, std)
 
 
 def _charuco(args: argparse.Namespace) -> Target:

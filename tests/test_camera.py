@@ -83,9 +83,13 @@ def test_calibration_recovers_known_intrinsics_from_rendered_charuco_views(tmp_p
     assert "1 without enough corners" in printed and "RMS reprojection error" in printed
     cam = read_intrinsics(out)
     k, k0 = cam.matrix, TRUE_CAMERA.matrix
-    assert abs(k[0, 0] / k0[0, 0] - 1) < 0.01 and abs(k[1, 1] / k0[1, 1] - 1) < 0.01
-    assert abs(k[0, 2] - k0[0, 2]) < 4 and abs(k[1, 2] - k0[1, 2]) < 4
-    assert abs(cam.distortion[0] - TRUE_CAMERA.distortion[0]) < 0.03
+    # every parameter within 4 of its reported standard uncertainty (measured over 4 seeds: |z| <= 1.8), and
+    # those uncertainties small: fx, fy, cx, cy to under 1 px, k1 to under 0.01
+    std = np.array([float(v) for v in re.findall(r"± ([0-9.e-]+)", printed)])
+    assert len(std) == 9 and np.all(std[:4] < 1.0) and std[4] < 0.01
+    found = np.array([k[0, 0], k[1, 1], k[0, 2], k[1, 2], *cam.distortion[:5]])
+    truth = np.array([k0[0, 0], k0[1, 1], k0[0, 2], k0[1, 2], *TRUE_CAMERA.distortion[:5]])
+    assert np.all(np.abs(found - truth) < 4 * std), (found - truth) / std
     fs = cv2.FileStorage(str(out), cv2.FILE_STORAGE_READ)
     assert fs.getNode("avg_reprojection_error").real() < 0.3  # px, on renders with 1 grey level of noise
 
