@@ -266,6 +266,10 @@ def run(args: argparse.Namespace) -> int:
         robot_spec, tracker_spec = RobotSpec.parse(args.robot), TrackerSpec.parse(args.tracker)
         session, path = None, None
         plan = None
+    if not args.dry_run and (robot_spec.is_mock or tracker_spec.is_mock or tracker_spec.backend == "aruco"):
+        from drivers.sim import check_pairing
+
+        check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
     robot_model = load_robot(robot_spec.model)
     if plan is None:
         plan = build_plan(robot_model, site)

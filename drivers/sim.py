@@ -161,8 +161,7 @@ class SimulatedRig:
         tracker = tracker if tracker is None or isinstance(tracker, TrackerSpec) else TrackerSpec.parse(tracker)
         camera = tracker is not None and is_simulated_camera(tracker)
         if not robot.is_mock or (tracker is not None and not tracker.is_mock and not camera):
-            raise SpecError(f"a simulated rig needs mock devices (mock:MODEL and mock or aruco:sim), got "
-                            f"{str(robot)!r} and {str(tracker)!r}")
+            raise _unpaired(robot, tracker)
         r = robot.mock_settings()
         t = tracker.mock_settings() if tracker is not None and not camera else TrackerSpec("mock").mock_settings()
         view = None
@@ -501,6 +500,19 @@ class SimulatedTracker:
 def is_simulated_camera(spec: TrackerSpec) -> bool:
     """True for ``aruco:sim?...``: real detection on images rendered from the rig (drivers/camera_sim.py)."""
     return spec.backend == "aruco" and spec.target == "sim"
+
+
+def check_pairing(robot: RobotSpec, tracker: TrackerSpec) -> None:
+    """SpecError unless the two devices are both simulated or both real: a simulated tracker cannot see a real
+    arm, nor a real tracker a simulated one (one simulated world, :class:`SimulatedRig`)."""
+    simulated = (robot.is_mock, tracker.is_mock or is_simulated_camera(tracker))
+    if simulated[0] != simulated[1]:
+        raise _unpaired(robot, tracker)
+
+
+def _unpaired(robot: RobotSpec, tracker: TrackerSpec | None) -> SpecError:
+    return SpecError(f"a simulated rig needs mock devices on both sides (mock:MODEL with mock or aruco:sim), got "
+                     f"{str(robot)!r} and {str(tracker)!r}")
 
 
 def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock: Clock | None = None,

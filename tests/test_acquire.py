@@ -75,6 +75,15 @@ def test_dry_run_connects_nothing_and_refuses_plans_outside_limits(tmp_path, mon
     assert "plan refused" in err and "joint 2" in err
 
 
+@pytest.mark.parametrize(("robot", "tracker"), [("ur5e@127.0.0.9", "mock"), ("mock:ur5e", "serial:/dev/ttyUSB9"),
+                                               ("ur5e@127.0.0.9", "aruco:sim")])
+def test_simulated_and_real_devices_are_refused_together_before_the_plan(tmp_path, capsys, robot, tracker):
+    code, path = _run(tmp_path, "--yes", robot=robot, tracker=tracker)
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "" and not path.exists()
+    assert "needs mock devices on both sides" in err and err.count("\n") == 1
+
+
 def test_protective_stop_pauses_and_resume_completes_without_duplicates(tmp_path, capsys):
     code, path = _run(tmp_path, robot=ROBOT + "&fault=protective_stop@20")
     assert code == 1
@@ -215,7 +224,8 @@ def test_a_real_robot_never_moves_without_confirmation(tmp_path, monkeypatch, ca
 
     monkeypatch.setattr(registry, "open_robot", forbidden)
     monkeypatch.setattr("sys.stdin.isatty", lambda: False)
-    assert main(["--robot", "ur5e@127.0.0.1", "--tracker", "mock", "--session", str(tmp_path / "r.session")]) == 2
+    assert main(["--robot", "ur5e@127.0.0.1", "--tracker", "serial:/dev/ttyUSB9",
+                 "--session", str(tmp_path / "r.session")]) == 2
     assert "needs confirmation" in capsys.readouterr().err
     assert not (tmp_path / "r.session").exists()
 
