@@ -44,11 +44,8 @@ SLOW, SLOW_ACC = [0.3] * 6, [1.0] * 6
 
 @pytest.fixture
 def emulator():
-    emu = EmulatorProcess(time_scale=SCALE)
-    try:
+    with EmulatorProcess(time_scale=SCALE) as emu:
         yield emu
-    finally:
-        emu.close()
 
 
 def wait_for(condition, timeout: float = 5.0) -> None:

@@ -29,11 +29,8 @@ STEP = np.array([0.2, 0, 0, 0, 0, 0])
 
 @pytest.fixture
 def emulator():
-    emu = EmulatorProcess(time_scale=SCALE)
-    try:
+    with EmulatorProcess(time_scale=SCALE) as emu:
         yield emu
-    finally:
-        emu.close()
 
 
 def test_a_killed_worker_is_replaced_and_the_run_goes_on(emulator: EmulatorProcess) -> None:
