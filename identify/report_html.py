@@ -135,7 +135,8 @@ def figure_joint(ident: Identification, fit: Measurements, joint: int) -> Figure
     ax1.plot(u[inl], v[inl], ".", color="C0", label="measured")
     if np.any(~inl):
         ax1.plot(u[~inl], v[~inl], "x", color="C3", ms=8, label="rejected")
-    _focus_on_inliers(ax1, v[inl], v[~inl])
+    if not revolute:  # the circle view keeps its equal aspect, which fixed y limits would fight
+        _focus_on_inliers(ax1, v[inl], v[~inl])
     ax1.set_title(f"joint {joint} ({'revolute' if revolute else 'prismatic'}): points and model path")
     ax1.legend(fontsize=7, loc="best")
     x = q[:, j] * (DEG if revolute else MM)
