@@ -12,6 +12,7 @@ are radians for revolute joints and metres for prismatic ones: ``limits`` and ``
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -90,24 +91,31 @@ def robot_names() -> list[str]:
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
 
 
+def config_file(name_or_path: str | Path, directory: Path, kind: str, names: Callable[[], list[str]]) -> Path:
+    """The YAML file of a bundled ``kind`` (e.g. "robot") named ``name_or_path`` (case-insensitive, in
+    ``directory``), or the file at that path: a ``Path``, or a string with a path separator or ending in
+    ``.yaml``/``.yml``. ConfigError (one line) if it does not exist; ``names()`` lists the bundled ones."""
+    text = str(name_or_path)
+    is_path = "/" in text or "\\" in text or text.lower().endswith((".yaml", ".yml"))
+    if isinstance(name_or_path, Path) or is_path:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise ConfigError(path, None, f"an existing {kind} YAML file", "no such file")
+        return path
+    path = directory / f"{text.strip().lower()}.yaml"
+    if not path.is_file():
+        raise ConfigError(repr(text), None, f"a bundled {kind} name ({', '.join(names())}) or a path to a YAML file",
+                          "an unknown name")
+    return path
+
+
 def load_robot(name_or_path: str | Path) -> RobotModel:
     """Load and validate a bundled model by name (case-insensitive) or a YAML file by path.
 
     A ``Path``, or a string containing a path separator or ending in ``.yaml``/``.yml``, is read as a file;
     anything else is a bundled name. Raises :class:`ConfigError` on any problem.
     """
-    text = str(name_or_path)
-    is_path = "/" in text or "\\" in text or text.lower().endswith((".yaml", ".yml"))
-    if isinstance(name_or_path, Path) or is_path:
-        path = Path(name_or_path)
-        if not path.is_file():
-            raise ConfigError(path, None, "an existing robot YAML file", "no such file")
-    else:
-        path = ROBOTS_DIR / f"{text.strip().lower()}.yaml"
-        if not path.is_file():
-            known = ", ".join(robot_names())
-            raise ConfigError(repr(text), None, f"a bundled robot name ({known}) or a path to a YAML file",
-                              "an unknown name")
+    path = config_file(name_or_path, ROBOTS_DIR, "robot", robot_names)
     return _model_from_dict(path, _read_yaml(path))
 
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from config.robots import ConfigError, _got, _read_yaml, check_schema
+from config.robots import ConfigError, _got, _read_yaml, check_schema, config_file
 from drivers.errors import BadReading, MeasurementError, TargetLost
 
 SCHEMA_VERSION = 1
@@ -119,16 +119,7 @@ def profile_names() -> list[str]:
 
 def load_profile(name_or_path: str | Path) -> Profile:
     """A bundled profile by name, or a YAML file by path; ConfigError (one line: file, key, expected)."""
-    text = str(name_or_path)
-    if isinstance(name_or_path, Path) or "/" in text or "\\" in text or text.endswith((".yaml", ".yml")):
-        path = Path(name_or_path)
-        if not path.is_file():
-            raise ConfigError(path, None, "an existing tracker profile YAML file", "no such file")
-    else:
-        path = TRACKERS_DIR / f"{text.strip().lower()}.yaml"
-        if not path.is_file():
-            raise ConfigError(repr(text), None, f"a bundled tracker profile ({', '.join(profile_names())}) or a "
-                              "path to a YAML file", "an unknown name")
+    path = config_file(name_or_path, TRACKERS_DIR, "tracker profile", profile_names)
     return profile_from_dict(_read_yaml(path), path)
 
 
