@@ -159,9 +159,11 @@ class SimulatedRig:
         """The rig of ``mock:MODEL?...`` and ``mock?...`` (options, faults included); clock default VirtualClock."""
         robot = robot if isinstance(robot, RobotSpec) else RobotSpec.parse(robot)
         tracker = tracker if tracker is None or isinstance(tracker, TrackerSpec) else TrackerSpec.parse(tracker)
-        camera = tracker is not None and is_simulated_camera(tracker)
-        if not robot.is_mock or (tracker is not None and not tracker.is_mock and not camera):
+        if not robot.is_mock:
             raise _unpaired(robot, tracker)
+        if tracker is not None:
+            check_pairing(robot, tracker)
+        camera = tracker is not None and is_simulated_camera(tracker)
         r = robot.mock_settings()
         t = tracker.mock_settings() if tracker is not None and not camera else TrackerSpec("mock").mock_settings()
         view = None
