@@ -266,7 +266,7 @@ def run(args: argparse.Namespace) -> int:
         robot_spec, tracker_spec = RobotSpec.parse(args.robot), TrackerSpec.parse(args.tracker)
         session, path = None, None
         plan = None
-    if not args.dry_run and (robot_spec.is_mock or tracker_spec.is_mock or tracker_spec.backend == "aruco"):
+    if not args.dry_run:
         from drivers.sim import check_pairing
 
         check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
