@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import least_squares
 
 from identify.geometry import (
     Circle,
@@ -113,7 +114,7 @@ def axis_from_sweep(
     if circle.radius < 3.0 * circle.rms:
         raise InputError(f"joint {joint}: sweep {sweep} is not a circle (radius {circle.radius * 1e3:.3f} mm); "
                          "is the TP on the joint's axis?")
-    angles = angles_on_circle(points[order], circle)
+    angles = angles_on_circle(points[order], circle, moved[order] if have_q else None)
     span = float(np.ptp(angles))
     sagitta = circle.radius * (1.0 - np.cos(min(span, np.pi) / 2.0))
     # the arc's sagitta must stand out of the noise of its mean over the sweep's samples
@@ -267,6 +268,27 @@ def dh_from_axes(
     return DHModel(types, table[:, 0], table[:, 1], table[:, 2], table[:, 3], frames[0], tool)
 
 
+def common_point(axes: list[JointAxis], meas: Measurements) -> Array:
+    """The point closest to every revolute sweep's circle and every prismatic sweep's line (tracker frame, m):
+    the TP at home, which all sweeps of one home pose pass through. Seeded by the measured sample nearest
+    to all of them, refined by least squares."""
+
+    def distances(p: Array) -> Array:
+        out = []
+        for ax in axes:
+            rel = p - ax.point
+            if ax.kind == "R":
+                h = rel @ ax.direction
+                out.append(np.hypot(h, np.linalg.norm(rel - h * ax.direction) - ax.radius))
+            else:
+                out.append(np.linalg.norm(rel - (rel @ ax.direction) * ax.direction))
+        return np.array(out)
+
+    seeds = meas.points[meas.joint > 0]
+    best = min(seeds, key=lambda p: float(np.sum(distances(p) ** 2)))
+    return least_squares(distances, best, method="lm" if len(axes) >= 3 else "trf", xtol=1e-12, ftol=1e-12).x
+
+
 def geometric_step(
     meas: Measurements,
     conventional: Array | None = None,
@@ -298,10 +320,11 @@ def geometric_step(
                 axis = axis_from_sweep(pts, fit.q[rows, j - 1], "R", j, best, home[j - 1], robust_scale=scale)
         axes.append(axis)
     estimates = [ax.tp_home for ax in axes if ax.tp_home is not None]
-    if not estimates:
-        raise InputError("no sweep has joint readings: the home pose of the TP cannot be located")
-    weights = np.array([ax.samples for ax in axes if ax.tp_home is not None], dtype=float)
-    tp_home = np.average(np.array(estimates), axis=0, weights=weights)
+    if estimates:
+        weights = np.array([ax.samples for ax in axes if ax.tp_home is not None], dtype=float)
+        tp_home = np.average(np.array(estimates), axis=0, weights=weights)
+    else:  # positions only (the paper's setting): every sweep passes through the TP at home
+        tp_home = common_point(axes, fit)
     model = dh_from_axes(
         fit.joint_types,
         [ax.point for ax in axes],

@@ -1,0 +1,76 @@
+"""The identified axis lines written as standard DH, with the covariance carried over.
+
+DH is exact for any chain of lines, but near-parallel consecutive axes put their common normal far away
+(``d`` ~ link length / misalignment). Exact DH is used unless it would move such a ``d`` more than
+``max_offset`` from its conventional value; those links keep the parallel-axis convention, and the caller
+measures what that costs. The covariance of the DH values (full vector of :mod:`identify.refine`) is the
+lines' covariance mapped through the conversion's Jacobian (forward differences); values held by a
+convention have zero rows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from identify.cpa import dh_from_axes
+from identify.kinematics import DHModel
+from identify.poe import AxisLines, LineProblem
+
+Array = NDArray[np.float64]
+
+EXACT_TOL = 1e-12  # rad: below this, axes are parallel to float precision and only a convention places them
+STEP = 1e-7  # rad / m: forward-difference step on the line parameters
+
+
+@dataclass(frozen=True)
+class DHOutput:
+    """The DH model, the links kept at the parallel-axis convention (1-based) with the ``d`` shift exact DH
+    would need (m), and the full-vector Jacobian of the conversion (9 + 4n, p)."""
+
+    model: DHModel
+    capped: dict[int, float]
+    jacobian: Array
+
+
+def _convert(lines: AxisLines, conventional: Array, reference: DHModel | None, capped: Collection[int]) -> DHModel:
+    return dh_from_axes(lines.joint_types, list(lines.points), list(lines.directions), lines.home, lines.tp_home,
+                        conventional, EXACT_TOL, reference, capped)
+
+
+def _vector(model: DHModel, base_rotation: Array) -> Array:
+    increment = Rotation.from_matrix(model.base[:3, :3] @ base_rotation.T).as_rotvec()
+    return np.concatenate([increment, model.base[:3, 3], model.tool, model.dh_table().ravel()])
+
+
+def dh_output(lines: AxisLines, conventional: Array, reference: DHModel | None, parallel_tol: float,
+              max_offset: float) -> DHOutput:
+    """Convert ``lines`` to DH (conventions from ``conventional`` (n, 4) and the x-axis signs of
+    ``reference``), capping near-parallel links (within ``parallel_tol`` rad) at ``max_offset`` m."""
+    exact = _convert(lines, conventional, reference, ())
+    capped: dict[int, float] = {}
+    for i in range(1, exact.n_joints):
+        shift = abs(exact.d[i] - conventional[i, 1])
+        near_parallel = abs(np.sin(exact.alpha[i - 1])) < np.sin(parallel_tol)
+        if near_parallel and (not np.isfinite(shift) or shift > max_offset):
+            capped[i] = float(shift)
+    model = _convert(lines, conventional, reference, capped) if capped else exact
+    problem = LineProblem(lines, np.zeros((0, len(lines.home))), np.zeros((0, 3)), np.zeros(0))
+    centre = _vector(model, model.base[:3, :3])
+    jac = np.zeros((len(centre), problem.size))
+    for k in range(problem.size):
+        x = np.zeros(problem.size)
+        x[k] = STEP
+        moved, _ = problem.lines(x)
+        diff = _vector(_convert(moved, conventional, reference, capped), model.base[:3, :3]) - centre
+        thetas = slice(9, None, 4)
+        diff[thetas] = np.angle(np.exp(1j * diff[thetas]))
+        alphas = slice(12, None, 4)
+        diff[alphas] = np.angle(np.exp(1j * diff[alphas]))
+        jac[:, k] = diff / STEP
+    jac[np.abs(jac) < 1e-7] = 0.0  # conventions: values that do not move with the lines at all
+    return DHOutput(model, capped, jac)
