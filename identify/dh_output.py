@@ -47,18 +47,40 @@ def _vector(model: DHModel, base_rotation: Array) -> Array:
     return np.concatenate([increment, model.base[:3, 3], model.tool, model.dh_table().ravel()])
 
 
-def dh_output(lines: AxisLines, conventional: Array, reference: DHModel | None, parallel_tol: float,
-              max_offset: float) -> DHOutput:
-    """Convert ``lines`` to DH (conventions from ``conventional`` (n, 4) and the x-axis signs of
-    ``reference``), capping near-parallel links (within ``parallel_tol`` rad) at ``max_offset`` m."""
+PARALLEL_SIGMAS = 3.0  # axes whose angle is within this many standard uncertainties of 0 may be parallel
+
+
+def _axis_angle(lines: AxisLines, i: int) -> float:
+    """Angle (rad) between the axes of joints i and i+1 (0-based), as lines (sign-free)."""
+    return float(np.arccos(np.clip(abs(lines.directions[i] @ lines.directions[i + 1]), 0.0, 1.0)))
+
+
+def near_parallel(lines: AxisLines, covariance: Array, conventional: Array, reference: DHModel | None,
+                  parallel_tol: float, max_offset: float) -> tuple[dict[int, float], dict[int, float]]:
+    """Links (1-based) whose axes the data cannot tell from parallel: angle within ``parallel_tol`` rad or
+    within PARALLEL_SIGMAS standard uncertainties (from the lines' ``covariance``), each with the shift of
+    ``d`` from its conventional value that exact DH needs (m); and those of them beyond ``max_offset``."""
     exact = _convert(lines, conventional, reference, ())
-    capped: dict[int, float] = {}
+    problem = LineProblem(lines, np.zeros((0, len(lines.home))), np.zeros((0, 3)), np.zeros(0))
+    near: dict[int, float] = {}
     for i in range(1, exact.n_joints):
-        shift = abs(exact.d[i] - conventional[i, 1])
-        near_parallel = abs(np.sin(exact.alpha[i - 1])) < np.sin(parallel_tol)
-        if near_parallel and (not np.isfinite(shift) or shift > max_offset):
-            capped[i] = float(shift)
-    model = _convert(lines, conventional, reference, capped) if capped else exact
+        angle = _axis_angle(lines, i - 1)
+        grad = np.zeros(problem.size)
+        for k in range(problem.size):
+            x = np.zeros(problem.size)
+            x[k] = STEP
+            grad[k] = (_axis_angle(problem.lines(x)[0], i - 1) - angle) / STEP
+        sigma = float(np.sqrt(max(grad @ covariance @ grad, 0.0)))
+        if angle < max(parallel_tol, PARALLEL_SIGMAS * sigma):
+            shift = abs(exact.d[i] - conventional[i, 1])
+            near[i] = float(shift) if np.isfinite(shift) else float("inf")
+    return near, {i: v for i, v in near.items() if v > max_offset}
+
+
+def dh_output(lines: AxisLines, conventional: Array, reference: DHModel | None, capped: dict[int, float]) -> DHOutput:
+    """Convert ``lines`` to DH (conventions from ``conventional`` (n, 4), x-axis signs from ``reference``),
+    the ``capped`` links at the parallel-axis convention."""
+    model = _convert(lines, conventional, reference, capped)
     problem = LineProblem(lines, np.zeros((0, len(lines.home))), np.zeros((0, 3)), np.zeros(0))
     centre = _vector(model, model.base[:3, :3])
     jac = np.zeros((len(centre), problem.size))
@@ -67,10 +89,8 @@ def dh_output(lines: AxisLines, conventional: Array, reference: DHModel | None, 
         x[k] = STEP
         moved, _ = problem.lines(x)
         diff = _vector(_convert(moved, conventional, reference, capped), model.base[:3, :3]) - centre
-        thetas = slice(9, None, 4)
-        diff[thetas] = np.angle(np.exp(1j * diff[thetas]))
-        alphas = slice(12, None, 4)
-        diff[alphas] = np.angle(np.exp(1j * diff[alphas]))
+        for angles in (slice(9, None, 4), slice(12, None, 4)):  # theta, alpha
+            diff[angles] = np.angle(np.exp(1j * diff[angles]))
         jac[:, k] = diff / STEP
     jac[np.abs(jac) < 1e-7] = 0.0  # conventions: values that do not move with the lines at all
-    return DHOutput(model, capped, jac)
+    return DHOutput(model, dict(capped), jac)

@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from identify.kinematics import DHModel, frames_from_joints
@@ -60,7 +61,17 @@ def place_nominal(nominal: DHModel, q: Array, points: Array) -> DHModel:
             tool = new_tool
             break
         tool = new_tool
-    return replace(nominal, base=base.copy(), tool=tool)
+
+    def residuals(x: Array) -> Array:  # the alternation can stall on short arcs: finish jointly
+        rot = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
+        local = np.einsum("kij,j->ki", frames[:, :3, :3], x[6:]) + frames[:, :3, 3]
+        return (local @ rot.T + x[3:6] - points).ravel()
+
+    x = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tool]), method="lm", xtol=1e-12,
+                      ftol=1e-12).x
+    base[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
+    base[:3, 3] = x[3:6]
+    return replace(nominal, base=base.copy(), tool=x[6:].copy())
 
 
 def nominal_start(nominal: DHModel, q: Array, points: Array, unknown: NDArray[np.int64], home: Array) -> AxisLines:

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from identify import verdict as checks
 from identify.adequacy import Adequacy, assess
 from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, geometric_step, home_from_measurements
-from identify.dh_output import dh_output
+from identify.dh_output import DHOutput, dh_output, near_parallel
 from identify.estimate import LinesFit, along_arc, fit, nominal_start, place_nominal
 from identify.kinematics import DHModel, points_from_joints
 from identify.measurements import InputError, Measurements, prepared_joints, validate
@@ -162,8 +162,8 @@ def split_holdout(meas: Measurements, fraction: float, seed: int = 0) -> Measure
 def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
     joint = int("".join(ch for ch in name if ch.isdigit()) or 0)
     if joint in capped and name.startswith("d"):
-        return (f"axes {joint} and {joint + 1} are nearly parallel: exact DH would move d{joint + 1} by "
-                f"{capped[joint]:.3g} m, beyond --max-offset; the common normal is placed by convention")
+        return (f"axes {joint} and {joint + 1} are parallel within tolerance or their uncertainty: the common "
+                f"normal is placed by convention (exact DH would move d{joint} by {capped[joint]:.3g} m)")
     if joint == 1 and name[:-1] in ("theta", "d"):
         return "redundant with the base pose (frame 0 is placed by convention)"
     if joint == n:
@@ -241,17 +241,32 @@ def identify(
     inv = (vt.T / np.maximum(s, 1e-300) ** 2) @ vt / np.outer(scale, scale)
     variance = max(adequacy.residual, declared or 0.0) ** 2 / unit**2 * adequacy.inflation
     lines_cov = inv * variance * unit**2 if fitm.sigma is None else inv * variance
-    out = dh_output(lines, conventional, nominal, parallel_tol, max_offset)
-    model = out.model
-    cov_full = out.jacobian @ lines_cov @ out.jacobian.T
-    free = np.any(out.jacobian != 0.0, axis=1)
-    std = np.sqrt(np.clip(np.diag(cov_full), 0.0, None))
+    near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
+    fitted = (best.q[inl], fitm.points[inl], None if fitm.sigma is None else fitm.sigma[inl], weights[inl], res_w,
+              variance)
+    out, dh_fit, gap = _written_dh(lines, conventional, nominal, near, fitted, adequacy.noise)
+    if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
+        # the data resolve the misalignment: exact DH wherever it stays within --max-offset
+        out, dh_fit, gap = _written_dh(lines, conventional, nominal, beyond, fitted, adequacy.noise)
+    if dh_fit is None:  # exact DH: the lines' covariance carried over
+        model = out.model
+        free = np.any(out.jacobian != 0.0, axis=1)
+        cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
+    else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
+        model, free = dh_fit.model, dh_fit.free
+        own = 1.0 if fitm.sigma is not None else max(dh_fit.cost / max(3 * int(inl.sum()) - int(free.sum()), 1),
+                                                      1e-300)
+        cov_free = dh_fit.covariance / own * variance
+    std = np.zeros(len(free))
+    std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     residuals = best.residuals
     notes = [f"fitted from the {best.start}" + (f" (of {len(fits)} starts)" if len(fits) > 1 else "")]
+    if fitm.sigma is not None:
+        notes.append(f"reduced chi-square {adequacy.statistic:.3g} (1 when the given sigma is right)")
     if adequacy.inflation > 1.0:
         notes.append(f"residuals correlated along the arcs (lag-1 {adequacy.rho:.2f}): covariance inflated "
                      f"{adequacy.inflation:.3g}x")
-    ref = Refinement(model, free, cov_full[np.ix_(free, free)], adequacy.noise, inl, residuals, condition,
+    ref = Refinement(model, free, cov_free, adequacy.noise, inl, residuals, condition,
                      float(np.sum(res_w**2)), best.q, fitm.points, notes)
     names = parameter_names(n)
     vector = np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
@@ -267,15 +282,7 @@ def identify(
     ident_rms = float(np.sqrt(np.mean(np.sum(residuals[inl] ** 2, axis=1))))
     check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
     expected = _expected_accuracy(lines, lines_cov, best.q[inl], adequacy)
-    gap_rms, gap_statistic = _dh_gap(model, lines, best.q[inl], fitm.points[inl], weights[inl], res_w, variance)
-    if out.capped and gap_statistic > checks.chi2.isf(checks.HOLDOUT_ALARM, len(out.capped)):
-        # the convention costs something measurable: the best DH under it, then what is left
-        polished = refine(model, best.q[inl], fitm.points[inl], None if fitm.sigma is None else fitm.sigma[inl],
-                          conventional, sorted(out.capped), adequacy.noise, False, max_offset).model
-        polished_gap = _dh_gap(polished, lines, best.q[inl], fitm.points[inl], weights[inl], res_w, variance)
-        if polished_gap[1] < gap_statistic:
-            model, (gap_rms, gap_statistic) = polished, polished_gap
-            notes.append("DH table refitted under the parallel-axis convention")
+    gap_rms, gap_statistic = gap
     dh_check = checks.dh_table(gap_rms, gap_statistic, expected, [f"d{i + 1}" for i in out.capped])
     if dh_check.status == "pass":
         def predict(qq: Array) -> Array:
@@ -322,6 +329,20 @@ def identify(
         start=best.start,
         warnings=warnings,
     )
+
+
+def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
+                fitted: tuple[Array, Array, Array | None, Array, Array, float], noise: float
+                ) -> tuple[DHOutput, Refinement | None, tuple[float, float]]:
+    """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH
+    table refitted under that convention (so the cost it adds is a likelihood ratio, chi-square when the
+    axes are parallel); and that cost with the RMS gap to the lines (see :func:`_dh_gap`)."""
+    q, points, sigma, weights, res_w, variance = fitted
+    out = dh_output(lines, conventional, nominal, capped)
+    if not capped:
+        return out, None, _dh_gap(out.model, lines, q, points, weights, res_w, variance)
+    dh_fit = refine(out.model, q, points, sigma, conventional, sorted(capped), noise, False, 0.0)
+    return out, dh_fit, _dh_gap(dh_fit.model, lines, q, points, weights, res_w, variance)
 
 
 def _dh_gap(model: DHModel, lines: AxisLines, q: Array, points: Array, weights: Array, res_w: Array,

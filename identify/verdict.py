@@ -121,13 +121,18 @@ def nominal(name: str, rms: float) -> Check:
                  f"nominal {name} placed on the data misses them by {mm(rms)} RMS: {text}")
 
 
+def dh_limit(links: int) -> float:
+    """Chi-square limit of the cost a parallel-axis convention may add before it counts as measurable."""
+    return float(chi2.isf(HOLDOUT_ALARM, max(links, 1)))
+
+
 def dh_table(rms_gap: float, statistic: float, expected: float, capped: list[str]) -> Check:
     """Whether the written DH table reproduces the identified model (parallel-axis offset cap).
 
     ``statistic``: the cost the convention adds, in noise variances; chi-square with one degree of freedom
     per capped link when the axes' misalignment is only noise. ``rms_gap`` (m) the RMS difference of the
     two models' predictions at the fitted poses, ``expected`` (m) the accuracy expected there."""
-    limit = float(chi2.isf(HOLDOUT_ALARM, max(len(capped), 1)))
+    limit = dh_limit(len(capped))
     if not capped or statistic <= limit:
         text = "" if not capped else f" (convention for {', '.join(capped)} costs nothing measurable)"
         return Check("dh_table", "pass", statistic, limit,
