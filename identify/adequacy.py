@@ -10,9 +10,10 @@ Three estimates of the per-axis noise (weighted units: metres when no sigma is g
 
 Model error is called when the residual noise exceeds the declared one (chi-square test), or, without a
 declaration, its own difference estimate (F test), at a false-alarm rate of ``ALARM``. Its size is
-``sqrt(residual² - noise²)`` per axis. Systematic residuals are correlated along each arc, so the
-parameters' covariance is inflated by the AR(1) variance factor ``(1 + rho) / (1 - rho)`` of the lag-1
-correlation ``rho`` of the residuals along the sweeps.
+``sqrt(residual² - noise²)`` per axis. Systematic residuals are correlated along each arc: a sweep of n
+samples is worth only ``n_eff = n (1 - rho) / (1 + rho)`` independent ones (AR(1), ``rho`` the lag-1
+correlation of the residuals along the sweeps), and never fewer than one. The parameters' covariance is
+inflated by ``n / n_eff``: at most the samples per sweep, when each sweep's error is one shared offset.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from scipy.stats import f as f_dist
 Array = NDArray[np.float64]
 
 ALARM = 1e-3  # false-alarm rate of the model-error tests
-MAX_RHO = 0.9  # cap of the lag-1 correlation used for inflation (factor 19)
+MAX_RHO = 0.999  # lag-1 correlation used for inflation stays below 1
 
 
 @dataclass(frozen=True)
@@ -102,6 +103,7 @@ def assess(res_w: Array, jac_red: Array, unknown: NDArray[np.int64], runs: list[
     detected = statistic > limit
     model_error = float(np.sqrt(max(residual**2 - reference**2, 0.0))) if detected else 0.0
     rho_used = min(max(rho, 0.0), MAX_RHO) if detected else 0.0
-    inflation = (1.0 + rho_used) / (1.0 - rho_used)
+    per_sweep = float(np.mean([len(r) for r in runs])) if runs else 1.0
+    inflation = min((1.0 + rho_used) / (1.0 - rho_used), max(per_sweep, 1.0))
     return Adequacy(residual, difference, declared, model_error, bool(detected), rho, inflation, statistic, limit,
                     test)

@@ -61,8 +61,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--parallel-tol", type=float, default=DEFAULT_PARALLEL_TOL, metavar="RAD",
                         help=f"axes closer than this are treated as parallel ({DEFAULT_PARALLEL_TOL} rad)")
     parser.add_argument("--max-offset", type=float, default=DEFAULT_MAX_OFFSET, metavar="M",
-                        help="exact DH for resolved near-parallel axes only if no d moves more than this "
-                        f"({DEFAULT_MAX_OFFSET} m)")
+                        help="where the data resolve a near-parallel pair's misalignment, keep the parallel-axis "
+                        "convention instead of exact DH if exact DH would move d more than M metres (default: "
+                        "no cap; the verdict's dh_table check says what a cap costs)")
     parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
     parser.add_argument("--noise", type=float, metavar="M",
                         help="the tracker's noise, m per axis (1 sigma), to judge the fit by (a sigma column wins)")

@@ -7,9 +7,10 @@ shared by neighbouring samples. Only the first are outliers. So a sample is reje
 1. its studentised residual (divided by sqrt(1 - leverage), so thin sweeps' well-fitted samples are not
    judged by the scale of the others) fails the Bonferroni-corrected Hotelling test of
    :func:`identify.refine.inlier_mask`, and
-2. within its sweep, it also differs from the mean of its nearest accepted neighbours (ordered by the
-   moved joint's value) by more than the noise of successive differences allows, at the same per-sample
-   false-alarm rate. Free poses have no neighbours; for them the first test decides.
+2. within its sweep (ordered by the moved joint's value), it also departs from the straight line through
+   its two neighbours by more than the noise of such second differences allows, at the same per-sample
+   false-alarm rate: a smooth systematic residual follows its neighbours, a gross error does not. Free
+   poses and sweeps of fewer than four samples have no such neighbours; for them the first test decides.
 """
 
 from __future__ import annotations
@@ -44,14 +45,18 @@ def sweep_neighbours(group: NDArray[np.int64], key: Array) -> list[NDArray[np.in
     return out
 
 
-def difference_scale(res: Array, runs: list[NDArray[np.int64]]) -> Array:
-    """Robust per-axis noise (3,) from successive differences along each sweep (weighted units): smooth
-    systematic residuals cancel in them, gross errors do not move a median."""
-    diffs = [res[r[1:]] - res[r[:-1]] for r in runs if len(r) > 1]
-    if not diffs:
-        return np.full(3, np.nan)
-    d = np.vstack(diffs)
-    return 1.4826 * np.median(np.abs(d), axis=0) / np.sqrt(2.0)
+def second_differences(res: Array, run: NDArray[np.int64]) -> tuple[Array, Array]:
+    """Each sample's residual minus the straight line through its neighbours along the arc (m, 3): the
+    mean of both neighbours inside the run, the extrapolation of the next two at its ends; and the variance
+    of that difference in units of the noise variance (1.5 inside, 6 at the ends)."""
+    r = res[run]
+    e = np.empty_like(r)
+    spread = np.full(len(r), 1.5)
+    e[1:-1] = r[1:-1] - 0.5 * (r[:-2] + r[2:])
+    e[0] = r[0] - (2 * r[1] - r[2])
+    e[-1] = r[-1] - (2 * r[-2] - r[-3])
+    spread[[0, -1]] = 6.0
+    return e, spread
 
 
 def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Array) -> NDArray[np.bool_]:
@@ -60,20 +65,15 @@ def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Arr
     keep = inlier_mask(res / np.sqrt(1.0 - lev)[:, None], 0)
     if np.all(keep):
         return keep
-    runs = sweep_neighbours(group, key)
-    scale = np.maximum(difference_scale(res, runs), NOISE_FLOOR)
+    runs = [r for r in sweep_neighbours(group, key) if len(r) >= 4]
+    if not runs:
+        return keep
+    parts = [second_differences(res, r) for r in runs]
+    inner = np.vstack([e[1:-1] / np.sqrt(s[1:-1])[:, None] for e, s in parts])
+    scale = np.maximum(1.4826 * np.median(np.abs(inner), axis=0), NOISE_FLOOR)  # noise per axis, robust
     limit = chi2.isf(OUTLIER_PROBABILITY / len(res), 3)
-    for run in runs:
-        bad = ~keep[run]
-        if not np.any(bad) or np.all(bad):
-            continue
-        good = np.flatnonzero(~bad)
-        for pos in np.flatnonzero(bad):
-            left, right = good[good < pos], good[good > pos]
-            nbrs = [run[v[i]] for v, i in ((left, -1), (right, 0)) if len(v)]
-            expected = np.mean(res[nbrs], axis=0)
-            spread = 1.0 + 1.0 / len(nbrs)  # variance of the difference, in units of the noise
-            e = (res[run[pos]] - expected) / scale
-            if float(e @ e) / spread <= limit:
-                keep[run[pos]] = True  # it moves with its neighbours: systematic, not gross
+    for run, (e, spread) in zip(runs, parts, strict=True):
+        d2 = np.sum((e / scale) ** 2, axis=1) / spread
+        smooth = d2 <= limit
+        keep[run[smooth & ~keep[run]]] = True  # it moves with its neighbours: systematic, not gross
     return keep

@@ -20,7 +20,7 @@ from identify.adequacy import Adequacy, assess
 from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, geometric_step, home_from_measurements
 from identify.dh_output import DHOutput, dh_output, near_parallel
 from identify.estimate import LinesFit, along_arc, fit, nominal_start, place_nominal
-from identify.kinematics import DHModel, points_from_joints
+from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.measurements import InputError, Measurements, prepared_joints, validate
 from identify.outliers import sweep_neighbours
 from identify.poe import AxisLines, LineProblem, points_from_lines
@@ -145,6 +145,28 @@ def dh_prediction_covariances(model: DHModel, ref: Refinement, q: Array) -> Arra
     return g @ ref.covariance @ np.swapaxes(g, 1, 2)
 
 
+def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
+                  unknown: NDArray[np.int64]) -> Array:
+    """Unit-variance covariance of the ``free`` DH values (weighted units), rows of unread joints (``unknown``,
+    0-based, -1 for none) projected on the complement of their nuisance joint value."""
+    p, jac = full_jacobian(model, q)
+    jac = jac[:, :, free] * weights[:, None, None]
+    rows = np.flatnonzero(unknown >= 0)
+    if len(rows):
+        frames = frames_from_joints(model, q[rows])
+        j = unknown[rows]
+        axis = frames[np.arange(len(rows)), j, :3, 2]
+        origin = frames[np.arange(len(rows)), j, :3, 3]
+        revolute = model.revolute[j]
+        g = np.where(revolute[:, None], np.cross(axis, p[rows] - origin), axis) * weights[rows, None]
+        coef = np.einsum("ki,kip->kp", g, jac[rows]) / np.einsum("ki,ki->k", g, g)[:, None]
+        jac[rows] -= g[:, :, None] * coef[:, None, :]
+    flat = jac.reshape(-1, jac.shape[2])
+    scale = np.maximum(np.linalg.norm(flat, axis=0), 1e-300)
+    _, s, vt = np.linalg.svd(flat / scale, full_matrices=False)
+    return (vt.T / np.maximum(s, 1e-300) ** 2) @ vt / np.outer(scale, scale)
+
+
 def split_holdout(meas: Measurements, fraction: float, seed: int = 0) -> Measurements:
     """Mark a seeded ``fraction`` of the free poses as held out (``check``), unless a role column did."""
     if meas.has_role or fraction <= 0:
@@ -254,9 +276,7 @@ def identify(
         cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
         model, free = dh_fit.model, dh_fit.free
-        own = 1.0 if fitm.sigma is not None else max(dh_fit.cost / max(3 * int(inl.sum()) - int(free.sum()), 1),
-                                                      1e-300)
-        cov_free = dh_fit.covariance / own * variance
+        cov_free = dh_covariance(model, free, best.q[inl], weights[inl], unknown[inl]) * variance
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     residuals = best.residuals

@@ -33,7 +33,7 @@ NOISE_FLOOR = 1e-8  # m: below this, residuals are rounding, not noise (no outli
 RANK_TOL = 1e-7
 RESIDUAL_FLOOR = 1e-12  # m: rounding level of residuals, floor of the noise in the significance test
 RELEASE_PROBABILITY = 1e-3  # false-alarm rate of the test that releases the parallel-axis convention
-DEFAULT_MAX_OFFSET = 1.0  # m  # relative: a parameter adding less than this to the span of the others is redundant
+DEFAULT_MAX_OFFSET = float("inf")  # m: exact DH wherever the data resolve a near-parallel pair's misalignment
 
 
 def parameter_names(n: int) -> list[str]:
