@@ -6,7 +6,8 @@ shared by neighbouring samples. Only the first are outliers. So a sample is reje
 
 1. its studentised residual (divided by sqrt(1 - leverage), so thin sweeps' well-fitted samples are not
    judged by the scale of the others) fails the Bonferroni-corrected Hotelling test of
-   :func:`identify.refine.inlier_mask`, and
+   :func:`identify.refine.inlier_mask` (sweep rows and free poses on scales of their own: model error
+   grows away from home, where the free poses are), and
 2. within its sweep (ordered by the moved joint's value), it also departs from the straight line through
    its two neighbours by more than the noise of such second differences allows, at the same per-sample
    false-alarm rate: a smooth systematic residual follows its neighbours, a gross error does not. Free
@@ -36,6 +37,18 @@ def leverages(jac_blocks: Array, unknown: NDArray[np.int64]) -> Array:
     return (np.einsum("kir,kir->k", u, u) + (unknown >= 0)) / 3.0
 
 
+MIN_GROUP = 10  # samples a group needs for a scale of its own
+
+
+def _scale_groups(group: NDArray[np.int64]) -> list[NDArray[np.int64]]:
+    """Sweep rows and free poses, each judged on its own scale when both are large enough: errors a DH
+    table cannot hold grow away from home, where the free poses are."""
+    sweeps, free = np.flatnonzero(group > 0), np.flatnonzero(group == 0)
+    if len(sweeps) >= MIN_GROUP and len(free) >= MIN_GROUP:
+        return [sweeps, free]
+    return [np.arange(len(group))]
+
+
 def sweep_neighbours(group: NDArray[np.int64], key: Array) -> list[NDArray[np.int64]]:
     """Rows of each sweep (``group`` >= 1), ordered by ``key`` (the moved joint's value)."""
     out = []
@@ -62,7 +75,10 @@ def second_differences(res: Array, run: NDArray[np.int64]) -> tuple[Array, Array
 def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Array) -> NDArray[np.bool_]:
     """Mask of the samples kept: see the module docstring. ``res`` (m, 3) weighted residuals."""
     lev = np.clip(leverage, 0.0, 0.99)
-    keep = inlier_mask(res / np.sqrt(1.0 - lev)[:, None], 0)
+    student = res / np.sqrt(1.0 - lev)[:, None]
+    keep = np.ones(len(res), dtype=bool)
+    for rows in _scale_groups(group):
+        keep[rows] = inlier_mask(student[rows], 0, OUTLIER_PROBABILITY * len(rows) / len(res))
     if np.all(keep):
         return keep
     runs = [r for r in sweep_neighbours(group, key) if len(r) >= 4]
