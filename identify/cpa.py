@@ -22,6 +22,7 @@ from identify.geometry import (
     circle_from_points,
     circle_residuals,
     common_normal,
+    cross,
     line_from_points,
     perpendicular_basis,
     rotation_about_axis,
@@ -214,7 +215,7 @@ def dh_from_axes(
         cn = common_normal(points[i - 1], dirs[i - 1], points[i], dirs[i], tol, anchor)
         gap = cn.foot_2 - cn.foot_1
         gap -= (gap @ dirs[i - 1]) * dirs[i - 1]
-        normal = np.cross(dirs[i - 1], dirs[i])
+        normal = cross(dirs[i - 1], dirs[i])
         if not cn.parallel:  # skew or intersecting: x is the common normal's direction, exactly
             flip = np.linalg.norm(gap) > 1e-9 and gap @ normal < 0  # sign from a gap that is really there
             x = -unit(normal) if flip else unit(normal)
@@ -224,7 +225,7 @@ def dh_from_axes(
             x = xs[i - 1] if i > 1 else perpendicular_basis(dirs[0])[0]
             x = unit(x - (x @ dirs[i]) * dirs[i])
         a = float((cn.foot_2 - cn.foot_1) @ x)
-        alpha = float(np.arctan2(np.cross(dirs[i - 1], dirs[i]) @ x, dirs[i - 1] @ dirs[i]))
+        alpha = float(np.arctan2(cross(dirs[i - 1], dirs[i]) @ x, dirs[i - 1] @ dirs[i]))
         x_signed = _oriented_normal(x, reference, i - 1, a, alpha)
         if i == 1:
             feet0 = cn.foot_1
@@ -233,7 +234,7 @@ def dh_from_axes(
     q1 = home[0]
     if n == 1:
         feet0 = points[0] + ((tp_home - points[0]) @ dirs[0]) * dirs[0]
-        x1 = unit(np.cross(dirs[0], perpendicular_basis(dirs[0])[1]))
+        x1 = unit(cross(dirs[0], perpendicular_basis(dirs[0])[1]))
     else:
         x1 = xs[1]
     turn0 = conventional[0, 0] + (q1 if rev[0] else 0.0)
@@ -243,7 +244,7 @@ def dh_from_axes(
     frames = np.zeros((n + 1, 4, 4))
     for i in range(n):
         frames[i, :3, 0] = xs[i]
-        frames[i, :3, 1] = np.cross(dirs[i], xs[i])
+        frames[i, :3, 1] = cross(dirs[i], xs[i])
         frames[i, :3, 2] = dirs[i]
         frames[i, :3, 3] = origins[i]
         frames[i, 3, 3] = 1.0
@@ -256,13 +257,13 @@ def dh_from_axes(
         prev, cur = frames[i - 1], frames[i]
         xp, zp, op = prev[:3, 0], prev[:3, 2], prev[:3, 3]
         xc, zc, oc = cur[:3, 0], cur[:3, 2], cur[:3, 3]
-        theta = np.arctan2(np.cross(xp, xc) @ zp, xp @ xc)
+        theta = np.arctan2(cross(xp, xc) @ zp, xp @ xc)
         d = (oc - op) @ zp
         if rev[i - 1]:
             theta -= home[i - 1]
         else:
             d -= home[i - 1]
-        table[i - 1] = [np.angle(np.exp(1j * theta)), d, (oc - op) @ xc, np.arctan2(np.cross(zp, zc) @ xc, zp @ zc)]
+        table[i - 1] = [np.angle(np.exp(1j * theta)), d, (oc - op) @ xc, np.arctan2(cross(zp, zc) @ xc, zp @ zc)]
     table[n - 1] = conventional[n - 1]
     tool = frames[n, :3, :3].T @ (tp_home - frames[n, :3, 3])
     return DHModel(types, table[:, 0], table[:, 1], table[:, 2], table[:, 3], frames[0], tool)

@@ -62,11 +62,12 @@ def near_parallel(lines: AxisLines, covariance: Array, conventional: Array, refe
     ``d`` from its conventional value that exact DH needs (m); and those of them beyond ``max_offset``."""
     exact = _convert(lines, conventional, reference, ())
     problem = LineProblem(lines, np.zeros((0, len(lines.home))), np.zeros((0, 3)), np.zeros(0))
+    starts = np.cumsum([0] + [4 if t == "R" else 2 for t in lines.joint_types])  # first parameter of each joint
     near: dict[int, float] = {}
     for i in range(1, exact.n_joints):
         angle = _axis_angle(lines, i - 1)
         grad = np.zeros(problem.size)
-        for k in range(problem.size):
+        for k in (*range(starts[i - 1], starts[i - 1] + 2), *range(starts[i], starts[i] + 2)):  # their tilts
             x = np.zeros(problem.size)
             x[k] = STEP
             grad[k] = (_axis_angle(problem.lines(x)[0], i - 1) - angle) / STEP
@@ -77,10 +78,13 @@ def near_parallel(lines: AxisLines, covariance: Array, conventional: Array, refe
     return near, {i: v for i, v in near.items() if v > max_offset}
 
 
-def dh_output(lines: AxisLines, conventional: Array, reference: DHModel | None, capped: dict[int, float]) -> DHOutput:
+def dh_output(lines: AxisLines, conventional: Array, reference: DHModel | None, capped: dict[int, float],
+              with_jacobian: bool = True) -> DHOutput:
     """Convert ``lines`` to DH (conventions from ``conventional`` (n, 4), x-axis signs from ``reference``),
-    the ``capped`` links at the parallel-axis convention."""
+    the ``capped`` links at the parallel-axis convention; the Jacobian (zeros unless ``with_jacobian``)."""
     model = _convert(lines, conventional, reference, capped)
+    if not with_jacobian:
+        return DHOutput(model, dict(capped), np.zeros((9 + 4 * model.n_joints, lines.n_parameters)))
     problem = LineProblem(lines, np.zeros((0, len(lines.home))), np.zeros((0, 3)), np.zeros(0))
     centre = _vector(model, model.base[:3, :3])
     jac = np.zeros((len(centre), problem.size))

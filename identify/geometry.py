@@ -263,8 +263,7 @@ def common_normal(
     infinitely many normals.
     """
     p1, u1, p2, u2 = (np.asarray(v, dtype=float) for v in (p1, u1, p2, u2))
-    cross = np.cross(u1, u2)
-    sin_angle = np.linalg.norm(cross)
+    sin_angle = np.linalg.norm(cross(u1, u2))
     if sin_angle <= np.sin(parallel_tol):
         foot_1 = p1 if anchor is None else np.asarray(anchor, dtype=float)
         foot_2 = p2 + ((foot_1 - p2) @ u2) * u2

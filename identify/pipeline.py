@@ -358,7 +358,7 @@ def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, 
     table refitted under that convention (so the cost it adds is a likelihood ratio, chi-square when the
     axes are parallel); and that cost with the RMS gap to the lines (see :func:`_dh_gap`)."""
     q, points, sigma, weights, res_w, variance = fitted
-    out = dh_output(lines, conventional, nominal, capped)
+    out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
     if not capped:
         return out, None, _dh_gap(out.model, lines, q, points, weights, res_w, variance)
     dh_fit = refine(out.model, q, points, sigma, conventional, sorted(capped), noise, False, 0.0)

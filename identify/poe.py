@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.geometry import perpendicular_basis, rotation_about_axis, skew, unit
+from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, unit
 from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 
 Array = NDArray[np.float64]
@@ -110,7 +110,7 @@ def solve_unknown(lines: AxisLines, q: Array, points: Array, unknown: NDArray[np
             v2 = target - lines.points[j]
             v1 -= np.outer(v1 @ u, u)
             v2 -= np.outer(v2 @ u, u)
-            delta = np.arctan2(np.cross(v1, v2) @ u, np.einsum("ki,ki->k", v1, v2))
+            delta = np.arctan2(cross(v1, v2) @ u, np.einsum("ki,ki->k", v1, v2))
         else:
             delta = (target - tip) @ u
         q[rows, j] = lines.home[j] + delta
@@ -176,7 +176,7 @@ class LineProblem:
             if data and self.has_unknown:
                 rows = self.unknown == i
                 if t == "R":
-                    nuisance[rows] = np.einsum("kij,kj->ki", left[rows], np.cross(lines.directions[i],
+                    nuisance[rows] = np.einsum("kij,kj->ki", left[rows], cross(lines.directions[i],
                                                                                    w[rows] - lines.points[i]))
                 else:
                     nuisance[rows] = left[rows] @ lines.directions[i]
@@ -187,8 +187,8 @@ class LineProblem:
                 shift = left - left @ rot
                 c = lines.points[i]
                 for j in range(2):  # tilting the direction turns the line about its point c
-                    eps_w = np.cross(lines.directions[i], tangents[i][j])
-                    jac[:, :, k + j] = turn @ eps_w - shift @ np.cross(eps_w, c)
+                    eps_w = cross(lines.directions[i], tangents[i][j])
+                    jac[:, :, k + j] = turn @ eps_w - shift @ cross(eps_w, c)
                     jac[:, :, k + 2 + j] = shift @ self.bases[i][j]
                 k += 4
             else:
