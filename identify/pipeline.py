@@ -303,7 +303,7 @@ def identify(
     check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
     expected = _expected_accuracy(lines, lines_cov, best.q[inl], adequacy)
     gap_rms, gap_statistic = gap
-    dh_check = checks.dh_table(gap_rms, gap_statistic, expected, [f"d{i + 1}" for i in out.capped])
+    dh_check = checks.dh_table(gap_rms, gap_statistic, expected, [f"d{i}" for i in out.capped])
     if dh_check.status == "pass":
         def predict(qq: Array) -> Array:
             return points_from_joints(model, qq)
@@ -318,8 +318,7 @@ def identify(
             return prediction_covariances(lines, lines_cov, qq)
     validation = _validate(check_rows, predict, covariances, adequacy) if len(check_rows) else None
     found = [
-        checks.model_fit(ident_rms, adequacy.residual, adequacy.noise, adequacy.model_error, adequacy.detected,
-                         adequacy.test, adequacy.statistic, adequacy.limit, declared is not None),
+        checks.model_fit(ident_rms, adequacy),
         checks.conditioning(condition),
         checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
         dh_check,

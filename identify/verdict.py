@@ -11,6 +11,8 @@ from dataclasses import dataclass
 
 from scipy.stats import chi2
 
+from identify.adequacy import Adequacy
+
 STATUSES = ("pass", "warn", "fail")
 
 GROSS_MISFIT = 0.01  # m RMS 3D: no calibrated arm, tracker or DH-able error leaves residuals this large;
@@ -63,21 +65,26 @@ def mm(value: float) -> str:
     return f"{value * 1e3:.3g} mm"
 
 
-def model_fit(rms_3d: float, residual: float, noise: float, model_error: float, detected: bool, test: str,
-              statistic: float, limit: float, declared: bool) -> Check:
+def model_fit(rms_3d: float, adequacy: Adequacy) -> Check:
     """Residuals against the noise: gross misfit fails, detected model error warns (uncertainties inflated)."""
+    a = adequacy
     if rms_3d > GROSS_MISFIT:
         return Check("model_fit", "fail", rms_3d, GROSS_MISFIT,
                      f"residual RMS {mm(rms_3d)} exceeds {mm(GROSS_MISFIT)}: the model does not describe these data "
                      "(joint types, units, robot model or mixed data sets?)")
-    source = "declared" if declared else "estimated"
-    if detected:
-        return Check("model_fit", "warn", model_error, None,
-                     f"model error {mm(model_error)} per axis against tracker noise {mm(noise)} ({source}); residuals "
-                     f"{mm(residual)} per axis ({test}: {statistic:.3g} > {limit:.3g}); uncertainties inflated to "
-                     "cover it")
-    return Check("model_fit", "pass", statistic, limit,
-                 f"residuals {mm(residual)} per axis are explained by the tracker noise {mm(noise)} ({source})")
+    if a.declared is not None:
+        reference = f"the declared tracker noise {mm(a.declared)}"
+    elif a.difference is not None:
+        reference = f"the noise of successive differences along the sweeps, {mm(a.difference)}"
+    else:
+        reference = "no independent noise estimate (no sweeps to difference)"
+    if a.detected:
+        return Check("model_fit", "warn", a.model_error, None,
+                     f"model error {mm(a.model_error)} per axis against tracker noise {mm(a.noise)}: residuals "
+                     f"{mm(a.residual)} per axis vs {reference} ({a.statistic:.3g} > {a.limit:.3g}); uncertainties "
+                     f"inflated {a.inflation:.3g}x in variance to cover it")
+    return Check("model_fit", "pass", a.statistic, a.limit,
+                 f"residuals {mm(a.residual)} per axis, consistent with {reference}")
 
 
 def conditioning(condition: float) -> Check:
