@@ -353,6 +353,17 @@ class Session:
             self._db.execute("INSERT INTO events (t, run_id, kind, message) VALUES (?, ?, ?, ?)",
                              (time.time(), self._run_id, kind, message))
 
+    def set_connection(self, connection: dict[str, Any], message: str) -> None:
+        """Record new connection details (robot and tracker specs, site configuration) that a later resume
+        starts from (header key ``connection``; ``config`` keeps the original), with an event saying what
+        changed, in one transaction."""
+        with self._transaction("record the connection details"):
+            self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('connection', ?)",
+                             (json.dumps(connection, allow_nan=False),))
+            self._db.execute("INSERT INTO events (t, run_id, kind, message) VALUES (?, ?, 'connection', ?)",
+                             (time.time(), self._run_id, message))
+        self._header["connection"] = json.loads(json.dumps(connection))
+
     def events(self) -> list[tuple[float, int | None, str, str]]:
         """Every event as (t, run_id, kind, message), oldest first."""
         return [tuple(row) for row in self._db.execute("SELECT t, run_id, kind, message FROM events ORDER BY id")]
