@@ -36,7 +36,7 @@ from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.factory import factory_reference
 from identify.measurements import InputError
-from identify.outputs import check_outputs, check_target, same_file, write_output
+from identify.outputs import OutputError, check_outputs, check_target, same_file, write_output
 from identify.pipeline import identify
 from identify.report import format_reference, format_report
 from identify.result_io import result_to_dict
@@ -299,6 +299,11 @@ def _check_files(args: argparse.Namespace) -> None:
         raise UsageError(f"--log {args.log} is the session or the site file; the log is a file of its own")
     if args.resume or args.dry_run or args.session is None:
         return
+    try:
+        check_target(args.session, force=False, option="--session")
+    except OutputError as exc:  # --force replaces derived files, never a session
+        raise UsageError(str(exc).replace("pass --force to replace it",
+                                          "a session file is never overwritten")) from None
     check_outputs(inputs, [("--session", args.session), ("result", args.session.with_suffix(".result.yaml")),
                            ("report", args.session.with_suffix(".report.html"))], args.force)
 
