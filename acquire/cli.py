@@ -28,7 +28,8 @@ import yaml
 from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
 from acquire.plan import Plan, build_plan, check_plan, estimate_duration, format_plan, predicted_accuracy
 from acquire.resume import ResumeRefused, resume_settings
-from acquire.session import Session, SessionError, backup_session, factory_calibration
+from acquire.session import Session, SessionError, factory_calibration
+from acquire.session_backup import backup_session
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock

@@ -29,12 +29,13 @@ Durability: a step and all its readings are written in one transaction, committe
 With the rollback journal the session file itself holds every committed step after each commit: copying the
 ``.session`` file alone between steps copies them all, and a closed (finished, stopped or killed between
 steps) session is one file with no ``-wal``/``-shm``/``-journal`` beside it. Only while SQLite writes a
-step's pages (microseconds) is the file alone in flux; :func:`backup_session` copies a live session safely.
+step's pages (microseconds) is the file alone in flux; ``acquire backup`` copies a live session safely.
 Creation is atomic too: the file is built under a temporary name and linked into place complete.
 
 One writer: opening for writing (:meth:`Session.create`, ``Session.open(path, write=True)``) takes an
 exclusive ``flock`` on the file, held until :meth:`Session.close`; a second writer is refused at once with a
-:class:`SessionBusy` naming the holder's PID. Readers take no lock and work while a session is written.
+:class:`SessionBusy` naming the holder's PID (acquire/session_lock.py). Readers take no lock and work while
+a session is written. :func:`acquire.session_backup.backup_session` copies a live session.
 
 Units: metres (positions, sigma), radians / metres (joints), seconds since the epoch (times).
 """
@@ -48,7 +49,6 @@ import os
 import socket
 import sqlite3
 import sys
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -60,16 +60,13 @@ import numpy as np
 
 from acquire.plan import Plan
 from acquire.records import StepRecord
+from acquire.session_lock import Locked, write_lock
+from acquire.session_lock import unlock as _unlock
 from drivers.base import DeviceIdentity, TrackerReading
 from identify import __version__
 from identify.csvio import format_measurements
 from identify.measurements import Measurements
-from identify.outputs import OutputError, check_outputs, check_target, commit_file, same_file, write_output
-
-try:
-    import fcntl
-except ImportError:  # not POSIX: no lock (one writer is then the operator's job)
-    fcntl = None  # type: ignore[assignment]
+from identify.outputs import OutputError, check_target, commit_file, same_file, write_output
 
 SCHEMA_VERSION = 1
 OUTCOMES = ("running", "complete", "aborted", "failed")
@@ -535,6 +532,14 @@ class Session:
         write_output(path, format_measurements(meas, metadata), force)
         return len(meas)
 
+    def backup_to(self, target: sqlite3.Connection) -> None:
+        """Copy the whole file into the open database ``target`` with SQLite's online backup API (one step: a
+        consistent snapshot; a writer's commit waits the few milliseconds it takes)."""
+        try:
+            self._db.backup(target)
+        except sqlite3.Error as exc:
+            raise SessionError(f"{self.path}: cannot be copied ({exc})") from None
+
     def drift(self) -> list[tuple[float, float]]:
         """Home re-measurements as (t, displacement) relative to the first ok one: t = the step's end time (s),
         displacement = distance of its averaged TP from the first's (m)."""
@@ -596,58 +601,14 @@ def _check_magic(path: Path) -> None:
 
 
 def _lock(path: Path, shown: Path) -> int:
-    """An open descriptor of ``path`` holding an exclusive ``flock`` (released by :func:`_unlock`); SessionBusy
-    at once, naming the holder, if another process holds it. ``shown`` is the name used in messages."""
+    """The write lock of ``path`` (:func:`acquire.session_lock.write_lock`), errors as SessionError."""
     try:
-        fd = os.open(path, os.O_RDWR)
+        return write_lock(path)
+    except Locked as exc:
+        raise SessionBusy(f"{shown} is being written by {exc.holder}; one writer at a time: wait for it to end or "
+                          "stop it (readers such as identify and export work meanwhile)") from None
     except OSError as exc:
         raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None
-    if fcntl is None:
-        return fd
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise SessionBusy(f"{shown} is being written by {_holder(path)}; one writer at a time: wait for it to "
-                          "end or stop it (readers such as identify and export work meanwhile)") from None
-    except OSError as exc:
-        os.close(fd)
-        raise SessionError(f"{shown}: cannot be locked for writing ({exc.strerror or exc})") from None
-    return fd
-
-
-def _unlock(fd: int | None) -> None:
-    if fd is not None:
-        with contextlib.suppress(OSError):
-            os.close(fd)  # closing the last descriptor releases the flock
-
-
-def _holder(path: Path) -> str:
-    """Who holds the write lock of ``path``: "process PID" from the kernel's lock table (Linux), else the writer
-    recorded in the file, else "another process"."""
-    pid = None
-    try:
-        st = os.stat(path)
-        with open("/proc/locks", encoding="ascii") as fh:
-            for line in fh:
-                fields = line.split()
-                if len(fields) >= 6 and fields[1] == "FLOCK" and fields[3] == "WRITE":
-                    major, minor, inode = fields[5].split(":")
-                    if (int(inode), int(major, 16), int(minor, 16)) == (st.st_ino, os.major(st.st_dev),
-                                                                        os.minor(st.st_dev)):
-                        pid = int(fields[4]) or None
-                        break
-    except (OSError, ValueError):
-        pid = None
-    recorded = None
-    try:
-        with contextlib.closing(sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=0.2)) as db:
-            recorded = db.execute("SELECT pid, host, command FROM writer WHERE id = 1").fetchone()
-    except sqlite3.Error:
-        recorded = None
-    if recorded is not None and (pid is None or recorded[0] == pid):
-        return f"process {recorded[0]} on {recorded[1]} ({recorded[2][:120]})"
-    return f"process {pid}" if pid is not None else "another process"
 
 
 def _newer(path: Path, version: int) -> SessionError:
@@ -708,32 +669,3 @@ def _identity_line(identity: dict[str, Any]) -> str:
     if identity.get("firmware"):
         parts.append(f"firmware {identity['firmware']}")
     return " ".join(" ".join(parts).split())
-
-
-def backup_session(source: str | Path, dest: str | Path, force: bool = False) -> int:
-    """Copy the session ``source`` to the new file ``dest`` with SQLite's online backup API: a consistent copy
-    even while another process writes the session (its commits wait the few milliseconds the copy takes).
-    The copy is one file (rollback journal), built beside ``dest`` and moved into place whole; ``dest`` may not
-    be ``source`` and is replaced only with ``force`` (OutputError). Returns the number of steps copied."""
-    source, dest = Path(source), Path(dest)
-    check_outputs([source], [("DEST", dest)], force)
-    fd, tmp = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".tmp", dir=dest.parent)
-    os.close(fd)
-    temp = Path(tmp)
-    try:
-        with Session.open(source) as session, contextlib.closing(sqlite3.connect(temp, isolation_level=None)) as copy:
-            session._db.backup(copy)
-            copy.execute("PRAGMA journal_mode = DELETE")  # a session of an older version may be in WAL mode
-            steps = copy.execute("SELECT count(*) FROM steps").fetchone()[0]
-            if copy.execute("PRAGMA quick_check").fetchone()[0] != "ok":
-                raise SessionError(f"{dest}: the copy of {source} does not check out; nothing was written")
-        _fsync(temp)
-        commit_file(temp, dest, force)
-    except sqlite3.Error as exc:
-        raise SessionError(f"{dest}: cannot copy {source} ({exc})") from None
-    except OSError as exc:
-        raise SessionError(f"{dest}: cannot copy {source} ({exc.strerror or exc})") from None
-    finally:
-        with contextlib.suppress(OSError):
-            temp.unlink()
-    return int(steps)

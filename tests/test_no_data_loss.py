@@ -20,7 +20,8 @@ import yaml
 
 from acquire.cli import main as acquire_main
 from acquire.resume import ResumeRefused, resume_settings
-from acquire.session import Session, SessionBusy, SessionError, backup_session
+from acquire.session import Session, SessionBusy, SessionError
+from acquire.session_backup import backup_session
 from identify.cli import main as identify_main
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 
