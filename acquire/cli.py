@@ -296,8 +296,9 @@ def _check_files(args: argparse.Namespace) -> None:
     if args.remeasure_missing and not args.resume:
         raise UsageError("--remeasure-missing goes with --resume SESSION")
     inputs = [p for p in (args.resume, args.config) if p is not None]
-    if args.log is not None and any(same_file(args.log, p) for p in [*inputs, args.session] if p is not None):
-        raise UsageError(f"--log {args.log} is the session or the site file; the log is a file of its own")
+    for option, log_file in (("--log", args.log), ("--trace-io", args.trace_io)):  # appended to, never replaced
+        if log_file is not None and any(same_file(log_file, p) for p in [*inputs, args.session] if p is not None):
+            raise UsageError(f"{option} {log_file} is the session or the site file; a log is a file of its own")
     if args.resume or args.dry_run or args.session is None:
         return
     try:

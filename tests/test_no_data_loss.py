@@ -136,6 +136,14 @@ def test_acquire_export_never_replaces_silently(session_copy: Path, tmp_path: Pa
     assert _side_files(tmp_path) == []
 
 
+def test_a_log_is_never_written_into_the_session(session_copy: Path, capsys) -> None:
+    before = session_copy.read_bytes()
+    for option in ("--log", "--trace-io"):
+        assert acquire_main(["--resume", str(session_copy), option, str(session_copy)]) == 2
+        assert "a log is a file of its own" in _one_line(capsys.readouterr().err)
+    assert session_copy.read_bytes() == before
+
+
 def test_a_new_session_never_replaces_a_file_or_its_result(tmp_path: Path, capsys) -> None:
     path = tmp_path / "s.session"
     result = tmp_path / "s.result.yaml"
