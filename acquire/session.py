@@ -1,25 +1,6 @@
 """A session: one SQLite file holding everything an acquisition recorded, durable and resumable.
 
-The file (stdlib ``sqlite3``, rollback journal ``DELETE``, ``synchronous=EXTRA``, foreign keys on) holds:
-
-- ``meta(key, value)``: the header, each value JSON: ``schema`` (int), ``created`` (s since the epoch),
-  ``software`` (``identify.__version__``), ``config`` (the resolved configuration, an object), ``robot`` and
-  ``tracker`` (``DeviceIdentity.as_dict()``; a UR robot's ``details.factory_calibration`` holds the
-  controller's DH values, see :func:`factory_calibration`), ``plan`` (``Plan.to_json()``). ``PRAGMA
-  user_version`` holds the schema too; a file of a newer schema is refused, never modified.
-- ``runs(id, started, ended, outcome, reason)``: one row per run (start or resume); ``outcome`` is
-  ``running``, ``complete``, ``aborted`` (by the operator) or ``failed`` (with the reason). A run left
-  ``running`` by a process that died is closed as ``failed`` ("interrupted") by the next ``begin_run``.
-- ``steps(plan_index PRIMARY KEY, ...)``: one row per plan step, commanded and actual joints, averaged TP,
-  its per-axis sigma, sample counts, status (``ok``/``missing``), reason, timestamps and run id. The
-  primary key makes recording a step twice impossible.
-- ``readings(id, plan_index, x, y, z, sigma, t, status, used)``: every raw tracker reading of a step and
-  whether it was kept after outlier rejection. SQLite stores NaN as NULL; NULL coordinates read back NaN.
-- ``events(id, t, run_id, kind, message)``: pauses, faults, retries, resumes, changed connection details.
-- ``retired_steps`` / ``retired_readings``: earlier attempts of steps measured again (``attempt`` 1, 2...),
-  with the columns of ``steps`` / ``readings``; ``steps`` always holds the latest attempt.
-- ``writer(pid, host, since, command)``: the process that last opened the file for writing (for messages).
-  The last three tables are created by the first writer that needs them; files without them are schema 1 too.
+The file's tables and settings: acquire/session_file.py.
 
 Drift is not a table: home re-measurements are steps of kind ``home``, and :meth:`Session.drift`
 computes their displacement from the first one on read (one source of truth, nothing to keep in sync).
@@ -44,13 +25,11 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 import os
 import socket
 import sqlite3
 import sys
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -60,6 +39,21 @@ import numpy as np
 
 from acquire.plan import Plan
 from acquire.records import StepRecord
+from acquire.session_file import (  # the errors and SCHEMA_VERSION are part of this module's interface too
+    EXTRA_SCHEMA,
+    SCHEMA,
+    SCHEMA_VERSION,
+    STEP_COLUMNS,
+    SessionBusy,
+    SessionError,
+    check_magic,
+    configure,
+    dump_q,
+    fsync_path,
+    load_q,
+    nan_of,
+    newer,
+)
 from acquire.session_lock import Locked, write_lock
 from acquire.session_lock import unlock as _unlock
 from drivers.base import DeviceIdentity, TrackerReading
@@ -68,54 +62,7 @@ from identify.csvio import format_measurements
 from identify.measurements import Measurements
 from identify.outputs import OutputError, check_target, commit_file, same_file, write_output
 
-SCHEMA_VERSION = 1
 OUTCOMES = ("running", "complete", "aborted", "failed")
-_MAGIC = b"SQLite format 3\x00"
-_STEP_COLUMNS = ("plan_index", "kind", "sweep", "joint", "role", "q_cmd", "q_act", "x", "y", "z", "sigma", "samples",
-                 "rejected", "status", "reason", "t_start", "t_end")
-
-_SCHEMA = """
-CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE runs (
-    id INTEGER PRIMARY KEY, started REAL NOT NULL, ended REAL,
-    outcome TEXT NOT NULL CHECK (outcome IN ('running', 'complete', 'aborted', 'failed')),
-    reason TEXT NOT NULL DEFAULT '');
-CREATE TABLE steps (
-    plan_index INTEGER PRIMARY KEY, kind TEXT NOT NULL, sweep INTEGER NOT NULL, joint INTEGER NOT NULL,
-    role TEXT NOT NULL, q_cmd TEXT NOT NULL, q_act TEXT, x REAL, y REAL, z REAL, sigma REAL,
-    samples INTEGER NOT NULL, rejected INTEGER NOT NULL,
-    status TEXT NOT NULL CHECK (status IN ('ok', 'missing')), reason TEXT NOT NULL DEFAULT '',
-    t_start REAL NOT NULL, t_end REAL NOT NULL, run_id INTEGER NOT NULL REFERENCES runs (id));
-CREATE TABLE readings (
-    id INTEGER PRIMARY KEY, plan_index INTEGER NOT NULL REFERENCES steps (plan_index),
-    x REAL, y REAL, z REAL, sigma REAL, t REAL, status TEXT NOT NULL, used INTEGER NOT NULL CHECK (used IN (0, 1)));
-CREATE INDEX readings_by_step ON readings (plan_index);
-CREATE TABLE events (
-    id INTEGER PRIMARY KEY, t REAL NOT NULL, run_id INTEGER REFERENCES runs (id), kind TEXT NOT NULL,
-    message TEXT NOT NULL);
-"""
-# tables added after schema 1 was fixed; old files get them from their first writer, old readers ignore them
-_EXTRA_SCHEMA = """
-CREATE TABLE IF NOT EXISTS retired_steps (
-    plan_index INTEGER NOT NULL, attempt INTEGER NOT NULL, kind TEXT NOT NULL, sweep INTEGER NOT NULL,
-    joint INTEGER NOT NULL, role TEXT NOT NULL, q_cmd TEXT NOT NULL, q_act TEXT, x REAL, y REAL, z REAL, sigma REAL,
-    samples INTEGER NOT NULL, rejected INTEGER NOT NULL, status TEXT NOT NULL, reason TEXT NOT NULL,
-    t_start REAL NOT NULL, t_end REAL NOT NULL, run_id INTEGER NOT NULL, PRIMARY KEY (plan_index, attempt));
-CREATE TABLE IF NOT EXISTS retired_readings (
-    id INTEGER PRIMARY KEY, plan_index INTEGER NOT NULL, attempt INTEGER NOT NULL, x REAL, y REAL, z REAL,
-    sigma REAL, t REAL, status TEXT NOT NULL, used INTEGER NOT NULL);
-CREATE TABLE IF NOT EXISTS writer (
-    id INTEGER PRIMARY KEY CHECK (id = 1), pid INTEGER NOT NULL, host TEXT NOT NULL, since REAL NOT NULL,
-    command TEXT NOT NULL);
-"""
-
-
-class SessionError(Exception):
-    """A session file that cannot be created, read or written; the message is one line for the operator."""
-
-
-class SessionBusy(SessionError):
-    """The session is open for writing in another process (the message names it)."""
 
 
 @dataclass(frozen=True)
@@ -173,9 +120,9 @@ class Session:
             temp.unlink(missing_ok=True)
             conn = sqlite3.connect(temp, isolation_level=None)
             try:
-                _configure(conn)
+                configure(conn)
                 conn.execute("BEGIN IMMEDIATE")
-                for statement in (_SCHEMA + _EXTRA_SCHEMA).split(";"):
+                for statement in (SCHEMA + EXTRA_SCHEMA).split(";"):
                     if statement.strip():
                         conn.execute(statement)
                 conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", rows)
@@ -183,7 +130,7 @@ class Session:
                 conn.execute("COMMIT")
             finally:
                 conn.close()
-            _fsync(temp)
+            fsync_path(temp)
             lock_fd = _lock(temp, path)  # the lock is on the file (inode): it stays when the file is linked
             commit_file(temp, path, force=False)  # a hard link: fails if path exists, even in a race
         except OutputError:
@@ -207,7 +154,7 @@ class Session:
         holder if another process has it). SessionError (one line) for a missing, corrupt, non-SQLite or
         foreign file, or one written by a newer schema."""
         path = Path(path)
-        _check_magic(path)
+        check_magic(path)
         lock_fd = _lock(path, path) if write else None
         return cls._open(path, lock_fd)
 
@@ -226,7 +173,7 @@ class Session:
         try:
             version = conn.execute("PRAGMA user_version").fetchone()[0]
             if version > SCHEMA_VERSION:
-                raise _newer(path, version)
+                raise newer(path, version)
             if conn.execute("PRAGMA quick_check").fetchone()[0] != "ok":
                 raise not_session
             tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
@@ -235,12 +182,12 @@ class Session:
             meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
             header = {key: json.loads(value) for key, value in meta.items()}
             if int(header.get("schema", 0)) > SCHEMA_VERSION:
-                raise _newer(path, int(header["schema"]))
+                raise newer(path, int(header["schema"]))
             plan = Plan.from_json(meta["plan"])
             if lock_fd is not None:
-                _configure(conn)
+                configure(conn)
                 conn.execute("BEGIN IMMEDIATE")
-                for statement in _EXTRA_SCHEMA.split(";"):
+                for statement in EXTRA_SCHEMA.split(";"):
                     if statement.strip():
                         conn.execute(statement)
                 conn.execute("INSERT OR REPLACE INTO writer (id, pid, host, since, command) VALUES (1, ?, ?, ?, ?)",
@@ -418,8 +365,8 @@ class Session:
             "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
             " rejected, status, reason, t_start, t_end, run_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,"
             " ?, ?, ?, ?, ?)",
-            (i, record.kind, record.sweep, record.joint, record.role, _dump_q(record.q_cmd),
-             _dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
+            (i, record.kind, record.sweep, record.joint, record.role, dump_q(record.q_cmd),
+             dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
              record.reason, record.t_start, record.t_end, self._run_id))
         self._db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used)"
                              " VALUES (?, ?, ?, ?, ?, ?, ?, ?)", readings)
@@ -433,7 +380,7 @@ class Session:
         if row is None or row[0] != "missing":
             raise SessionError(f"{self.path}: step {i} is {'not recorded' if row is None else 'ok'}; only a missing "
                                "step is measured again")
-        columns = ", ".join(c for c in _STEP_COLUMNS)
+        columns = ", ".join(c for c in STEP_COLUMNS)
         with self._transaction(f"retire step {i}"):
             attempt = 1 + self._db.execute("SELECT count(*) FROM retired_steps WHERE plan_index = ?",
                                            (i,)).fetchone()[0]
@@ -477,7 +424,7 @@ class Session:
         out = []
         for row in self._step_rows():
             raw = by_step.get(row["plan_index"], [])
-            readings = tuple(TrackerReading(np.array([_nan(x), _nan(y), _nan(z)]), _nan(t), sigma, status)
+            readings = tuple(TrackerReading(np.array([nan_of(x), nan_of(y), nan_of(z)]), nan_of(t), sigma, status)
                              for x, y, z, sigma, t, status, _ in raw)
             try:
                 out.append(StepRecord(**row, readings=readings, used=tuple(bool(r[-1]) for r in raw)))
@@ -487,12 +434,12 @@ class Session:
 
     def _step_rows(self, where: str = "") -> list[dict[str, Any]]:
         """Step columns (no readings) as StepRecord keyword arguments, in plan order."""
-        cur = self._db.execute(f"SELECT {', '.join(_STEP_COLUMNS)} FROM steps {where} ORDER BY plan_index")
+        cur = self._db.execute(f"SELECT {', '.join(STEP_COLUMNS)} FROM steps {where} ORDER BY plan_index")
         out = []
         for values in cur:
-            row = dict(zip(_STEP_COLUMNS, values, strict=True))
+            row = dict(zip(STEP_COLUMNS, values, strict=True))
             x, y, z = row.pop("x"), row.pop("y"), row.pop("z")
-            row.update(q_cmd=_load_q(row["q_cmd"]), q_act=_load_q(row["q_act"]),
+            row.update(q_cmd=load_q(row["q_cmd"]), q_act=load_q(row["q_act"]),
                        position=None if x is None else (x, y, z))
             out.append(row)
         return out
@@ -574,30 +521,8 @@ class Session:
             raise SessionError(f"{self.path}: cannot {what} ({exc})") from None
 
 
-def _configure(conn: sqlite3.Connection) -> None:
-    """A writer's settings: rollback journal (the main file holds every commit; files of older versions in WAL
-    mode are converted), each commit fsync'd with the journal's deletion (``EXTRA``), foreign keys on."""
-    conn.execute("PRAGMA busy_timeout = 5000")
-    mode = conn.execute("PRAGMA journal_mode = DELETE").fetchone()[0]
-    if str(mode).lower() != "delete":
-        raise sqlite3.OperationalError(f"cannot use the rollback journal (got {mode})")
-    conn.execute("PRAGMA synchronous = EXTRA")
-    conn.execute("PRAGMA foreign_keys = ON")
 
 
-def _check_magic(path: Path) -> None:
-    """SessionError unless ``path`` is a readable SQLite file."""
-    try:
-        with path.open("rb") as f:
-            magic = f.read(len(_MAGIC))
-    except FileNotFoundError:
-        raise SessionError(f"{path}: no such session file") from None
-    except IsADirectoryError:
-        raise SessionError(f"{path} is a folder, not a session file") from None
-    except OSError as exc:
-        raise SessionError(f"{path}: cannot be read ({exc.strerror or exc})") from None
-    if magic != _MAGIC:
-        raise SessionError(f"{path} is not a session file (corrupt or not SQLite)")
 
 
 def _lock(path: Path, shown: Path) -> int:
@@ -611,38 +536,14 @@ def _lock(path: Path, shown: Path) -> int:
         raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None
 
 
-def _newer(path: Path, version: int) -> SessionError:
-    return SessionError(f"{path} was written by schema {version}; this version reads up to {SCHEMA_VERSION}: "
-                        "upgrade dh-calib")
 
 
-def _fsync(path: Path, directory: bool = False) -> None:
-    """Flush ``path`` to disk; a directory that cannot be flushed (some platforms) is skipped."""
-    try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        if directory:
-            return
-        raise
-    try:
-        os.fsync(fd)
-    except OSError:
-        if not directory:
-            raise
-    finally:
-        os.close(fd)
 
 
-def _dump_q(q: Sequence[float] | None) -> str | None:
-    return None if q is None else json.dumps([v if math.isfinite(v) else None for v in q])
 
 
-def _load_q(text: str | None) -> tuple[float, ...] | None:
-    return None if text is None else tuple(math.nan if v is None else float(v) for v in json.loads(text))
 
 
-def _nan(v: float | None) -> float:
-    return math.nan if v is None else float(v)
 
 
 def factory_calibration(header: dict[str, Any]) -> tuple[dict[str, Any] | None, str]:
