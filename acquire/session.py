@@ -54,7 +54,7 @@ from acquire.session_file import (  # the errors and SCHEMA_VERSION are part of 
     nan_of,
     newer,
 )
-from acquire.session_lock import Locked, write_lock
+from acquire.session_lock import Locked, busy_message, write_lock
 from acquire.session_lock import unlock as _unlock
 from drivers.base import DeviceIdentity, TrackerReading
 from identify import __version__
@@ -530,8 +530,7 @@ def _lock(path: Path, shown: Path) -> int:
     try:
         return write_lock(path)
     except Locked as exc:
-        raise SessionBusy(f"{shown} is being written by {exc.holder}; one writer at a time: wait for it to end or "
-                          "stop it (readers such as identify and export work meanwhile)") from None
+        raise SessionBusy(busy_message(shown, exc.holder)) from None
     except OSError as exc:
         raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None
 

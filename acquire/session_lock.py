@@ -27,10 +27,25 @@ class Locked(Exception):
         self.holder = holder
 
 
+_held: dict[tuple[int, int], int] = {}  # (device, inode) -> descriptor locked by hold() and not yet claimed
+
+
+def hold(path: Path) -> None:
+    """Take the lock of ``path`` now, for this process's next :func:`write_lock` of the same file to claim (the
+    ``acquire`` command takes it before its heavy imports). Locked / OSError as :func:`write_lock`."""
+    fd = write_lock(path)
+    st = os.fstat(fd)
+    _held[(st.st_dev, st.st_ino)] = fd
+
+
 def write_lock(path: Path) -> int:
     """An open descriptor of ``path`` holding its exclusive lock, taken at once or not at all: Locked if another
     process holds it, OSError if the file cannot be opened for writing. Release with :func:`unlock`."""
     fd = os.open(path, os.O_RDWR)
+    st = os.fstat(fd)
+    if (st.st_dev, st.st_ino) in _held:  # taken by hold() in this process: hand it over
+        os.close(fd)
+        return _held.pop((st.st_dev, st.st_ino))
     if fcntl is None:
         return fd
     try:
@@ -42,6 +57,12 @@ def write_lock(path: Path) -> int:
         os.close(fd)
         raise
     return fd
+
+
+def busy_message(path: Path, holder: str) -> str:
+    """The one line that refuses a second writer of ``path``."""
+    return (f"{path} is being written by {holder}; one writer at a time: wait for it to end or stop it (readers "
+            "such as identify and export work meanwhile)")
 
 
 def unlock(fd: int | None) -> None:

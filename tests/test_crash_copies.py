@@ -11,11 +11,11 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -174,46 +174,49 @@ def test_sigkill_then_copy_the_session_file_alone_and_resume_the_copy(tmp_path: 
 
 
 def test_two_writers_started_together_one_runs_the_other_exits_2_at_once(tmp_path: Path) -> None:
+    """Two fresh ``acquire --resume`` processes (the installed entry point, acquire/launch.py) started together."""
     site = tmp_path / "fast.yaml"
     site.write_text(FAST_SITE)
     path = tmp_path / "s.session"
-    first = Writer(tmp_path, "first")
-    second = Writer(tmp_path, "second")
+    writer = Writer(tmp_path)
     try:
-        first.start(["--robot", "mock:ur5e?fault=protective_stop@5", "--tracker", "mock", "--config", site,
-                     "--session", path, "--quiet"])
-        assert first.finish() == 1  # a session to resume: 4 steps recorded
-        with Session.open(path) as session:
-            runs_before, steps_before = len(session.runs()), len(session.steps())
-        results: dict[str, tuple[int, float, int, int]] = {}  # exit code, seconds, pid, where its stderr starts
-
-        def run(name: str, writer: Writer) -> None:
-            where = Path(writer.err.name).stat().st_size
-            t = time.monotonic()
-            pid = writer.start(["--resume", path, "--realtime", "--quiet"])
-            results[name] = (writer.finish(), time.monotonic() - t, pid, where)
-
-        threads = [threading.Thread(target=run, args=(name, w)) for name, w in (("first", first), ("second", second))]
-        for t in threads:
-            t.start()
-        for t in threads:
-            t.join(timeout=60)
-        codes = sorted(r[0] for r in results.values())
-        assert codes == [0, 2], results
-        lost = "first" if results["first"][0] == 2 else "second"
-        loser, winner = (first, second) if lost == "first" else (second, first)
-        _, seconds, _, where = results[lost]
-        winner_pid = results["second" if lost == "first" else "first"][2]
-        assert seconds < 1.0, results  # refused at once (measured from the command's start, imports excluded)
-        assert not loser.opened() and winner.opened()  # the refused writer opened no device
-        err = Path(loser.err.name).read_text()[where:].strip().splitlines()
-        assert len(err) == 1 and err[0].startswith("acquire: error: "), err
-        assert f"is being written by process {winner_pid} " in err[0], err
-        print(f"refused in {seconds * 1e3:.0f} ms: {err[0]}")
-        with Session.open(path) as session:
-            assert len(session.runs()) == runs_before + 1  # only the winner ran
-            assert [r.plan_index for r in session.steps()] == list(range(len(session.plan.steps)))
-            assert len(session.steps()) > steps_before
+        writer.start(["--robot", "mock:ur5e?fault=protective_stop@5", "--tracker", "mock", "--config", site,
+                      "--session", path, "--quiet"])
+        assert writer.finish() == 1  # a session to resume: 4 steps recorded
     finally:
-        first.close()
-        second.close()
+        writer.close()
+    with Session.open(path) as session:
+        runs_before, steps_before = len(session.runs()), len(session.steps())
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "acquire.launch", "--resume", str(path), "--realtime", "--quiet"]
+    started = time.monotonic()
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
+             for _ in range(2)]
+    ended: dict[int, float] = {}
+    while len(ended) < 2 and time.monotonic() - started < 120:
+        for k, proc in enumerate(procs):
+            if k not in ended and proc.poll() is not None:
+                ended[k] = time.monotonic() - started
+        time.sleep(0.005)
+    outputs = [proc.communicate(timeout=10) for proc in procs]
+    codes = [proc.returncode for proc in procs]
+    assert sorted(codes) == [0, 2], (codes, outputs)
+    loser, winner = (0, 1) if codes[0] == 2 else (1, 0)
+    assert ended[loser] < 1.0, ended  # from the start of both processes, interpreter start-up included
+    out, err = outputs[loser]
+    assert out == ""  # refused before the plan was even shown: no device was opened, nothing moved
+    line = _one_line_of(err)
+    assert line.startswith("acquire: error: ")
+    assert re.search(rf"is being written by process {procs[winner].pid}\b", line), line
+    assert "session:" in outputs[winner][0]
+    with Session.open(path) as session:
+        assert len(session.runs()) == runs_before + 1  # only the winner ran
+        assert [r.plan_index for r in session.steps()] == list(range(len(session.plan.steps)))
+        assert len(session.steps()) > steps_before
+    print(f"refused in {ended[loser] * 1e3:.0f} ms from the start: {line}")
+
+
+def _one_line_of(err: str) -> str:
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    return lines[0]
