@@ -82,7 +82,7 @@ class Cell:
 class Approach:
     """Closest approach per configuration (m,): ``slack`` (m) = distance minus what it must be (< 0: too
     close), ``distance`` (m) surface to surface (to the plane for the mounting surface), ``what`` index into
-    ``labels`` ("wrist 3 – mounting surface") naming the pair."""
+    ``labels`` ("wrist 3 vs mounting surface") naming the pair."""
 
     slack: Array
     distance: Array
@@ -99,24 +99,26 @@ def segment_distances(p0: Array, p1: Array, q0: Array, q1: Array) -> Array:
     """Least distance (m) between segments ``p0``-``p1`` and ``q0``-``q1``; arrays (..., 3) broadcast together.
 
     Closest points by minimising over both segment parameters in closed form, clamped to [0, 1]; a segment
-    whose ends coincide is a point."""
+    whose ends coincide is a point. Computed per coordinate (x, y, z planes), which numpy runs fastest."""
+    p0, p1, q0, q1 = (np.moveaxis(np.asarray(v, dtype=float), -1, 0) for v in (p0, p1, q0, q1))
     d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a = np.einsum("...i,...i", d1, d1)
-    e = np.einsum("...i,...i", d2, d2)
-    b = np.einsum("...i,...i", d1, d2)
-    c = np.einsum("...i,...i", d1, r)
-    f = np.einsum("...i,...i", d2, r)
+
+    def dot(u: Array, v: Array) -> Array:
+        return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+    a, e, b, c, f = dot(d1, d1), dot(d2, d2), dot(d1, d2), dot(d1, r), dot(d2, r)
     a, e, b, c, f = np.broadcast_arrays(a, e, b, c, f)
-    safe_a, safe_e = np.where(a > _EPS, a, 1.0), np.where(e > _EPS, e, 1.0)
+    point_p, point_q = a <= _EPS, e <= _EPS
+    safe_a, safe_e = np.where(point_p, 1.0, a), np.where(point_q, 1.0, e)
     denom = a * e - b * b
-    s = np.where(denom > _EPS * np.maximum(a * e, _EPS), (b * f - c * e) / np.where(denom > 0, denom, 1.0), 0.0)
-    s = np.clip(np.where(a > _EPS, s, 0.0), 0.0, 1.0)
-    t = np.where(e > _EPS, (b * s + f) / safe_e, 0.0)
+    parallel = denom <= _EPS * np.maximum(a * e, _EPS)
+    s = np.where(parallel | point_p, 0.0, np.clip((b * f - c * e) / np.where(parallel, 1.0, denom), 0.0, 1.0))
+    t = np.where(point_q, 0.0, (b * s + f) / safe_e)
     s = np.where(t < 0.0, np.clip(-c / safe_a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / safe_a, 0.0, 1.0), s))
-    s = np.where(a > _EPS, s, 0.0)
+    s = np.where(point_p, 0.0, s)
     t = np.clip(t, 0.0, 1.0)
-    gap = p0 + d1 * s[..., None] - q0 - d2 * t[..., None]
-    return np.linalg.norm(gap, axis=-1)
+    gap = r + d1 * s - d2 * t
+    return np.sqrt(dot(gap, gap))
 
 
 def point_box_distances(p: Array, lo: Array, hi: Array) -> Array:
@@ -152,8 +154,8 @@ def body_segments(cell: Cell, q: Array) -> tuple[Array, Array]:
     frames = frames_from_joints(cell.model, np.atleast_2d(np.asarray(q, dtype=float)))
     f = frames[:, cell.bodies.frame]  # (m, K, 4, 4)
     rot, pos = f[..., :3, :3], f[..., :3, 3]
-    a = np.einsum("mkij,kj->mki", rot, cell.bodies.a) + pos
-    b = np.einsum("mkij,kj->mki", rot, cell.bodies.b) + pos
+    a = (rot @ cell.bodies.a[:, :, None])[..., 0] + pos
+    b = (rot @ cell.bodies.b[:, :, None])[..., 0] + pos
     return a, b
 
 
@@ -168,23 +170,23 @@ def approach(cell: Cell, q: Array) -> Approach:
         height = np.minimum(a[:, moving] @ cell.normal, b[:, moving] @ cell.normal) - cell.offset - r[moving]
         dists.append(height)
         slacks.append(height - cell.clearance)
-        labels += [f"{names[k]} – mounting surface" for k in moving]
+        labels += [f"{names[k]} vs mounting surface" for k in moving]
     if len(cell.pairs):
         i, j = cell.pairs[:, 0], cell.pairs[:, 1]
         dist = segment_distances(a[:, i], b[:, i], a[:, j], b[:, j]) - r[i] - r[j]
         dists.append(dist)
         slacks.append(dist - cell.margin)
-        labels += [f"{names[x]} – {names[y]}" for x, y in cell.pairs]
+        labels += [f"{names[x]} vs {names[y]}" for x, y in cell.pairs]
     if len(cell.box_names):
         dist = segment_box_distances(a[:, :, None], b[:, :, None], cell.boxes_lo, cell.boxes_hi) - r[:, None]
         dists.append(dist.reshape(len(a), -1))
         slacks.append(dists[-1] - cell.margin)
-        labels += [f"{names[k]} – {box}" for k in range(len(names)) for box in cell.box_names]
+        labels += [f"{names[k]} vs {box}" for k in range(len(names)) for box in cell.box_names]
     if len(cell.cyl_names):
         dist = segment_distances(a[:, :, None], b[:, :, None], cell.cyl_a, cell.cyl_b) - r[:, None] - cell.cyl_radius
         dists.append(dist.reshape(len(a), -1))
         slacks.append(dists[-1] - cell.margin)
-        labels += [f"{names[k]} – {cyl}" for k in range(len(names)) for cyl in cell.cyl_names]
+        labels += [f"{names[k]} vs {cyl}" for k in range(len(names)) for cyl in cell.cyl_names]
     if not slacks:
         inf = np.full(len(a), np.inf)
         return Approach(inf, inf, np.zeros(len(a), dtype=np.int64), ("nothing",))
@@ -220,18 +222,17 @@ def moves_samples(cell: Cell, poses: Array, step: float = STEP) -> tuple[Array, 
 def reach_per_joint(model: DHModel, bodies: Bodies, limits: Array) -> Array:
     """(n,) m: a bound on how far any body point moves per unit of each joint (rad or m), at any pose.
 
-    Revolute joint j: the distance of any point beyond it from its axis is at most the sum of the link
-    lengths (|a|, |d|, and the stroke of later prismatic joints) from joint j on, plus the farthest body end
-    from its own frame origin plus its radius. Prismatic: 1 (every point beyond moves with it)."""
-    n = model.n_joints
-    length = np.abs(model.a) + np.abs(model.d)
-    length = length + np.where(model.revolute, 0.0, np.max(np.abs(limits), axis=1))
+    Revolute joint j: a body on frame f is at most the lengths of links j..f (``sqrt(a² + d²)`` each, plus
+    the stroke of a prismatic one) plus the body's farthest end from its frame origin plus its radius from
+    joint j's axis. Prismatic: 1 (every point beyond moves with it)."""
+    length = np.hypot(model.a, model.d) + np.where(model.revolute, 0.0, np.max(np.abs(limits), axis=1))
     extent = np.maximum(np.linalg.norm(bodies.a, axis=1), np.linalg.norm(bodies.b, axis=1)) + bodies.radius
-    out = np.ones(n)
-    for j in range(n):
+    out = np.ones(model.n_joints)
+    for j in range(model.n_joints):
         if model.revolute[j]:
-            beyond = extent[bodies.frame > j]
-            out[j] = length[j:].sum() + (beyond.max() if len(beyond) else 0.0)
+            beyond = bodies.frame > j  # bodies on frames j+1.. move with joint j+1 (0-based j)
+            lever = [length[j:f].sum() + e for f, e in zip(bodies.frame[beyond], extent[beyond], strict=True)]
+            out[j] = max(lever, default=0.0)
     return out
 
 

@@ -15,12 +15,15 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from acquire.cell import Clearance, Contact, cell_from_config, clearance_of, contact_at, first_contact, free_interval
+from acquire.collision import Cell, approach, moves_samples
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
@@ -29,6 +32,7 @@ from identify.refine import full_jacobian
 from identify.simulate import axis_distances, random_poses
 
 STEP_KINDS = ("sweep", "free", "home")
+JSON_KINDS = ("sweep", "free", "check", "home")  # the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
 
 
 @dataclass(frozen=True)
@@ -195,12 +199,25 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
     notes = [f"TP guess {list(site.tp_guess)} m in the flange frame, kept >= {minimum * 1e3:g} mm off every "
              "revolute axis"]
 
+    cell = cell_from_config(robot, site)
+    if cell is None:
+        notes.append(f"{robot.name} has no collision geometry: the plan is checked against the joint limits only")
+    else:
+        contact = contact_at(cell, home)
+        if contact is not None:
+            raise PlanError(f"{site.source}: the home pose is not clear: {_contact_text(contact)}; move the "
+                            "obstacle or lower cell.margin / cell.mounting_clearance")
+
     poses: list[tuple[str, int, int, Array, str]] = []  # kind, sweep, joint, q, role
     sweep_id = 0
     for j in sorted(joints, reverse=True):
         span = site.sweep_ranges[j - 1] if site.sweep_ranges is not None else None
         values = sweep_values(types[j - 1], float(home[j - 1]), tuple(robot.limits[j - 1]), site.steps_per_sweep,
                               span)
+        if cell is not None:
+            values = _safe_sweep(cell, robot, site, j, values, span is not None, notes)
+            if values is None:
+                continue
         q = np.tile(home, (len(values), 1))
         q[:, j - 1] = values
         dist = np.array([axis_distances(model, row) for row in q])
@@ -212,11 +229,12 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
         if ok.any():
             sweep_id += 1
             poses += [("sweep", sweep_id, j, row, "fit") for row in q[ok]]
-    if any(types[j - 1] == "R" and (site.sweep_ranges is None or site.sweep_ranges[j - 1] is None) for j in joints):
+    if cell is None and any(types[j - 1] == "R" and (site.sweep_ranges is None or site.sweep_ranges[j - 1] is None)
+                            for j in joints):
         notes.append("default revolute sweeps turn as far as the limits allow (up to a full turn): make sure "
                      "the cell is clear, or restrict them with plan.sweep_ranges")
 
-    free = _free_poses(robot, site, model, np.array([p[3] for p in poses]).reshape(-1, n), rng_seed, notes)
+    free = _free_poses(robot, site, model, np.array([p[3] for p in poses]).reshape(-1, n), rng_seed, notes, cell)
     start = poses[-1][3] if poses else home
     for q, role in _nearest_order(free, start, speed):
         sweep_id += 1
@@ -228,20 +246,80 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
         steps.append(Step(len(steps), kind, sweep, joint, tuple(float(x) for x in q), role))
 
     every = site.home_check_every
+    ordered: list[tuple[str, int, int, Array, str]] = []
     if every and poses:
-        add("home", HOME_SWEEP, 0, home)
+        ordered.append(("home", HOME_SWEEP, 0, home, "fit"))
     for count, pose in enumerate(poses, start=1):
-        add(*pose)
+        ordered.append(pose)
         if every and (count % every == 0 or count == len(poses)):
-            add("home", HOME_SWEEP, 0, home)
+            ordered.append(("home", HOME_SWEEP, 0, home, "fit"))
+    for pose in _via_home(cell, ordered, home, notes) if cell is not None else ordered:
+        add(*pose)
     return Plan(robot.name, types, tuple(float(x) for x in home), tuple(steps), site.samples_per_step,
                 site.settle_time, tuple(float(x) for x in speed), tuple(float(x) for x in acceleration),
                 tuple(notes))
 
 
+def _contact_text(contact: Contact) -> str:
+    return (f"{contact.what} {contact.distance * 1e3:.0f} mm apart (needs {contact.required * 1e3:.0f} mm)")
+
+
+def _safe_sweep(cell: Cell, robot: RobotModel, site: SiteConfig, j: int, values: Array, requested: bool,
+                notes: list[str]) -> Array | None:
+    """The sweep of joint ``j`` (1-based) kept to the collision-free interval around home.
+
+    A requested range (``plan.sweep_ranges``) that is not clear all the way from home is refused
+    (:class:`PlanError` naming the joint, the value and the bodies); a default one is clipped to the clear
+    interval around home (noted), or left out (None, noted) when there is no room to move."""
+    kind, h = robot.joint_types[j - 1], float(robot.home[j - 1])
+    lo, hi = min(h, float(values.min())), max(h, float(values.max()))
+    low, high, contact = free_interval(cell, robot.home, j - 1, lo, hi)
+    if contact is None:
+        return values
+    at = _fmt(float(contact.q[j - 1]), kind)
+    if requested:
+        raise PlanError(f"{site.source}: plan.sweep_ranges[{j - 1}]: joint {j} at {at} collides: "
+                        f"{_contact_text(contact)}; narrow the range")
+    if high - low < 1e-9:
+        notes.append(f"joint {j} sweep left out: no room to move from home ({_contact_text(contact)})")
+        return None
+    notes.append(f"joint {j} sweep clipped to {_fmt(low, kind)} .. {_fmt(high, kind)}, the collision-free "
+                 f"interval around home (at {at}: {_contact_text(contact)})")
+    return np.linspace(low, high, len(values))
+
+
+def _via_home(cell: Cell, ordered: list[tuple[str, int, int, Array, str]], home: Array,
+              notes: list[str]) -> list[tuple[str, int, int, Array, str]]:
+    """``ordered`` with a home step before every pose whose direct move from the one before (home at the
+    start) would come too close; moves from and to home are clear by construction (sweeps inside their clear
+    interval, free poses chosen with a clear path from home)."""
+    q = np.array([home, *(p[3] for p in ordered)])
+    samples, owner = moves_samples(cell, q)
+    bad = set(np.unique(owner[approach(cell, samples).slack < 0]).tolist())
+    out: list[tuple[str, int, int, Array, str]] = []
+    for i, pose in enumerate(ordered):
+        if i in bad:
+            out.append(("home", HOME_SWEEP, 0, home, "fit"))
+        out.append(pose)
+    if bad:
+        notes.append(f"{len(bad)} move(s) go through home: the direct move would come too close")
+    return out
+
+
+def plan_clearance(plan: Plan, robot: RobotModel, site: SiteConfig) -> Clearance | None:
+    """Closest approach of the plan run from home (every step and every move between them, sampled so that no
+    body point travels more than 1 cm between samples) in the cell of ``site``; None without robot geometry.
+    ``Clearance.move`` is the index of the step the move leads to."""
+    cell = cell_from_config(robot, site)
+    if cell is None:
+        return None
+    return clearance_of(cell, np.array([plan.home, *(s.q for s in plan.steps)]))
+
+
 def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: Array, rng_seed: int,
-                notes: list[str]) -> list[tuple[Array, str]]:
-    """Check poses (random) then designed free poses from one seeded pool of safe candidates."""
+                notes: list[str], cell: Cell | None = None) -> list[tuple[Array, str]]:
+    """Check poses (random) then designed free poses from one seeded pool of safe candidates: the TP off every
+    axis and, with a ``cell``, the pose and the move to it from home clear."""
     wanted = site.free_poses + site.check_poses
     if not wanted:
         return []
@@ -249,12 +327,28 @@ def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: A
     box = _joint_box(robot, site)
     pool = random_poses(box, CANDIDATES, rng, FREE_MARGIN)
     pool = pool[np.all(axis_distances_many(model, pool) >= site.min_axis_distance, axis=1)]
+    if cell is not None:
+        pool = pool[approach(cell, pool).slack >= 0]
     if len(pool) < wanted + 1:
-        raise PlanError(f"only {len(pool)} candidate free poses keep the TP off every axis; lower "
-                        "plan.free_poses / plan.check_poses or plan.min_axis_distance")
-    check, pool = pool[: site.check_poses], pool[site.check_poses:]
+        raise PlanError(f"only {len(pool)} candidate free poses keep the TP off every axis and clear of the cell; "
+                        "lower plan.free_poses / plan.check_poses, plan.min_axis_distance or cell.margin")
+    reachable = _reachable_test(cell, robot.home, pool)
+    check_idx: list[int] = []
+    for k in range(len(pool)):  # check poses: the first pool poses reachable from home
+        if len(check_idx) == site.check_poses:
+            break
+        if reachable(k):
+            check_idx.append(k)
+    if len(check_idx) < site.check_poses:
+        raise PlanError(f"only {len(check_idx)} candidate check poses can be reached from home without coming too "
+                        "close to the cell; lower plan.check_poses or cell.margin")
+    check, pool = pool[check_idx], np.delete(pool, check_idx, axis=0)
+    reachable = _reachable_test(cell, robot.home, pool)
     q_eval = random_poses(robot.limits, EVAL_POSES, rng)
-    chosen = greedy_design(model, q_sweeps, pool, q_eval, site.free_poses)
+    chosen = greedy_design(model, q_sweeps, pool, q_eval, site.free_poses, accept=reachable)
+    if len(chosen) < site.free_poses:
+        raise PlanError(f"only {len(chosen)} candidate free poses can be reached from home without coming too close "
+                        "to the cell; lower plan.free_poses or cell.margin")
     if site.free_poses:
         notes.append(f"{site.free_poses} free poses chosen from {len(pool)} candidates to minimise the predicted "
                      f"held-out error (greedy design on the nominal model); {site.check_poses} check poses at "
@@ -262,6 +356,18 @@ def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: A
     elif site.check_poses:
         notes.append(f"{site.check_poses} check poses at random, held out for validation")
     return [(q, "fit") for q in pool[chosen]] + [(q, "check") for q in check]
+
+
+def _reachable_test(cell: Cell | None, home: Array, poses: Array) -> Callable[[int], bool]:
+    """A test whether the straight joint-space move from ``home`` to ``poses[k]`` stays clear (always True
+    without a cell); each pose is checked once, when first asked about."""
+    if cell is None:
+        return lambda k: True
+
+    def test(k: int) -> bool:
+        return first_contact(cell, home, poses[k]) is None
+
+    return test
 
 
 def _nearest_order(poses: list[tuple[Array, str]], start: Array, speed: Array) -> list[tuple[Array, str]]:
@@ -305,13 +411,16 @@ def _whitened(model: DHModel, *qs: Array) -> list[Array]:
     return [j @ basis for j in jacs]
 
 
-def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array, count: int) -> NDArray[np.int64]:
+def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array, count: int,
+                  accept: Callable[[int], bool] | None = None) -> NDArray[np.int64]:
     """Indices of ``count`` rows of ``candidates`` chosen one at a time, each the pose that most reduces the
     predicted held-out error given ``q_fit`` and those chosen before: the trace of the Cramér-Rao prediction
     covariance summed over ``q_eval`` (DESIGN.md), ``sum_k tr(Jc_k Σ Jc_kᵀ)`` with ``Σ = (JᵀJ)⁻¹``.
 
     Rank-one (rank-three: one TP) updates of Σ keep it O(count · candidates · r²) for r parameters.
-    Directions the fit leaves undetermined get a tiny ridge, so poses that determine them win first.
+    Directions the fit leaves undetermined get a tiny ridge, so poses that determine them win first. With
+    ``accept``, a best candidate it rejects is set aside and the next best taken (fewer than ``count`` when
+    the candidates run out).
     """
     if count <= 0:
         return np.zeros(0, dtype=np.int64)
@@ -325,13 +434,19 @@ def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array
     available = np.ones(len(candidates), dtype=bool)
     eye = np.eye(3)
     g_pool_t = np.swapaxes(g_pool, 1, 2)
-    for _ in range(min(count, len(candidates))):
+    while len(chosen) < count and available.any():
         u = g_pool @ cov  # (K, 3, r): candidate rows weighted by the current covariance
         s = eye + u @ g_pool_t  # (K, 3, 3)
         w = (u @ target) @ np.swapaxes(u, 1, 2)  # (K, 3, 3)
         gain = np.trace(np.linalg.solve(s, w), axis1=1, axis2=2)
         gain[~available] = -np.inf
         k = int(np.argmax(gain))
+        while accept is not None and not accept(k):
+            available[k] = False
+            gain[k] = -np.inf
+            if not available.any():
+                return np.array(chosen, dtype=np.int64)
+            k = int(np.argmax(gain))
         cov = cov - u[k].T @ np.linalg.solve(s[k], u[k])
         cov = 0.5 * (cov + cov.T)
         chosen.append(k)

@@ -63,7 +63,7 @@ def geometry_from_dict(path: Path, data: Any, n_joints: int) -> RobotGeometry:
         return np.array(value, dtype=float)
 
     if not isinstance(data, dict) or set(data) - set(KEYS) or not {"source", "bodies"} <= set(data):
-        raise fail("", f"a mapping with the keys source, bodies and optionally mounting, ignore", data)
+        raise fail("", "a mapping with the keys source, bodies and optionally mounting, ignore", data)
     if not isinstance(data["source"], str) or not data["source"].strip():
         raise fail("source", "a non-empty string naming where the dimensions come from", data["source"])
     mounting = data.get("mounting", {"normal": [0, 0, 1], "offset": 0.0})
