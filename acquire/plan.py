@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acquire.cell import Clearance, Contact, cell_from_config, clearance_of, contact_at, first_contact, free_interval
-from acquire.collision import Cell, approach, moves_samples
+from acquire.collision import STEP, Cell, approach, moves_samples
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
@@ -642,3 +642,26 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
     if plan.notes:
         lines += ["", "notes:", *(f"  - {note}" for note in plan.notes)]
     return "\n".join(lines)
+
+
+def plan_json(plan: Plan, clearance: Clearance | None) -> dict[str, Any]:
+    """The plan as DESIGN.md's Plan JSON: ``robot``, ``joint_types``, ``home``, ``steps`` (execution order,
+    ``{index, kind, joint, q}``, a held-out free pose's kind is "check") and ``clearance_m`` (m; None when the
+    robot model has no collision geometry)."""
+    steps = [{"index": s.index, "kind": "check" if s.kind == "free" and s.role == "check" else s.kind,
+              "joint": s.joint, "q": list(s.q)} for s in plan.steps]
+    return {"robot": plan.robot, "joint_types": plan.joint_types, "home": list(plan.home), "steps": steps,
+            "clearance_m": None if clearance is None else clearance.distance}
+
+
+def format_clearance(clearance: Clearance | None, plan: Plan, site: SiteConfig) -> str:
+    """The dry-run's clearance line: the closest approach of the plan, between what, on which move."""
+    if clearance is None:
+        return ("clearance: NOT CHECKED: the robot model has no collision geometry; only the joint limits are "
+                "checked (make sure the cell is clear)")
+    step = plan.steps[clearance.move] if plan.steps else None
+    where = f"on the move to step {step.index} ({step.kind})" if step is not None else "at home"
+    return (f"clearance: closest approach {clearance.distance * 1e3:.1f} mm, {clearance.what}, {where}; required "
+            f"{site.cell_margin * 1e3:g} mm between bodies and {site.mounting_clearance * 1e3:g} mm above the "
+            f"mounting surface; every step and every move checked, no body point travelling more than "
+            f"{STEP * 1e3:g} mm between checks")
