@@ -115,6 +115,7 @@ def segment_distances(p0: Array, p1: Array, q0: Array, q1: Array) -> Array:
     s = np.where(parallel | point_p, 0.0, np.clip((b * f - c * e) / np.where(parallel, 1.0, denom), 0.0, 1.0))
     t = np.where(point_q, 0.0, (b * s + f) / safe_e)
     s = np.where(t < 0.0, np.clip(-c / safe_a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / safe_a, 0.0, 1.0), s))
+    s = np.where(point_q, np.clip(-c / safe_a, 0.0, 1.0), s)  # a point: the closest point of the segment
     s = np.where(point_p, 0.0, s)
     t = np.clip(t, 0.0, 1.0)
     gap = r + d1 * s - d2 * t
