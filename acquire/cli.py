@@ -27,17 +27,8 @@ import yaml
 
 from acquire.cell import Clearance
 from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
-from acquire.plan import (
-    Plan,
-    build_plan,
-    check_plan,
-    estimate_duration,
-    format_clearance,
-    format_plan,
-    plan_clearance,
-    plan_json,
-    predicted_accuracy,
-)
+from acquire.plan import Plan, build_plan, check_plan, estimate_duration, plan_clearance
+from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.session import Session, SessionError, factory_calibration
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site

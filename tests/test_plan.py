@@ -20,14 +20,12 @@ from acquire.plan import (
     build_plan,
     check_plan,
     estimate_duration,
-    format_plan,
     greedy_design,
     motion_time,
-    predicted_accuracy,
-    prediction_bound,
     sweep_values,
     tp_model,
 )
+from acquire.plan_report import format_plan, predicted_accuracy, prediction_bound
 from config.robots import load_robot
 from config.site import SiteConfig
 from identify.bounds import prediction_rms_bound
