@@ -45,15 +45,19 @@ class Contact:
 
 @dataclass(frozen=True)
 class Clearance:
-    """Closest approach over a sequence of poses and moves: ``distance`` m (surface to surface, or to the
-    mounting plane), ``slack`` m beyond what is required, the pair ``what``, and ``move`` the index of the
-    move it happens on (0 = from the first pose to the second) with its configuration ``q``."""
+    """Over a sequence of poses and the moves between them: the closest approach ``distance`` (m, surface to
+    surface, or to the mounting plane) of the pair ``what`` on move ``move`` (0 = from the first pose to the
+    second) at configuration ``q``; and the least ``slack`` (m, distance beyond what is required; < 0: too
+    close) of the pair ``slack_what`` on move ``slack_move``, ``slack_distance`` m apart."""
 
     distance: float
-    slack: float
     what: str
     move: int
     q: Array
+    slack: float
+    slack_what: str
+    slack_move: int
+    slack_distance: float
 
 
 def cell_from_config(robot: RobotModel, site: SiteConfig) -> Cell | None:
@@ -155,5 +159,6 @@ def clearance_of(cell: Cell, poses: Array, step: float = STEP) -> Clearance:
     """Closest approach over the moves between consecutive rows of ``poses`` (p, n), every sample checked."""
     q, owner = moves_samples(cell, np.asarray(poses, dtype=float), step)
     app = approach(cell, q)
-    i = int(np.argmin(app.slack))
-    return Clearance(float(app.distance[i]), float(app.slack[i]), app.label(i), int(owner[i]), q[i])
+    i, k = int(np.argmin(app.closest)), int(np.argmin(app.slack))
+    return Clearance(float(app.closest[i]), app.labels[int(app.closest_what[i])], int(owner[i]), q[i],
+                     float(app.slack[k]), app.label(k), int(owner[k]), float(app.distance[k]))

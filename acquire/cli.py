@@ -350,9 +350,10 @@ def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clear
                 "checked against the cell and the arm itself"]
     if clearance.slack >= 0:
         return []
-    step = plan.steps[clearance.move]
-    return [f"the move to step {step.index} ({step.kind}) comes too close: {clearance.what} "
-            f"{clearance.distance * 1e3:.1f} mm apart (needs {(clearance.distance - clearance.slack) * 1e3:.0f} mm)"]
+    step = plan.steps[clearance.slack_move]
+    needs = clearance.slack_distance - clearance.slack
+    return [f"the move to step {step.index} ({step.kind}) comes too close: {clearance.slack_what} "
+            f"{clearance.slack_distance * 1e3:.1f} mm apart (needs {needs * 1e3:.0f} mm)"]
 
 
 def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site: SiteConfig) -> int:

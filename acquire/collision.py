@@ -80,14 +80,16 @@ class Cell:
 
 @dataclass(frozen=True)
 class Approach:
-    """Closest approach per configuration (m,): ``slack`` (m) = distance minus what it must be (< 0: too
-    close), ``distance`` (m) surface to surface (to the plane for the mounting surface), ``what`` index into
-    ``labels`` ("wrist 3 vs mounting surface") naming the pair."""
+    """Per configuration (m,): ``slack`` (m), the least distance minus what it must be (< 0: too close), of the
+    pair ``what`` (index into ``labels``, e.g. "wrist 3 vs mounting surface") at ``distance`` (m, surface to
+    surface, or to the plane); ``closest`` (m), the least distance of any pair, which is ``closest_what``."""
 
     slack: Array
     distance: Array
     what: NDArray[np.int64]
     labels: tuple[str, ...]
+    closest: Array
+    closest_what: NDArray[np.int64]
 
     def label(self, i: int) -> str:
         return self.labels[int(self.what[i])]
@@ -189,12 +191,12 @@ def approach(cell: Cell, q: Array) -> Approach:
         slacks.append(dists[-1] - cell.margin)
         labels += [f"{names[k]} vs {cyl}" for k in range(len(names)) for cyl in cell.cyl_names]
     if not slacks:
-        inf = np.full(len(a), np.inf)
-        return Approach(inf, inf, np.zeros(len(a), dtype=np.int64), ("nothing",))
+        inf, zero = np.full(len(a), np.inf), np.zeros(len(a), dtype=np.int64)
+        return Approach(inf, inf, zero, ("nothing",), inf, zero)
     slack, dist = np.hstack(slacks), np.hstack(dists)
-    what = np.argmin(slack, axis=1)
+    what, near = np.argmin(slack, axis=1), np.argmin(dist, axis=1)
     rows = np.arange(len(a))
-    return Approach(slack[rows, what], dist[rows, what], what, tuple(labels))
+    return Approach(slack[rows, what], dist[rows, what], what, tuple(labels), dist[rows, near], near)
 
 
 def path_samples(cell: Cell, q_from: Array, q_to: Array, step: float = STEP) -> Array:

@@ -160,13 +160,20 @@ def plan_json(plan: Plan, clearance: Clearance | None) -> dict[str, Any]:
 
 
 def format_clearance(clearance: Clearance | None, plan: Plan, site: SiteConfig) -> str:
-    """The dry-run's clearance line: the closest approach of the plan, between what, on which move."""
+    """The dry-run's clearance lines: the plan's closest approach (between what, on which move) and its least
+    margin beyond what the cell requires."""
     if clearance is None:
         return ("clearance: NOT CHECKED: the robot model has no collision geometry; only the joint limits are "
                 "checked (make sure the cell is clear)")
-    step = plan.steps[clearance.move] if plan.steps else None
-    where = f"on the move to step {step.index} ({step.kind})" if step is not None else "at home"
-    return (f"clearance: closest approach {clearance.distance * 1e3:.1f} mm, {clearance.what}, {where}; required "
-            f"{site.cell_margin * 1e3:g} mm between bodies and {site.mounting_clearance * 1e3:g} mm above the "
-            f"mounting surface; every step and every move checked, no body point travelling more than "
-            f"{STEP * 1e3:g} mm between checks")
+
+    def where(move: int) -> str:
+        step = plan.steps[move] if plan.steps else None
+        return f"on the move to step {step.index} ({step.kind})" if step is not None else "at home"
+
+    return (f"clearance: closest approach {clearance.distance * 1e3:.1f} mm, {clearance.what}, "
+            f"{where(clearance.move)}\n"
+            f"           least margin beyond the required {site.cell_margin * 1e3:g} mm between bodies and "
+            f"{site.mounting_clearance * 1e3:g} mm above the mounting surface: {clearance.slack * 1e3:.1f} mm, "
+            f"{clearance.slack_what}, {where(clearance.slack_move)}\n"
+            f"           (every step and every move checked, no body point travelling more than {STEP * 1e3:g} mm "
+            "between checks)")
