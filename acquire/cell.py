@@ -35,7 +35,8 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Contact:
-    """A configuration ``q`` that comes too close: the pair ``what`` at ``distance`` m (``required`` m)."""
+    """A configuration ``q`` that comes too close: the pair ``what`` at ``distance`` m where a checked sample
+    needs ``required`` m (the cell's margin or clearance plus the guard for the motion between samples)."""
 
     q: Array
     what: str
@@ -47,8 +48,9 @@ class Contact:
 class Clearance:
     """Over a sequence of poses and the moves between them: the closest approach ``distance`` (m, surface to
     surface, or to the mounting plane) of the pair ``what`` on move ``move`` (0 = from the first pose to the
-    second) at configuration ``q``; and the least ``slack`` (m, distance beyond what is required; < 0: too
-    close) of the pair ``slack_what`` on move ``slack_move``, ``slack_distance`` m apart."""
+    second) at configuration ``q``; and the least ``slack`` (m, distance beyond the cell's margin or clearance
+    at a checked sample; below ``guard`` the plan may not run) of the pair ``slack_what`` on move
+    ``slack_move``, ``slack_distance`` m apart."""
 
     distance: float
     what: str
@@ -58,6 +60,7 @@ class Clearance:
     slack_what: str
     slack_move: int
     slack_distance: float
+    guard: float = STEP
 
 
 def cell_from_config(robot: RobotModel, site: SiteConfig) -> Cell | None:
@@ -102,11 +105,11 @@ def first_contact(cell: Cell, q_from: Array, q_to: Array, step: float = STEP) ->
 
 def _first_bad(cell: Cell, q: Array) -> Contact | None:
     app = approach(cell, q)
-    bad = np.flatnonzero(app.slack < 0)
+    bad = np.flatnonzero(app.slack < cell.guard)
     if not len(bad):
         return None
     i = int(bad[0])
-    return Contact(q[i], app.label(i), float(app.distance[i]), float(app.distance[i] - app.slack[i]))
+    return Contact(q[i], app.label(i), float(app.distance[i]), float(app.distance[i] - app.slack[i] + cell.guard))
 
 
 def free_interval(cell: Cell, home: Array, joint: int, lo: float, hi: float,
@@ -127,10 +130,11 @@ def free_interval(cell: Cell, home: Array, joint: int, lo: float, hi: float,
         q = np.tile(np.asarray(home, dtype=float), (len(values), 1))
         q[:, joint] = values
         app = approach(cell, q)
-        bad = np.flatnonzero(app.slack < 0)
+        bad = np.flatnonzero(app.slack < cell.guard)
         if len(bad):
             k = int(bad[0])
-            found.append(Contact(q[k], app.label(k), float(app.distance[k]), float(app.distance[k] - app.slack[k])))
+            required = float(app.distance[k] - app.slack[k] + cell.guard)
+            found.append(Contact(q[k], app.label(k), float(app.distance[k]), required))
             ends.append(float(values[max(k - 1, 0)]))
         else:
             ends.append(float(end))
@@ -161,4 +165,4 @@ def clearance_of(cell: Cell, poses: Array, step: float = STEP) -> Clearance:
     app = approach(cell, q)
     i, k = int(np.argmin(app.closest)), int(np.argmin(app.slack))
     return Clearance(float(app.closest[i]), app.labels[int(app.closest_what[i])], int(owner[i]), q[i],
-                     float(app.slack[k]), app.label(k), int(owner[k]), float(app.distance[k]))
+                     float(app.slack[k]), app.label(k), int(owner[k]), float(app.distance[k]), cell.guard)

@@ -348,12 +348,13 @@ def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clear
             return []
         return [f"{robot.name} has no collision geometry ('collision:' in {robot.path.name}): the plan cannot be "
                 "checked against the cell and the arm itself"]
-    if clearance.slack >= 0:
+    if clearance.slack >= clearance.guard:
         return []
     step = plan.steps[clearance.slack_move]
-    needs = clearance.slack_distance - clearance.slack
+    needs = clearance.slack_distance - clearance.slack + clearance.guard
     return [f"the move to step {step.index} ({step.kind}) comes too close: {clearance.slack_what} "
-            f"{clearance.slack_distance * 1e3:.1f} mm apart (needs {needs * 1e3:.0f} mm)"]
+            f"{clearance.slack_distance * 1e3:.1f} mm apart at a checked sample (needs {needs * 1e3:.0f} mm with "
+            f"{clearance.guard * 1e3:g} mm for the motion between samples)"]
 
 
 def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site: SiteConfig) -> int:

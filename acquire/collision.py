@@ -16,8 +16,10 @@ after joint i, as :func:`identify.kinematics.frames_from_joints` numbers them), 
   housings of one joint, which overlap by construction) are not checked against each other.
 
 Motion is joint-space linear interpolation (the driver's ``moveJ``), sampled so that no point of any body
-travels more than ``step`` (m, default 1 cm) between samples (:func:`path_samples`): the distances hold at
-every sample, and between two samples no distance can drop by more than ``step``.
+travels more than ``step`` (m, default 1 cm) between samples (:func:`path_samples`). Between two samples every
+point stays within ``step / 2`` of where it is at the nearer one, so no distance can be more than ``step``
+below its value there: the planner asks every sample for ``guard`` = ``step`` beyond the margins, and the
+margins then hold all along the motion.
 """
 
 from __future__ import annotations
@@ -55,7 +57,8 @@ class Cell:
 
     ``model`` gives the DH frames (its base and tool are not used); ``pairs`` (P, 2) the body pairs checked
     against each other; ``floor_from`` the first frame whose bodies are checked against the mounting surface;
-    ``reach`` (n,) m: the most any body point moves per rad (revolute) or m (prismatic)
+    ``guard`` m asked for beyond the margins at every checked sample (the most a distance can drop between
+    samples); ``reach`` (n,) m: the most any body point moves per rad (revolute) or m (prismatic)
     of each joint, for sampling moves; ``boxes_lo``, ``boxes_hi`` (B, 3); cylinders as capsules
     ``cyl_a``, ``cyl_b`` (C, 3), ``cyl_radius`` (C,); names of each for messages.
     """
@@ -76,6 +79,7 @@ class Cell:
     cyl_names: tuple[str, ...]
     reach: Array
     floor_from: int = 1
+    guard: float = STEP
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acquire.cell import Clearance, Contact, cell_from_config, clearance_of, contact_at, first_contact, free_interval
-from acquire.collision import Cell, approach, moves_samples
+from acquire.collision import STEP, Cell, approach, moves_samples
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
@@ -262,7 +262,8 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
 
 
 def _contact_text(contact: Contact) -> str:
-    return (f"{contact.what} {contact.distance * 1e3:.0f} mm apart (needs {contact.required * 1e3:.0f} mm)")
+    return (f"{contact.what} {contact.distance * 1e3:.1f} mm apart (needs {contact.required * 1e3:.0f} mm with "
+            f"{STEP * 1e3:g} mm for the motion between checks)")
 
 
 def _safe_sweep(cell: Cell, robot: RobotModel, site: SiteConfig, j: int, values: Array, requested: bool,
@@ -296,7 +297,7 @@ def _via_home(cell: Cell, ordered: list[tuple[str, int, int, Array, str]], home:
     interval, free poses chosen with a clear path from home)."""
     q = np.array([home, *(p[3] for p in ordered)])
     samples, owner = moves_samples(cell, q)
-    bad = set(np.unique(owner[approach(cell, samples).slack < 0]).tolist())
+    bad = set(np.unique(owner[approach(cell, samples).slack < cell.guard]).tolist())
     out: list[tuple[str, int, int, Array, str]] = []
     for i, pose in enumerate(ordered):
         if i in bad:
@@ -329,7 +330,7 @@ def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: A
     pool = random_poses(box, CANDIDATES, rng, FREE_MARGIN)
     pool = pool[np.all(axis_distances_many(model, pool) >= site.min_axis_distance, axis=1)]
     if cell is not None:
-        pool = pool[approach(cell, pool).slack >= 0]
+        pool = pool[approach(cell, pool).slack >= cell.guard]
     if len(pool) < wanted + 1:
         raise PlanError(f"only {len(pool)} candidate free poses keep the TP off every axis and clear of the cell; "
                         "lower plan.free_poses / plan.check_poses, plan.min_axis_distance or cell.margin")

@@ -176,4 +176,5 @@ def format_clearance(clearance: Clearance | None, plan: Plan, site: SiteConfig) 
             f"{site.mounting_clearance * 1e3:g} mm above the mounting surface: {clearance.slack * 1e3:.1f} mm, "
             f"{clearance.slack_what}, {where(clearance.slack_move)}\n"
             f"           (every step and every move checked, no body point travelling more than {STEP * 1e3:g} mm "
-            "between checks)")
+            f"between checks; each check keeps {clearance.guard * 1e3:g} mm beyond the required, so they hold "
+            "between checks too)")

@@ -5,9 +5,10 @@ The plans are checked here by an independent point sampling of the capsules: poi
 capsule's axis, their distances to the plane, to the boxes and to the other capsule's axis (a projection),
 never the planner's segment distance functions. A sampled distance is never below the true one and at most
 ``H / 2`` above it.
-Tolerances: at the plan's steps the planner guarantees the full margin, so the sampled distance must reach it
-exactly; along a move the planner checks samples at most ``STEP`` (1 cm) of body travel apart, so between them a
-distance can drop by at most ``STEP``: the test's own samples along the moves must keep ``margin - STEP``.
+Tolerances: the planner checks samples of every move at most ``STEP`` (1 cm) of body travel apart and asks each
+for ``STEP`` beyond the margins, because between two samples a distance can drop by at most ``STEP``. So at the
+plan's steps (checked samples) the sampled distance must reach the margin plus ``STEP``, and anywhere along the
+moves (the test's own samples) the margin itself; neither needs a tolerance, the sampling only overestimates.
 """
 
 from __future__ import annotations
@@ -124,17 +125,17 @@ def path(plan: Plan, robot: RobotModel, per_rad: float = 25.0, per_m: float = 10
 
 
 def assert_safe(plan: Plan, robot: RobotModel, site: SiteConfig, per_rad: float = 25.0) -> float:
-    """Every step clear by the full margin, every sample of every move by the margin less ``STEP``; returns
-    the least slack along the moves."""
+    """Every step clear by the margin plus ``STEP``, every sample of every move by the margin; returns the least
+    slack along the moves."""
     model = PointModel(robot, site)
     steps = np.array([s.q for s in plan.steps])
     slack, what = model.slack(steps)
-    bad = np.flatnonzero(slack < 0)
+    bad = np.flatnonzero(slack < STEP)
     assert not len(bad), f"{robot.name}: step {plan.steps[bad[0]].index}: {what[bad[0]]} {slack[bad[0]] * 1e3:.1f} mm"
     q = path(plan, robot, per_rad)
     slack, what = model.slack(q)
     k = int(np.argmin(slack))
-    assert slack[k] >= -STEP, f"{robot.name}: {what[k]} {slack[k] * 1e3:.1f} mm short at q = {q[k]}"
+    assert slack[k] >= 0, f"{robot.name}: {what[k]} {slack[k] * 1e3:.1f} mm short at q = {q[k]}"
     return float(slack[k])
 
 
@@ -169,7 +170,7 @@ def test_default_plan_of_every_bundled_robot_is_clear(name: str) -> None:
     plan = build_plan(robot, SITE)
     assert_safe(plan, robot, SITE)
     clearance = plan_clearance(plan, robot, SITE)
-    assert clearance is not None and clearance.slack >= 0
+    assert clearance is not None and clearance.slack >= STEP
 
 
 def test_the_issue_plan_is_now_clipped() -> None:
@@ -226,8 +227,9 @@ def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
                 q = robot.home.copy()
                 q[j - 1] = math.radians(float(value[:-1])) if value.endswith("°") else float(value.split()[0]) / 1e3
                 slack, _ = PointModel(robot, site).slack(q[None])
-                # the contact is real: within the point sampling and the printed rounding (0.1°, 0.1 mm)
-                assert slack[0] < H + 0.0035, f"{robot.name}: {text}: slack {slack[0]:.4f}"
+                # the contact is real (closer than the margin plus the guard between checks), within the point
+                # sampling and the printed rounding (0.1°: up to 3.5 mm at the end of the longest arm)
+                assert slack[0] < STEP + H / 2 + 0.0035, f"{robot.name}: {text}: slack {slack[0]:.4f}"
             continue
         accepted += 1
         assert_safe(plan, robot, site, per_rad=12.0)
