@@ -316,6 +316,9 @@ def run(args: argparse.Namespace) -> int:
     _confirm(robot_spec, args, plan)
     robot, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
     try:
+        first = 0 if session is None else session.next_index()
+        if first is not None:
+            _check_start(robot, plan, robot_model, site, first)
         if session is None:
             path = args.session or Path("sessions") / f"{robot_model.name}-{time.strftime('%Y%m%d-%H%M%S')}.session"
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -357,6 +360,26 @@ def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clear
             f"{clearance.guard * 1e3:g} mm for the motion between samples)"]
 
 
+def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int) -> None:
+    """The plan is checked from home; the arm may stand elsewhere (jogged, or stopped mid-move before a
+    resume). UsageError unless the move from where it stands to step ``index`` is clear too."""
+    import numpy as np
+
+    from acquire.cell import cell_from_config, first_contact
+
+    cell = cell_from_config(robot_model, site)
+    if cell is None or not plan.steps:
+        return
+    here = np.asarray(robot.read_joints(), dtype=float)
+    contact = first_contact(cell, here, np.asarray(plan.steps[index].q))
+    if contact is not None:
+        home = ", ".join(f"{np.degrees(v):.1f}" if t == "R" else f"{v:.3f}"
+                         for v, t in zip(plan.home, plan.joint_types, strict=True))
+        raise UsageError(f"the move from the arm's current pose to step {index} would come too close: {contact.what} "
+                         f"{contact.distance * 1e3:.1f} mm apart (needs {contact.required * 1e3:.0f} mm); jog the "
+                         f"arm to home ({home}; deg / m) first")
+
+
 def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site: SiteConfig) -> int:
     """``--tracker none``: move through the plan at the reduced speed after confirmation, measuring nothing."""
     from acquire.rehearsal import rehearse
@@ -371,6 +394,11 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
         rig = SimulatedRig.from_spec(robot_spec, None, WallClock() if args.realtime else VirtualClock())
     robot = open_robot(robot_spec, rig=rig, site=site)
     robot.connect(site.timeouts.connect)
+    try:
+        _check_start(robot, plan, load_robot(robot_spec.model), site, 0)
+    except UsageError:
+        robot.close()
+        raise
 
     def show(step, done: int, total: int) -> None:
         what = f"joint {step.joint} sweep" if step.kind == "sweep" else step.kind

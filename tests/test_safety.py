@@ -280,3 +280,26 @@ def test_dry_run_shows_the_clearance_and_json_is_the_design_contract(capsys) -> 
     clearance = plan_clearance(plan, load_robot("ur5e"), SITE)
     assert doc["clearance_m"] == pytest.approx(clearance.distance)
     assert f"closest approach {clearance.distance * 1e3:.1f} mm, {clearance.what}" in line
+
+
+def test_a_run_starts_only_when_the_move_from_where_the_arm_stands_is_clear() -> None:
+    """The plan is checked from home; an arm left elsewhere (jogged, or stopped mid-move before a resume) must
+    reach the first step clear of the cell too, or nothing moves."""
+    from acquire.cli import UsageError, _check_start
+
+    ur = load_robot("ur5e")
+    plan = build_plan(ur, replace(SITE, free_poses=0, check_poses=0, steps_per_sweep=4))
+
+    class Arm:
+        def __init__(self, q) -> None:
+            self.q = q
+
+        def read_joints(self):
+            return tuple(self.q)
+
+    _check_start(Arm(ur.home), plan, ur, SITE, 0)  # at home: fine
+    folded = ur.home.copy()
+    folded[1] = 0.3  # shoulder tipped over: the arm is in the table
+    with pytest.raises(UsageError, match=r"to step 0 would come too close: .* mounting surface .* jog the arm to "
+                                         r"home \(0\.0, -90\.0, 90\.0, -90\.0, -90\.0, 0\.0; deg / m\) first"):
+        _check_start(Arm(folded), plan, ur, SITE, 0)
