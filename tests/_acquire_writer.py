@@ -36,7 +36,7 @@ def _child(argv: list[str]) -> int:
         return open_robot(*args, **kwargs)
 
     registry.open_robot = opened
-    cli._identify_session = lambda *args, **kwargs: {}
+    cli._identify_session = lambda *args, **kwargs: {"verdict": {"status": "pass"}}  # identification is not under test
     cli.predicted_accuracy = lambda *args, **kwargs: None
     cli.format_plan = lambda *args, **kwargs: "(plan)"
     cli._progress_printer = lambda quiet: (lambda p: _say(f"ack {p.step.index}"))
