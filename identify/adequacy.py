@@ -25,6 +25,8 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
+from identify.linalg import thin_svd
+
 Array = NDArray[np.float64]
 
 ALARM = 1e-3  # false-alarm rate of the model-error tests
@@ -69,7 +71,7 @@ def assess(res_w: Array, jac_red: Array, unknown: NDArray[np.int64], runs: list[
     s2_res = float(np.sum(res_w**2)) / dof
     flat = jac_red.reshape(-1, p)
     scale = np.maximum(np.linalg.norm(flat, axis=0), 1e-300)
-    u, s, _ = np.linalg.svd(flat / scale, full_matrices=False)
+    u, s, _ = thin_svd(flat / scale)
     u = u[:, s > 1e-12 * s[0]].reshape(m, 3, -1)
     pairs = [(r[:-1], r[1:]) for r in runs if len(r) > 1]
     s2_diff = None

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from identify.linalg import thin_svd
 from identify.refine import NOISE_FLOOR, OUTLIER_PROBABILITY, inlier_mask
 
 Array = NDArray[np.float64]
@@ -32,7 +33,7 @@ def leverages(jac_blocks: Array, unknown: NDArray[np.int64]) -> Array:
     m, _, p = jac_blocks.shape
     j = jac_blocks.reshape(-1, p)
     scale = np.maximum(np.linalg.norm(j, axis=0), 1e-300)
-    u, s, _ = np.linalg.svd(j / scale, full_matrices=False)
+    u, s, _ = thin_svd(j / scale)
     u = u[:, s > 1e-12 * s[0]].reshape(m, 3, -1)
     return (np.einsum("kir,kir->k", u, u) + (unknown >= 0)) / 3.0
 

@@ -21,6 +21,7 @@ from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, geometric_step, 
 from identify.dh_output import DHOutput, dh_output, near_parallel
 from identify.estimate import LinesFit, along_arc, fit, nominal_start, place_nominal
 from identify.kinematics import DHModel, frames_from_joints, points_from_joints
+from identify.linalg import thin_svd
 from identify.measurements import InputError, Measurements, prepared_joints, validate
 from identify.outliers import sweep_neighbours
 from identify.poe import AxisLines, LineProblem, points_from_lines
@@ -163,7 +164,7 @@ def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Ar
         jac[rows] -= g[:, :, None] * coef[:, None, :]
     flat = jac.reshape(-1, jac.shape[2])
     scale = np.maximum(np.linalg.norm(flat, axis=0), 1e-300)
-    _, s, vt = np.linalg.svd(flat / scale, full_matrices=False)
+    _, s, vt = thin_svd(flat / scale, left=False)
     return (vt.T / np.maximum(s, 1e-300) ** 2) @ vt / np.outer(scale, scale)
 
 
@@ -258,7 +259,7 @@ def identify(
     adequacy = assess(res_w, jac_blocks, unknown[inl], runs, unit, declared)
     jac = jac_blocks.reshape(-1, lines.n_parameters)
     scale = np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
-    _, s, vt = np.linalg.svd(jac / scale, full_matrices=False)
+    _, s, vt = thin_svd(jac / scale, left=False)
     condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
     inv = (vt.T / np.maximum(s, 1e-300) ** 2) @ vt / np.outer(scale, scale)
     variance = max(adequacy.residual, declared or 0.0) ** 2 / unit**2 * adequacy.inflation

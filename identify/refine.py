@@ -22,6 +22,7 @@ from scipy.stats import f as f_dist
 
 from identify.geometry import cross, skew
 from identify.kinematics import DH_NAMES, DHModel, frames_from_joints
+from identify.linalg import thin_svd, triangle
 
 Array = NDArray[np.float64]
 
@@ -129,6 +130,8 @@ def select_free(model: DHModel, q: Array, parallel: Collection[int], tol: float 
     _, jac = full_jacobian(replace(model, alpha=ideal), q)
     columns = jac.reshape(-1, jac.shape[2])
     columns = columns / np.maximum(np.linalg.norm(columns, axis=0), 1e-300)
+    if columns.shape[0] > columns.shape[1]:
+        columns = triangle(columns)  # same geometry of the columns in p dimensions instead of 3m
     free = np.zeros(columns.shape[1], dtype=bool)
     basis = np.zeros((columns.shape[0], 0))
     for index in _priority(model.joint_types):
@@ -273,11 +276,11 @@ def refine(
     dof = max(len(res_w) - int(free.sum()), 1)
     cost = float(res_w @ res_w)
     scale2 = cost / dof
-    _, s, vt = np.linalg.svd(jac, full_matrices=False)
+    _, s, vt = thin_svd(jac, left=False)
     cov = (vt.T / s**2) @ vt
     covariance = cov * (scale2 if sigma is None else 1.0)
     col_norm = np.linalg.norm(jac, axis=0)
-    s_scaled = np.linalg.svd(jac / col_norm, compute_uv=False)
+    _, s_scaled, _ = thin_svd(jac / col_norm, left=False)
     _, predicted = full_jacobian_points(model, q)
     residuals = points - predicted
     noise = float(np.sqrt(np.sum((residuals[inliers]) ** 2) / dof))
