@@ -56,7 +56,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="acquire", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:8]))
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:9]))
     p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e (mock:ur5e; on --resume: the session's,"
                    " whose address may change)")
     p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock (mock; on --resume:"
