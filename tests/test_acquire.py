@@ -229,6 +229,7 @@ def test_ctrl_c_stops_motion_closes_the_session_and_prints_the_resume_command(tm
         assert session.outcome() == "aborted"
         done = len(session.recorded_indices())
         assert 1 <= done < len(session.plan.steps)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.session"]  # one file, no -journal/-wal/-shm
 
 
 def test_a_real_robot_never_moves_without_confirmation(tmp_path, monkeypatch, capsys):
