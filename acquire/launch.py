@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from acquire.session_lock import Locked, busy_message, hold
+from acquire.session_lock import Locked, busy_message, drop_held, hold
 
 
 def resume_target(argv: list[str]) -> Path | None:
@@ -40,9 +40,12 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         except OSError:
             pass  # a missing or unreadable file: the full command says so in its own words
-    from acquire.cli import main as full_main
+    try:
+        from acquire.cli import main as full_main
 
-    return full_main(argv)
+        return full_main(argv)
+    finally:
+        drop_held()  # a lock the command never claimed (it stopped before opening the session)
 
 
 if __name__ == "__main__":

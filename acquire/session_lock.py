@@ -38,6 +38,12 @@ def hold(path: Path) -> None:
     _held[(st.st_dev, st.st_ino)] = fd
 
 
+def drop_held() -> None:
+    """Release every lock taken by :func:`hold` and not claimed (the command ended before opening its session)."""
+    while _held:
+        unlock(_held.popitem()[1])
+
+
 def write_lock(path: Path) -> int:
     """An open descriptor of ``path`` holding its exclusive lock, taken at once or not at all: Locked if another
     process holds it, OSError if the file cannot be opened for writing. Release with :func:`unlock`."""

@@ -416,6 +416,7 @@ def test_json_output(tmp_path, session, capsys):
 def test_out_writes_the_result_yaml(tmp_path, session, capsys):
     meas = session[1]
     out_path = tmp_path / "results" / "result.yaml"
+    out_path.parent.mkdir()  # a missing folder is an error (issue 13), never made
     code, out, err = invoke([write(tmp_path, format_measurements(meas)), "--out", out_path], capsys)
     assert code == 0, err
     assert f"result written to {out_path}" in out

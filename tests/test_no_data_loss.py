@@ -250,6 +250,26 @@ def test_a_second_writer_is_refused_naming_the_holder_and_readers_still_work(tmp
         assert again.recorded_indices() == {0, 1} and len(again.runs()) == 1
 
 
+def test_the_entry_point_refuses_a_second_writer_before_the_heavy_imports(tmp_path: Path, capsys) -> None:
+    from acquire.launch import main as launch_main
+    from acquire.launch import resume_target
+
+    assert resume_target(["--resume", "a.session", "--quiet"]) == Path("a.session")
+    assert resume_target(["--resume=b.session"]) == Path("b.session")
+    assert resume_target(["--resume", "a.session", "--dry-run"]) is None
+    assert resume_target(["export", "a.session", "--csv", "x.csv"]) is None
+    path = tmp_path / "l.session"
+    with Session.create(path, small_plan(), CONFIG, ROBOT, TRACKER):
+        assert launch_main(["--resume", str(path)]) == 2
+        assert f"is being written by process {os.getpid()}" in _one_line(capsys.readouterr().err)
+    assert launch_main(["--resume", str(path), "--log", str(path)]) == 2  # refused by the full command...
+    assert "a log is a file of its own" in _one_line(capsys.readouterr().err)
+    with Session.open(path, write=True):  # ... and the lock it took first was released
+        pass
+    assert launch_main(["--resume", str(tmp_path / "none.session")]) == 2
+    assert "no such session file" in _one_line(capsys.readouterr().err)
+
+
 # --- resume does what the operator means ---------------------------------------------------------------------
 
 
