@@ -303,3 +303,43 @@ def test_a_run_starts_only_when_the_move_from_where_the_arm_stands_is_clear() ->
     with pytest.raises(UsageError, match=r"to step 0 would come too close: .* mounting surface .* jog the arm to "
                                          r"home \(0\.0, -90\.0, 90\.0, -90\.0, -90\.0, 0\.0; deg / m\) first"):
         _check_start(Arm(folded), plan, ur, SITE, 0)
+
+
+def test_a_camera_cell_leaves_out_the_steps_it_cannot_see(tmp_path) -> None:
+    """A camera 1.5 m in front of the target at home (given as the result of an earlier session with it):
+    sweep steps and free poses where the target faces away or leaves the view are left out, with the reason,
+    and every step kept is seen (checked here with the forward model and plain angles)."""
+    import yaml
+
+    from config.site import load_site
+
+    ur = load_robot("ur5e")
+    frames = frames_from_joints(replace(ur.nominal, tool=np.array(SITE.tp_guess)), ur.home[None])[0]
+    tp = points_from_joints(replace(ur.nominal, tool=np.array(SITE.tp_guess)), ur.home[None])[0]
+    normal_flange = np.array([0.0, 1.0, 0.0])  # the print faces along the flange's y: +x of the base at home
+    assert np.allclose(frames[-1, :3, :3] @ normal_flange, [1, 0, 0])
+    camera = np.eye(4)
+    camera[:3, :3] = np.column_stack([[0, 1, 0], [0, 0, -1], [-1, 0, 0]])  # looking along -x
+    camera[:3, 3] = tp + np.array([1.5, 0.0, 0.0])
+    base = np.linalg.inv(camera)  # a result's base: camera frame <- robot base
+    (tmp_path / "first.result.yaml").write_text(yaml.safe_dump({"base": base.tolist()}))
+    (tmp_path / "site.yaml").write_text("schema: 1\ncell: {camera_pose: first.result.yaml, target_normal: [0, 1, 0], "
+                                        "camera_half_fov: 0.4, camera_max_tilt: 1.0}\n")
+    site = load_site(tmp_path / "site.yaml")
+    np.testing.assert_allclose(np.array(site.camera_pose), camera, atol=1e-12)
+    plan = build_plan(ur, site)
+    assert any(n.startswith("joint 1 sweep: ") and "left out for the camera" in n
+               and "the target faces away from the camera" in n for n in plan.notes)
+    joint1 = [s for s in plan.steps if s.kind == "sweep" and s.joint == 1]
+    assert 3 <= len(joint1) < SITE.steps_per_sweep
+    q = np.array([s.q for s in plan.steps if s.kind != "home"])
+    model = replace(ur.nominal, tool=np.array(SITE.tp_guess))
+    f = frames_from_joints(model, q)[:, -1]
+    centre = points_from_joints(model, q)
+    sight = centre - camera[:3, 3]
+    sight /= np.linalg.norm(sight, axis=1, keepdims=True)
+    assert np.all(np.degrees(np.arccos(sight @ camera[:3, 2])) <= np.degrees(0.4) + 1e-9)
+    facing = np.einsum("mi,mi->m", f[:, :3, :3] @ normal_flange, -sight)
+    assert np.all(np.degrees(np.arccos(np.clip(facing, -1, 1))) <= np.degrees(1.0) + 1e-9)
+    assert sum(s.kind == "free" for s in plan.steps) == SITE.free_poses + SITE.check_poses
+    assert_safe(plan, ur, site)
