@@ -20,6 +20,7 @@ from acquire.collision import (
     Bodies,
     Cell,
     approach,
+    body_segments,
     checked_pairs,
     fixed_height_frames,
     moves_samples,
@@ -166,3 +167,15 @@ def clearance_of(cell: Cell, poses: Array, step: float = STEP) -> Clearance:
     i, k = int(np.argmin(app.closest)), int(np.argmin(app.slack))
     return Clearance(float(app.closest[i]), app.labels[int(app.closest_what[i])], int(owner[i]), q[i],
                      float(app.slack[k]), app.label(k), int(owner[k]), float(app.distance[k]), cell.guard)
+
+
+def envelope(cell: Cell, poses: Array, step: float = 0.05, limit: int = 4000) -> Array:
+    """Points (k, 3), base frame, m, that the arm's bodies pass through moving along ``poses`` (p, n): the ends
+    and middles of every capsule axis at samples no more than ``step`` of travel apart, at most ``limit``
+    of them (evenly thinned). For showing the space a plan sweeps, not for checking it."""
+    q, _ = moves_samples(cell, np.asarray(poses, dtype=float), step)
+    a, b = body_segments(cell, q)
+    points = np.concatenate([a, b, 0.5 * (a + b)], axis=1).reshape(-1, 3)
+    if len(points) > limit:
+        points = points[np.linspace(0, len(points) - 1, limit).astype(int)]
+    return points

@@ -262,6 +262,24 @@ def _hms(seconds: float) -> str:
     return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
 
 
+def _cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:
+    """The mounting surface and the plan's swept envelope (DH frame 0) for the report's 3D view."""
+    import numpy as np
+
+    from acquire.cell import cell_from_config, envelope
+
+    try:
+        site = SiteConfig.from_dict(session.header["config"]["site"])
+    except (KeyError, TypeError, ConfigError):
+        return None
+    cell = cell_from_config(robot, site)
+    if cell is None:
+        return None
+    plan = session.plan
+    poses = np.array([plan.home, *(s.q for s in plan.steps)])
+    return {"normal": cell.normal, "offset": cell.offset, "envelope": envelope(cell, poses)}
+
+
 def _identify_session(session: Session, session_path: Path, robot: RobotModel) -> dict[str, Any]:
     meas = session.to_measurements()
     ident = identify(meas, robot.nominal)
@@ -283,7 +301,8 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
         return doc
     report = session_path.with_suffix(".report.html")
     write_output(report, report_html(ident, meas, robot.nominal, robot.name, session=session, source=str(session_path),
-                                     reference=reference, reference_note=note or None), force=True)
+                                     reference=reference, reference_note=note or None,
+                                     cell=_cell_view(session, robot)), force=True)
     print(f"report written to {report}")
     return doc
 

@@ -106,7 +106,8 @@ def segment_distances(p0: Array, p1: Array, q0: Array, q1: Array) -> Array:
 
     Closest points by minimising over both segment parameters in closed form, clamped to [0, 1]; a segment
     whose ends coincide is a point. Computed per coordinate (x, y, z planes), which numpy runs fastest."""
-    p0, p1, q0, q1 = (np.moveaxis(np.asarray(v, dtype=float), -1, 0) for v in (p0, p1, q0, q1))
+    p0, p1, q0, q1 = (np.moveaxis(v, -1, 0) for v in np.broadcast_arrays(*(np.asarray(v, dtype=float)
+                                                                           for v in (p0, p1, q0, q1))))
     d1, d2, r = p1 - p0, q1 - q0, p0 - q0
 
     def dot(u: Array, v: Array) -> Array:

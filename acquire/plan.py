@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from acquire.camera_view import visible
 from acquire.cell import Clearance, Contact, cell_from_config, clearance_of, contact_at, first_contact, free_interval
 from acquire.collision import STEP, Cell, approach, moves_samples
 from config.robots import RobotModel
@@ -84,6 +85,7 @@ class Plan:
 Array = NDArray[np.float64]
 
 FREE_MARGIN = 0.1  # free poses stay this share of each joint's range inside it
+CAMERA_SPAN = 0.8  # rad / m: with a camera, free pose candidates are drawn within home ± this
 CANDIDATES = 1500  # size of the seeded pool free poses are chosen from
 EVAL_POSES = 200  # random held-out poses the design and the accuracy estimate average over
 PARTIAL_ARC = math.radians(20.0)  # half-width of the "±20° sweeps" of the comparison
@@ -227,6 +229,7 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
             near = sorted({int(i) + 1 for i in np.flatnonzero(np.any(dist[~ok] < minimum, axis=0))})
             notes.append(f"joint {j} sweep: {int((~ok).sum())} of {len(q)} poses dropped (TP within "
                          f"{minimum * 1e3:g} mm of the axis of joint {', '.join(map(str, near))})")
+        ok &= _seen(site, model, q, f"joint {j} sweep", notes)
         if ok.any():
             sweep_id += 1
             poses += [("sweep", sweep_id, j, row, "fit") for row in q[ok]]
@@ -259,6 +262,20 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
     return Plan(robot.name, types, tuple(float(x) for x in home), tuple(steps), site.samples_per_step,
                 site.settle_time, tuple(float(x) for x in speed), tuple(float(x) for x in acceleration),
                 tuple(notes))
+
+
+def _seen(site: SiteConfig, model: DHModel, q: Array, what: str, notes: list[str]) -> NDArray[np.bool_]:
+    """(m,) which configurations a camera tracker sees the target at (all without ``cell.camera_pose``); the
+    others are left out, noted with their reasons."""
+    if site.camera_pose is None or not len(q):
+        return np.ones(len(q), dtype=bool)
+    seen, reasons = visible(model, q, np.array(site.camera_pose), np.array(site.target_normal),
+                            site.camera_half_fov, site.camera_max_tilt)
+    if not seen.all():
+        counts = {r: reasons.count(r) for r in dict.fromkeys(r for r in reasons if r)}
+        notes.append(f"{what}: {int((~seen).sum())} of {len(q)} left out for the camera ("
+                     + "; ".join(f"{n}: {r}" for r, n in counts.items()) + ")")
+    return seen
 
 
 def _contact_text(contact: Contact) -> str:
@@ -327,13 +344,18 @@ def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: A
         return []
     rng = np.random.default_rng(rng_seed)
     box = _joint_box(robot, site)
+    if site.camera_pose is not None:  # a camera sees the target near home: draw the candidates there
+        box = np.column_stack([np.maximum(box[:, 0], robot.home - CAMERA_SPAN), np.minimum(box[:, 1],
+                                                                                        robot.home + CAMERA_SPAN)])
     pool = random_poses(box, CANDIDATES, rng, FREE_MARGIN)
     pool = pool[np.all(axis_distances_many(model, pool) >= site.min_axis_distance, axis=1)]
     if cell is not None:
         pool = pool[approach(cell, pool).slack >= cell.guard]
+    pool = pool[_seen(site, model, pool, "free pose candidates", notes)]
     if len(pool) < wanted + 1:
-        raise PlanError(f"only {len(pool)} candidate free poses keep the TP off every axis and clear of the cell; "
-                        "lower plan.free_poses / plan.check_poses, plan.min_axis_distance or cell.margin")
+        raise PlanError(f"only {len(pool)} candidate free poses keep the TP off every axis, clear of the cell (and "
+                        "in a camera's view); lower plan.free_poses / plan.check_poses, plan.min_axis_distance or "
+                        "cell.margin")
     reachable = _reachable_test(cell, robot.home, pool)
     check_idx: list[int] = []
     for k in range(len(pool)):  # check poses: the first pool poses reachable from home

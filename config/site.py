@@ -8,7 +8,8 @@ unknown key is rejected. Sections and keys (units: m, rad, s; per-joint values b
     tracker:  {spec, noise, settings, measure_time}
     plan:     {tp_guess, samples_per_step, settle_time, steps_per_sweep, joints, sweep_ranges,
                free_poses, check_poses, home_check_every, min_axis_distance}
-    cell:     {margin, mounting_offset, mounting_clearance, tool_a, tool_b, tool_radius, boxes, cylinders}
+    cell:     {margin, mounting_offset, mounting_clearance, tool_a, tool_b, tool_radius, boxes, cylinders,
+               camera_pose, camera_half_fov, camera_max_tilt, target_normal}
     timeouts: {connect, move, settle, measure}
     retries:  3
 
@@ -62,6 +63,10 @@ FIELDS: dict[str, tuple[str | None, str]] = {
     "tool_radius": ("cell", "tool_radius"),
     "boxes": ("cell", "boxes"),
     "cylinders": ("cell", "cylinders"),
+    "camera_pose": ("cell", "camera_pose"),
+    "camera_half_fov": ("cell", "camera_half_fov"),
+    "camera_max_tilt": ("cell", "camera_max_tilt"),
+    "target_normal": ("cell", "target_normal"),
     "connect_timeout": ("timeouts", "connect"),
     "move_timeout": ("timeouts", "move"),
     "settle_timeout": ("timeouts", "settle"),
@@ -101,7 +106,9 @@ class SiteConfig:
     (z = 0 for an arm on a table), moved to ``mounting_offset`` when given, kept ``mounting_clearance``
     away; the tool is a capsule ``tool_a``-``tool_b`` (flange frame; ``tool_b`` None: the TP guess) of
     ``tool_radius``; ``boxes`` ``{name, min, max}`` (axis-aligned corners) and ``cylinders``
-    ``{name, a, b, radius}`` (axis ends). Timeouts in s; ``retries`` per failed measurement. ``source``
+    ``{name, a, b, radius}`` (axis ends). A camera cell: ``camera_pose`` (base frame ← camera frame, 4x4;
+    None: no camera view check), ``camera_half_fov`` and ``camera_max_tilt`` (rad) and ``target_normal``
+    (flange frame): see :mod:`acquire.camera_view`. Timeouts in s; ``retries`` per failed measurement. ``source``
     names where it came from.
     """
 
@@ -134,6 +141,10 @@ class SiteConfig:
     tool_radius: float = 0.03
     boxes: tuple[dict[str, Any], ...] = ()
     cylinders: tuple[dict[str, Any], ...] = ()
+    camera_pose: tuple[tuple[float, ...], ...] | None = None
+    camera_half_fov: float = 0.5
+    camera_max_tilt: float = 1.05
+    target_normal: tuple[float, float, float] = (0.0, 0.0, 1.0)
     connect_timeout: float = 10.0
     move_timeout: float = 120.0
     settle_timeout: float = 10.0
@@ -383,6 +394,41 @@ def _optional_offset(v: _Validator, key: str, value: Any) -> float | None:
                     strict=True)
 
 
+def _camera_pose(v: _Validator, key: str, value: Any) -> tuple[tuple[float, ...], ...] | None:
+    """A 4x4 pose (base frame ← camera), or the path of a result YAML whose ``base`` is camera ← base."""
+    if value is None:
+        return None
+    expected = ("a 4x4 pose of the camera in the robot's base frame, or the path of a result YAML of a session "
+                "with this camera")
+    if isinstance(value, str):
+        import numpy as np
+
+        from config.robots import _read_yaml
+
+        where = Path(v.source).parent if isinstance(v.source, Path) else Path.cwd()
+        path = where / value
+        if not path.is_file():
+            raise v.fail(key, expected, value)
+        doc = _read_yaml(path)
+        base = doc.get("base") if isinstance(doc, dict) else None
+        if not (isinstance(base, list) and len(base) == 4):
+            raise v.fail(key, f"{expected} (with a 4x4 'base')", value)
+        matrix = np.array([v.numbers(f"{key}.base[{i}]", row, "4 numbers", 4) for i, row in enumerate(base)])
+        inverse = np.eye(4)
+        inverse[:3, :3] = matrix[:3, :3].T
+        inverse[:3, 3] = -matrix[:3, :3].T @ matrix[:3, 3]
+        value = inverse.tolist()
+    if not isinstance(value, list) or len(value) != 4:
+        raise v.fail(key, expected, value)
+    rows = tuple(v.numbers(f"{key}[{i}]", row, "a row of 4 numbers", 4) for i, row in enumerate(value))
+    rotation = [row[:3] for row in rows[:3]]
+    ortho = all(abs(sum(rotation[k][i] * rotation[k][j] for k in range(3)) - (i == j)) < 1e-6
+                for i in range(3) for j in range(3))
+    if rows[3] != (0.0, 0.0, 0.0, 1.0) or not ortho:
+        raise v.fail(key, f"{expected}: a rotation and a translation, last row 0, 0, 0, 1", value)
+    return rows
+
+
 _CHECKS: dict[str, Any] = {
     "robot_model": lambda v, key, x: v.text(key, x),
     "host": lambda v, key, x: v.text(key, x),
@@ -414,6 +460,10 @@ _CHECKS: dict[str, Any] = {
     "boxes": _obstacles(("name", "min", "max"), "{name: fixture, min: [0.4, -0.2, 0], max: [0.6, 0.2, 0.3]}"),
     "cylinders": _obstacles(("name", "a", "b", "radius"),
                             "{name: tracker stand, a: [1.5, 0, 0], b: [1.5, 0, 1.2], radius: 0.15}"),
+    "camera_pose": _camera_pose,
+    "camera_half_fov": lambda v, key, x: v.number(key, x, "an angle > 0 (rad)", 0.0, strict=True),
+    "camera_max_tilt": lambda v, key, x: v.number(key, x, "an angle > 0 (rad)", 0.0, strict=True),
+    "target_normal": lambda v, key, x: v.numbers(key, x, "[x, y, z] in the flange frame, not zero", 3),
     "connect_timeout": _positive("s"),
     "move_timeout": _positive("s"),
     "settle_timeout": _positive("s"),

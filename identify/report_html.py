@@ -155,8 +155,12 @@ def figure_joint(ident: Identification, fit: Measurements, joint: int) -> Figure
     return fig
 
 
-def figure_frames(ident: Identification, fit: Measurements) -> Figure:
-    """3D view (tracker frame, mm) of the identified joint axes and DH frames at home, with the points."""
+def figure_frames(ident: Identification, fit: Measurements, cell: dict[str, Any] | None = None) -> Figure:
+    """3D view (tracker frame, mm) of the identified joint axes and DH frames at home, with the points.
+
+    ``cell`` (optional, in DH frame 0, m): ``normal`` (3,) and ``offset`` of the mounting surface and
+    ``envelope`` (k, 3), points the arm's bodies pass through during the plan; both are drawn through the
+    identified base transform."""
     model, home = ident.model, ident.lines.home
     frames = frames_from_joints(model, home)[0]
     tp = points_from_joints(model, home)[0]
@@ -164,6 +168,8 @@ def figure_frames(ident: Identification, fit: Measurements) -> Figure:
     ax = fig.add_subplot(projection="3d")
     pts = fit.points * MM
     ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=3, color="#777", alpha=0.5, label="measured")
+    if cell is not None:
+        _draw_cell(ax, model.base, cell)
     span = float(np.ptp(np.vstack([pts, frames[:, :3, 3] * MM]), axis=0).max()) or 100.0
     size = 0.08 * span
     for i, frame in enumerate(frames):
@@ -186,6 +192,24 @@ def figure_frames(ident: Identification, fit: Measurements) -> Figure:
     ax.set_title("DH frames 0..n at home (x red, y green, z blue), joint axes dashed")
     ax.legend(fontsize=7)
     return fig
+
+
+def _draw_cell(ax: Any, base: Array, cell: dict[str, Any]) -> None:
+    """The plan's swept envelope (points) and the mounting surface (a square patch under it), tracker frame."""
+    rot, shift = base[:3, :3], base[:3, 3]
+    envelope = np.asarray(cell["envelope"], dtype=float).reshape(-1, 3)
+    normal = np.asarray(cell["normal"], dtype=float)
+    if len(envelope):
+        env = (envelope @ rot.T + shift) * MM
+        ax.scatter(env[:, 0], env[:, 1], env[:, 2], s=2, color="C0", alpha=0.25, label="swept by the plan")
+    u, v = _plane_basis(normal)
+    centre = normal * float(cell["offset"])
+    extent = float(np.max(np.abs((envelope - centre) @ np.column_stack([u, v])), initial=0.5)) * 1.1
+    grid = np.linspace(-extent, extent, 2)
+    gu, gv = np.meshgrid(grid, grid)
+    corners = centre + gu[..., None] * u + gv[..., None] * v
+    world = (corners @ rot.T + shift) * MM
+    ax.plot_surface(world[..., 0], world[..., 1], world[..., 2], color="C2", alpha=0.15)
 
 
 def figure_validation(errors: Array, expected: float | None) -> Figure:
@@ -383,13 +407,15 @@ def report_html(
     title: str | None = None,
     source: str | None = None,
     reference_note: str | None = None,
+    cell: dict[str, Any] | None = None,
 ) -> str:
     """The report as one HTML document (str).
 
     ``meas``: the measurements given to :func:`identify.pipeline.identify` (after the hold-out split), so
     fitted and held-out rows can be told apart. ``nominal``: deltas against it. ``reference``: (label, model)
     for another comparison, e.g. the controller's factory calibration; ``reference_note``: shown with the DH
-    table, e.g. why there is no factory calibration. ``session``: adds the acquisition record.
+    table, e.g. why there is no factory calibration. ``session``: adds the acquisition record. ``cell``: the
+    mounting surface and the plan's swept envelope for the 3D view (see :func:`figure_frames`).
     """
     fit = meas.subset(_fit_rows(meas))
     if len(fit) != len(ident.refinement.residuals):
@@ -423,8 +449,10 @@ def report_html(
         body.append(_figure_html(figure_joint(ident, fit, a.joint), caption))
     body.append("</section>")
     body.append('<section id="frames-3d"><h2>Axes and frames</h2>'
-                + _figure_html(figure_frames(ident, fit), "Identified DH frames and joint axes at the home pose, "
-                               "with the measured points (tracker frame)") + "</section>")
+                + _figure_html(figure_frames(ident, fit, cell), "Identified DH frames and joint axes at the home pose, "
+                               "with the measured points (tracker frame)" + (
+                                   "; the mounting surface (green) and the space the plan swept the arm through "
+                                   "(blue dots)" if cell is not None else "")) + "</section>")
     body.append('<section id="validation"><h2>Held-out validation</h2>')
     v = ident.validation
     if v is None:

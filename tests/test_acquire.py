@@ -69,10 +69,12 @@ def test_dry_run_connects_nothing_and_refuses_plans_outside_limits(tmp_path, mon
     out = capsys.readouterr().out
     assert "estimated duration" in out and "nothing was connected or moved" in out
     site = tmp_path / "site.yaml"
-    site.write_text("schema: 1\nplan:\n  sweep_ranges: [null, [-7.0, 0.0], null, null, null, null]\n")
+    # joint 6 turns the tool about the flange axis, clear of the cell at any angle: only the limit is broken (a
+    # shoulder range would be refused first for driving the arm into the table: tests/test_safety.py)
+    site.write_text("schema: 1\nplan:\n  sweep_ranges: [null, null, null, null, null, [-7.0, 0.0]]\n")
     assert main(["--robot", "ur5e", "--tracker", "mock", "--config", str(site), "--dry-run"]) == 2
     err = capsys.readouterr().err
-    assert "plan refused" in err and "joint 2" in err
+    assert "plan refused" in err and "joint 6" in err and "outside its limits" in err
 
 
 @pytest.mark.parametrize(("robot", "tracker"), [("ur5e@127.0.0.9", "mock"), ("mock:ur5e", "serial:/dev/ttyUSB9"),

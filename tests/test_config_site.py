@@ -188,6 +188,12 @@ BAD = [
     ("schema: 1\ncell: {cylinders: [{name: s, a: [0, 0, 0], b: [0, 0, 1], radius: -1}]}\n",
      "cell.cylinders[0].radius", "a number > 0 (m)"),
     ("schema: 1\ncell: {walls: []}\n", "cell.walls", "only the keys"),
+    ("schema: 1\ncell: {camera_pose: nowhere.yaml}\n", "cell.camera_pose", "a 4x4 pose of the camera"),
+    ("schema: 1\ncell: {camera_pose: [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 2]]}\n", "cell.camera_pose",
+     "last row 0, 0, 0, 1"),
+    ("schema: 1\ncell: {camera_pose: [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}\n", "cell.camera_pose",
+     "a rotation and a translation"),
+    ("schema: 1\ncell: {camera_half_fov: 0}\n", "cell.camera_half_fov", "an angle > 0 (rad)"),
     ("- 1\n- 2\n", None, "a mapping with the keys"),
 ]
 

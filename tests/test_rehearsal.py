@@ -71,3 +71,45 @@ def test_rehearsal_on_the_simulated_robot_and_its_speed_fraction(tmp_path, monke
     assert "speed: 7.2°/s" in out and "rehearsal complete" in out and not (tmp_path / "sessions").exists()
     assert acquire([*args, "--speed-fraction", "1.5"]) == 2
     assert "--speed-fraction must be in (0, 1], got 1.5" in capsys.readouterr().err
+
+
+def test_ctrl_c_stops_a_rehearsal_and_a_fault_fails_it() -> None:
+    """The rehearsal loop: Ctrl-C (the stop request) stops the arm and ends the run as aborted; a robot fault
+    stops it and ends it as failed; nothing else happens between moves."""
+    from acquire.orchestrator import StopRequest
+    from acquire.rehearsal import rehearse
+    from drivers.base import RobotState
+    from drivers.errors import ProtectiveStop
+
+    plan = build_plan(load_robot("ur5e"), load_site_text(SITE))
+
+    class Arm:
+        def __init__(self, fault_at: int | None = None) -> None:
+            self.moves, self.stops, self.fault_at = [], 0, fault_at
+
+        def state(self):
+            return RobotState.READY
+
+        def move_joints(self, q, speed, acceleration, timeout):
+            if len(self.moves) == self.fault_at:
+                raise ProtectiveStop("protective stop")
+            self.moves.append((tuple(q), tuple(speed), timeout))
+
+        def stop(self):
+            self.stops += 1
+
+    arm, stop = Arm(), StopRequest()
+    result = rehearse(arm, plan, 60.0, stop, lambda step, done, total: stop.request() if done == 5 else None)
+    assert (result.outcome, result.recorded, len(arm.moves), arm.stops) == ("aborted", 5, 5, 1)
+    assert all(m == (s.q, plan.speed, 60.0) for m, s in zip(arm.moves, plan.steps, strict=False))
+    arm = Arm(fault_at=7)
+    result = rehearse(arm, plan, 60.0, StopRequest())
+    assert (result.outcome, result.recorded, arm.stops) == ("failed", 7, 1) and "protective stop" in result.reason
+
+
+def load_site_text(text: str):
+    import yaml
+
+    from config.site import site_from_dict
+
+    return site_from_dict(yaml.safe_load(text), "test")

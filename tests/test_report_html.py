@@ -158,3 +158,22 @@ def test_report_loads_in_headless_chromium(session_path, tmp_path):
     assert probe.group(1) == f"images={figures} broken=0 errors=0"
     for section in (*SECTIONS, "acquisition"):
         assert f'id="{section}"' in done.stdout
+
+
+def test_report_3d_view_shows_the_mounting_surface_and_the_swept_envelope():
+    """With a cell view (acquire passes the plan's), the 3D view draws the surface and the envelope through the
+    identified base transform."""
+    from identify.report_html import figure_frames
+
+    robot, meas, ident = _identified("ur5e")
+    envelope = np.array([[0.3, 0.1, 0.4], [-0.2, 0.4, 0.6], [0.1, -0.3, 0.2]])
+    cell = {"normal": np.array([0.0, 0.0, 1.0]), "offset": 0.0, "envelope": envelope}
+    text = report_html(ident, meas, robot.nominal, robot.name, cell=cell)
+    assert "the mounting surface (green) and the space the plan swept the arm through" in text
+    fit = meas.subset(~meas.check)
+    ax = figure_frames(ident, fit, cell).axes[0]
+    drawn = next(c for c in ax.collections if c.get_label() == "swept by the plan")
+    x, y, z = drawn._offsets3d  # the envelope, mapped by the identified base into the tracker frame, mm
+    expected = (envelope @ ident.model.base[:3, :3].T + ident.model.base[:3, 3]) * 1e3
+    np.testing.assert_allclose(np.column_stack([x, y, z]), expected, atol=1e-9)
+    assert any(type(c).__name__ == "Poly3DCollection" for c in ax.collections)  # the surface patch

@@ -100,6 +100,12 @@ class PointModel:
                 height = (p @ self.normal).min(axis=1) - self.offset - self.radius[i]
                 columns.append(height - self.site.mounting_clearance)
                 labels.append(f"{self.names[i]} vs mounting surface")
+            for cyl in self.site.cylinders:  # a cylinder is checked as the capsule around it (its axis, radius)
+                a, b = np.array(cyl["a"]), np.array(cyl["b"])
+                t = np.clip((p - a) @ (b - a) / ((b - a) @ (b - a)), 0.0, 1.0)
+                gap = np.linalg.norm(p - (a + t[..., None] * (b - a)), axis=-1)
+                columns.append(gap.min(axis=1) - self.radius[i] - cyl["radius"] - self.site.cell_margin)
+                labels.append(f"{self.names[i]} vs {cyl['name']}")
             for box in self.site.boxes:
                 lo, hi = np.array(box["min"]), np.array(box["max"])
                 gap = np.linalg.norm(np.maximum(np.maximum(lo - p, p - hi), 0), axis=-1)
@@ -185,20 +191,23 @@ def test_the_issue_plan_is_now_clipped() -> None:
 
 
 def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
-    """Random sweep ranges, margins, clearances, tools and boxes on every bundled robot: each plan is clear by
-    the independent check, or refused with one line; a refusal naming a joint and angle is a real contact."""
+    """150 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
+    robot: each plan is clear by the independent check (every step exactly, the moves at 8 samples per rad to
+    keep the test near 15 s), or refused with one line; a refusal naming a joint and angle is a real contact."""
     rng = np.random.default_rng(2026)
     names = robot_names()
     accepted = refused = 0
-    for trial in range(250):
+    for trial in range(150):
         robot = load_robot(names[trial % len(names)])
         n = robot.n_joints
         ranges = []
+        mode = trial % 3  # 0: default sweeps (clipped), 1: one joint's range given, 2: most joints' given
+        ranged = {int(rng.integers(n))} if mode == 1 else set(range(n)) if mode == 2 else set()
         for j in range(n):
             lo, hi = robot.limits[j]
             if robot.joint_types[j] == "R":
                 lo, hi = max(lo, robot.home[j] - math.pi), min(hi, robot.home[j] + math.pi)
-            if rng.random() < 0.4:
+            if j not in ranged or rng.random() < 0.4:
                 ranges.append(None)
             else:
                 a, b = np.sort(rng.uniform(lo, hi, 2))
@@ -210,7 +219,13 @@ def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
             centre = centre + rng.normal(0, 0.3, 3)
             half = rng.uniform(0.03, 0.12, 3)
             boxes = ({"name": "fixture", "min": list(centre - half), "max": list(centre + half)},)
-        site = replace(SITE, steps_per_sweep=int(rng.integers(3, 8)), free_poses=int(rng.integers(0, 3)),
+        cylinders = ()
+        if rng.random() < 0.2:
+            foot = rng.normal(0, 0.6, 3)
+            cylinders = ({"name": "stand", "a": list(foot), "b": list(foot + rng.normal(0, 0.4, 3)),
+                          "radius": float(rng.uniform(0.03, 0.15))},)
+        site = replace(SITE, steps_per_sweep=int(rng.integers(3, 8)), cylinders=cylinders,
+                       free_poses=int(rng.integers(0, 3)),
                        check_poses=int(rng.integers(0, 2)), home_check_every=int(rng.integers(0, 12)),
                        sweep_ranges=tuple(ranges), cell_margin=float(rng.uniform(0.005, 0.04)),
                        mounting_clearance=float(rng.uniform(0.0, 0.06)), tool_radius=float(rng.uniform(0.01, 0.04)),
@@ -232,8 +247,8 @@ def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
                 assert slack[0] < STEP + H / 2 + 0.0035, f"{robot.name}: {text}: slack {slack[0]:.4f}"
             continue
         accepted += 1
-        assert_safe(plan, robot, site, per_rad=12.0)
-    assert accepted >= 30 and refused >= 10, (accepted, refused)
+        assert_safe(plan, robot, site, per_rad=8.0)
+    assert accepted >= 50 and refused >= 30, (accepted, refused)
 
 
 def test_a_fixture_in_the_way_clips_the_sweep_and_a_colliding_range_is_refused(tmp_path, capsys) -> None:
@@ -249,6 +264,15 @@ def test_a_fixture_in_the_way_clips_the_sweep_and_a_colliding_range_is_refused(t
     assert min(values) == pytest.approx(-math.pi) and max(values) < math.radians(80)
     assert max(s.q[0] for s in free.steps if s.kind == "sweep" and s.joint == 1) > math.radians(160)
     assert any(n.startswith("joint 1 sweep clipped") and "fixture" in n for n in plan.notes)
+    assert_safe(plan, ur, site)
+
+    up = np.array([0.0, 0.0, 1.0])
+    stand = {"name": "tracker stand", "a": list(centre - 0.6 * up), "b": list(centre + 0.3 * up), "radius": 0.1}
+    site = replace(SITE, cylinders=(stand,))
+    plan = build_plan(ur, site)
+    values = [s.q[0] for s in plan.steps if s.kind == "sweep" and s.joint == 1]
+    assert min(values) == pytest.approx(-math.pi) and max(values) < math.radians(80)
+    assert any(n.startswith("joint 1 sweep clipped") and "tracker stand" in n for n in plan.notes)
     assert_safe(plan, ur, site)
 
     path_ = tmp_path / "site.yaml"
@@ -303,3 +327,43 @@ def test_a_run_starts_only_when_the_move_from_where_the_arm_stands_is_clear() ->
     with pytest.raises(UsageError, match=r"to step 0 would come too close: .* mounting surface .* jog the arm to "
                                          r"home \(0\.0, -90\.0, 90\.0, -90\.0, -90\.0, 0\.0; deg / m\) first"):
         _check_start(Arm(folded), plan, ur, SITE, 0)
+
+
+def test_a_camera_cell_leaves_out_the_steps_it_cannot_see(tmp_path) -> None:
+    """A camera 1.5 m in front of the target at home (given as the result of an earlier session with it):
+    sweep steps and free poses where the target faces away or leaves the view are left out, with the reason,
+    and every step kept is seen (checked here with the forward model and plain angles)."""
+    import yaml
+
+    from config.site import load_site
+
+    ur = load_robot("ur5e")
+    frames = frames_from_joints(replace(ur.nominal, tool=np.array(SITE.tp_guess)), ur.home[None])[0]
+    tp = points_from_joints(replace(ur.nominal, tool=np.array(SITE.tp_guess)), ur.home[None])[0]
+    normal_flange = np.array([0.0, 1.0, 0.0])  # the print faces along the flange's y: +x of the base at home
+    assert np.allclose(frames[-1, :3, :3] @ normal_flange, [1, 0, 0])
+    camera = np.eye(4)
+    camera[:3, :3] = np.column_stack([[0, 1, 0], [0, 0, -1], [-1, 0, 0]])  # looking along -x
+    camera[:3, 3] = tp + np.array([1.5, 0.0, 0.0])
+    base = np.linalg.inv(camera)  # a result's base: camera frame <- robot base
+    (tmp_path / "first.result.yaml").write_text(yaml.safe_dump({"base": base.tolist()}))
+    (tmp_path / "site.yaml").write_text("schema: 1\ncell: {camera_pose: first.result.yaml, target_normal: [0, 1, 0], "
+                                        "camera_half_fov: 0.4, camera_max_tilt: 1.0}\n")
+    site = load_site(tmp_path / "site.yaml")
+    np.testing.assert_allclose(np.array(site.camera_pose), camera, atol=1e-12)
+    plan = build_plan(ur, site)
+    assert any(n.startswith("joint 1 sweep: ") and "left out for the camera" in n
+               and "the target faces away from the camera" in n for n in plan.notes)
+    joint1 = [s for s in plan.steps if s.kind == "sweep" and s.joint == 1]
+    assert 3 <= len(joint1) < SITE.steps_per_sweep
+    q = np.array([s.q for s in plan.steps if s.kind != "home"])
+    model = replace(ur.nominal, tool=np.array(SITE.tp_guess))
+    f = frames_from_joints(model, q)[:, -1]
+    centre = points_from_joints(model, q)
+    sight = centre - camera[:3, 3]
+    sight /= np.linalg.norm(sight, axis=1, keepdims=True)
+    assert np.all(np.degrees(np.arccos(sight @ camera[:3, 2])) <= np.degrees(0.4) + 1e-9)
+    facing = np.einsum("mi,mi->m", f[:, :3, :3] @ normal_flange, -sight)
+    assert np.all(np.degrees(np.arccos(np.clip(facing, -1, 1))) <= np.degrees(1.0) + 1e-9)
+    assert sum(s.kind == "free" for s in plan.steps) == SITE.free_poses + SITE.check_poses
+    assert_safe(plan, ur, site)
