@@ -3,8 +3,8 @@
 :func:`cell_from_config` joins a robot model's capsules (``config/robots/*.yaml``) and a site's cell
 (``cell:`` in the site file) into an :class:`acquire.collision.Cell`; :func:`free_interval` finds how far
 one joint may turn from home with the others at home; :func:`first_contact` the first sample of a move
-that comes too close; :func:`route` inserts the home pose where a direct move would come too close;
-:func:`clearance_of` the closest approach over a whole sequence of poses and the moves between them.
+that comes too close; :func:`clearance_of` the closest approach over a whole sequence of poses and the moves
+between them; :func:`envelope` the space a plan sweeps, for showing it.
 Joint values in rad / m, lengths in m, all in the robot's base frame (DH frame 0).
 """
 
@@ -141,23 +141,6 @@ def free_interval(cell: Cell, home: Array, joint: int, lo: float, hi: float,
             ends.append(float(end))
     nearest = min(found, key=lambda c: abs(c.q[joint] - h)) if found else None
     return ends[0], ends[1], nearest
-
-
-def route(cell: Cell, poses: list[Array], home: Array) -> tuple[list[Array], list[int]]:
-    """``poses`` as visited from ``home``, with ``home`` inserted before every pose whose direct move from
-    the previous one comes too close; returns the poses and the indices (in the output) of the insertions.
-    Moves from and to home are assumed clear (the planner only proposes such poses)."""
-    out: list[Array] = []
-    inserted: list[int] = []
-    here = np.asarray(home, dtype=float)
-    for pose in poses:
-        pose = np.asarray(pose, dtype=float)
-        if not np.array_equal(here, home) and not np.array_equal(pose, home) and first_contact(cell, here, pose):
-            inserted.append(len(out))
-            out.append(np.asarray(home, dtype=float))
-        out.append(pose)
-        here = pose
-    return out, inserted
 
 
 def clearance_of(cell: Cell, poses: Array, step: float = STEP) -> Clearance:

@@ -165,8 +165,8 @@ def test_segment_distances_match_a_brute_force_sampling() -> None:
     box = segment_box_distances(p0, p1, lo, hi)
     pts = p0[:, None] + t[None] * (p1 - p0)[:, None]
     sampled = np.linalg.norm(np.maximum(np.maximum(lo - pts, pts - hi), 0), axis=-1).min(axis=1)
-    # the golden-section search ends within ~1e-8 of the segment length of the minimum
-    assert np.all(box <= sampled + 1e-8) and np.all(sampled - box <= np.linalg.norm(p1 - p0, axis=1) / 200 + 1e-8)
+    # the golden-section search ends within ~2e-7 of the segment length of the minimum
+    assert np.all(box <= sampled + 1e-6) and np.all(sampled - box <= np.linalg.norm(p1 - p0, axis=1) / 200 + 1e-9)
 
 
 @pytest.mark.parametrize("name", robot_names())
@@ -191,14 +191,15 @@ def test_the_issue_plan_is_now_clipped() -> None:
 
 
 def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
-    """150 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
+    """200 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
     robot: each plan is clear by the independent check (every step exactly, the moves at 8 samples per rad to
     keep the test near 15 s), or refused with one line; a refusal naming a joint and angle is a real contact."""
     rng = np.random.default_rng(2026)
     names = robot_names()
+    robots = {name: load_robot(name) for name in names}
     accepted = refused = 0
-    for trial in range(150):
-        robot = load_robot(names[trial % len(names)])
+    for trial in range(200):
+        robot = robots[names[trial % len(names)]]
         n = robot.n_joints
         ranges = []
         mode = trial % 3  # 0: default sweeps (clipped), 1: one joint's range given, 2: most joints' given
@@ -248,7 +249,7 @@ def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
             continue
         accepted += 1
         assert_safe(plan, robot, site, per_rad=8.0)
-    assert accepted >= 50 and refused >= 30, (accepted, refused)
+    assert accepted >= 70 and refused >= 40, (accepted, refused)
 
 
 def test_a_fixture_in_the_way_clips_the_sweep_and_a_colliding_range_is_refused(tmp_path, capsys) -> None:
