@@ -84,7 +84,7 @@ def nominal_start(nominal: DHModel, q: Array, points: Array, unknown: NDArray[np
 def robust_scale(res: Array, leverage: Array) -> float:
     """Robust per-axis noise (weighted units) of studentised residuals: median of the squared norm over
     the median of chi-square(3)."""
-    r2 = np.sum(res**2, axis=1) / np.maximum(1.0 - leverage, 0.01)
+    r2 = np.sum(res**2, axis=1) / np.maximum(1.0 - leverage, 0.01)  # (a nuisance row's third dimension aside)
     return float(np.sqrt(np.median(r2) / 2.365974))
 
 
@@ -99,12 +99,12 @@ def fit(start: AxisLines, q: Array, points: Array, weights: Array, unknown: NDAr
         lev = leverages(LineProblem(lines, q, points, weights, unknown).jacobian_blocks(np.zeros(lines.n_parameters)),
                         unknown)
         key = along_arc(q_s, joint)
-        inliers = outlier_free(res, lev, group, key)
+        inliers = outlier_free(res, lev, group, key, unknown)
         if not np.all(inliers):
             for _ in range(ROBUST_PASSES):  # the scale of a fit pulled by outliers is too wide: shrink it
                 scale = max(robust_scale(res, lev), NOISE_FLOOR * float(np.median(weights)))
                 lines, q_s, res = fit_lines(lines, q, points, weights, unknown, "soft_l1", ROBUST_WIDTH * scale)
-            inliers = outlier_free(res, lev, group, along_arc(q_s, joint))
+            inliers = outlier_free(res, lev, group, along_arc(q_s, joint), unknown)
             for _ in range(2):  # least squares on the samples kept; re-admit those it then explains
                 lines, _, _ = fit_lines(lines, q[inliers], points[inliers], weights[inliers], unknown[inliers])
                 problem = LineProblem(lines, q, points, weights, unknown)
@@ -112,7 +112,7 @@ def fit(start: AxisLines, q: Array, points: Array, weights: Array, unknown: NDAr
                 res = problem.residuals(np.zeros(lines.n_parameters)).reshape(-1, 3)
                 kept = inliers
                 lev = leverages(problem.jacobian_blocks(np.zeros(lines.n_parameters)), unknown)
-                inliers = outlier_free(res, lev, group, along_arc(q_s, joint))
+                inliers = outlier_free(res, lev, group, along_arc(q_s, joint), unknown)
                 if np.array_equal(inliers, kept):
                     break
     scale = max(robust_scale(res[inliers], np.zeros(int(inliers.sum()))), NOISE_FLOOR)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
+from scipy.stats import f as f_dist
 
 from identify.linalg import thin_svd
 from identify.refine import NOISE_FLOOR, OUTLIER_PROBABILITY, inlier_mask
@@ -27,18 +28,19 @@ Array = NDArray[np.float64]
 
 
 def leverages(jac_blocks: Array, unknown: NDArray[np.int64]) -> Array:
-    """Mean leverage per sample (m,): trace of its 3x3 block of the hat matrix / 3, including the row's
-    own nuisance parameter where its joint was not read. ``jac_blocks`` (m, 3, p) are weighted and
-    already projected on the nuisance complement."""
+    """Mean leverage of the parameters per sample (m,): trace of its 3x3 block of the hat matrix / 3 (a row's
+    own nuisance angle, where its joint was not read, takes one more dimension: see :func:`outlier_free`).
+    ``jac_blocks`` (m, 3, p) are weighted and already projected on the nuisance complement."""
     m, _, p = jac_blocks.shape
     j = jac_blocks.reshape(-1, p)
     scale = np.maximum(np.linalg.norm(j, axis=0), 1e-300)
     u, s, _ = thin_svd(j / scale)
     u = u[:, s > 1e-12 * s[0]].reshape(m, 3, -1)
-    return (np.einsum("kir,kir->k", u, u) + (unknown >= 0)) / 3.0
+    return np.einsum("kir,kir->k", u, u) / 3.0
 
 
 MIN_GROUP = 10  # samples a group needs for a scale of its own
+CORE = 0.975  # share of clean rows the noise is estimated from
 
 
 def _scale_groups(group: NDArray[np.int64]) -> list[NDArray[np.int64]]:
@@ -73,13 +75,40 @@ def second_differences(res: Array, run: NDArray[np.int64]) -> tuple[Array, Array
     return e, spread
 
 
-def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Array) -> NDArray[np.bool_]:
-    """Mask of the samples kept: see the module docstring. ``res`` (m, 3) weighted residuals."""
+def _isotropic_inliers(res: Array, leverage: Array, unknown: NDArray[np.int64], probability: float
+                       ) -> NDArray[np.bool_]:
+    """The outlier test for rows of which some carry a nuisance angle: each row's squared residual over its
+    own degrees of freedom (3, or 2 with a nuisance; less the parameters' share) against an F limit, the noise
+    (isotropic) estimated from the rows within the 97.5 % core (corrected for that truncation)."""
+    dof = np.where(unknown >= 0, 2.0, 3.0)
+    variance = np.maximum(dof - 3.0 * leverage, 0.05 * dof)  # E|r|² / sigma², per row
+    t = np.sum(res**2, axis=1) * dof / variance  # ~ sigma² chi²(dof)
+    s2 = float(np.median(t / chi2.median(dof))) + NOISE_FLOOR**2
+    core = np.ones(len(res), dtype=bool)
+    for _ in range(2):
+        cut = chi2.ppf(CORE, dof)
+        core = t / s2 <= cut
+        if core.sum() <= 3:
+            break
+        kept_mean = dof * chi2.cdf(cut, dof + 2) / CORE  # E[chi²(k) | below its CORE quantile]
+        s2 = float(np.sum(t[core]) / np.sum(kept_mean[core])) + NOISE_FLOOR**2
+    nu = max(float(np.sum(dof[core])) - 1.0, 5.0)
+    return f_dist.sf(t / (dof * s2), dof, nu) >= probability / len(res)
+
+
+def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Array,
+                 unknown: NDArray[np.int64] | None = None) -> NDArray[np.bool_]:
+    """Mask of the samples kept: see the module docstring. ``res`` (m, 3) weighted residuals; ``leverage``
+    (m,) the parameters' mean leverage per row; ``unknown`` (m,) rows' unread joints (-1: none)."""
+    unknown = np.full(len(res), -1) if unknown is None else unknown
     lev = np.clip(leverage, 0.0, 0.99)
-    student = res / np.sqrt(1.0 - lev)[:, None]
     keep = np.ones(len(res), dtype=bool)
     for rows in _scale_groups(group):
-        keep[rows] = inlier_mask(student[rows], 0, OUTLIER_PROBABILITY * len(rows) / len(res))
+        share = OUTLIER_PROBABILITY * len(rows) / len(res)
+        if np.any(unknown[rows] >= 0):  # a nuisance angle leaves 2 of the row's 3 dimensions to the noise
+            keep[rows] = _isotropic_inliers(res[rows], lev[rows], unknown[rows], share)
+        else:
+            keep[rows] = inlier_mask(res[rows] / np.sqrt(1.0 - lev[rows])[:, None], 0, share)
     if np.all(keep):
         return keep
     runs = [r for r in sweep_neighbours(group, key) if len(r) >= 4]

@@ -262,7 +262,7 @@ def refine(
     elif not robust:
         inliers[:] = True
     model = model_from_vector(problem.start, problem.full(x))
-    if np.any(free_exact & ~free):
+    if max_offset > 0 and np.any(free_exact & ~free):  # with no offset allowed, the convention stays
         model, free, note = _release_parallel(
             model, q[inliers], points[inliers], weights[inliers], free, free_exact, conventional, max_offset
         )
