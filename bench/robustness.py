@@ -255,17 +255,24 @@ def _rms(a: Array) -> float:
     return float(np.sqrt(np.mean(np.sum(a**2, axis=1))))
 
 
-def run_case(robot_name: str, robot_index: int, case_index: int, draws: int, oracle: bool = False) -> CaseResult:
-    """``draws`` data sets of case ``CASES[case_index]``; draw k uses the seed (SEED, robot, case, k).
+def draw(robot_name: str, case_key: str, k: int) -> tuple[Scenario, Array]:
+    """Draw ``k`` of a case: the data set and the held-out readings (200, n). A reproducer of any draw:
+    ``scen, q_check = draw("ur5e", "jogged", 3)``, then ``identify(scen.meas, noise=scen.noise)``."""
+    case_index = [c.key for c in CASES].index(case_key)
+    rng = np.random.default_rng((SEED, ROBOTS.index(robot_name), case_index, k))
+    scen = scenario(CASES[case_index], robot_name, rng)
+    return scen, random_poses(load_robot(robot_name).limits, CHECK_POSES, rng)
+
+
+def run_case(robot_name: str, case_key: str, draws: int, oracle: bool = False) -> CaseResult:
+    """``draws`` data sets of the case keyed ``case_key`` (:func:`draw` 0 .. draws-1) on ``robot_name``.
     With ``oracle`` the :class:`Oracle` replaces the estimator."""
-    case = CASES[case_index]
+    case = next(c for c in CASES if c.key == case_key)
     robot = load_robot(robot_name)
     nominal = robot.nominal if case.nominal else None
     result = CaseResult(robot_name, case)
     for k in range(draws):
-        rng = np.random.default_rng((SEED, robot_index, case_index, k))
-        scen = scenario(case, robot_name, rng)
-        q_check = random_poses(robot.limits, CHECK_POSES, rng)
+        scen, q_check = draw(robot_name, case.key, k)
         result.draws += 1
         start = time.perf_counter()
         try:
@@ -302,7 +309,7 @@ def run_case(robot_name: str, robot_index: int, case_index: int, draws: int, ora
     return result
 
 
-def _run(args: tuple[str, int, int, int, bool]) -> CaseResult:
+def _run(args: tuple[str, str, int, bool]) -> CaseResult:
     return run_case(*args)
 
 
@@ -341,8 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     draws = 5 if args.quick else args.draws
     robots = tuple(args.robot) if args.robot else ROBOTS
-    todo = [(name, ri, ci, draws, args.oracle) for ri, name in enumerate(ROBOTS) if name in robots
-            for ci, case in enumerate(CASES) if (not args.case or case.key in args.case) and applicable(case, name)
+    todo = [(name, case.key, draws, args.oracle) for name in ROBOTS if name in robots
+            for case in CASES if (not args.case or case.key in args.case) and applicable(case, name)
             and not (args.oracle and case.readings != "all")]
     start = time.perf_counter()
     who = "identify"
