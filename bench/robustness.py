@@ -32,6 +32,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import argparse
 import sys
 import time
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from types import SimpleNamespace
@@ -40,7 +41,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import binom
 
-from config.robots import load_robot
+from functools import lru_cache
+
+from config.robots import RobotModel
+from config.robots import load_robot as _load_robot
 from identify import pipeline
 from identify.poe import AxisLines, _LineProblem, fit_lines, points_from_lines
 from identify.simulate import (
@@ -54,6 +58,12 @@ from identify.simulate import (
 )
 
 Array = NDArray[np.float64]
+
+
+@lru_cache
+def load_robot(name: str) -> RobotModel:
+    """The bundled robot model ``name`` (read once per process)."""
+    return _load_robot(name)
 
 ROBOTS = ("ur5e", "scara", "iiwa7")
 CHECK_POSES = 200
@@ -210,6 +220,7 @@ class CaseResult:
     times: list[float] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
     worst: tuple[float, int] = (0.0, -1)  # largest RMS/bound and its draw
+    checks: Counter[str] = field(default_factory=Counter)  # "name:status" of every check not passing
 
     @property
     def ratio(self) -> float:
@@ -293,6 +304,9 @@ def run_case(robot_name: str, case_key: str, draws: int, oracle: bool = False) -
         bound = lines_bound(scen.truth, scen.true_q[clean_fit], scen.unknown[clean_fit], scen.meas.joint[clean_fit],
                             scen.true_values(q_check), scen.noise)
         result.status[status] += 1
+        for check in ident.verdict.checks:
+            if check.status != "pass":
+                result.checks[f"{check.name}:{check.status}"] += 1
         result.bounds.append(bound)
         result.ratios2.append((err / bound) ** 2)
         result.calib2.append((err / reported) ** 2 if reported > 0 else float("inf"))
@@ -364,7 +378,10 @@ def main(argv: list[str] | None = None) -> int:
         results = [_run(t) for t in todo]
     print_table(results)
     print()
+    print("checks not passing (name:status x draws) and exceptions, per case:")
     for r in results:
+        if r.checks:
+            print(f"  {r.robot} {r.case.key}: " + ", ".join(f"{k} x{v}" for k, v in r.checks.most_common(6)))
         for message in r.errors[:3]:
             print(f"  {r.robot} {r.case.key}: {message}")
     total = sum(r.draws for r in results)
