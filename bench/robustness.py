@@ -35,13 +35,12 @@ import time
 from collections import Counter
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from types import SimpleNamespace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import binom
-
-from functools import lru_cache
 
 from config.robots import RobotModel
 from config.robots import load_robot as _load_robot
