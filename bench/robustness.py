@@ -294,6 +294,7 @@ def run_case(robot_name: str, case_key: str, draws: int, oracle: bool = False) -
         result.times.append(time.perf_counter() - start)
         readings = scen.predictor_readings(q_check)
         err = _rms(ident.predict(readings) - scen.truth_points(q_check))
+        err = err if np.isfinite(err) else float("inf")  # a NaN prediction is an infinite error, not a pass
         status = ident.verdict.status
         reported = float(ident.prediction_rms(readings))
         rejected = np.asarray(ident.rejected_rows, dtype=int) - 1  # meas.row is 1-based, row k is index k-1

@@ -422,6 +422,8 @@ def make_scenario(
     (only joint ``jogged_joint``'s sweep, 1-based, default the middle joint). ``model_error`` (lo, hi) m: each
     sweep sees the truth moved by an RMS amount uniform in that range (:func:`perturbed_lines`). ``errors``:
     controller readings differ from the true angles. Noise: isotropic Gaussian, ``noise`` m per axis.
+    The rows of a sweep are in the order of motion (readings increasing), which is all that gives a
+    positions-only sweep its sense of rotation.
     """
     types, n = truth.joint_types, len(home)
     if free_only:
