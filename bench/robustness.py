@@ -45,11 +45,13 @@ from scipy.stats import binom
 from config.robots import RobotModel
 from config.robots import load_robot as _load_robot
 from identify import pipeline
-from identify.poe import AxisLines, _LineProblem, fit_lines, points_from_lines
+from identify.poe import AxisLines, fit_lines, points_from_lines
 from identify.simulate import (
     Scenario,
     dh_truth,
+    line_parameter_count,
     make_scenario,
+    moved_lines,
     random_poses,
     reading_error,
     tilted_truth,
@@ -76,6 +78,20 @@ RCOND = 1e-9
 FD_STEP = 1e-6  # rad or m: central differences for the nuisance columns
 
 
+def lines_jacobian(lines: AxisLines, q: Array) -> Array:
+    """Jacobian (3m, size) of the TPs predicted at true joint values ``q`` (m, n) with respect to the lines
+    parameters of ``identify.simulate.moved_lines`` (rad, m) at zero; central differences (``FD_STEP``),
+    relative error ~1e-9."""
+    size = line_parameter_count(lines.joint_types)
+    jac = np.empty((3 * len(q), size))
+    for k in range(size):
+        step = np.zeros(size)
+        step[k] = FD_STEP
+        diff = points_from_lines(moved_lines(lines, step), q) - points_from_lines(moved_lines(lines, -step), q)
+        jac[:, k] = diff.ravel() / (2 * FD_STEP)
+    return jac
+
+
 def lines_bound(lines: AxisLines, q_fit: Array, unknown: NDArray[np.bool_], moved: NDArray[np.int64],
                 q_check: Array, sigma: float) -> float:
     """Cramér-Rao bound (m) on the RMS 3D error of predicted TPs at true joint values ``q_check`` (k, n).
@@ -86,8 +102,8 @@ def lines_bound(lines: AxisLines, q_fit: Array, unknown: NDArray[np.bool_], move
     ``sigma² · Jc · pinv(JᵀJ) · Jcᵀ`` over all parameters (the check predictions do not depend on the
     nuisances), RMS over the check poses = sqrt(mean trace). ``sigma``: isotropic noise, m per axis.
     """
-    problem = _LineProblem(lines, q_fit, np.zeros((len(q_fit), 3)), np.ones(len(q_fit)))
-    jac = problem.jacobian(np.zeros(problem.size))
+    size = line_parameter_count(lines.joint_types)
+    jac = lines_jacobian(lines, q_fit)
     rows = np.flatnonzero(unknown)
     if len(rows):
         cols = moved[rows] - 1
@@ -98,9 +114,8 @@ def lines_bound(lines: AxisLines, q_fit: Array, unknown: NDArray[np.bool_], move
         nuisance = np.zeros((len(q_fit), 3, len(rows)))
         nuisance[rows, :, np.arange(len(rows))] = deriv
         jac = np.hstack([jac, nuisance.reshape(-1, len(rows))])
-    check = _LineProblem(lines, q_check, np.zeros((len(q_check), 3)), np.ones(len(q_check)))
     jac_check = np.zeros((3 * len(q_check), jac.shape[1]))
-    jac_check[:, :problem.size] = check.jacobian(np.zeros(check.size))
+    jac_check[:, :size] = lines_jacobian(lines, q_check)
     scale = np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
     _, s, vt = np.linalg.svd(jac / scale, full_matrices=False)
     keep = s > RCOND * s[0]
@@ -118,7 +133,7 @@ class Oracle:
         fit = ~scen.meas.check & np.all(np.isfinite(scen.meas.q), axis=1)
         fit[scen.outliers] = False
         start = replace(scen.truth, home=scen.home)
-        self.lines, _ = fit_lines(start, scen.meas.q[fit], scen.meas.points[fit])
+        self.lines = fit_lines(start, scen.meas.q[fit], scen.meas.points[fit])[0]
         self.q_fit, self.noise = scen.meas.q[fit], scen.noise
         self.rejected_rows = [int(r) for r in scen.meas.row[scen.outliers]]
         self.verdict = SimpleNamespace(status="pass", checks=[])
