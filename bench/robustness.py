@@ -252,6 +252,13 @@ class CaseResult:
         return float(np.sqrt(np.mean(self.calib2))) if self.calib2 else float("nan")
 
     @property
+    def calib_se(self) -> float:
+        c2 = np.array(self.calib2)
+        if len(c2) < 2 or not np.all(np.isfinite(c2)):
+            return float("nan")
+        return float(0.5 * self.calib * np.std(c2, ddof=1) / (np.sqrt(len(c2)) * np.mean(c2)))
+
+    @property
     def failed(self) -> int:
         return self.status["fail"] + self.status["err"]
 
@@ -345,7 +352,7 @@ def _run(args: tuple[str, str, int, bool]) -> CaseResult:
 def print_table(results: list[CaseResult]) -> None:
     header = (f"{'robot':<6} {'case':<33} {'n':>3} {'bound mm':>9} {'ratio':>7} {'±se':>5} {'worst':>7} "
               f"{'pass':>4} {'warn':>4} {'fail':>4} {'err':>3} {'silent':>6} {'false':>5} {'missed':>6} "
-              f"{'calib':>6} {'ms med':>6} {'ms max':>6}  ok")
+              f"{'calib':>6} {'±se':>4} {'ms med':>6} {'ms max':>6}  ok")
     print(header)
     print("-" * len(header))
     for r in results:
@@ -356,7 +363,8 @@ def print_table(results: list[CaseResult]) -> None:
         missed = f"{r.missed}/{r.outliers}" if r.outliers else "-"
         print(f"{r.robot:<6} {r.case.label:<33} {r.draws:>3} {bound:>9.5f} {r.ratio:>7.3f} {r.ratio_se:>5.2f} "
               f"{r.worst[0]:>7.2f} {st['pass']:>4} {st['warn']:>4} {st['fail']:>4} {st['err']:>3} "
-              f"{len(r.silent):>6} {len(r.false_sets):>5} {missed:>6} {r.calib:>6.2f} {med:>6.0f} {mx:>6.0f}  "
+              f"{len(r.silent):>6} {len(r.false_sets):>5} {missed:>6} {r.calib:>6.2f} {r.calib_se:>4.2f} "
+              f"{med:>6.0f} {mx:>6.0f}  "
               f"{'NO' if r.missed_targets() else 'yes'}")
     print()
     print("ratio = sqrt(mean (RMS/bound)²) at 200 held-out poses (target <= 1.10 unless the model is wrong: model err,")
@@ -405,6 +413,7 @@ def main(argv: list[str] | None = None) -> int:
     clean_draws = sum(r.draws for r in clean)
     clean_fail = sum(r.failed for r in clean)
     allowed = int(binom.ppf(0.95, clean_draws, RATE_TARGET)) if clean_draws else 0
+    print(f"load average at the end {os.getloadavg()[0]:.1f} (2 cores shared: timings are indicative)")
     print(f"total {total} draws in {time.perf_counter() - start:.0f} s; silent failures {silent}; fail on clean "
           f"well-posed draws {clean_fail}/{clean_draws} ({clean_fail / max(clean_draws, 1):.1%}, <= {allowed} "
           f"allowed at {RATE_TARGET:.0%})")
