@@ -161,6 +161,7 @@ class Case:
     free_only: int = 0
     check_poses: int = 0
     holdout_in_sweep: int = 0
+    missing_in_sweep: int = 0
     outliers: float = 0.0
     readings: str = "all"
     model_error: tuple[float, float] | None = None
@@ -194,6 +195,7 @@ CASES = (
     Case("tiltfree", "tilted, 12 s. + 20 free + 10 chk", truth="tilted", steps=12, free_poses=20, check_poses=10),
     Case("nongeo", "reading scale 1e-4 + 0.01°/turn", noise=1e-5, reading_error=True),
     Case("wrist6", "wrist 6 at 144°, 2 held out", steps=12, wrist=True, holdout_in_sweep=2),
+    Case("gap20", "36 s., 20 in a row lost in 1 sweep", missing_in_sweep=20),
 )
 
 
@@ -208,6 +210,7 @@ def scenario(case: Case, robot_name: str, rng: np.random.Generator) -> Scenario:
     return make_scenario(truth, robot.home, robot.limits, rng, noise=case.noise, steps=case.steps, arc=case.arc,
                          wrist=case.wrist, free_poses=case.free_poses, free_only=case.free_only,
                          check_poses=case.check_poses, holdout_in_sweep=case.holdout_in_sweep,
+                         missing_in_sweep=case.missing_in_sweep,
                          outlier_fraction=case.outliers, readings=case.readings, model_error=case.model_error,
                          errors=errors)
 

@@ -424,6 +424,7 @@ def make_scenario(
     free_only: int = 0,
     check_poses: int = 0,
     holdout_in_sweep: int = 0,
+    missing_in_sweep: int = 0,
     outlier_fraction: float = 0.0,
     readings: str = "all",
     jogged_joint: int | None = None,
@@ -434,7 +435,8 @@ def make_scenario(
 
     Sweeps (:func:`scenario_sweeps`) unless ``free_only`` > 0 (then only that many free poses, joint 0);
     ``free_poses`` extra fitted free poses and ``check_poses`` held-out free poses; ``holdout_in_sweep`` rows
-    of the last joint's sweep (its 2nd, 3rd, ...) held out. ``outlier_fraction`` of the fitted sweep rows
+    of the last joint's sweep (its 2nd, 3rd, ...) held out; ``missing_in_sweep`` rows of that sweep (from its
+    2nd) never measured. ``outlier_fraction`` of the fitted sweep rows
     (free rows for ``free_only``) get gross errors of 5-20 mm. ``readings``: ``"all"``; ``"none"`` (every
     reading of every sweep row NaN: positions only, the predictor works relative to home); ``"jogged"``
     (only joint ``jogged_joint``'s sweep, 1-based, default the middle joint). ``model_error`` (lo, hi) m: each
@@ -449,6 +451,10 @@ def make_scenario(
         sweep, joint = np.arange(1, free_only + 1), np.zeros(free_only, dtype=np.int64)
     else:
         q, sweep, joint = scenario_sweeps(types, home, limits, steps, arc, wrist)
+        if missing_in_sweep:  # the tracker lost the target: consecutive steps of the last joint's sweep absent
+            gone = np.flatnonzero(joint == n)[1:1 + missing_in_sweep]
+            keep = ~np.isin(np.arange(len(q)), gone)
+            q, sweep, joint = q[keep], sweep[keep], joint[keep]
     n_main = len(q)
     extra = free_poses + check_poses
     if extra:

@@ -208,3 +208,12 @@ def test_bench_oracle_reaches_the_lines_bound_on_tilted_truths():
     # 12 draws: the ratio's Monte-Carlo standard error is ~0.07
     assert 0.75 < result.ratio < 1.25
     assert not result.silent and not result.false_sets
+
+
+def test_lost_steps_leave_a_gap_in_the_last_sweep():
+    rng = np.random.default_rng(13)
+    scen = make_scenario(dh_truth(UR5E.nominal, UR5E.home, rng), UR5E.home, UR5E.limits, rng, steps=36,
+                         missing_in_sweep=20)
+    values = scen.meas.q[scen.meas.joint == 6, 5]
+    assert len(values) == 16 and np.sum(scen.meas.joint == 5) == 36
+    assert np.max(np.diff(values)) == pytest.approx(np.radians(10) * 21)  # a 210° gap, > 180°
