@@ -326,7 +326,11 @@ def _finish(result: RunResult, session: Session, path: Path, robot: RobotModel) 
         minutes = (drift[-1][0] - drift[0][0]) / 60
         print(f"home drift: {len(drift)} re-measurements over {minutes:.1f} min, largest {worst * 1e3:.4f} mm "
               "from the first")
-    _identify_session(session, path, robot)
+    doc = _identify_session(session, path, robot)
+    if doc["verdict"]["status"] == "fail":
+        print("acquire: the identification FAILS its verdict: do not use this model (see the checks above)",
+              file=sys.stderr)
+        return 3
     return 0
 
 

@@ -1,12 +1,14 @@
 """``identify INPUT``: identify DH parameters from a measurement CSV (the edge where files are read).
 
-Exit codes: 0 success, 2 bad input or usage (one line on stderr), 1 an identification that failed.
+Exit codes: 0 a result that passes its verdict or passes with warnings, 3 a result that fails its verdict
+(still written, for diagnosis), 2 bad input or usage (one line on stderr), 1 an identification that failed.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import tempfile
@@ -59,9 +61,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--parallel-tol", type=float, default=DEFAULT_PARALLEL_TOL, metavar="RAD",
                         help=f"axes closer than this are treated as parallel ({DEFAULT_PARALLEL_TOL} rad)")
     parser.add_argument("--max-offset", type=float, default=DEFAULT_MAX_OFFSET, metavar="M",
-                        help="exact DH for resolved near-parallel axes only if no d moves more than this "
-                        f"({DEFAULT_MAX_OFFSET} m)")
+                        help="where the data resolve a near-parallel pair's misalignment, keep the parallel-axis "
+                        "convention instead of exact DH if exact DH would move d more than M metres (default: "
+                        "no cap; the verdict's dh_table check says what a cap costs)")
     parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
+    parser.add_argument("--noise", type=float, metavar="M",
+                        help="the tracker's noise, m per axis (1 sigma), to judge the fit by (a sigma column wins)")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return parser
 
@@ -199,7 +204,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
                          f"{meas.joint_types}")
     _check_exports(args, meas.joint_types)
-    ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset)
+    if args.noise is not None and not (args.noise > 0 and math.isfinite(args.noise)):
+        raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
+    ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset,
+                     noise=args.noise)
     ident.warnings[:0] = content.notes
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
     if args.out:
@@ -207,7 +215,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     reference, note = _factory_reference(header, meas.joint_types) if header is not None else (None, "")
     _write_exports(args, ident, meas, doc, robot, reference, note)
     if args.json:
-        print(json.dumps(doc))
+        print(json.dumps(doc, allow_nan=False))
     else:
         print(format_report(ident, nominal, nominal_name))
         if reference is not None or note:
@@ -220,7 +228,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        run(args)
+        doc = run(args)
     except InputError as exc:
         print(f"identify: error: {exc}", file=sys.stderr)
         return 2
@@ -230,6 +238,9 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # numerical failure: one line, not a traceback; --debug-free by design
         print(f"identify: error: identification failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
+    if doc["verdict"]["status"] == "fail":
+        print("identify: the result FAILS its verdict: do not use this model (see the checks above)", file=sys.stderr)
+        return 3
     return 0
 
 

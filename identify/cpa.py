@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import least_squares
 
 from identify.geometry import (
     Circle,
@@ -21,6 +22,7 @@ from identify.geometry import (
     circle_from_points,
     circle_residuals,
     common_normal,
+    cross,
     line_from_points,
     perpendicular_basis,
     rotation_about_axis,
@@ -113,7 +115,7 @@ def axis_from_sweep(
     if circle.radius < 3.0 * circle.rms:
         raise InputError(f"joint {joint}: sweep {sweep} is not a circle (radius {circle.radius * 1e3:.3f} mm); "
                          "is the TP on the joint's axis?")
-    angles = angles_on_circle(points[order], circle)
+    angles = angles_on_circle(points[order], circle, moved[order] if have_q else None)
     span = float(np.ptp(angles))
     sagitta = circle.radius * (1.0 - np.cos(min(span, np.pi) / 2.0))
     # the arc's sagitta must stand out of the noise of its mean over the sweep's samples
@@ -213,7 +215,7 @@ def dh_from_axes(
         cn = common_normal(points[i - 1], dirs[i - 1], points[i], dirs[i], tol, anchor)
         gap = cn.foot_2 - cn.foot_1
         gap -= (gap @ dirs[i - 1]) * dirs[i - 1]
-        normal = np.cross(dirs[i - 1], dirs[i])
+        normal = cross(dirs[i - 1], dirs[i])
         if not cn.parallel:  # skew or intersecting: x is the common normal's direction, exactly
             flip = np.linalg.norm(gap) > 1e-9 and gap @ normal < 0  # sign from a gap that is really there
             x = -unit(normal) if flip else unit(normal)
@@ -223,7 +225,7 @@ def dh_from_axes(
             x = xs[i - 1] if i > 1 else perpendicular_basis(dirs[0])[0]
             x = unit(x - (x @ dirs[i]) * dirs[i])
         a = float((cn.foot_2 - cn.foot_1) @ x)
-        alpha = float(np.arctan2(np.cross(dirs[i - 1], dirs[i]) @ x, dirs[i - 1] @ dirs[i]))
+        alpha = float(np.arctan2(cross(dirs[i - 1], dirs[i]) @ x, dirs[i - 1] @ dirs[i]))
         x_signed = _oriented_normal(x, reference, i - 1, a, alpha)
         if i == 1:
             feet0 = cn.foot_1
@@ -232,7 +234,7 @@ def dh_from_axes(
     q1 = home[0]
     if n == 1:
         feet0 = points[0] + ((tp_home - points[0]) @ dirs[0]) * dirs[0]
-        x1 = unit(np.cross(dirs[0], perpendicular_basis(dirs[0])[1]))
+        x1 = unit(cross(dirs[0], perpendicular_basis(dirs[0])[1]))
     else:
         x1 = xs[1]
     turn0 = conventional[0, 0] + (q1 if rev[0] else 0.0)
@@ -242,7 +244,7 @@ def dh_from_axes(
     frames = np.zeros((n + 1, 4, 4))
     for i in range(n):
         frames[i, :3, 0] = xs[i]
-        frames[i, :3, 1] = np.cross(dirs[i], xs[i])
+        frames[i, :3, 1] = cross(dirs[i], xs[i])
         frames[i, :3, 2] = dirs[i]
         frames[i, :3, 3] = origins[i]
         frames[i, 3, 3] = 1.0
@@ -255,16 +257,37 @@ def dh_from_axes(
         prev, cur = frames[i - 1], frames[i]
         xp, zp, op = prev[:3, 0], prev[:3, 2], prev[:3, 3]
         xc, zc, oc = cur[:3, 0], cur[:3, 2], cur[:3, 3]
-        theta = np.arctan2(np.cross(xp, xc) @ zp, xp @ xc)
+        theta = np.arctan2(cross(xp, xc) @ zp, xp @ xc)
         d = (oc - op) @ zp
         if rev[i - 1]:
             theta -= home[i - 1]
         else:
             d -= home[i - 1]
-        table[i - 1] = [np.angle(np.exp(1j * theta)), d, (oc - op) @ xc, np.arctan2(np.cross(zp, zc) @ xc, zp @ zc)]
+        table[i - 1] = [np.angle(np.exp(1j * theta)), d, (oc - op) @ xc, np.arctan2(cross(zp, zc) @ xc, zp @ zc)]
     table[n - 1] = conventional[n - 1]
     tool = frames[n, :3, :3].T @ (tp_home - frames[n, :3, 3])
     return DHModel(types, table[:, 0], table[:, 1], table[:, 2], table[:, 3], frames[0], tool)
+
+
+def common_point(axes: list[JointAxis], meas: Measurements) -> Array:
+    """The point closest to every revolute sweep's circle and every prismatic sweep's line (tracker frame, m):
+    the TP at home, which all sweeps of one home pose pass through. Seeded by the measured sample nearest
+    to all of them, refined by least squares."""
+
+    def distances(p: Array) -> Array:
+        out = []
+        for ax in axes:
+            rel = p - ax.point
+            if ax.kind == "R":
+                h = rel @ ax.direction
+                out.append(np.hypot(h, np.linalg.norm(rel - h * ax.direction) - ax.radius))
+            else:
+                out.append(np.linalg.norm(rel - (rel @ ax.direction) * ax.direction))
+        return np.array(out)
+
+    seeds = meas.points[meas.joint > 0]
+    best = min(seeds, key=lambda p: float(np.sum(distances(p) ** 2)))
+    return least_squares(distances, best, method="lm" if len(axes) >= 3 else "trf", xtol=1e-12, ftol=1e-12).x
 
 
 def geometric_step(
@@ -298,10 +321,11 @@ def geometric_step(
                 axis = axis_from_sweep(pts, fit.q[rows, j - 1], "R", j, best, home[j - 1], robust_scale=scale)
         axes.append(axis)
     estimates = [ax.tp_home for ax in axes if ax.tp_home is not None]
-    if not estimates:
-        raise InputError("no sweep has joint readings: the home pose of the TP cannot be located")
-    weights = np.array([ax.samples for ax in axes if ax.tp_home is not None], dtype=float)
-    tp_home = np.average(np.array(estimates), axis=0, weights=weights)
+    if estimates:
+        weights = np.array([ax.samples for ax in axes if ax.tp_home is not None], dtype=float)
+        tp_home = np.average(np.array(estimates), axis=0, weights=weights)
+    else:  # positions only (the paper's setting): every sweep passes through the TP at home
+        tp_home = common_point(axes, fit)
     model = dh_from_axes(
         fit.joint_types,
         [ax.point for ax in axes],

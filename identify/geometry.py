@@ -201,11 +201,34 @@ def circle_residuals(points: ArrayLike, circle: Circle) -> Array:
     return np.hypot(h, rho - circle.radius)
 
 
-def angles_on_circle(points: ArrayLike, circle: Circle) -> Array:
-    """Angle of each point about ``circle.normal`` (counter-clockwise), radians, unwrapped in row order."""
+UNWRAP_CONSISTENT = 0.5  # rad: most a reading-unwrapped angle may stray from the readings' line
+
+
+def angles_on_circle(points: ArrayLike, circle: Circle, readings: ArrayLike | None = None) -> Array:
+    """Angle of each point about ``circle.normal`` (counter-clockwise), radians, unwrapped.
+
+    With the joint ``readings`` (rad, one per point) each angle is unwrapped to the turn the readings
+    predict (turning either way about the normal), so samples more than half a turn apart, or a sweep
+    with gaps, keep their true angles. Without readings, or when the angles do not follow the readings
+    at one radian per radian either way (readings in another unit), they are unwrapped in row order.
+    """
     e1, e2 = perpendicular_basis(circle.normal)
     rel = np.asarray(points, dtype=float) - circle.center
-    return np.unwrap(np.arctan2(rel @ e2, rel @ e1))
+    raw = np.arctan2(rel @ e2, rel @ e1)
+    if readings is not None and len(raw) > 1:
+        ref = np.asarray(readings, dtype=float) - float(np.asarray(readings)[0])
+        best = None
+        for sign in (1.0, -1.0):
+            turns = np.round((sign * ref - (raw - raw[0])) / (2 * np.pi))
+            angles = raw + 2 * np.pi * turns
+            stray = angles - sign * ref
+            stray -= np.median(stray)
+            worst = float(np.max(np.abs(stray)))
+            if worst < UNWRAP_CONSISTENT and (best is None or worst < best[0]):
+                best = (worst, angles)
+        if best is not None:
+            return best[1]
+    return np.unwrap(raw)
 
 
 @dataclass(frozen=True)
@@ -240,8 +263,7 @@ def common_normal(
     infinitely many normals.
     """
     p1, u1, p2, u2 = (np.asarray(v, dtype=float) for v in (p1, u1, p2, u2))
-    cross = np.cross(u1, u2)
-    sin_angle = np.linalg.norm(cross)
+    sin_angle = np.linalg.norm(cross(u1, u2))
     if sin_angle <= np.sin(parallel_tol):
         foot_1 = p1 if anchor is None else np.asarray(anchor, dtype=float)
         foot_2 = p2 + ((foot_1 - p2) @ u2) * u2

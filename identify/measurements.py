@@ -78,9 +78,12 @@ class Measurements:
         return [int(ids[i]) for i in sorted(first)]
 
 
-def validate(meas: Measurements) -> list[str]:
+def validate(meas: Measurements, with_nominal: bool = False) -> list[str]:
     """Check that ``meas`` can be identified; raise InputError on the first fatal problem.
 
+    Missing readings (NaN) are allowed for a sweep's moved joint (jogged by hand) or for a whole sweep row
+    (positions only: the other joints stand at home). ``with_nominal``: a nominal model will start the fit,
+    so joints without a sweep are allowed when there are free poses.
     Returns warnings (one line each) for problems that do not stop the identification.
     """
     n = meas.n_joints
@@ -106,15 +109,20 @@ def validate(meas: Measurements) -> list[str]:
     moved = np.zeros_like(missing_q)
     swept = meas.joint > 0
     moved[np.flatnonzero(swept), meas.joint[swept] - 1] = True
-    if np.any(missing_q & ~moved):
-        bad = int(meas.row[np.any(missing_q & ~moved, axis=1)][0])
-        raise InputError(f"line {bad}: only the moved joint's reading may be empty, in a sweep")
+    positions_only = swept & np.all(missing_q, axis=1)  # nothing read: the other joints stand at home
+    if np.any(missing_q & ~moved & ~positions_only[:, None]):
+        bad = int(meas.row[np.any(missing_q & ~moved & ~positions_only[:, None], axis=1)][0])
+        raise InputError(f"line {bad}: in a sweep, leave either the moved joint's reading or every reading empty; "
+                         "a free pose needs every reading")
     warnings: list[str] = []
     fit = ~meas.check
     for j in range(1, n + 1):
         sweeps = [s for s in meas.sweeps_of(j) if np.any(fit & (meas.sweep == s))]
         if not sweeps:
-            raise InputError(f"joint {j} is never swept: every joint needs a sweep where it alone moves")
+            if with_nominal and np.any(fit & (meas.joint == 0)):
+                continue  # free poses and a nominal model determine the joint without a sweep
+            hint = "; or give a nominal model (--robot) to calibrate from free poses" if not with_nominal else ""
+            raise InputError(f"joint {j} is never swept: every joint needs a sweep where it alone moves{hint}")
         for s in sweeps:
             count = int(np.sum(fit & (meas.sweep == s)))
             if count < MIN_SWEEP_SAMPLES:
@@ -122,6 +130,25 @@ def validate(meas: Measurements) -> list[str]:
             if count < FEW_SWEEP_SAMPLES:
                 warnings.append(f"sweep {s} (joint {j}) has only {count} samples; {FEW_SWEEP_SAMPLES}+ recommended")
     return warnings
+
+
+def prepared_joints(meas: Measurements, home: Array) -> tuple[Array, NDArray[np.int64]]:
+    """Readings ready for the forward model, and the joint each row did not read.
+
+    Joints held still in a positions-only sweep row take their ``home`` readings (n,); the moved joint of
+    a row without its reading stays NaN and is named in ``unknown`` (0-based, -1 where every reading is
+    known): the fit estimates it as a nuisance parameter.
+    """
+    q = meas.q.copy()
+    unknown = np.full(len(q), -1, dtype=np.int64)
+    swept = meas.joint > 0
+    missing = np.isnan(q)
+    held = missing & swept[:, None]
+    held[np.flatnonzero(swept), meas.joint[swept] - 1] = False
+    q = np.where(held, home[None, :], q)
+    moved_missing = swept & missing[np.arange(len(q)), np.maximum(meas.joint - 1, 0)]
+    unknown[moved_missing] = meas.joint[moved_missing] - 1
+    return q, unknown
 
 
 def looks_like_millimetres(points: Array) -> bool:

@@ -1,40 +1,37 @@
 """The identification as one pure function: measurements in, identified model with its evidence out.
 
-Geometric step (the paper) -> maximum-likelihood refinement -> uncertainties -> held-out validation.
+Geometric step (the paper) and the nominal model (when given) start a maximum-likelihood fit of the joint
+axes as lines (:mod:`identify.estimate`, every sample used, unread joints as nuisance parameters, gross
+outliers rejected); its covariance is scaled to the noise and inflated for model error
+(:mod:`identify.adequacy`); the lines are written as DH (:mod:`identify.dh_output`); held-out poses
+validate it; and :mod:`identify.verdict` says whether it can be trusted.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, dh_from_axes, geometric_step
-from identify.kinematics import DHModel, points_from_joints
-from identify.measurements import Measurements, validate
-from identify.poe import AxisLines, fit_lines
-from identify.refine import (
-    DEFAULT_MAX_OFFSET,
-    Refinement,
-    dh_index,
-    full_jacobian,
-    inlier_mask,
-    parallel_links,
-    parameter_names,
-    refine,
-    vector_from_model,
-)
+from identify import verdict as checks
+from identify.adequacy import Adequacy, assess
+from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, geometric_step, home_from_measurements
+from identify.dh_output import DHOutput, dh_output, near_parallel
+from identify.estimate import LinesFit, along_arc, fit, nominal_start, place_nominal
+from identify.kinematics import DHModel, frames_from_joints, points_from_joints
+from identify.measurements import InputError, Measurements, prepared_joints, validate
+from identify.outliers import sweep_neighbours
+from identify.poe import AxisLines, LineProblem, points_from_lines
+from identify.refine import DEFAULT_MAX_OFFSET, Refinement, full_jacobian, parameter_names, refine
 
 Array = NDArray[np.float64]
-
-PARALLEL_SIGMAS = 3.0  # an alpha within this many standard uncertainties of 0 or pi counts as parallel
-UNDETERMINED_D = 0.05  # m: a d less certain than this is left to the parallel-axis convention
 
 
 @dataclass(frozen=True)
 class FixedParameter:
-    """A parameter the data cannot determine, held at ``value`` (rad or m) for ``reason``."""
+    """A parameter held at ``value`` (rad or m) by a convention, for ``reason``."""
 
     name: str
     value: float
@@ -57,7 +54,8 @@ class Validation:
     """Errors at held-out poses: measured vs predicted TP, 3D, metres.
 
     ``bound`` is the RMS error of the model's own predictions the fit's covariance implies;
-    ``expected`` adds the tracker noise of the held-out measurements (what ``rms`` should be near).
+    ``expected`` adds the tracker noise and model error of the held-out measurements (what ``rms``
+    should be near).
     """
 
     samples: int
@@ -69,19 +67,25 @@ class Validation:
 
 @dataclass(frozen=True)
 class Identification:
-    """Identified model (``model``), standard uncertainties in the layout of
-    :func:`identify.refine.parameter_names` (``std``), and the evidence behind them."""
+    """Identified model (``model``, standard DH), standard uncertainties in the layout of
+    :func:`identify.refine.parameter_names` (``std``), the axis lines it was fitted as (``lines``, with
+    their covariance ``lines_covariance``), and the evidence behind them, ending in ``verdict``."""
 
     model: DHModel
     std: Array
     fixed: list[FixedParameter]
-    geometric: GeometricResult
+    geometric: GeometricResult | None
     refinement: Refinement
     sweeps: list[SweepFit]
     rejected_rows: list[int]
     validation: Validation | None
     parallel: list[int]
     convention: str
+    lines: AxisLines
+    lines_covariance: Array
+    adequacy: Adequacy
+    verdict: checks.Verdict
+    start: str
     warnings: list[str] = field(default_factory=list)
 
     @property
@@ -93,9 +97,74 @@ class Identification:
     @property
     def geometric_rms(self) -> float:
         """RMS 3D residual of the same inliers under the geometric step's model (the paper's), m."""
+        if self.geometric is None:
+            return float("nan")
         ref = self.refinement
         err = ref.points - points_from_joints(self.geometric.model, ref.q)
         return float(np.sqrt(np.mean(np.sum(err[ref.inliers] ** 2, axis=1))))
+
+    @property
+    def exact_dh(self) -> bool:
+        """True when the DH table is the identified model; False when a parallel-axis convention it keeps
+        costs measurable accuracy (then predictions use the axis lines)."""
+        return self.verdict_check("dh_table").status == "pass"
+
+    def verdict_check(self, name: str) -> checks.Check:
+        return next(c for c in self.verdict.checks if c.name == name)
+
+    def predict(self, q: Array) -> Array:
+        """Predicted TP (k, 3), tracker frame, at joint readings ``q`` (k, n) (positions-only data: readings
+        relative to the home pose)."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        return points_from_joints(self.model, q) if self.exact_dh else points_from_lines(self.lines, q)
+
+    def prediction_covariances(self, q: Array) -> Array:
+        """Covariance (k, 3, 3) of the predicted TP at ``q`` from the parameters' uncertainty, m²."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if self.exact_dh:
+            return dh_prediction_covariances(self.model, self.refinement, q)
+        return prediction_covariances(self.lines, self.lines_covariance, q)
+
+    def prediction_rms(self, q: Array) -> float:
+        """RMS over ``q`` of the 3D standard uncertainty of predictions (m), model error included: what the
+        error against the real arm should be near."""
+        cov = self.prediction_covariances(q)
+        return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) + 3 * self.adequacy.model_error**2))
+
+
+def prediction_covariances(lines: AxisLines, covariance: Array, q: Array) -> Array:
+    problem = LineProblem(lines, q, np.zeros((len(q), 3)), np.ones(len(q)))
+    g = problem.jacobian_blocks(np.zeros(lines.n_parameters), q=q)
+    return g @ covariance @ np.swapaxes(g, 1, 2)
+
+
+def dh_prediction_covariances(model: DHModel, ref: Refinement, q: Array) -> Array:
+    """Covariance (k, 3, 3) of the DH model's predictions at ``q`` from its parameters' covariance, m²."""
+    _, jac = full_jacobian(model, q)
+    g = jac[:, :, ref.free]
+    return g @ ref.covariance @ np.swapaxes(g, 1, 2)
+
+
+def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
+                  unknown: NDArray[np.int64]) -> Array:
+    """Unit-variance covariance of the ``free`` DH values (weighted units), rows of unread joints (``unknown``,
+    0-based, -1 for none) projected on the complement of their nuisance joint value."""
+    p, jac = full_jacobian(model, q)
+    jac = jac[:, :, free] * weights[:, None, None]
+    rows = np.flatnonzero(unknown >= 0)
+    if len(rows):
+        frames = frames_from_joints(model, q[rows])
+        j = unknown[rows]
+        axis = frames[np.arange(len(rows)), j, :3, 2]
+        origin = frames[np.arange(len(rows)), j, :3, 3]
+        revolute = model.revolute[j]
+        g = np.where(revolute[:, None], np.cross(axis, p[rows] - origin), axis) * weights[rows, None]
+        coef = np.einsum("ki,kip->kp", g, jac[rows]) / np.einsum("ki,ki->k", g, g)[:, None]
+        jac[rows] -= g[:, :, None] * coef[:, None, :]
+    flat = jac.reshape(-1, jac.shape[2])
+    scale = np.maximum(np.linalg.norm(flat, axis=0), 1e-300)
+    _, s, vt = np.linalg.svd(flat / scale, full_matrices=False)
+    return (vt.T / np.maximum(s, 1e-300) ** 2) @ vt / np.outer(scale, scale)
 
 
 def split_holdout(meas: Measurements, fraction: float, seed: int = 0) -> Measurements:
@@ -112,19 +181,41 @@ def split_holdout(meas: Measurements, fraction: float, seed: int = 0) -> Measure
     return replace(meas, check=check)
 
 
-def _reason(name: str, n: int, types: str, parallel: list[int]) -> str:
+def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
     joint = int("".join(ch for ch in name if ch.isdigit()) or 0)
-    if name.startswith("tool"):
-        return "redundant with the base pose along a prismatic axis"
+    if joint in capped and name.startswith("d"):
+        return (f"axes {joint} and {joint + 1} are parallel within tolerance or their uncertainty: the common "
+                f"normal is placed by convention (exact DH would move d{joint} by {capped[joint]:.3g} m)")
     if joint == 1 and name[:-1] in ("theta", "d"):
         return "redundant with the base pose (frame 0 is placed by convention)"
     if joint == n:
         return "redundant with the tool: frame n is placed by convention and the tool carries the TP"
     if types[joint - 1] == "P" and name[:-1] in ("a", "d"):
         return "a prismatic axis has no position; it is placed to meet the next axis"
-    if joint in parallel or joint - 1 in parallel:
-        return "axes parallel within tolerance: the common normal is placed by convention"
-    return "not determined by these data"
+    return "placed by convention"
+
+
+def _starts(meas: Measurements, q: Array, unknown: NDArray[np.int64], home: Array, nominal: DHModel | None,
+            conventional: Array, parallel_tol: float, warnings: list[str]) -> tuple[GeometricResult | None,
+                                                                                 list[tuple[str, AxisLines]]]:
+    starts: list[tuple[str, AxisLines]] = []
+    geo = None
+    every_joint_swept = all(meas.sweeps_of(j) for j in range(1, meas.n_joints + 1))
+    if every_joint_swept:
+        try:
+            geo = geometric_step(meas, conventional, parallel_tol, nominal)
+            starts.append(("geometric step", AxisLines(meas.joint_types, np.array([ax.point for ax in geo.axes]),
+                                                       np.array([ax.direction for ax in geo.axes]), home,
+                                                       geo.tp_home)))
+        except InputError as exc:
+            if nominal is None:
+                raise
+            warnings.append(f"geometric step skipped ({exc}); started from the nominal model")
+    if nominal is not None and np.sum(unknown < 0) >= 3:
+        starts.append(("nominal", nominal_start(nominal, q, meas.points, unknown, home)))
+    if not starts:
+        raise InputError("no start for the fit: sweep every joint, or give a nominal model and free poses")
+    return geo, starts
 
 
 def identify(
@@ -133,96 +224,166 @@ def identify(
     parallel_tol: float = DEFAULT_PARALLEL_TOL,
     robust: bool = True,
     max_offset: float = DEFAULT_MAX_OFFSET,
+    noise: float | None = None,
 ) -> Identification:
     """Identify the DH model from ``meas`` (fit rows; ``check`` rows are only used for validation).
 
-    ``nominal`` (optional) supplies the conventional values of undetermined parameters and the signs
-    of the x axes, so the result reads as deltas against it; identification never depends on it.
-    ``max_offset`` (m): how far a near-parallel pair's ``d`` may move when the data resolve its misalignment.
+    ``nominal`` (optional) starts a second fit (and the only one for free poses without sweeps), supplies
+    the conventional values of redundant parameters and the signs of the x axes, and is checked against
+    the data. ``noise`` (m per axis): the tracker's declared noise (the ``sigma`` column overrides it).
+    ``max_offset`` (m): how far exact DH may move a near-parallel pair's ``d`` before the convention is kept.
     """
-    warnings = validate(meas)
+    warnings = validate(meas, with_nominal=nominal is not None)
+    n = meas.n_joints
     if nominal is not None and nominal.joint_types != meas.joint_types:
         raise ValueError(f"nominal model has joints {nominal.joint_types}, data have {meas.joint_types}")
-    conventional = None if nominal is None else nominal.dh_table()
-    geo = geometric_step(meas, conventional, parallel_tol, nominal)
-    usable = ~meas.check & np.all(np.isfinite(meas.q), axis=1)
-    fit = meas.subset(usable)
-    lines = _fitted_lines(geo, fit, robust)
+    conventional = np.zeros((n, 4)) if nominal is None else nominal.dh_table()
+    fitm = meas.subset(~meas.check)
+    home = home_from_measurements(fitm)
+    q, unknown = prepared_joints(fitm, home)
+    weights = np.ones(len(q)) if fitm.sigma is None else 1.0 / fitm.sigma
+    numbers = {s: k + 1 for k, s in enumerate(np.unique(fitm.sweep[fitm.joint > 0]))}
+    group = np.array([numbers.get(int(s), 0) if j > 0 else 0 for s, j in zip(fitm.sweep, fitm.joint, strict=True)])
+    geo, starts = _starts(fitm, q, unknown, home, nominal, conventional, parallel_tol, warnings)
+    fits = [fit(start, q, fitm.points, weights, unknown, group, fitm.joint, robust, label) for label, start in starts]
+    best: LinesFit = min(fits, key=lambda f: f.robust_cost)
+    lines, inl = best.lines, best.inliers
+    problem = LineProblem(lines, q[inl], fitm.points[inl], weights[inl], unknown[inl])
+    x0 = np.zeros(lines.n_parameters)
+    jac_blocks = problem.jacobian_blocks(x0)
+    res_w = problem.residuals(x0).reshape(-1, 3)
+    unit = 1.0 if fitm.sigma is None else float(np.median(fitm.sigma))
+    declared = unit if fitm.sigma is not None else noise
+    runs = sweep_neighbours(group[inl], along_arc(best.q[inl], fitm.joint[inl]))
+    adequacy = assess(res_w, jac_blocks, unknown[inl], runs, unit, declared)
+    jac = jac_blocks.reshape(-1, lines.n_parameters)
+    scale = np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
+    _, s, vt = np.linalg.svd(jac / scale, full_matrices=False)
+    condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
+    inv = (vt.T / np.maximum(s, 1e-300) ** 2) @ vt / np.outer(scale, scale)
+    variance = max(adequacy.residual, declared or 0.0) ** 2 / unit**2 * adequacy.inflation
+    lines_cov = inv * variance * unit**2 if fitm.sigma is None else inv * variance
+    near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
+    fitted = (best.q[inl], fitm.points[inl], None if fitm.sigma is None else fitm.sigma[inl], weights[inl], res_w,
+              variance)
+    out, dh_fit, gap = _written_dh(lines, conventional, nominal, near, fitted, adequacy.noise)
+    if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
+        # the data resolve the misalignment: exact DH wherever it stays within --max-offset
+        out, dh_fit, gap = _written_dh(lines, conventional, nominal, beyond, fitted, adequacy.noise)
+    if dh_fit is None:  # exact DH: the lines' covariance carried over
+        model = out.model
+        free = np.any(out.jacobian != 0.0, axis=1)
+        cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
+    else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
+        model, free = dh_fit.model, dh_fit.free
+        cov_free = dh_covariance(model, free, best.q[inl], weights[inl], unknown[inl]) * variance
+    std = np.zeros(len(free))
+    std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
+    residuals = best.residuals
+    notes = [f"fitted from the {best.start}" + (f" (of {len(fits)} starts)" if len(fits) > 1 else "")]
+    if fitm.sigma is not None:
+        notes.append(f"reduced chi-square {adequacy.statistic:.3g} (1 when the given sigma is right)")
+    if adequacy.inflation > 1.0:
+        notes.append(f"residuals correlated along the arcs (lag-1 {adequacy.rho:.2f}): covariance inflated "
+                     f"{adequacy.inflation:.3g}x")
+    ref = Refinement(model, free, cov_free, adequacy.noise, inl, residuals, condition,
+                     float(np.sum(res_w**2)), best.q, fitm.points, notes)
+    names = parameter_names(n)
+    vector = np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
+    fixed = [FixedParameter(names[k], float(vector[k]), _reason(names[k], n, meas.joint_types, out.capped))
+             for k in np.flatnonzero(~free)]
+    sweeps = [_sweep_fit(int(sid), int(fitm.joint[group == g][0]), ref, group == g)
+              for sid, g in numbers.items()]
+    if np.any(fitm.joint == 0):
+        sweeps.append(_sweep_fit(0, 0, ref, fitm.joint == 0))
+    for sw in sweeps:
+        if sw.rejected:
+            warnings.append(f"sweep {sw.sweep}: {sw.rejected} sample(s) rejected as outliers")
+    ident_rms = float(np.sqrt(np.mean(np.sum(residuals[inl] ** 2, axis=1))))
+    check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
+    expected = _expected_accuracy(lines, lines_cov, best.q[inl], adequacy)
+    gap_rms, gap_statistic = gap
+    dh_check = checks.dh_table(gap_rms, gap_statistic, expected, [f"d{i}" for i in out.capped])
+    if dh_check.status == "pass":
+        def predict(qq: Array) -> Array:
+            return points_from_joints(model, qq)
 
-    def start_model(parallel: list[int]) -> DHModel:
-        return dh_from_axes(meas.joint_types, list(lines.points), list(lines.directions), lines.home,
-                            lines.tp_home, _conventional(conventional, meas.n_joints), parallel_tol, nominal,
-                            parallel)
+        def covariances(qq: Array) -> Array:
+            return dh_prediction_covariances(model, ref, qq)
+    else:
+        def predict(qq: Array) -> Array:
+            return points_from_lines(lines, qq)
 
-    start = start_model([])
-    parallel = parallel_links(start, parallel_tol)
-    noise = max(geo.noise, 1e-9)
-    ref = refine(start, fit.q, fit.points, fit.sigma, conventional, parallel, noise, robust, max_offset)
-    unresolved = _parallel_within_uncertainty(ref, parallel)
-    if unresolved:  # short or noisy sweeps: axes look skew only by noise; redo under the convention
-        parallel = sorted({*parallel, *unresolved})
-        ref = refine(start_model(parallel), fit.q, fit.points, fit.sigma, conventional, parallel, noise, robust,
-                     max_offset)
-    names = parameter_names(meas.n_joints)
-    fixed = [
-        FixedParameter(name, float(value), _reason(name, meas.n_joints, meas.joint_types, parallel))
-        for name, value, is_free in zip(names, vector_from_model(ref.model), ref.free, strict=True)
-        if not is_free
+        def covariances(qq: Array) -> Array:
+            return prediction_covariances(lines, lines_cov, qq)
+    validation = _validate(check_rows, predict, covariances, adequacy) if len(check_rows) else None
+    found = [
+        checks.model_fit(ident_rms, adequacy),
+        checks.conditioning(condition),
+        checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
+        dh_check,
     ]
-    sweeps = []
-    for s in np.unique(fit.sweep[fit.joint > 0]):
-        rows = fit.sweep == s
-        sweeps.append(_sweep_fit(int(s), int(fit.joint[rows][0]), ref, rows))
-    if np.any(fit.joint == 0):
-        sweeps.append(_sweep_fit(0, 0, ref, fit.joint == 0))
-    for s in sweeps:
-        if s.rejected:
-            warnings.append(f"sweep {s.sweep}: {s.rejected} sample(s) rejected as outliers")
-    validation = _validate(meas.subset(meas.check), ref) if np.any(meas.check) else None
+    if validation is not None:
+        found.append(checks.holdout(validation.samples, validation.rms, validation.expected))
+    if nominal is not None and np.sum(unknown < 0) >= 3:
+        known = unknown < 0
+        placed = place_nominal(nominal, best.q[known], points_from_lines(lines, best.q[known]))
+        gap = points_from_joints(placed, best.q[known]) - points_from_lines(lines, best.q[known])
+        found.append(checks.nominal("model", float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))))
     return Identification(
-        model=ref.model,
-        std=ref.std(),
+        model=model,
+        std=std,
         fixed=fixed,
         geometric=geo,
         refinement=ref,
         sweeps=sweeps,
-        rejected_rows=[int(r) for r in fit.row[~ref.inliers]],
+        rejected_rows=[int(r) for r in fitm.row[~inl]],
         validation=validation,
-        parallel=parallel,
+        parallel=sorted(out.capped),
         convention="nominal" if nominal is not None else "zero",
+        lines=lines,
+        lines_covariance=lines_cov,
+        adequacy=adequacy,
+        verdict=checks.Verdict(tuple(found)),
+        start=best.start,
         warnings=warnings,
     )
 
 
-def _conventional(conventional: Array | None, n: int) -> Array:
-    return np.zeros((n, 4)) if conventional is None else conventional
+def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
+                fitted: tuple[Array, Array, Array | None, Array, Array, float], noise: float
+                ) -> tuple[DHOutput, Refinement | None, tuple[float, float]]:
+    """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH
+    table refitted under that convention (so the cost it adds is a likelihood ratio, chi-square when the
+    axes are parallel); and that cost with the RMS gap to the lines (see :func:`_dh_gap`)."""
+    q, points, sigma, weights, res_w, variance = fitted
+    out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
+    if not capped:
+        return out, None, _dh_gap(out.model, lines, q, points, weights, res_w, variance)
+    dh_fit = refine(out.model, q, points, sigma, conventional, sorted(capped), noise, False, 0.0)
+    return out, dh_fit, _dh_gap(dh_fit.model, lines, q, points, weights, res_w, variance)
 
 
-def _fitted_lines(geo: GeometricResult, fit: Measurements, robust: bool) -> AxisLines:
-    """Axis lines fitted to every sample with its joint readings, started from the paper's circles."""
-    start = AxisLines(fit.joint_types, np.array([ax.point for ax in geo.axes]),
-                      np.array([ax.direction for ax in geo.axes]), geo.home, geo.tp_home)
-    weights = None if fit.sigma is None else 1.0 / fit.sigma
-    lines, res = fit_lines(start, fit.q, fit.points, weights)
-    keep = inlier_mask(res, 4 * fit.n_joints + 3)
-    if robust and not np.all(keep):
-        lines, _ = fit_lines(lines, fit.q[keep], fit.points[keep], None if weights is None else weights[keep])
-    return lines
+def _dh_gap(model: DHModel, lines: AxisLines, q: Array, points: Array, weights: Array, res_w: Array,
+            variance: float) -> tuple[float, float]:
+    """RMS difference (m) of the DH model's and the lines' predictions at ``q``, and the cost the DH model
+    adds over the lines', in noise variances."""
+    gap = points_from_joints(model, q) - points_from_lines(lines, q)
+    res_dh = (points - points_from_joints(model, q)) * weights[:, None]
+    added = float(np.sum(res_dh**2) - np.sum(res_w**2)) / max(variance, 1e-300)
+    return float(np.sqrt(np.mean(np.sum(gap**2, axis=1)))), added
 
 
-def _parallel_within_uncertainty(ref: Refinement, parallel: list[int]) -> list[int]:
-    """Links not yet treated as parallel whose axes the data cannot tell from parallel: alpha within
-    PARALLEL_SIGMAS standard uncertainties of 0 or pi, or a ``d`` more uncertain than UNDETERMINED_D."""
-    std = ref.std()
-    out = []
-    for i in range(1, ref.model.n_joints):
-        alpha, d = dh_index(i, "alpha"), dh_index(i, "d")
-        if i in parallel:
-            continue
-        near_zero = ref.free[alpha] and abs(np.sin(ref.model.alpha[i - 1])) < PARALLEL_SIGMAS * std[alpha]
-        if near_zero or (ref.model.joint_types[i - 1] == "R" and std[d] > UNDETERMINED_D):
-            out.append(i)
-    return out
+def _lost(sweeps: list[SweepFit]) -> list[str]:
+    """Sweeps that lost more than half their samples, or all but two, to the outlier test."""
+    return [f"sweep {s.sweep} (joint {s.joint})" for s in sweeps
+            if s.joint > 0 and (s.rejected * 2 > s.samples or s.samples - s.rejected < 3)]
+
+
+def _expected_accuracy(lines: AxisLines, covariance: Array, q: Array, adequacy: Adequacy) -> float:
+    """RMS 3D prediction uncertainty at the fitted configurations, model error included (m)."""
+    cov = prediction_covariances(lines, covariance, q)
+    return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) + 3 * adequacy.model_error**2))
 
 
 def _sweep_fit(sweep: int, joint: int, ref: Refinement, rows: NDArray[np.bool_]) -> SweepFit:
@@ -232,12 +393,11 @@ def _sweep_fit(sweep: int, joint: int, ref: Refinement, rows: NDArray[np.bool_])
     return SweepFit(sweep, joint, int(rows.sum()), int((rows & ~ref.inliers).sum()), rms)
 
 
-def _validate(check: Measurements, ref: Refinement) -> Validation:
-    predicted, jac = full_jacobian(ref.model, check.q)
-    err = np.linalg.norm(check.points - predicted, axis=1)
-    g = jac[:, :, ref.free]
-    cov = g @ ref.covariance @ np.swapaxes(g, 1, 2)
+def _validate(check: Measurements, predict: Callable[[Array], Array], covariances: Callable[[Array], Array],
+              adequacy: Adequacy) -> Validation:
+    err = np.linalg.norm(check.points - predict(check.q), axis=1)
+    cov = covariances(check.q)
     bound = float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))))
-    noise_var = 3 * ref.noise**2 if check.sigma is None else 3 * float(np.mean(check.sigma**2))
+    noise2 = adequacy.noise**2 if check.sigma is None else float(np.mean(check.sigma**2))
     return Validation(len(check), float(np.sqrt(np.mean(err**2))), float(err.max()), bound,
-                      float(np.sqrt(bound**2 + noise_var)))
+                      float(np.sqrt(bound**2 + 3 * noise2 + 3 * adequacy.model_error**2)))

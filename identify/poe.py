@@ -5,7 +5,13 @@ about joint i's axis line (revolute) or slides along its direction (prismatic), 
 home pose ``h``. Lines have no singular configuration (parallel or intersecting axes are ordinary), so
 this fit is well conditioned where DH is not; its lines are then turned into DH frames.
 Parameters: per revolute joint, 2 tilts of the direction and 2 shifts of the point; per prismatic, 2
-tilts; then the TP at home (3).
+tilts; then the TP at home (3). That is exactly what position-only data determine (4R + 2P + 3).
+
+A row whose moved joint was not read (a sweep jogged by hand, or positions-only data) carries that
+joint's value as a nuisance parameter. It is eliminated in closed form (variable projection): for given
+lines the best angle (or stroke) of each such row is computed exactly, and the Jacobian is projected
+onto the complement of the row's nuisance direction (Kaufman), which also gives the exact Schur
+complement for the covariance.
 """
 
 from __future__ import annotations
@@ -16,7 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.geometry import perpendicular_basis, rotation_about_axis, skew, unit
+from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, unit
+from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 
 Array = NDArray[np.float64]
 
@@ -31,6 +38,19 @@ class AxisLines:
     directions: Array
     home: Array
     tp_home: Array
+
+    @property
+    def n_parameters(self) -> int:
+        """Size of the minimal parameter vector: 4 per revolute joint, 2 per prismatic, 3 for the TP."""
+        return sum(4 if t == "R" else 2 for t in self.joint_types) + 3
+
+
+def lines_from_model(model: DHModel, home: Array) -> AxisLines:
+    """The axis lines of a DH ``model`` at joint readings ``home`` (n,), tracker frame."""
+    home = np.asarray(home, dtype=float)
+    frames = frames_from_joints(model, home[None, :])[0]
+    tp = points_from_joints(model, home[None, :])[0]
+    return AxisLines(model.joint_types, frames[:-1, :3, 3].copy(), frames[:-1, :3, 2].copy(), home.copy(), tp)
 
 
 def points_from_lines(lines: AxisLines, q: Array) -> Array:
@@ -57,12 +77,61 @@ def _chain(lines: AxisLines, q: Array) -> tuple[Array, list[tuple[Array, Array, 
     return x, steps[::-1]
 
 
-class _LineProblem:
-    def __init__(self, start: AxisLines, q: Array, points: Array, weights: Array):
+def _apply(lines: AxisLines, q: Array, joints: range, x: Array) -> Array:
+    """Points ``x`` (m, 3) moved by the given joints (applied from the last in ``joints`` to the first)."""
+    for i in reversed(joints):
+        delta = q[:, i] - lines.home[i]
+        if lines.joint_types[i] == "R":
+            x = lines.points[i] + np.einsum("kij,kj->ki", rotation_about_axis(lines.directions[i], delta),
+                                            x - lines.points[i])
+        else:
+            x = x + delta[:, None] * lines.directions[i]
+    return x
+
+
+def solve_unknown(lines: AxisLines, q: Array, points: Array, unknown: NDArray[np.int64]) -> Array:
+    """``q`` with each row's unknown joint (0-based index in ``unknown``, -1 for none) set to the value
+    that brings the predicted TP closest to the measured ``points`` (closed form; rad or m)."""
+    q = q.copy()
+    for j in np.unique(unknown[unknown >= 0]):
+        rows = np.flatnonzero(unknown == j)
+        qr = q[rows]
+        qr[:, j] = lines.home[j]
+        n = len(lines.joint_types)
+        tip = _apply(lines, qr, range(j + 1, n), np.tile(lines.tp_home, (len(rows), 1)))
+        # the joints before j move rigidly: undo them on the measurement (A^-1 y = R_Aᵀ (y - A(0)))
+        origin = _apply(lines, qr, range(j), np.zeros((len(rows), 3)))
+        cols = [_apply(lines, qr, range(j), np.tile(e, (len(rows), 1))) - origin for e in np.eye(3)]
+        rot_a = np.stack(cols, axis=2)
+        target = np.einsum("kji,kj->ki", rot_a, points[rows] - origin)
+        u = lines.directions[j]
+        if lines.joint_types[j] == "R":
+            v1 = tip - lines.points[j]
+            v2 = target - lines.points[j]
+            v1 -= np.outer(v1 @ u, u)
+            v2 -= np.outer(v2 @ u, u)
+            delta = np.arctan2(cross(v1, v2) @ u, np.einsum("ki,ki->k", v1, v2))
+        else:
+            delta = (target - tip) @ u
+        q[rows, j] = lines.home[j] + delta
+    return q
+
+
+class LineProblem:
+    """Weighted residuals and (projected) Jacobian of the lines model over its minimal parameters.
+
+    ``unknown`` (m,): 0-based index of each row's unread joint, -1 where every reading is known.
+    Parameters are increments on ``start`` (zero at the start).
+    """
+
+    def __init__(self, start: AxisLines, q: Array, points: Array, weights: Array,
+                 unknown: NDArray[np.int64] | None = None):
         self.start, self.q, self.points, self.weights = start, q, points, weights
+        self.unknown = np.full(len(q), -1) if unknown is None else np.asarray(unknown)
+        self.has_unknown = bool(np.any(self.unknown >= 0))
         self.types = start.joint_types
         self.bases = [np.array(perpendicular_basis(d)) for d in start.directions]
-        self.size = sum(4 if t == "R" else 2 for t in self.types) + 3
+        self.size = start.n_parameters
 
     def lines(self, x: Array) -> tuple[AxisLines, list[Array]]:
         pts, dirs, tangents, k = [], [], [], 0
@@ -82,19 +151,35 @@ class _LineProblem:
         lines = AxisLines(self.types, np.array(pts), np.array(dirs), self.start.home, x[k:k + 3] + self.start.tp_home)
         return lines, tangents
 
+    def joints(self, lines: AxisLines) -> Array:
+        """Readings with every unknown value at its best estimate for ``lines``."""
+        return solve_unknown(lines, self.q, self.points, self.unknown) if self.has_unknown else self.q
+
     def residuals(self, x: Array) -> Array:
         lines, _ = self.lines(x)
-        return ((points_from_lines(lines, self.q) - self.points) * self.weights[:, None]).ravel()
+        return ((points_from_lines(lines, self.joints(lines)) - self.points) * self.weights[:, None]).ravel()
 
-    def jacobian(self, x: Array) -> Array:
+    def jacobian_blocks(self, x: Array, q: Array | None = None) -> Array:
+        """Jacobian of the (weighted) predictions at readings ``q`` (default: the data's), (m, 3, size),
+        before the projection of the nuisance parameters."""
         lines, tangents = self.lines(x)
-        _, steps = _chain(lines, self.q)
-        m = len(self.q)
+        data = q is None
+        q = self.joints(lines) if data else q
+        _, steps = _chain(lines, q)
+        m = len(q)
         jac = np.zeros((m, 3, self.size))
+        nuisance = np.zeros((m, 3))
         left = np.broadcast_to(np.eye(3), (m, 3, 3)).copy()  # rotation of T_1 … T_{i-1}
         k = 0
         for i, t in enumerate(self.types):
             u, w, rot, delta = steps[i]
+            if data and self.has_unknown:
+                rows = self.unknown == i
+                if t == "R":
+                    nuisance[rows] = np.einsum("kij,kj->ki", left[rows], cross(lines.directions[i],
+                                                                                   w[rows] - lines.points[i]))
+                else:
+                    nuisance[rows] = left[rows] @ lines.directions[i]
             if t == "R":
                 # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
                 # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i)
@@ -102,8 +187,8 @@ class _LineProblem:
                 shift = left - left @ rot
                 c = lines.points[i]
                 for j in range(2):  # tilting the direction turns the line about its point c
-                    eps_w = np.cross(lines.directions[i], tangents[i][j])
-                    jac[:, :, k + j] = turn @ eps_w - shift @ np.cross(eps_w, c)
+                    eps_w = cross(lines.directions[i], tangents[i][j])
+                    jac[:, :, k + j] = turn @ eps_w - shift @ cross(eps_w, c)
                     jac[:, :, k + 2 + j] = shift @ self.bases[i][j]
                 k += 4
             else:
@@ -111,22 +196,44 @@ class _LineProblem:
                 k += 2
             left = left @ rot
         jac[:, :, k:k + 3] = left
-        jac *= self.weights[:, None, None]
-        return jac.reshape(-1, self.size)
+        if data:
+            jac *= self.weights[:, None, None]
+            if self.has_unknown:
+                g = nuisance * self.weights[:, None]
+                gg = np.maximum(np.einsum("ki,ki->k", g, g), 1e-300)
+                known = self.unknown < 0
+                coef = np.einsum("ki,kip->kp", g, jac) / gg[:, None]
+                jac -= np.where(known[:, None, None], 0.0, g[:, :, None] * coef[:, None, :])
+        return jac
+
+    def jacobian(self, x: Array) -> Array:
+        return self.jacobian_blocks(x).reshape(-1, self.size)
 
 
-def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None = None) -> tuple[AxisLines, Array]:
+def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None = None,
+              unknown: NDArray[np.int64] | None = None, loss: str = "linear",
+              scale: float = 1.0) -> tuple[AxisLines, Array, Array]:
     """Least-squares axis lines and TP for readings ``q`` (m, n) and TP ``points`` (m, 3).
 
-    ``weights`` (m,) = 1/sigma per sample. Returns the lines and the weighted residuals (m, 3).
+    ``weights`` (m,) = 1/sigma per sample; ``unknown`` marks rows whose one joint was not read (see
+    :class:`LineProblem`); ``loss``/``scale`` select a robust loss of scipy's ``least_squares`` (scale in
+    weighted units). Returns the lines, the readings with unknown values solved, and the weighted
+    residuals (m, 3).
     """
     weights = np.ones(len(q)) if weights is None else weights
-    problem = _LineProblem(start, q, points, weights)
-    method = "lm" if 3 * len(q) >= problem.size else "trf"
+    problem = LineProblem(start, q, points, weights, unknown)
+    n_nuisance = int(np.sum(problem.unknown >= 0))
+    linear = loss == "linear"
+    method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
+    tol = 1e-12 if linear else 1e-8
     fit = least_squares(problem.residuals, np.zeros(problem.size), jac=problem.jacobian, method=method,
-                        x_scale="jac", xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200)
+                        loss=loss, f_scale=scale, x_scale="jac", xtol=tol, ftol=tol, gtol=tol,
+                        max_nfev=200 if linear else 60)
     lines, _ = problem.lines(fit.x)
-    return _canonical(lines), fit.fun.reshape(-1, 3)
+    lines = _canonical(lines)
+    q_solved = problem.joints(lines) if problem.has_unknown else q
+    residuals = (points_from_lines(lines, q_solved) - points) * weights[:, None]
+    return lines, q_solved, residuals
 
 
 def _canonical(lines: AxisLines) -> AxisLines:

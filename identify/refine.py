@@ -33,7 +33,7 @@ NOISE_FLOOR = 1e-8  # m: below this, residuals are rounding, not noise (no outli
 RANK_TOL = 1e-7
 RESIDUAL_FLOOR = 1e-12  # m: rounding level of residuals, floor of the noise in the significance test
 RELEASE_PROBABILITY = 1e-3  # false-alarm rate of the test that releases the parallel-axis convention
-DEFAULT_MAX_OFFSET = 1.0  # m  # relative: a parameter adding less than this to the span of the others is redundant
+DEFAULT_MAX_OFFSET = float("inf")  # m: exact DH wherever the data resolve a near-parallel pair's misalignment
 
 
 def parameter_names(n: int) -> list[str]:
@@ -287,7 +287,7 @@ def refine(
                       q, points, notes)
 
 
-def inlier_mask(weighted_residuals: Array, n_free: int) -> NDArray[np.bool_]:
+def inlier_mask(weighted_residuals: Array, n_free: int, probability: float = OUTLIER_PROBABILITY) -> NDArray[np.bool_]:
     """Samples whose residual is within the chi-square(3) limit of a robust estimate of the noise.
 
     The noise may be anisotropic even after weighting: one sigma per sample cannot say that a camera's
@@ -298,7 +298,9 @@ def inlier_mask(weighted_residuals: Array, n_free: int) -> NDArray[np.bool_]:
     limit makes OUTLIER_PROBABILITY the chance that a clean data set loses any sample, whatever its size
     (Bonferroni), so a large session does not shed clean samples. Since the covariance is itself estimated
     from the samples, the limit is Hotelling's (a scaled F) rather than chi-square(3): with a few hundred
-    samples the difference is a few per cent, but it halves the false alarms of small sessions."""
+    samples the difference is a few per cent, but it halves the false alarms of small sessions.
+    ``probability``: the chance for these samples (a share of OUTLIER_PROBABILITY when they are a group of a
+    larger data set)."""
     res = np.asarray(weighted_residuals, dtype=float).reshape(-1, 3)
     count = res.size
     inflate = count / max(count - n_free, 1)  # residuals of a fit are smaller than the noise
@@ -315,7 +317,7 @@ def inlier_mask(weighted_residuals: Array, n_free: int) -> NDArray[np.bool_]:
         cov = core_rows.T @ core_rows / len(core_rows) * truncation * inflate + floor
         used = len(core_rows)
     distance2 = np.einsum("ij,jk,ik->i", res, np.linalg.inv(cov), res)
-    per_sample = OUTLIER_PROBABILITY / len(res)
+    per_sample = probability / len(res)
     dof = max(used - n_free / 3.0, 5.0)  # of the covariance estimate, per axis
     limit = 3.0 * dof / (dof - 2.0) * f_dist.isf(per_sample, 3, dof - 2.0)  # Hotelling's T² for 3 dimensions
     return distance2 <= limit

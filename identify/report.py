@@ -23,7 +23,9 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     model, std, ref = ident.model, ident.std, ident.refinement
     fixed = {f.name for f in ident.fixed}
     names = ("theta", "d", "a", "alpha")
-    lines = [f"Identified DH model, joints {model.joint_types} (standard DH; lengths mm, angles deg)"]
+    lines = [ident.verdict.summary()]
+    lines += [f"  {c.status:<4}  {c.name}: {c.message}" for c in ident.verdict.checks]
+    lines.append(f"Identified DH model, joints {model.joint_types} (standard DH; lengths mm, angles deg)")
     head = "joint type " + "".join(f"{f'{n} [{_UNIT[n]}]':>20}" for n in names)
     if nominal is not None:
         head += f"   Δ vs {nominal_name or 'nominal'} (d, a mm; theta, alpha deg)"
@@ -49,8 +51,9 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
         lines.append(f"parallel axes (within tolerance) at links {ident.parallel}: their d is conventional")
     lines.append(f"fixed (undetermined by the data): {', '.join(f.name for f in ident.fixed) or 'none'}")
     lines.append(
-        f"fit: {int(ref.inliers.sum())} samples, residual RMS {ident.rms * 1e3:.4f} mm (3D), implied noise "
-        f"{ref.noise * 1e3:.4f} mm per axis, condition number {ref.condition:.3g}"
+        f"fit: {int(ref.inliers.sum())} samples, residual RMS {ident.rms * 1e3:.4f} mm (3D), tracker noise "
+        f"{ref.noise * 1e3:.4f} mm per axis, model error {ident.adequacy.model_error * 1e3:.4f} mm per axis, "
+        f"condition number {ref.condition:.3g}"
     )
     worst = max(ident.sweeps, key=lambda s: s.rms if np.isfinite(s.rms) else -1.0)
     lines.append("per sweep RMS [mm]: " + ", ".join(
@@ -58,7 +61,8 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     ) + f"  (worst: sweep {worst.sweep})")
     if ident.rejected_rows:
         lines.append(f"rejected outliers (CSV lines): {ident.rejected_rows}")
-    lines.append(f"geometric step alone (the paper's method): residual RMS {ident.geometric_rms * 1e3:.4f} mm")
+    if ident.geometric is not None:
+        lines.append(f"geometric step alone (the paper's method): residual RMS {ident.geometric_rms * 1e3:.4f} mm")
     v = ident.validation
     if v is None:
         lines.append("validation: no held-out poses (add free poses, or rows with role=check)")

@@ -47,7 +47,8 @@ color:#222;padding:0 1em}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padd
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em}td,th{border:1px solid #ddd;padding:.25em .6em;
 text-align:right;white-space:nowrap}th{background:#f4f4f4}td.l,th.l{text-align:left;white-space:normal}
 .fixed{color:#888}figure{margin:1em 0}img{max-width:100%;height:auto}figcaption{font-size:.9em;color:#555}
-.warn{color:#a40}code{background:#f4f4f4}.scroll{overflow-x:auto}
+.warn{color:#a40}code{background:#f4f4f4}.scroll{overflow-x:auto}.verdict-pass h2{color:#063}
+.verdict-warn h2{color:#a40}.verdict-fail h2{color:#b00}
 """
 
 
@@ -90,7 +91,7 @@ def _focus_on_inliers(ax: Any, inlier_values: Array, outlier_values: Array) -> N
 def figure_joint(ident: Identification, fit: Measurements, joint: int) -> Figure:
     """Joint ``joint`` (1-based): its sweep's points with the model's path (circle or line) and swept arc,
     and the residuals against the joint reading."""
-    model, home, ref = ident.model, ident.geometric.home, ident.refinement
+    model, home, ref = ident.model, ident.lines.home, ident.refinement
     j = joint - 1
     rows = fit.joint == joint
     q, points = fit.q[rows], fit.points[rows]
@@ -156,7 +157,7 @@ def figure_joint(ident: Identification, fit: Measurements, joint: int) -> Figure
 
 def figure_frames(ident: Identification, fit: Measurements) -> Figure:
     """3D view (tracker frame, mm) of the identified joint axes and DH frames at home, with the points."""
-    model, home = ident.model, ident.geometric.home
+    model, home = ident.model, ident.lines.home
     frames = frames_from_joints(model, home)[0]
     tp = points_from_joints(model, home)[0]
     fig = Figure(figsize=(7.5, 6.5))
@@ -305,9 +306,11 @@ def _dh_section(ident: Identification, references: list[tuple[str, DHModel]]) ->
         parts.append(f"<p>Parallel axes (within tolerance) at links {_e(ident.parallel)}: their d is "
                      "conventional.</p>")
     ref = ident.refinement
-    parts.append(f"<p>Fit: {int(ref.inliers.sum())} samples, residual RMS {ident.rms * MM:.4f} mm (3D), implied "
-                 f"noise {ref.noise * MM:.4f} mm per axis, condition number {ref.condition:.3g}; the geometric "
-                 f"step alone (the paper's method) gives {ident.geometric_rms * MM:.4f} mm.</p>")
+    paper = ("" if ident.geometric is None else
+             f"; the geometric step alone (the paper's method) gives {ident.geometric_rms * MM:.4f} mm")
+    parts.append(f"<p>Fit: {int(ref.inliers.sum())} samples, residual RMS {ident.rms * MM:.4f} mm (3D), tracker "
+                 f"noise {ref.noise * MM:.4f} mm per axis, model error {ident.adequacy.model_error * MM:.4f} mm per "
+                 f"axis, condition number {ref.condition:.3g}{paper}.</p>")
     return "".join(parts)
 
 
@@ -398,6 +401,11 @@ def report_html(
     body = [f"<h1>{_e(title)}</h1>",
             f"<p>dh-calib {_e(__version__)}, generated {_e(_when(time.time()))}"
             + (f"; source <code>{_e(source)}</code>" if source else "") + ".</p>"]
+    verdict = ident.verdict
+    body.append(f'<section id="verdict" class="verdict-{verdict.status}"><h2>Verdict: {verdict.status.upper()}</h2>'
+                + _table(["check", "status", "what it found"],
+                         [[_e(c.name), _e(c.status), _e(c.message)] for c in verdict.checks], left=3)
+                + "</section>")
     notes = list(ident.warnings) + list(ident.refinement.notes)
     if notes:
         body.append('<section id="warnings"><h2>Warnings</h2><ul>'
@@ -406,7 +414,7 @@ def report_html(
                 "standard uncertainty).</p>" + _dh_section(ident, references)
                 + (f'<p class="warn">{_e(reference_note)}</p>' if reference_note else "") + "</section>")
     body.append('<section id="joints"><h2>Per joint</h2>')
-    for axis in ident.geometric.axes:
+    for axis in [] if ident.geometric is None else ident.geometric.axes:
         a = axis
         travel = f"{np.degrees(a.travel):.1f}°" if a.kind == "R" else f"{a.travel * MM:.1f} mm"
         radius = "" if np.isnan(a.radius) else f", radius {a.radius * MM:.2f} mm"
@@ -423,7 +431,7 @@ def report_html(
         body.append("<p>No held-out poses (add free poses, or rows with role=check).</p>")
     else:
         check = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
-        errors = np.linalg.norm(check.points - points_from_joints(ident.model, check.q), axis=1)
+        errors = np.linalg.norm(check.points - ident.predict(check.q), axis=1)
         body.append(f"<p>{v.samples} held-out poses: RMS {v.rms * MM:.4f} mm, max {v.max * MM:.4f} mm; expected "
                     f"RMS {v.expected * MM:.4f} mm (model bound {v.bound * MM:.4f} mm + tracker noise).</p>")
         body.append(_figure_html(figure_validation(errors, v.expected), "Errors at held-out poses"))

@@ -52,6 +52,25 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
     n = ident.model.n_joints
     std = ident.std
     doc = model_to_dict(ident.model)
+    doc["verdict"] = ident.verdict.as_dict()
+    lines = ident.lines
+    doc["axis_lines"] = {
+        "note": "the identified model as joint axes at the home readings (tracker frame, m): exact even where "
+                "the DH table keeps a parallel-axis convention (see verdict check dh_table)",
+        "home": _floats(lines.home),
+        "points": _floats(lines.points),
+        "directions": _floats(lines.directions),
+        "tp_home": _floats(lines.tp_home),
+    }
+    a = ident.adequacy
+    doc["noise"] = {
+        "tracker_per_axis": a.noise,
+        "declared_per_axis": a.declared,
+        "residual_per_axis": a.residual,
+        "difference_per_axis": a.difference,
+        "model_error_per_axis": a.model_error,
+        "covariance_inflation": a.inflation,
+    }
     doc["uncertainty"] = {
         "note": "standard uncertainty (1 sigma); 0 for fixed parameters",
         "joints": [dict(zip(DH_NAMES, map(float, std[9 + 4 * i: 13 + 4 * i]), strict=True)) for i in range(n)],
@@ -68,6 +87,7 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
     doc["residuals"] = {
         "rms": ident.rms,
         "noise_per_axis": ref.noise,
+        "model_error_per_axis": a.model_error,
         "samples": int(ref.inliers.size),
         "rejected_rows": ident.rejected_rows,
         "per_sweep": [
@@ -81,7 +101,7 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "samples": v.samples, "rms": v.rms, "max": v.max, "bound": v.bound, "expected_rms": v.expected,
     }
     geo = ident.geometric
-    doc["geometric_step"] = {
+    doc["geometric_step"] = None if geo is None else {
         "home": _floats(geo.home),
         "axes": [
             {"joint": ax.joint, "type": ax.kind, "point": _floats(ax.point), "direction": _floats(ax.direction),
@@ -91,6 +111,7 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         ],
         "model": model_to_dict(geo.model),
     }
+    doc["fit_start"] = ident.start
     if nominal is not None:
         delta = ident.model.dh_table() - nominal.dh_table()
         delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
@@ -100,4 +121,17 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
     doc["software"] = {"name": "dh-calib", "version": __version__}
     if source:
         doc["source"] = source
-    return doc
+    return finite(doc)
+
+
+def finite(value: Any) -> Any:
+    """``value`` with every NaN or infinity replaced by None, so the document is valid JSON and YAML."""
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value

@@ -213,7 +213,8 @@ def test_field_count_differs_from_header(tmp_path, lines, capsys):
 def test_empty_reading_of_a_joint_that_did_not_move(tmp_path, lines, capsys):
     line = data_lines(lines, 1)[3]  # sweep 1 moves joint 6; blank joint 2
     path = write(tmp_path, set_field(lines, line, "q2", ""))
-    assert_one_line_error(*invoke([path], capsys), f"line {line}: only the moved joint's reading may be empty")
+    assert_one_line_error(*invoke([path], capsys),
+                          f"line {line}: in a sweep, leave either the moved joint's reading or every reading empty")
 
 
 def test_joint_index_out_of_range(tmp_path, lines, capsys):

@@ -1,0 +1,109 @@
+"""Does the model explain the data? Residual noise against the tracker's and against its own differences.
+
+Three estimates of the per-axis noise (weighted units: metres when no sigma is given):
+
+- ``residual``: sum of squared residuals over the degrees of freedom (fitted parameters and the nuisance
+  angles of unread joints subtracted): the noise *plus* whatever the model cannot hold;
+- ``difference``: the same from successive differences along each sweep, made unbiased under the model
+  (``E|D r|² = σ² tr(D (I - H) Dᵀ)``): smooth systematic residuals cancel in it, so it sees the noise;
+- ``declared``: the tracker's (the ``sigma`` column, ``--noise``, or the session's tracker).
+
+Model error is called when the residual noise exceeds the declared one (chi-square test), or, without a
+declaration, its own difference estimate (F test), at a false-alarm rate of ``ALARM``. Its size is
+``sqrt(residual² - noise²)`` per axis. Systematic residuals are correlated along each arc: a sweep of n
+samples is worth only ``n_eff = n (1 - rho) / (1 + rho)`` independent ones (AR(1), ``rho`` the lag-1
+correlation of the residuals along the sweeps), and never fewer than one. The parameters' covariance is
+inflated by ``n / n_eff``: at most the samples per sweep, when each sweep's error is one shared offset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+from scipy.stats import f as f_dist
+
+Array = NDArray[np.float64]
+
+ALARM = 1e-3  # false-alarm rate of the model-error tests
+MAX_RHO = 0.999  # lag-1 correlation used for inflation stays below 1
+
+
+@dataclass(frozen=True)
+class Adequacy:
+    """Noise estimates per axis (m), the model error they imply (m per axis, 0 when not detected), the
+    variance inflation applied to the parameters' covariance, and the test that decided."""
+
+    residual: float
+    difference: float | None
+    declared: float | None
+    model_error: float
+    detected: bool
+    rho: float
+    inflation: float
+    statistic: float
+    limit: float
+    test: str
+
+    @property
+    def noise(self) -> float:
+        """The best estimate of the tracker noise alone (m per axis)."""
+        if self.declared is not None:
+            return self.declared
+        if self.detected and self.difference is not None:
+            return self.difference
+        return self.residual
+
+
+def assess(res_w: Array, jac_red: Array, unknown: NDArray[np.int64], runs: list[NDArray[np.int64]],
+           unit_scale: float, declared: float | None) -> Adequacy:
+    """Adequacy of a fit. ``res_w`` (m, 3) weighted residuals of the fitted inliers, ``jac_red`` (m, 3, p)
+    their projected weighted Jacobian, ``runs`` the rows of each sweep in order along the arc;
+    ``unit_scale`` (m) turns weighted units into metres (1 without sigma, else the median sigma);
+    ``declared`` the tracker's noise per axis (m) or None."""
+    m, _, p = jac_red.shape
+    n_unknown = int(np.sum(unknown >= 0))
+    dof = max(3 * m - p - n_unknown, 1)
+    s2_res = float(np.sum(res_w**2)) / dof
+    flat = jac_red.reshape(-1, p)
+    scale = np.maximum(np.linalg.norm(flat, axis=0), 1e-300)
+    u, s, _ = np.linalg.svd(flat / scale, full_matrices=False)
+    u = u[:, s > 1e-12 * s[0]].reshape(m, 3, -1)
+    pairs = [(r[:-1], r[1:]) for r in runs if len(r) > 1]
+    s2_diff = None
+    rho = 0.0
+    n_pairs = 0
+    if pairs:
+        a = np.concatenate([x for x, _ in pairs])
+        b = np.concatenate([y for _, y in pairs])
+        n_pairs = len(a)
+        d2 = float(np.sum((res_w[b] - res_w[a]) ** 2))
+        hat = float(np.sum((u[b] - u[a]) ** 2))
+        counts = np.bincount(np.concatenate([a, b]), minlength=m)
+        expected = 6.0 * n_pairs - hat - float(np.sum(counts[unknown >= 0]))
+        if expected > 0.5:
+            s2_diff = d2 / expected
+        rho = float(np.sum(res_w[a] * res_w[b]) / n_pairs / max(s2_res * dof / m, 1e-300))
+    residual = float(np.sqrt(s2_res)) * unit_scale
+    difference = None if s2_diff is None else float(np.sqrt(s2_diff)) * unit_scale
+    if declared is not None:
+        statistic = (residual / declared) ** 2
+        limit = float(chi2.isf(ALARM, dof) / dof)
+        test = f"residual noise vs the declared tracker noise (chi-square, {dof} dof)"
+        reference = declared
+    elif difference is not None and difference > 0:
+        statistic = (residual / difference) ** 2
+        limit = float(f_dist.isf(ALARM, dof, max(2 * n_pairs, 1)))
+        test = "residual noise vs the noise of successive differences along the sweeps (F test)"
+        reference = difference
+    else:
+        statistic, limit, test, reference = 1.0, float("inf"), "no reference noise (no sweep to difference)", residual
+    detected = statistic > limit
+    model_error = float(np.sqrt(max(residual**2 - reference**2, 0.0))) if detected else 0.0
+    rho_used = min(max(rho, 0.0), MAX_RHO) if detected else 0.0
+    per_sweep = float(np.mean([len(r) for r in runs])) if runs else 1.0
+    inflation = min((1.0 + rho_used) / (1.0 - rho_used), max(per_sweep, 1.0))
+    return Adequacy(residual, difference, declared, model_error, bool(detected), rho, inflation, statistic, limit,
+                    test)

@@ -1,0 +1,95 @@
+"""Gross outliers among fitted samples: far from the model *and* from their neighbours along the arc.
+
+A beam break or a wrong reflector gives one sample far from every model. Errors a DH table cannot hold
+(gear ratio, eccentricity, compliance) give residuals that are systematic along each arc: large, but
+shared by neighbouring samples. Only the first are outliers. So a sample is rejected when
+
+1. its studentised residual (divided by sqrt(1 - leverage), so thin sweeps' well-fitted samples are not
+   judged by the scale of the others) fails the Bonferroni-corrected Hotelling test of
+   :func:`identify.refine.inlier_mask` (sweep rows and free poses on scales of their own: model error
+   grows away from home, where the free poses are), and
+2. within its sweep (ordered by the moved joint's value), it also departs from the straight line through
+   its two neighbours by more than the noise of such second differences allows, at the same per-sample
+   false-alarm rate: a smooth systematic residual follows its neighbours, a gross error does not. Free
+   poses and sweeps of fewer than four samples have no such neighbours; for them the first test decides.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from identify.refine import NOISE_FLOOR, OUTLIER_PROBABILITY, inlier_mask
+
+Array = NDArray[np.float64]
+
+
+def leverages(jac_blocks: Array, unknown: NDArray[np.int64]) -> Array:
+    """Mean leverage per sample (m,): trace of its 3x3 block of the hat matrix / 3, including the row's
+    own nuisance parameter where its joint was not read. ``jac_blocks`` (m, 3, p) are weighted and
+    already projected on the nuisance complement."""
+    m, _, p = jac_blocks.shape
+    j = jac_blocks.reshape(-1, p)
+    scale = np.maximum(np.linalg.norm(j, axis=0), 1e-300)
+    u, s, _ = np.linalg.svd(j / scale, full_matrices=False)
+    u = u[:, s > 1e-12 * s[0]].reshape(m, 3, -1)
+    return (np.einsum("kir,kir->k", u, u) + (unknown >= 0)) / 3.0
+
+
+MIN_GROUP = 10  # samples a group needs for a scale of its own
+
+
+def _scale_groups(group: NDArray[np.int64]) -> list[NDArray[np.int64]]:
+    """Sweep rows and free poses, each judged on its own scale when both are large enough: errors a DH
+    table cannot hold grow away from home, where the free poses are."""
+    sweeps, free = np.flatnonzero(group > 0), np.flatnonzero(group == 0)
+    if len(sweeps) >= MIN_GROUP and len(free) >= MIN_GROUP:
+        return [sweeps, free]
+    return [np.arange(len(group))]
+
+
+def sweep_neighbours(group: NDArray[np.int64], key: Array) -> list[NDArray[np.int64]]:
+    """Rows of each sweep (``group`` >= 1), ordered by ``key`` (the moved joint's value)."""
+    out = []
+    for g in np.unique(group[group > 0]):
+        rows = np.flatnonzero(group == g)
+        out.append(rows[np.argsort(key[rows], kind="stable")])
+    return out
+
+
+def second_differences(res: Array, run: NDArray[np.int64]) -> tuple[Array, Array]:
+    """Each sample's residual minus the straight line through its neighbours along the arc (m, 3): the
+    mean of both neighbours inside the run, the extrapolation of the next two at its ends; and the variance
+    of that difference in units of the noise variance (1.5 inside, 6 at the ends)."""
+    r = res[run]
+    e = np.empty_like(r)
+    spread = np.full(len(r), 1.5)
+    e[1:-1] = r[1:-1] - 0.5 * (r[:-2] + r[2:])
+    e[0] = r[0] - (2 * r[1] - r[2])
+    e[-1] = r[-1] - (2 * r[-2] - r[-3])
+    spread[[0, -1]] = 6.0
+    return e, spread
+
+
+def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Array) -> NDArray[np.bool_]:
+    """Mask of the samples kept: see the module docstring. ``res`` (m, 3) weighted residuals."""
+    lev = np.clip(leverage, 0.0, 0.99)
+    student = res / np.sqrt(1.0 - lev)[:, None]
+    keep = np.ones(len(res), dtype=bool)
+    for rows in _scale_groups(group):
+        keep[rows] = inlier_mask(student[rows], 0, OUTLIER_PROBABILITY * len(rows) / len(res))
+    if np.all(keep):
+        return keep
+    runs = [r for r in sweep_neighbours(group, key) if len(r) >= 4]
+    if not runs:
+        return keep
+    parts = [second_differences(res, r) for r in runs]
+    inner = np.vstack([e[1:-1] / np.sqrt(s[1:-1])[:, None] for e, s in parts])
+    scale = np.maximum(1.4826 * np.median(np.abs(inner), axis=0), NOISE_FLOOR)  # noise per axis, robust
+    limit = chi2.isf(OUTLIER_PROBABILITY / len(res), 3)
+    for run, (e, spread) in zip(runs, parts, strict=True):
+        d2 = np.sum((e / scale) ** 2, axis=1) / spread
+        smooth = d2 <= limit
+        keep[run[smooth & ~keep[run]]] = True  # it moves with its neighbours: systematic, not gross
+    return keep

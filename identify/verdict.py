@@ -1,0 +1,151 @@
+"""Whether a result can be trusted: named checks with their numbers, and the verdict they add up to.
+
+Shape fixed in DESIGN.md: ``{status: pass | warn | fail, checks: [{name, status, value, limit, message}]}``.
+A check passes, warns (the result is usable with the caveat its message states in numbers) or fails (do
+not use the model). The verdict is the worst of its checks. Limits are stated as constants with why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from scipy.stats import chi2
+
+from identify.adequacy import Adequacy
+
+STATUSES = ("pass", "warn", "fail")
+
+GROSS_MISFIT = 0.01  # m RMS 3D: no calibrated arm, tracker or DH-able error leaves residuals this large;
+#                      a wrong joint type, a unit error or mixed data sets do
+CONDITION_WARN = 1e6  # column-scaled Jacobian of the minimal (line) parameters: directions known to
+CONDITION_FAIL = 1e9  # < 1e-6 / 1e-9 of the best one are barely / not determined (half / all of float's digits)
+HOLDOUT_ALARM = 1e-3  # false-alarm rate of the held-out test
+HOLDOUT_FAIL = 3.0  # held-out RMS over its expectation beyond which the model is wrong, not just optimistic
+REJECTED_WARN = 0.05  # share of samples rejected as outliers above which the data deserve a look
+NOMINAL_TOLERANCE = 0.01  # m RMS: an arm differs from its catalogue model by millimetres, not centimetres
+
+
+@dataclass(frozen=True)
+class Check:
+    """One named check: ``value`` against ``limit`` (units in ``message``)."""
+
+    name: str
+    status: str
+    value: float | None
+    limit: float | None
+    message: str
+
+    def as_dict(self) -> dict[str, object]:
+        return {"name": self.name, "status": self.status, "value": self.value, "limit": self.limit,
+                "message": self.message}
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The worst status of ``checks``."""
+
+    checks: tuple[Check, ...]
+
+    @property
+    def status(self) -> str:
+        return max((c.status for c in self.checks), key=STATUSES.index, default="pass")
+
+    def as_dict(self) -> dict[str, object]:
+        return {"status": self.status, "checks": [c.as_dict() for c in self.checks]}
+
+    def summary(self) -> str:
+        """One line: the status and the messages of the checks that did not pass."""
+        bad = [c for c in self.checks if c.status != "pass"]
+        if not bad:
+            return f"verdict: pass ({len(self.checks)} checks)"
+        return f"verdict: {self.status.upper()}: " + "; ".join(f"{c.name}: {c.message}" for c in bad)
+
+
+def mm(value: float) -> str:
+    return f"{value * 1e3:.3g} mm"
+
+
+def model_fit(rms_3d: float, adequacy: Adequacy) -> Check:
+    """Residuals against the noise: gross misfit fails, detected model error warns (uncertainties inflated)."""
+    a = adequacy
+    if rms_3d > GROSS_MISFIT:
+        return Check("model_fit", "fail", rms_3d, GROSS_MISFIT,
+                     f"residual RMS {mm(rms_3d)} exceeds {mm(GROSS_MISFIT)}: the model does not describe these data "
+                     "(joint types, units, robot model or mixed data sets?)")
+    if a.declared is not None:
+        reference = f"the declared tracker noise {mm(a.declared)}"
+    elif a.difference is not None:
+        reference = f"the noise of successive differences along the sweeps, {mm(a.difference)}"
+    else:
+        reference = "no independent noise estimate (no sweeps to difference)"
+    if a.detected:
+        return Check("model_fit", "warn", a.model_error, None,
+                     f"model error {mm(a.model_error)} per axis against tracker noise {mm(a.noise)}: residuals "
+                     f"{mm(a.residual)} per axis vs {reference} ({a.statistic:.3g} > {a.limit:.3g}); uncertainties "
+                     f"inflated {a.inflation:.3g}x in variance to cover it")
+    return Check("model_fit", "pass", a.statistic, a.limit,
+                 f"residuals {mm(a.residual)} per axis, consistent with {reference}")
+
+
+def conditioning(condition: float) -> Check:
+    status = "fail" if not condition < CONDITION_FAIL else "warn" if condition > CONDITION_WARN else "pass"
+    text = {"fail": "the data do not determine every parameter (near-singular)",
+            "warn": "some parameter combinations are barely determined",
+            "pass": "every parameter is determined"}[status]
+    return Check("conditioning", status, condition, CONDITION_WARN if status == "pass" else CONDITION_FAIL,
+                 f"condition number {condition:.3g}: {text}")
+
+
+def holdout(samples: int, rms: float, expected: float) -> Check:
+    """Held-out RMS against the RMS the model's uncertainty and the noise predict (chi-square on 3k)."""
+    limit = float(expected * (chi2.isf(HOLDOUT_ALARM, 3 * samples) / (3 * samples)) ** 0.5)
+    ratio = rms / expected if expected > 0 else float("inf")
+    if rms > limit and ratio > HOLDOUT_FAIL:
+        status = "fail"
+    elif rms > limit:
+        status = "warn"
+    else:
+        status = "pass"
+    return Check("holdout", status, rms, limit,
+                 f"held-out RMS {mm(rms)} over {samples} poses vs expected {mm(expected)} ({ratio:.2f}x)")
+
+
+def outliers(rejected: int, samples: int, lost_sweeps: list[str]) -> Check:
+    share = rejected / samples if samples else 0.0
+    if lost_sweeps:
+        return Check("outliers", "fail", share, REJECTED_WARN,
+                     f"{', '.join(lost_sweeps)} lost most of its samples as outliers: that joint rests on too "
+                     "little data")
+    status = "warn" if share > REJECTED_WARN else "pass"
+    return Check("outliers", status, share, REJECTED_WARN,
+                 f"{rejected} of {samples} samples rejected as gross outliers ({share:.1%})")
+
+
+def nominal(name: str, rms: float) -> Check:
+    status = "fail" if rms > NOMINAL_TOLERANCE else "pass"
+    text = "the data contradict the nominal model" if status == "fail" else "consistent with the nominal model"
+    return Check("nominal", status, rms, NOMINAL_TOLERANCE,
+                 f"nominal {name} placed on the data misses them by {mm(rms)} RMS: {text}")
+
+
+def dh_limit(links: int) -> float:
+    """Chi-square limit of the cost a parallel-axis convention may add before it counts as measurable."""
+    return float(chi2.isf(HOLDOUT_ALARM, max(links, 1)))
+
+
+def dh_table(rms_gap: float, statistic: float, expected: float, capped: list[str]) -> Check:
+    """Whether the written DH table reproduces the identified model (parallel-axis offset cap).
+
+    ``statistic``: the cost the convention adds, in noise variances; chi-square with one degree of freedom
+    per capped link when the axes' misalignment is only noise. ``rms_gap`` (m) the RMS difference of the
+    two models' predictions at the fitted poses, ``expected`` (m) the accuracy expected there."""
+    limit = dh_limit(len(capped))
+    if not capped or statistic <= limit:
+        text = "" if not capped else f" (convention for {', '.join(capped)} costs nothing measurable)"
+        return Check("dh_table", "pass", statistic, limit,
+                     f"the DH table reproduces the identified model to {mm(rms_gap)} RMS{text}")
+    status = "fail" if rms_gap > HOLDOUT_FAIL * expected else "warn"
+    return Check("dh_table", status, statistic, limit,
+                 f"the DH table misses the identified model by {mm(rms_gap)} RMS (expected accuracy {mm(expected)}): "
+                 f"the axes at {', '.join(capped)} are measurably misaligned and exact DH would put them beyond "
+                 "--max-offset; raise it for exact DH, or use the axis lines in the result")
