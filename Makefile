@@ -33,6 +33,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.trackers || status=1; \
 	$(BIN)/python -m bench.ur || status=1; \
 	$(BIN)/python -m bench.aruco || status=1; \
+	$(BIN)/python -m bench.safety || status=1; \
 	exit $$status
 
 clean:

@@ -15,6 +15,9 @@ Exit codes: 0 done, 2 bad input (one line).
 from __future__ import annotations
 
 import argparse
+import glob
+import io
+import os
 import struct
 import sys
 import time
@@ -26,6 +29,7 @@ import numpy as np
 from drivers.aruco_target import Target, charuco_board, dictionary_id, grid_board, single_marker
 from drivers.camera_model import CameraIntrinsics, write_intrinsics
 from drivers.errors import DriverError
+from identify.outputs import check_outputs, commit_file, write_output
 
 DROP_FACTOR = 3.0  # a view whose RMS exceeds this multiple of the median is dropped
 
@@ -52,7 +56,10 @@ def calibrate_main(argv: list[str]) -> int:
     p.add_argument("--views", type=int, default=25, help="views to grab with --live (25), one a second")
     p.add_argument("--min-corners", type=int, default=8, help="least ChArUco corners in a usable view (8)")
     p.add_argument("--out", type=Path, required=True, help="intrinsics file to write (.yaml)")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
     args = p.parse_args(argv)
+    inputs = sorted(glob.glob(args.images)) if args.images is not None else []
+    check_outputs(inputs, [("--out", args.out)], args.force)
     if (args.images is None) == (args.live is None):
         raise CameraToolError("give a folder or glob of images, or --live CAMERA (one of them)")
     if not all(v and v > 0 for v in (args.cols, args.rows, args.square, args.size)):
@@ -60,8 +67,15 @@ def calibrate_main(argv: list[str]) -> int:
     target = _charuco(args)
     images = _live_images(args.live, args.views) if args.live is not None else _folder_images(args.images)
     result = calibrate(images, target, args.min_corners)
-    write_intrinsics(args.out, result.camera, avg_reprojection_error=result.rms,
-                     calibration_time=time.strftime("%Y-%m-%d %H:%M:%S"))
+    temp = args.out.with_name(f".{args.out.stem}.{os.getpid()}.tmp{args.out.suffix}")  # FileStorage wants a name
+    try:
+        write_intrinsics(temp, result.camera, avg_reprojection_error=result.rms,
+                         calibration_time=time.strftime("%Y-%m-%d %H:%M:%S"))
+        with open(temp, "rb+") as fh:
+            os.fsync(fh.fileno())
+        commit_file(temp, args.out, args.force)  # whole or not at all
+    finally:
+        temp.unlink(missing_ok=True)
     k = result.camera.matrix
     print(f"{result.used} of {len(images)} views used ({result.skipped} without enough corners, "
           f"{result.dropped} dropped as outliers); RMS reprojection error {result.rms:.3f} px")
@@ -168,6 +182,7 @@ def print_main(argv: list[str]) -> int:
     p.add_argument("--gap", type=float, help="grid board: gap between markers, m (size/5)")
     p.add_argument("--dpi", type=int, default=600, help="print resolution, dots per inch (600)")
     p.add_argument("--out", type=Path, required=True, help="output file: .png or .pdf")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
     args = p.parse_args(argv)
     target = _print_target(args)
     if not 72 <= args.dpi <= 4800:
@@ -175,11 +190,12 @@ def print_main(argv: list[str]) -> int:
     suffix = args.out.suffix.lower()
     if suffix not in (".png", ".pdf"):
         raise CameraToolError(f"--out {args.out}: write .png or .pdf")
+    check_outputs([], [("--out", args.out)], args.force)
     ppm = args.dpi / 0.0254
     margin = round(0.01 * ppm)  # 10 mm white quiet zone
     image, _ = target.texture(ppm, margin)
     w, h = target.extent
-    (png if suffix == ".png" else pdf)(args.out, image, args.dpi)
+    write_output(args.out, (png if suffix == ".png" else pdf)(args.out, image, args.dpi), args.force)
     print(f"wrote {args.out}: {target.kind} {w * 1e3:.1f} x {h * 1e3:.1f} mm (+10 mm margin) at {args.dpi} dpi; "
           "print at 100 % (actual size) and measure the result")
     return 0
@@ -205,8 +221,9 @@ def _print_target(args: argparse.Namespace) -> Target:
         raise CameraToolError(str(exc)) from None
 
 
-def png(path: Path, image: np.ndarray, dpi: int) -> None:
-    """8-bit image -> PNG with a pHYs chunk (pixels per metre) so that viewers and printers know its scale."""
+def png(path: Path, image: np.ndarray, dpi: int) -> bytes:
+    """8-bit image -> PNG bytes with a pHYs chunk (pixels per metre) so that viewers and printers know its scale;
+    ``path`` names it in messages."""
     import cv2
 
     ok, data = cv2.imencode(".png", image)
@@ -217,11 +234,11 @@ def png(path: Path, image: np.ndarray, dpi: int) -> None:
     body = b"pHYs" + struct.pack(">IIB", ppm, ppm, 1)
     chunk = struct.pack(">I", 9) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
     end_of_ihdr = 8 + 8 + 13 + 4  # signature, IHDR length+type, IHDR data, CRC
-    path.write_bytes(raw[:end_of_ihdr] + chunk + raw[end_of_ihdr:])
+    return raw[:end_of_ihdr] + chunk + raw[end_of_ihdr:]
 
 
-def pdf(path: Path, image: np.ndarray, dpi: int) -> None:
-    """8-bit image -> one-page PDF whose page is the image at ``dpi`` (true scale when printed at 100 %)."""
+def pdf(path: Path, image: np.ndarray, dpi: int) -> bytes:
+    """8-bit image -> one-page PDF bytes whose page is the image at ``dpi`` (true scale when printed at 100 %)."""
     try:
         import matplotlib
 
@@ -234,8 +251,10 @@ def pdf(path: Path, image: np.ndarray, dpi: int) -> None:
     ax = fig.add_axes((0, 0, 1, 1))
     ax.imshow(image, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
     ax.set_axis_off()
-    fig.savefig(path, dpi=dpi, format="pdf")
+    buffer = io.BytesIO()
+    fig.savefig(buffer, dpi=dpi, format="pdf")
     plt.close(fig)
+    return buffer.getvalue()
 
 
 def main(argv: list[str]) -> int:

@@ -3,17 +3,22 @@
     acquire --robot mock:ur5e --tracker mock            mock-mode rehearsal (simulated robot and tracker)
     acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
     acquire --robot ur5e --tracker mock --dry-run      print the plan, its duration and accuracy; move nothing
+    acquire --robot ur5e@192.168.1.10 --tracker none    rehearse the plan's motion at 25 % speed, measuring nothing
     acquire --resume SESSION                            continue an interrupted session
     acquire export SESSION --csv out.csv                measurement CSV of a session
+    acquire backup SESSION COPY                         a safe copy of a session, even while it is written
     acquire --tracker serial:/dev/ttyUSB0?protocol=polled-xyz --probe   check the tracker on site
 
 Exit codes: 0 complete, 1 the run failed (robot fault, lost connection; resumable), 2 bad input or a
-plan that breaks a limit, 130 stopped by the operator (resumable).
+plan that breaks a limit or comes too close to the cell, 3 complete but its identification fails its
+verdict, 130 stopped by the operator (resumable).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
 import logging
 import sys
 import time
@@ -23,9 +28,13 @@ from typing import Any
 
 import yaml
 
+from acquire.cell import Clearance
 from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
-from acquire.plan import Plan, build_plan, check_plan, estimate_duration, format_plan, predicted_accuracy
+from acquire.plan import Plan, build_plan, check_plan, estimate_duration, plan_clearance
+from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
+from acquire.resume import ResumeRefused, resume_settings
 from acquire.session import Session, SessionError, factory_calibration
+from acquire.session_backup import backup_session
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
@@ -33,6 +42,7 @@ from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.factory import factory_reference
 from identify.measurements import InputError
+from identify.outputs import OutputError, check_outputs, check_target, same_file, write_output
 from identify.pipeline import identify
 from identify.report import format_reference, format_report
 from identify.result_io import result_to_dict
@@ -51,12 +61,18 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="acquire", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:8]))
-    p.add_argument("--robot", default="mock:ur5e", help="robot spec: ur5e, ur5e@HOST, mock:ur5e (mock:ur5e)")
-    p.add_argument("--tracker", default="mock", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock")
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:11]))
+    p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e (mock:ur5e; on --resume: the session's,"
+                   " whose address may change)")
+    p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock, or none (motion "
+                   "rehearsal) (mock; on --resume: the session's, whose port or host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
     p.add_argument("--session", type=Path, help="session file to create (default sessions/<robot>-<time>.session)")
     p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this session where it stopped")
+    p.add_argument("--remeasure-missing", action="store_true",
+                   help="with --resume: measure a complete session's missing steps again (the first attempt is kept)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing result or report beside a new session")
     p.add_argument("--dry-run", action="store_true", help="print the plan and what it will reach; move nothing")
     p.add_argument("--yes", action="store_true", help="do not ask before moving a real robot")
     p.add_argument("--realtime", action="store_true", help="mock mode at the speed of a real run")
@@ -69,7 +85,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--probe", action="store_true",
                    help="open the tracker, take --count readings, print them with their spread, and exit")
     p.add_argument("--count", type=int, default=10, help="readings taken by --probe (10)")
-    p.add_argument("--json", action="store_true", help="with --probe: one JSON object per reading")
+    p.add_argument("--json", action="store_true",
+                   help="with --probe: one JSON object per reading; with --dry-run: the plan as one JSON object")
+    p.add_argument("--speed-fraction", type=float, metavar="F",
+                   help="joint speeds and accelerations as this fraction of the model's defaults (site "
+                        "robot.speed_fraction; 0.25 with --tracker none)")
     p.add_argument("--trace-io", type=Path, metavar="FILE",
                    help="log every byte to and from the tracker (serial and I++ trackers)")
     return p
@@ -79,17 +99,40 @@ def _export(argv: list[str]) -> int:
     p = _Parser(prog="acquire export", description="Write a session's measurements as the CSV contract.")
     p.add_argument("session", type=Path)
     p.add_argument("--csv", type=Path, required=True)
+    p.add_argument("--force", action="store_true", help="replace the CSV if it exists")
     args = p.parse_args(argv)
+    check_outputs([args.session], [("--csv", args.csv)], args.force)
     with Session.open(args.session) as session:
-        rows = session.export_csv(args.csv)
+        rows = session.export_csv(args.csv, force=args.force)
     print(f"wrote {args.csv} ({rows} rows)")
     return 0
 
 
+def _backup(argv: list[str]) -> int:
+    p = _Parser(prog="acquire backup", description="Copy a session safely, even while it is being written "
+                "(SQLite's online backup API).")
+    p.add_argument("session", type=Path)
+    p.add_argument("dest", type=Path, help="the copy (a new file; an existing one only with --force)")
+    p.add_argument("--force", action="store_true", help="replace DEST if it exists")
+    args = p.parse_args(argv)
+    steps = backup_session(args.session, args.dest, args.force)
+    print(f"copied {args.session} to {args.dest} ({steps} steps)")
+    return 0
+
+
+REHEARSAL_SPEED = 0.25  # --tracker none: the share of the model's default speeds and accelerations
+
+
 def _site(args: argparse.Namespace) -> SiteConfig:
     site = load_site(args.config) if args.config else SiteConfig.default()
+    fraction = args.speed_fraction
+    if fraction is None and getattr(args, "tracker", None) == "none":
+        fraction = REHEARSAL_SPEED
+    if fraction is not None and not 0 < fraction <= 1:
+        raise UsageError(f"--speed-fraction must be in (0, 1], got {fraction}")
     return site.with_overrides(steps_per_sweep=args.steps, samples_per_step=args.samples,
-                               free_poses=args.free_poses, tracker_noise=args.noise)
+                               free_poses=args.free_poses, tracker_noise=args.noise, speed_fraction=fraction,
+                               acceleration_fraction=fraction)
 
 
 def _without_faults(spec):
@@ -99,13 +142,14 @@ def _without_faults(spec):
     return replace(spec, options={k: v for k, v in spec.options.items() if k != "fault"})
 
 
-def _confirm(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan) -> None:
+def _confirm(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, question: str | None = None) -> None:
     """A real robot moves only after the operator has seen the plan and said yes (or passed --yes)."""
     if robot_spec.backend == "mock" or args.yes:
         return
     if not sys.stdin.isatty():
         raise UsageError("a real robot needs confirmation: run in a terminal or pass --yes after reading the plan")
-    answer = input(f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: ").strip()
+    question = question or f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: "
+    answer = input(question).strip()
     if answer.lower() != "yes":
         raise UsageError("not confirmed; nothing moved")
 
@@ -143,8 +187,6 @@ def probe(args: argparse.Namespace) -> int:
     """The operator's first check on site: open the tracker, take readings, show them and their spread.
 
     Exit 0 when every reading worked, 1 when any failed (each failure is one line), 2 for bad input."""
-    import json
-
     import numpy as np
 
     from drivers.errors import DeviceTimeout, MeasurementError
@@ -152,13 +194,13 @@ def probe(args: argparse.Namespace) -> int:
     if args.count < 1:
         raise UsageError(f"--count must be at least 1, got {args.count}")
     site = _site(args)
-    tracker_spec = TrackerSpec.parse(args.tracker)
+    tracker_spec = TrackerSpec.parse(args.tracker or "mock")
     rig = None
     if tracker_spec.backend == "mock" or str(tracker_spec).startswith("aruco:sim"):  # a simulated tracker
         # looks at a simulated robot standing at home
         from drivers.sim import SimulatedRig
 
-        robot_spec = RobotSpec.parse(args.robot)
+        robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
         robot_spec = robot_spec if robot_spec.backend == "mock" else RobotSpec.parse(f"mock:{robot_spec.model}")
         rig = SimulatedRig.from_spec(robot_spec, tracker_spec, VirtualClock())
     tracker = _open_tracker(tracker_spec, rig, site, args.trace_io)
@@ -230,7 +272,9 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
     doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path))
     out = session_path.with_suffix(".result.yaml")
-    out.write_text(yaml.safe_dump(doc, sort_keys=False, width=120), encoding="utf-8")
+    # the session's own outputs: checked before a new session started (refused if they existed, without --force),
+    # brought up to date by each run of the session that completes; written whole or not at all
+    write_output(out, yaml.safe_dump(doc, sort_keys=False, width=120), force=True)
     print(f"result written to {out}")
     try:
         from identify.report_html import report_html
@@ -238,8 +282,8 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
         print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
         return doc
     report = session_path.with_suffix(".report.html")
-    report.write_text(report_html(ident, meas, robot.nominal, robot.name, session=session, source=str(session_path),
-                                  reference=reference, reference_note=note or None), encoding="utf-8")
+    write_output(report, report_html(ident, meas, robot.nominal, robot.name, session=session, source=str(session_path),
+                                     reference=reference, reference_note=note or None), force=True)
     print(f"report written to {report}")
     return doc
 
@@ -247,26 +291,65 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
 def run(args: argparse.Namespace) -> int:
     if args.probe:
         return probe(args)
+    _check_files(args)
     if args.log:  # our own handler: basicConfig would do nothing where logging is already configured
         handler = logging.FileHandler(args.log, encoding="utf-8")
         handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
         log.addHandler(handler)
         log.setLevel(logging.INFO)
-    if args.resume:
-        session = Session.open(args.resume)
-        header = session.header
+    if not args.resume:
+        return _run(args, None)
+    if args.dry_run:
+        with Session.open(args.resume) as session:  # a dry run only reads: no lock, works beside a writer
+            return _run(args, session)
+    # the write lock first: a second writer is refused here, before any device is opened
+    with Session.open(args.resume, write=True) as session:
+        return _run(args, session)
+
+
+def _check_files(args: argparse.Namespace) -> None:
+    """Refuse, before anything is opened or moved, files that would overwrite data: a new session that exists
+    or has no folder, a result or report beside it that exists (without --force), a log that is an input."""
+    if args.remeasure_missing and not args.resume:
+        raise UsageError("--remeasure-missing goes with --resume SESSION")
+    inputs = [p for p in (args.resume, args.config) if p is not None]
+    for option, log_file in (("--log", args.log), ("--trace-io", args.trace_io)):  # appended to, never replaced
+        if log_file is not None and any(same_file(log_file, p) for p in [*inputs, args.session] if p is not None):
+            raise UsageError(f"{option} {log_file} is the session or the site file; a log is a file of its own")
+    if args.resume or args.dry_run or args.session is None:
+        return
+    try:
+        check_target(args.session, force=False, option="--session")
+    except OutputError as exc:  # --force replaces derived files, never a session
+        raise UsageError(str(exc).replace("pass --force to replace it",
+                                          "a session file is never overwritten")) from None
+    check_outputs(inputs, [("--session", args.session), ("result", args.session.with_suffix(".result.yaml")),
+                           ("report", args.session.with_suffix(".report.html"))], args.force)
+
+
+def _run(args: argparse.Namespace, session: Session | None) -> int:
+    """Plan (or the session's plan), show it, then connect and record; ``session`` is the session to resume
+    (open for writing, or for reading in a dry run) or None for a new one."""
+    changes: tuple[str, ...] = ()
+    if session is not None:
+        options = {"--steps": args.steps, "--samples": args.samples, "--free-poses": args.free_poses}
+        settings = resume_settings(session.header, args.robot, args.tracker, args.config, options)
         # a rehearsal's injected faults happened in the run that stopped; the resumed run starts clear
-        robot_spec = _without_faults(RobotSpec.parse(header["config"]["robot_spec"]))
-        tracker_spec = _without_faults(TrackerSpec.parse(header["config"]["tracker_spec"]))
-        site = SiteConfig.from_dict(header["config"]["site"])
-        plan = session.plan
-        path = args.resume
+        robot_spec = settings.robot if args.robot else _without_faults(settings.robot)
+        tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
+        site, plan, path, changes = settings.site, session.plan, args.resume, settings.changes
+        if not args.dry_run and _nothing_to_do(session, args.remeasure_missing):
+            return 0
     else:
         site = _site(args)
-        robot_spec, tracker_spec = RobotSpec.parse(args.robot), TrackerSpec.parse(args.tracker)
-        session, path = None, None
-        plan = None
-    if not args.dry_run:
+        robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
+        tracker_arg = args.tracker or "mock"
+        tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)
+        path, plan = None, None
+    if args.json and not args.dry_run:
+        raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")
+    rehearsal = tracker_spec is None
+    if not args.dry_run and not rehearsal:
         from drivers.sim import check_pairing
 
         check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
@@ -274,25 +357,38 @@ def run(args: argparse.Namespace) -> int:
     if plan is None:
         plan = build_plan(robot_model, site)
     problems = check_plan(plan, robot_model)
+    clearance = plan_clearance(plan, robot_model, site)
+    problems += _motion_problems(plan, robot_model, robot_spec, clearance, site)
     if problems:
         for line in problems:
             print(f"acquire: plan refused: {line}", file=sys.stderr)
         return 2
-    duration = estimate_duration(plan, robot_model, site.measure_time)
-    accuracy = predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
+    if args.json:
+        print(json.dumps(plan_json(plan, clearance)))
+        return 0
+    duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
+    accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
     print(format_plan(plan, robot_model, duration, accuracy))
+    print(format_clearance(clearance, plan, site))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
+    if rehearsal:
+        return _rehearse(robot_spec, args, plan, site)
+    if session is None:
+        path = args.session or _default_session_path(robot_model.name)
     _confirm(robot_spec, args, plan)
     robot, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
     try:
+        first = 0 if session is None else session.next_index()
+        if first is not None:
+            _check_start(robot, plan, robot_model, site, first)
         if session is None:
-            path = args.session or Path("sessions") / f"{robot_model.name}-{time.strftime('%Y%m%d-%H%M%S')}.session"
-            path.parent.mkdir(parents=True, exist_ok=True)
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv)}
             session = Session.create(path, plan, config, robot.identity(), tracker.identity())
+        elif changes:
+            session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))
         print(f"session: {path}")
         stop = StopRequest()
         orchestrator = Orchestrator(robot, tracker, session, clock,
@@ -310,6 +406,114 @@ def run(args: argparse.Namespace) -> int:
             session.close()
 
 
+def _default_session_path(robot: str) -> Path:
+    """sessions/<robot>-<time>.session; the one folder of the default (not any folder the operator names) is
+    made if missing."""
+    folder = Path("sessions")
+    with contextlib.suppress(FileExistsError):
+        folder.mkdir()
+    path = folder / f"{robot}-{time.strftime('%Y%m%d-%H%M%S')}.session"
+    check_target(path, option="session")
+    return path
+
+
+def _nothing_to_do(session: Session, remeasure: bool) -> bool:
+    """True (after saying so) when a resumed session has every step recorded and no missing step is to be
+    measured again: nothing connects, nothing moves."""
+    if session.next_index() is not None:
+        return False
+    missing = session.missing_indices()
+    total = len(session.plan.steps)
+    if not missing:
+        print(f"{session.path} is complete: all {total} steps recorded; nothing to do")
+        return True
+    if not remeasure:
+        print(f"{session.path} is complete: {total} steps recorded, {len(missing)} missing (steps "
+              f"{', '.join(map(str, missing))}); nothing moved. --remeasure-missing measures them again")
+        return True
+    return False
+
+
+def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clearance: Clearance | None,
+                     site: SiteConfig) -> list[str]:
+    """Why the plan's motion may not run: a step or move that comes too close to the cell, or no geometry to
+    check it with on a real robot."""
+    if clearance is None:
+        if robot_spec.backend == "mock":
+            return []
+        return [f"{robot.name} has no collision geometry ('collision:' in {robot.path.name}): the plan cannot be "
+                "checked against the cell and the arm itself"]
+    if clearance.slack >= clearance.guard:
+        return []
+    step = plan.steps[clearance.slack_move]
+    needs = clearance.slack_distance - clearance.slack + clearance.guard
+    return [f"the move to step {step.index} ({step.kind}) comes too close: {clearance.slack_what} "
+            f"{clearance.slack_distance * 1e3:.1f} mm apart at a checked sample (needs {needs * 1e3:.0f} mm with "
+            f"{clearance.guard * 1e3:g} mm for the motion between samples)"]
+
+
+def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int) -> None:
+    """The plan is checked from home; the arm may stand elsewhere (jogged, or stopped mid-move before a
+    resume). UsageError unless the move from where it stands to step ``index`` is clear too."""
+    import numpy as np
+
+    from acquire.cell import cell_from_config, first_contact
+
+    cell = cell_from_config(robot_model, site)
+    if cell is None or not plan.steps:
+        return
+    here = np.asarray(robot.read_joints(), dtype=float)
+    contact = first_contact(cell, here, np.asarray(plan.steps[index].q))
+    if contact is not None:
+        home = ", ".join(f"{np.degrees(v):.1f}" if t == "R" else f"{v:.3f}"
+                         for v, t in zip(plan.home, plan.joint_types, strict=True))
+        raise UsageError(f"the move from the arm's current pose to step {index} would come too close: {contact.what} "
+                         f"{contact.distance * 1e3:.1f} mm apart (needs {contact.required * 1e3:.0f} mm); jog the "
+                         f"arm to home ({home}; deg / m) first")
+
+
+def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site: SiteConfig) -> int:
+    """``--tracker none``: move through the plan at the reduced speed after confirmation, measuring nothing."""
+    from acquire.rehearsal import rehearse
+    from drivers.registry import open_robot
+
+    _confirm(robot_spec, args, plan, f"Rehearse the motion: move {robot_spec} through these {len(plan.steps)} "
+             f"steps at {site.speed_fraction:g} x the default speed, measuring nothing? Type 'yes' to start: ")
+    rig = None
+    if robot_spec.backend == "mock":
+        from drivers.sim import SimulatedRig
+
+        rig = SimulatedRig.from_spec(robot_spec, None, WallClock() if args.realtime else VirtualClock())
+    robot = open_robot(robot_spec, rig=rig, site=site)
+    robot.connect(site.timeouts.connect)
+    try:
+        _check_start(robot, plan, load_robot(robot_spec.model), site, 0)
+    except UsageError:
+        robot.close()
+        raise
+
+    def show(step, done: int, total: int) -> None:
+        what = f"joint {step.joint} sweep" if step.kind == "sweep" else step.kind
+        log.info("rehearsal step %d/%d (%s) reached", done, total, what)
+        if not args.quiet and (done == total or done % 25 == 0):
+            print(f"rehearsal: step {done}/{total} ({what}) reached", file=sys.stderr)
+
+    stop = StopRequest()
+    try:
+        with stop.installed():
+            result = rehearse(robot, plan, site.timeouts.move, stop, show)
+    finally:
+        robot.close()
+    log.info("rehearsal %s%s; %d of %d steps reached", result.outcome, f" ({result.reason})" if result.reason else "",
+             result.recorded, len(plan.steps))
+    if result.outcome != "complete":
+        print(f"acquire: rehearsal {result.outcome}: {result.reason}; {result.recorded} of {len(plan.steps)} steps "
+              "reached", file=sys.stderr)
+        return 130 if result.outcome == "aborted" else 1
+    print(f"rehearsal complete: {result.recorded} steps reached, nothing measured or recorded")
+    return 0
+
+
 def _finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -> int:
     log.info("run %s%s; %d step(s) recorded, %d missing", result.outcome,
              f" ({result.reason})" if result.reason else "", result.recorded, result.missing)
@@ -319,7 +523,8 @@ def _finish(result: RunResult, session: Session, path: Path, robot: RobotModel) 
               file=sys.stderr)
         return 130 if result.outcome == "aborted" else 1
     if result.missing:
-        print(f"note: {result.missing} step(s) missing (tracker failures); the identification uses the rest")
+        print(f"note: {result.missing} step(s) still missing after a second attempt (tracker failures); the "
+              f"identification uses the rest; acquire --resume {path} --remeasure-missing tries them again")
     drift = session.drift()
     if len(drift) > 1:
         worst = max(d for _, d in drift)
@@ -339,12 +544,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if argv[:1] == ["export"]:
             return _export(argv[1:])
+        if argv[:1] == ["backup"]:
+            return _backup(argv[1:])
         if argv[:1] in (["calibrate-camera"], ["print-board"]):  # camera tools: acquire/camera_cli.py
             from acquire.camera_cli import main as camera_main
 
             return camera_main(argv)
         return run(build_parser().parse_args(argv))
-    except (UsageError, ConfigError, SessionError, InputError, DriverError, ValueError) as exc:
+    except (UsageError, ResumeRefused, ConfigError, SessionError, InputError, DriverError, ValueError) as exc:
         print(f"acquire: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -1,7 +1,8 @@
 """The acquisition loop: move, wait until still, read the joints, measure, reject outliers, record.
 
-A plain loop over the plan's unrecorded steps (so a resumed session continues where it stopped). Each
-step is committed to the session before the next move. Tracker failures are retried a bounded number
+A plain loop over the plan's unrecorded steps (so a resumed session continues where it stopped), then
+one more attempt at each step recorded as missing (the first attempt stays in the session). Each step is
+committed to the session before the next move. Tracker failures are retried a bounded number
 of times, then the step is recorded as missing and the run goes on; robot faults and lost connections
 stop the motion, end the run as failed and return (the session says how to resume); Ctrl-C stops the
 motion at once and ends the run as aborted. Every device call has a timeout.
@@ -43,8 +44,8 @@ class Timeouts:
 
 @dataclass(frozen=True)
 class RunResult:
-    """How a run ended: ``outcome`` complete / aborted / failed, with ``reason``; steps recorded in
-    this run and how many of them are missing."""
+    """How a run ended: ``outcome`` complete / aborted / failed, with ``reason``; steps recorded for the first
+    time in this run, and how many steps of the session are still missing."""
 
     outcome: str
     reason: str
@@ -127,41 +128,59 @@ class Orchestrator:
         self.plan: Plan = session.plan
 
     def run(self) -> RunResult:
-        """Record every remaining step of the plan; returns how the run ended (the session has it too)."""
+        """Record every remaining step of the plan, then measure once more each step recorded as missing (this
+        run's or earlier runs'; the first attempt is kept in the session); returns how the run ended (the
+        session has it too). Progress counts the steps that remain in this run."""
         self.stop.on_request = self.robot.stop
         self.session.begin_run()
-        recorded = missing = 0
-        todo = [s for s in self.plan.steps if s.index not in self.session.recorded_indices()]
+        recorded = 0
+        done = self.session.recorded_indices()
+        todo = [(s, False) for s in self.plan.steps if s.index not in done]
+        retakes = [self.plan.steps[i] for i in self.session.missing_indices()]
+        total = len(todo) + len(retakes)
         started = self.clock.now()
         sweep_points: dict[int, list[Array]] = {}
+        count = 0
         try:
-            for count, step in enumerate(todo, start=1):
+            while todo or retakes:
+                if not todo:  # the main pass is over: every step missing now, once
+                    todo = [(s, True) for s in retakes]
+                    retakes = []
+                    self.session.event("remeasure", f"measuring {len(todo)} missing step(s) again: "
+                                       + ", ".join(str(s.index) for s, _ in todo))
+                step, retake = todo.pop(0)
+                count += 1
                 if self.stop.requested:
-                    return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
+                    return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded)
                 record = self._do_step(step)
                 if self.stop.requested and record.status != "ok":
-                    return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
-                self.session.record_step(record)
-                recorded += 1
-                missing += record.status != "ok"
+                    return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded)
+                if retake:
+                    self.session.retake_step(record)
+                else:
+                    self.session.record_step(record)
+                    recorded += 1
+                    if record.status != "ok":
+                        retakes.append(step)
+                        total += 1
                 if self.on_progress is not None:
-                    self.on_progress(self._progress(step, record, count, len(todo), started, sweep_points))
+                    self.on_progress(self._progress(step, record, count, total, started, sweep_points))
         except (RobotFault, ConnectionFailed, DeviceTimeout) as exc:
             self.robot.stop()
             if self.stop.requested:  # the operator's stop interrupted the motion: not a fault
-                return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
+                return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded)
             kind = {RobotFault: "robot fault", ConnectionFailed: "connection lost", DeviceTimeout: "timeout"}
             label = next(v for k, v in kind.items() if isinstance(exc, k))
             self.session.event(label, str(exc))
-            return self._end("failed", f"{label}: {exc}", recorded, missing)
+            return self._end("failed", f"{label}: {exc}", recorded)
         except KeyboardInterrupt:
             self.robot.stop()
-            return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded, missing)
-        return self._end("complete", "", recorded, missing)
+            return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded)
+        return self._end("complete", "", recorded)
 
-    def _end(self, outcome: str, reason: str, recorded: int, missing: int) -> RunResult:
+    def _end(self, outcome: str, reason: str, recorded: int) -> RunResult:
         self.session.end_run(outcome, reason)
-        return RunResult(outcome, reason, recorded, missing)
+        return RunResult(outcome, reason, recorded, len(self.session.missing_indices()))
 
     def _do_step(self, step: Step) -> StepRecord:
         t_start = self.clock.now()

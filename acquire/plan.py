@@ -6,21 +6,25 @@ validation); home checks return to the home pose every N steps to watch the trac
 Joint values: rad (revolute) / m (prismatic).
 
 Functions (all pure): :func:`build_plan` (robot model + site configuration -> plan, free poses by a
-greedy optimal design), :func:`check_plan` (every limit violation, one line each; nothing moves unless
-it is empty), :func:`estimate_duration`, :func:`predicted_accuracy` (Cramér-Rao bound of the held-out
-TP error) and :func:`format_plan` (the dry-run table).
+greedy optimal design, every step and move clear of the cell: :mod:`acquire.cell`), :func:`check_plan`
+(every limit violation, one line each; nothing moves unless it is empty), :func:`plan_clearance` (the
+closest approach of a plan to its cell) and :func:`estimate_duration`. What the operator is told about a
+plan (accuracy, dry-run text, Plan JSON) is in :mod:`acquire.plan_report`.
 """
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from acquire.cell import Clearance, Contact, cell_from_config, clearance_of, contact_at, first_contact, free_interval
+from acquire.collision import STEP, Cell, approach, moves_samples
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
@@ -29,6 +33,7 @@ from identify.refine import full_jacobian
 from identify.simulate import axis_distances, random_poses
 
 STEP_KINDS = ("sweep", "free", "home")
+JSON_KINDS = ("sweep", "free", "check", "home")  # the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
 
 
 @dataclass(frozen=True)
@@ -195,12 +200,25 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
     notes = [f"TP guess {list(site.tp_guess)} m in the flange frame, kept >= {minimum * 1e3:g} mm off every "
              "revolute axis"]
 
+    cell = cell_from_config(robot, site)
+    if cell is None:
+        notes.append(f"{robot.name} has no collision geometry: the plan is checked against the joint limits only")
+    else:
+        contact = contact_at(cell, home)
+        if contact is not None:
+            raise PlanError(f"{site.source}: the home pose is not clear: {_contact_text(contact)}; move the "
+                            "obstacle or lower cell.margin / cell.mounting_clearance")
+
     poses: list[tuple[str, int, int, Array, str]] = []  # kind, sweep, joint, q, role
     sweep_id = 0
     for j in sorted(joints, reverse=True):
         span = site.sweep_ranges[j - 1] if site.sweep_ranges is not None else None
         values = sweep_values(types[j - 1], float(home[j - 1]), tuple(robot.limits[j - 1]), site.steps_per_sweep,
                               span)
+        if cell is not None:
+            values = _safe_sweep(cell, robot, site, j, values, span is not None, notes)
+            if values is None:
+                continue
         q = np.tile(home, (len(values), 1))
         q[:, j - 1] = values
         dist = np.array([axis_distances(model, row) for row in q])
@@ -212,11 +230,12 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
         if ok.any():
             sweep_id += 1
             poses += [("sweep", sweep_id, j, row, "fit") for row in q[ok]]
-    if any(types[j - 1] == "R" and (site.sweep_ranges is None or site.sweep_ranges[j - 1] is None) for j in joints):
+    if cell is None and any(types[j - 1] == "R" and (site.sweep_ranges is None or site.sweep_ranges[j - 1] is None)
+                            for j in joints):
         notes.append("default revolute sweeps turn as far as the limits allow (up to a full turn): make sure "
                      "the cell is clear, or restrict them with plan.sweep_ranges")
 
-    free = _free_poses(robot, site, model, np.array([p[3] for p in poses]).reshape(-1, n), rng_seed, notes)
+    free = _free_poses(robot, site, model, np.array([p[3] for p in poses]).reshape(-1, n), rng_seed, notes, cell)
     start = poses[-1][3] if poses else home
     for q, role in _nearest_order(free, start, speed):
         sweep_id += 1
@@ -228,20 +247,81 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
         steps.append(Step(len(steps), kind, sweep, joint, tuple(float(x) for x in q), role))
 
     every = site.home_check_every
+    ordered: list[tuple[str, int, int, Array, str]] = []
     if every and poses:
-        add("home", HOME_SWEEP, 0, home)
+        ordered.append(("home", HOME_SWEEP, 0, home, "fit"))
     for count, pose in enumerate(poses, start=1):
-        add(*pose)
+        ordered.append(pose)
         if every and (count % every == 0 or count == len(poses)):
-            add("home", HOME_SWEEP, 0, home)
+            ordered.append(("home", HOME_SWEEP, 0, home, "fit"))
+    for pose in _via_home(cell, ordered, home, notes) if cell is not None else ordered:
+        add(*pose)
     return Plan(robot.name, types, tuple(float(x) for x in home), tuple(steps), site.samples_per_step,
                 site.settle_time, tuple(float(x) for x in speed), tuple(float(x) for x in acceleration),
                 tuple(notes))
 
 
+def _contact_text(contact: Contact) -> str:
+    return (f"{contact.what} {contact.distance * 1e3:.1f} mm apart (needs {contact.required * 1e3:.0f} mm with "
+            f"{STEP * 1e3:g} mm for the motion between checks)")
+
+
+def _safe_sweep(cell: Cell, robot: RobotModel, site: SiteConfig, j: int, values: Array, requested: bool,
+                notes: list[str]) -> Array | None:
+    """The sweep of joint ``j`` (1-based) kept to the collision-free interval around home.
+
+    A requested range (``plan.sweep_ranges``) that is not clear all the way from home is refused
+    (:class:`PlanError` naming the joint, the value and the bodies); a default one is clipped to the clear
+    interval around home (noted), or left out (None, noted) when there is no room to move."""
+    kind, h = robot.joint_types[j - 1], float(robot.home[j - 1])
+    lo, hi = min(h, float(values.min())), max(h, float(values.max()))
+    low, high, contact = free_interval(cell, robot.home, j - 1, lo, hi)
+    if contact is None:
+        return values
+    at = _fmt(float(contact.q[j - 1]), kind)
+    if requested:
+        raise PlanError(f"{site.source}: plan.sweep_ranges[{j - 1}]: joint {j} at {at} collides: "
+                        f"{_contact_text(contact)}; narrow the range")
+    if high - low < 1e-9:
+        notes.append(f"joint {j} sweep left out: no room to move from home ({_contact_text(contact)})")
+        return None
+    notes.append(f"joint {j} sweep clipped to {_fmt(low, kind)} .. {_fmt(high, kind)}, the collision-free "
+                 f"interval around home (at {at}: {_contact_text(contact)})")
+    return np.linspace(low, high, len(values))
+
+
+def _via_home(cell: Cell, ordered: list[tuple[str, int, int, Array, str]], home: Array,
+              notes: list[str]) -> list[tuple[str, int, int, Array, str]]:
+    """``ordered`` with a home step before every pose whose direct move from the one before (home at the
+    start) would come too close; moves from and to home are clear by construction (sweeps inside their clear
+    interval, free poses chosen with a clear path from home)."""
+    q = np.array([home, *(p[3] for p in ordered)])
+    samples, owner = moves_samples(cell, q)
+    bad = set(np.unique(owner[approach(cell, samples).slack < cell.guard]).tolist())
+    out: list[tuple[str, int, int, Array, str]] = []
+    for i, pose in enumerate(ordered):
+        if i in bad:
+            out.append(("home", HOME_SWEEP, 0, home, "fit"))
+        out.append(pose)
+    if bad:
+        notes.append(f"{len(bad)} move(s) go through home: the direct move would come too close")
+    return out
+
+
+def plan_clearance(plan: Plan, robot: RobotModel, site: SiteConfig) -> Clearance | None:
+    """Closest approach of the plan run from home (every step and every move between them, sampled so that no
+    body point travels more than 1 cm between samples) in the cell of ``site``; None without robot geometry.
+    ``Clearance.move`` is the index of the step the move leads to."""
+    cell = cell_from_config(robot, site)
+    if cell is None:
+        return None
+    return clearance_of(cell, np.array([plan.home, *(s.q for s in plan.steps)]))
+
+
 def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: Array, rng_seed: int,
-                notes: list[str]) -> list[tuple[Array, str]]:
-    """Check poses (random) then designed free poses from one seeded pool of safe candidates."""
+                notes: list[str], cell: Cell | None = None) -> list[tuple[Array, str]]:
+    """Check poses (random) then designed free poses from one seeded pool of safe candidates: the TP off every
+    axis and, with a ``cell``, the pose and the move to it from home clear."""
     wanted = site.free_poses + site.check_poses
     if not wanted:
         return []
@@ -249,12 +329,28 @@ def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: A
     box = _joint_box(robot, site)
     pool = random_poses(box, CANDIDATES, rng, FREE_MARGIN)
     pool = pool[np.all(axis_distances_many(model, pool) >= site.min_axis_distance, axis=1)]
+    if cell is not None:
+        pool = pool[approach(cell, pool).slack >= cell.guard]
     if len(pool) < wanted + 1:
-        raise PlanError(f"only {len(pool)} candidate free poses keep the TP off every axis; lower "
-                        "plan.free_poses / plan.check_poses or plan.min_axis_distance")
-    check, pool = pool[: site.check_poses], pool[site.check_poses:]
+        raise PlanError(f"only {len(pool)} candidate free poses keep the TP off every axis and clear of the cell; "
+                        "lower plan.free_poses / plan.check_poses, plan.min_axis_distance or cell.margin")
+    reachable = _reachable_test(cell, robot.home, pool)
+    check_idx: list[int] = []
+    for k in range(len(pool)):  # check poses: the first pool poses reachable from home
+        if len(check_idx) == site.check_poses:
+            break
+        if reachable(k):
+            check_idx.append(k)
+    if len(check_idx) < site.check_poses:
+        raise PlanError(f"only {len(check_idx)} candidate check poses can be reached from home without coming too "
+                        "close to the cell; lower plan.check_poses or cell.margin")
+    check, pool = pool[check_idx], np.delete(pool, check_idx, axis=0)
+    reachable = _reachable_test(cell, robot.home, pool)
     q_eval = random_poses(robot.limits, EVAL_POSES, rng)
-    chosen = greedy_design(model, q_sweeps, pool, q_eval, site.free_poses)
+    chosen = greedy_design(model, q_sweeps, pool, q_eval, site.free_poses, accept=reachable)
+    if len(chosen) < site.free_poses:
+        raise PlanError(f"only {len(chosen)} candidate free poses can be reached from home without coming too close "
+                        "to the cell; lower plan.free_poses or cell.margin")
     if site.free_poses:
         notes.append(f"{site.free_poses} free poses chosen from {len(pool)} candidates to minimise the predicted "
                      f"held-out error (greedy design on the nominal model); {site.check_poses} check poses at "
@@ -262,6 +358,18 @@ def _free_poses(robot: RobotModel, site: SiteConfig, model: DHModel, q_sweeps: A
     elif site.check_poses:
         notes.append(f"{site.check_poses} check poses at random, held out for validation")
     return [(q, "fit") for q in pool[chosen]] + [(q, "check") for q in check]
+
+
+def _reachable_test(cell: Cell | None, home: Array, poses: Array) -> Callable[[int], bool]:
+    """A test whether the straight joint-space move from ``home`` to ``poses[k]`` stays clear (always True
+    without a cell); each pose is checked once, when first asked about."""
+    if cell is None:
+        return lambda k: True
+
+    def test(k: int) -> bool:
+        return first_contact(cell, home, poses[k]) is None
+
+    return test
 
 
 def _nearest_order(poses: list[tuple[Array, str]], start: Array, speed: Array) -> list[tuple[Array, str]]:
@@ -305,13 +413,16 @@ def _whitened(model: DHModel, *qs: Array) -> list[Array]:
     return [j @ basis for j in jacs]
 
 
-def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array, count: int) -> NDArray[np.int64]:
+def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array, count: int,
+                  accept: Callable[[int], bool] | None = None) -> NDArray[np.int64]:
     """Indices of ``count`` rows of ``candidates`` chosen one at a time, each the pose that most reduces the
     predicted held-out error given ``q_fit`` and those chosen before: the trace of the Cramér-Rao prediction
     covariance summed over ``q_eval`` (DESIGN.md), ``sum_k tr(Jc_k Σ Jc_kᵀ)`` with ``Σ = (JᵀJ)⁻¹``.
 
     Rank-one (rank-three: one TP) updates of Σ keep it O(count · candidates · r²) for r parameters.
-    Directions the fit leaves undetermined get a tiny ridge, so poses that determine them win first.
+    Directions the fit leaves undetermined get a tiny ridge, so poses that determine them win first. With
+    ``accept``, a best candidate it rejects is set aside and the next best taken (fewer than ``count`` when
+    the candidates run out).
     """
     if count <= 0:
         return np.zeros(0, dtype=np.int64)
@@ -325,13 +436,19 @@ def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array
     available = np.ones(len(candidates), dtype=bool)
     eye = np.eye(3)
     g_pool_t = np.swapaxes(g_pool, 1, 2)
-    for _ in range(min(count, len(candidates))):
+    while len(chosen) < count and available.any():
         u = g_pool @ cov  # (K, 3, r): candidate rows weighted by the current covariance
         s = eye + u @ g_pool_t  # (K, 3, 3)
         w = (u @ target) @ np.swapaxes(u, 1, 2)  # (K, 3, 3)
         gain = np.trace(np.linalg.solve(s, w), axis1=1, axis2=2)
         gain[~available] = -np.inf
         k = int(np.argmax(gain))
+        while accept is not None and not accept(k):
+            available[k] = False
+            gain[k] = -np.inf
+            if not available.any():
+                return np.array(chosen, dtype=np.int64)
+            k = int(np.argmax(gain))
         cov = cov - u[k].T @ np.linalg.solve(s[k], u[k])
         cov = 0.5 * (cov + cov.T)
         chosen.append(k)
@@ -412,118 +529,3 @@ def estimate_duration(plan: Plan, robot: RobotModel, measure_time_per_sample: fl
     moves = motion_time(np.diff(q, axis=0), plan.speed, plan.acceleration).max(axis=1)
     per_step = plan.settle_time + plan.samples_per_step * measure_time_per_sample
     return float(moves.sum() + len(plan.steps) * per_step)
-
-
-def _partial_sweeps(plan: Plan, robot: RobotModel) -> Array:
-    """The plan's sweeps with each revolute one cut to home ± ``PARTIAL_ARC`` (same step counts)."""
-    rows = []
-    for j in dict.fromkeys(s.joint for s in plan.steps if s.kind == "sweep"):
-        count = sum(1 for s in plan.steps if s.kind == "sweep" and s.joint == j)
-        q = np.tile(np.array(plan.home), (count, 1))
-        if robot.joint_types[j - 1] == "R":
-            lo, hi = robot.limits[j - 1]
-            q[:, j - 1] = np.linspace(max(lo, plan.home[j - 1] - PARTIAL_ARC),
-                                      min(hi, plan.home[j - 1] + PARTIAL_ARC), count)
-        else:
-            q[:, j - 1] = [s.q[j - 1] for s in plan.steps if s.kind == "sweep" and s.joint == j]
-        rows.append(q)
-    return np.vstack(rows) if rows else np.zeros((0, robot.n_joints))
-
-
-def prediction_bound(model: DHModel, q_fit: Array, q_eval: Array, sigma: float) -> float:
-    """Cramér-Rao bound (m) on the RMS TP error at ``q_eval`` for data at ``q_fit`` with noise ``sigma``,
-    as :func:`identify.bounds.prediction_rms_bound`, but inf when the data leave a combination of
-    parameters that changes the predictions at ``q_eval`` undetermined."""
-    g_fit, g_eval = _whitened(model, q_fit, q_eval)
-    info = _gram(g_fit)
-    values = np.linalg.eigvalsh(info)
-    if not len(values) or values[0] <= SUBSPACE_TOL**2 * values[-1]:
-        return math.inf
-    cov = np.linalg.inv(info)
-    target = _gram(g_eval)
-    return float(sigma * np.sqrt(np.trace(cov @ target) / len(q_eval)))
-
-
-def predicted_accuracy(plan: Plan, robot: RobotModel, tp_guess: Any, noise: float, rng_seed: int = 1,
-                       eval_poses: int = EVAL_POSES) -> dict[str, float]:
-    """Cramér-Rao bounds (m) of the RMS TP prediction error at ``eval_poses`` random held-out poses within
-    the limits, on the nominal model with the TP guess as tool, for tracker ``noise`` (m per axis per
-    reading; a step averages ``samples_per_step`` readings, so its noise is ``noise / √samples``).
-
-    Keys: ``with_free`` (the plan's sweeps and fitted free poses), ``sweeps_only`` (without the free
-    poses), ``partial`` (±20° revolute sweeps, no free poses), ``partial_with_free`` (those plus the
-    free poses), ``noise``, ``step_noise`` (m), ``eval_poses``. ``inf`` where the data leave the
-    predictions undetermined. Home checks and check poses are not counted as fitted data.
-    """
-    model = tp_model(robot, tp_guess)
-    step_noise = noise / math.sqrt(max(plan.samples_per_step, 1))
-    q_eval = random_poses(robot.limits, eval_poses, np.random.default_rng(rng_seed))
-    sweeps = np.array([s.q for s in plan.steps if s.kind == "sweep"]).reshape(-1, robot.n_joints)
-    free = np.array([s.q for s in plan.steps if s.kind == "free" and s.role == "fit"]).reshape(-1, robot.n_joints)
-    partial = _partial_sweeps(plan, robot)
-
-    def bound(q: Array) -> float:
-        return prediction_bound(model, q, q_eval, step_noise) if len(q) else math.inf
-
-    return {
-        "with_free": bound(np.vstack([sweeps, free])),
-        "sweeps_only": bound(sweeps),
-        "partial": bound(partial),
-        "partial_with_free": bound(np.vstack([partial, free])),
-        "noise": float(noise),
-        "step_noise": step_noise,
-        "eval_poses": float(eval_poses),
-    }
-
-
-def _hms(seconds: float) -> str:
-    total = round(seconds)
-    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
-
-
-def _per_joint_text(values: tuple[float, ...], types: str, unit_r: str, unit_p: str) -> str:
-    return ", ".join(f"{math.degrees(v):.1f}{unit_r}" if t == "R" else f"{v * 1e3:.0f}{unit_p}"
-                     for v, t in zip(values, types, strict=False))
-
-
-def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict[str, float] | None) -> str:
-    """The dry-run summary an operator reads: one line per sweep, counts, duration, accuracy, notes."""
-    types = plan.joint_types
-    lines = [f"Plan for {plan.robot} ({types}), {len(plan.steps)} steps", "",
-             f"{'sweep':>5}  {'joint':>5}  {'from':>10}  {'to':>10}  {'steps':>5}"]
-    sweeps: dict[int, list[Step]] = {}
-    for s in plan.steps:
-        if s.kind == "sweep":
-            sweeps.setdefault(s.sweep, []).append(s)
-    for sweep, steps in sweeps.items():
-        j = steps[0].joint
-        values = [s.q[j - 1] for s in steps]
-        kind = types[j - 1] if 0 < j <= len(types) else "P"
-        lines.append(f"{sweep:>5}  {j:>5}  {_fmt(min(values), kind):>10}  {_fmt(max(values), kind):>10}  "
-                     f"{len(steps):>5}")
-    count = {k: sum(1 for s in plan.steps if s.kind == k) for k in STEP_KINDS}
-    check = sum(1 for s in plan.steps if s.kind == "free" and s.role == "check")
-    lines += ["",
-              f"free poses: {count['free'] - check} fitted + {check} held out for checking; "
-              f"home checks: {count['home']}",
-              f"total: {len(plan.steps)} steps x {plan.samples_per_step} samples = "
-              f"{len(plan.steps) * plan.samples_per_step} samples; settle {plan.settle_time:g} s per step",
-              f"speed: {_per_joint_text(plan.speed, types, '°/s', ' mm/s')}",
-              f"acceleration: {_per_joint_text(plan.acceleration, types, '°/s²', ' mm/s²')}",
-              f"estimated duration: {_hms(duration_s)}"]
-    if accuracy:
-        step = accuracy["step_noise"]
-        lines += ["",
-                  f"predicted accuracy (Cramér-Rao bound, RMS TP error at {int(accuracy['eval_poses'])} random "
-                  f"held-out poses; tracker noise {accuracy['noise'] * 1e3:.4g} mm per axis, "
-                  f"{plan.samples_per_step} samples per step: {step * 1e3:.4g} mm per step):"]
-        rows = (("with_free", "this plan"), ("sweeps_only", "without its free poses"),
-                ("partial", "±20° sweeps, no free poses"), ("partial_with_free", "±20° sweeps + free poses"))
-        for key, label in rows:
-            value = accuracy[key]
-            shown = (f"{value * 1e3:.4f} mm = {value / step:.1f} x the noise per step" if math.isfinite(value)
-                     else "undetermined (the data do not fix every parameter)")
-            lines.append(f"  {label:<28} {shown}")
-    if plan.notes:
-        lines += ["", "notes:", *(f"  - {note}" for note in plan.notes)]
-    return "\n".join(lines)

@@ -1,28 +1,22 @@
 """A session: one SQLite file holding everything an acquisition recorded, durable and resumable.
 
-The file (stdlib ``sqlite3``, WAL journal, ``synchronous=FULL``, foreign keys on) holds:
-
-- ``meta(key, value)``: the header, each value JSON: ``schema`` (int), ``created`` (s since the epoch),
-  ``software`` (``identify.__version__``), ``config`` (the resolved configuration, an object), ``robot`` and
-  ``tracker`` (``DeviceIdentity.as_dict()``; a UR robot's ``details.factory_calibration`` holds the
-  controller's DH values, see :func:`factory_calibration`), ``plan`` (``Plan.to_json()``). ``PRAGMA
-  user_version`` holds the schema too; a file of a newer schema is refused, never modified.
-- ``runs(id, started, ended, outcome, reason)``: one row per run (start or resume); ``outcome`` is
-  ``running``, ``complete``, ``aborted`` (by the operator) or ``failed`` (with the reason). A run left
-  ``running`` by a process that died is closed as ``failed`` ("interrupted") by the next ``begin_run``.
-- ``steps(plan_index PRIMARY KEY, ...)``: one row per plan step, commanded and actual joints, averaged TP,
-  its per-axis sigma, sample counts, status (``ok``/``missing``), reason, timestamps and run id. The
-  primary key makes recording a step twice impossible.
-- ``readings(id, plan_index, x, y, z, sigma, t, status, used)``: every raw tracker reading of a step and
-  whether it was kept after outlier rejection. SQLite stores NaN as NULL; NULL coordinates read back NaN.
-- ``events(id, t, run_id, kind, message)``: pauses, faults, retries, resumes.
+The file's tables and settings: acquire/session_file.py.
 
 Drift is not a table: home re-measurements are steps of kind ``home``, and :meth:`Session.drift`
 computes their displacement from the first one on read (one source of truth, nothing to keep in sync).
 
 Durability: a step and all its readings are written in one transaction, committed (fsync'd) before
 :meth:`Session.record_step` returns; a ``kill -9`` at any moment leaves the whole step or none of it.
+With the rollback journal the session file itself holds every committed step after each commit: copying the
+``.session`` file alone between steps copies them all, and a closed (finished, stopped or killed between
+steps) session is one file with no ``-wal``/``-shm``/``-journal`` beside it. Only while SQLite writes a
+step's pages (microseconds) is the file alone in flux; ``acquire backup`` copies a live session safely.
 Creation is atomic too: the file is built under a temporary name and linked into place complete.
+
+One writer: opening for writing (:meth:`Session.create`, ``Session.open(path, write=True)``) takes an
+exclusive ``flock`` on the file, held until :meth:`Session.close`; a second writer is refused at once with a
+:class:`SessionBusy` naming the holder's PID (acquire/session_lock.py). Readers take no lock and work while
+a session is written. :func:`acquire.session_backup.backup_session` copies a live session.
 
 Units: metres (positions, sigma), radians / metres (joints), seconds since the epoch (times).
 """
@@ -31,11 +25,11 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 import os
+import socket
 import sqlite3
+import sys
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -45,41 +39,30 @@ import numpy as np
 
 from acquire.plan import Plan
 from acquire.records import StepRecord
+from acquire.session_file import (  # the errors and SCHEMA_VERSION are part of this module's interface too
+    EXTRA_SCHEMA,
+    SCHEMA,
+    SCHEMA_VERSION,
+    STEP_COLUMNS,
+    SessionBusy,
+    SessionError,
+    check_magic,
+    configure,
+    dump_q,
+    fsync_path,
+    load_q,
+    nan_of,
+    newer,
+)
+from acquire.session_lock import Locked, busy_message, write_lock
+from acquire.session_lock import unlock as _unlock
 from drivers.base import DeviceIdentity, TrackerReading
 from identify import __version__
 from identify.csvio import format_measurements
 from identify.measurements import Measurements
+from identify.outputs import OutputError, check_target, commit_file, same_file, write_output
 
-SCHEMA_VERSION = 1
 OUTCOMES = ("running", "complete", "aborted", "failed")
-_MAGIC = b"SQLite format 3\x00"
-_STEP_COLUMNS = ("plan_index", "kind", "sweep", "joint", "role", "q_cmd", "q_act", "x", "y", "z", "sigma", "samples",
-                 "rejected", "status", "reason", "t_start", "t_end")
-
-_SCHEMA = """
-CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
-CREATE TABLE runs (
-    id INTEGER PRIMARY KEY, started REAL NOT NULL, ended REAL,
-    outcome TEXT NOT NULL CHECK (outcome IN ('running', 'complete', 'aborted', 'failed')),
-    reason TEXT NOT NULL DEFAULT '');
-CREATE TABLE steps (
-    plan_index INTEGER PRIMARY KEY, kind TEXT NOT NULL, sweep INTEGER NOT NULL, joint INTEGER NOT NULL,
-    role TEXT NOT NULL, q_cmd TEXT NOT NULL, q_act TEXT, x REAL, y REAL, z REAL, sigma REAL,
-    samples INTEGER NOT NULL, rejected INTEGER NOT NULL,
-    status TEXT NOT NULL CHECK (status IN ('ok', 'missing')), reason TEXT NOT NULL DEFAULT '',
-    t_start REAL NOT NULL, t_end REAL NOT NULL, run_id INTEGER NOT NULL REFERENCES runs (id));
-CREATE TABLE readings (
-    id INTEGER PRIMARY KEY, plan_index INTEGER NOT NULL REFERENCES steps (plan_index),
-    x REAL, y REAL, z REAL, sigma REAL, t REAL, status TEXT NOT NULL, used INTEGER NOT NULL CHECK (used IN (0, 1)));
-CREATE INDEX readings_by_step ON readings (plan_index);
-CREATE TABLE events (
-    id INTEGER PRIMARY KEY, t REAL NOT NULL, run_id INTEGER REFERENCES runs (id), kind TEXT NOT NULL,
-    message TEXT NOT NULL);
-"""
-
-
-class SessionError(Exception):
-    """A session file that cannot be created, read or written; the message is one line for the operator."""
 
 
 @dataclass(frozen=True)
@@ -96,26 +79,32 @@ class RunInfo:
 class Session:
     """An open session file. Create with :meth:`create`, reopen with :meth:`open`; use as a context manager."""
 
-    def __init__(self, path: Path, conn: sqlite3.Connection, header: dict[str, Any], plan: Plan) -> None:
+    def __init__(self, path: Path, conn: sqlite3.Connection, header: dict[str, Any], plan: Plan,
+                 lock_fd: int | None = None) -> None:
         """Internal: use :meth:`create` or :meth:`open`."""
         self.path = path
         self._conn: sqlite3.Connection | None = conn
         self._header = header
         self._plan = plan
         self._run_id: int | None = None
+        self._lock_fd = lock_fd
 
     # --- creating and opening -------------------------------------------------------------------------------
 
     @classmethod
     def create(cls, path: str | Path, plan: Plan, config: dict[str, Any], robot: DeviceIdentity,
                tracker: DeviceIdentity) -> Session:
-        """A new session file at ``path`` with its header; refuses to overwrite anything (SessionError).
+        """A new session file at ``path`` with its header, open for writing (locked); refuses to overwrite
+        anything and to create folders (SessionError).
 
         The file appears complete or not at all: it is written under a temporary name, then linked into place.
         """
         path = Path(path)
-        if path.exists():
-            raise SessionError(f"{path} already exists; a session file is never overwritten (choose another name)")
+        try:
+            check_target(path, force=False, option="session")
+        except OutputError as exc:
+            raise SessionError(f"{exc}".replace("; pass --force to replace it", "; a session file is never "
+                                                "overwritten (choose another name)")) from None
         if any(step.index != i for i, step in enumerate(plan.steps)):
             raise SessionError(f"{path}: plan step indices must be 0..{len(plan.steps) - 1} in order")
         header = {"schema": SCHEMA_VERSION, "created": time.time(), "software": __version__, "config": config,
@@ -126,60 +115,65 @@ class Session:
             raise SessionError(f"{path}: the configuration cannot be stored as JSON ({exc})") from None
         rows.append(("plan", plan.to_json()))
         temp = path.with_name(f".{path.name}.creating-{os.getpid()}")
+        lock_fd = None
         try:
             temp.unlink(missing_ok=True)
             conn = sqlite3.connect(temp, isolation_level=None)
             try:
-                _configure(conn)
+                configure(conn)
                 conn.execute("BEGIN IMMEDIATE")
-                for statement in _SCHEMA.split(";"):
+                for statement in (SCHEMA + EXTRA_SCHEMA).split(";"):
                     if statement.strip():
                         conn.execute(statement)
                 conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", rows)
                 conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
                 conn.execute("COMMIT")
             finally:
-                conn.close()  # the last connection checkpoints the WAL into the file and removes it
-            _fsync(temp)
-            try:
-                os.link(temp, path)  # fails if path exists: no overwrite, even in a race
-            except FileExistsError:
-                raise SessionError(f"{path} already exists; a session file is never overwritten") from None
-            except OSError:  # a file system without hard links: rename (checked above that path is free)
-                os.replace(temp, path)
-            _fsync(path.parent, directory=True)
+                conn.close()
+            fsync_path(temp)
+            lock_fd = _lock(temp, path)  # the lock is on the file (inode): it stays when the file is linked
+            commit_file(temp, path, force=False)  # a hard link: fails if path exists, even in a race
+        except OutputError:
+            _unlock(lock_fd)
+            raise SessionError(f"{path} already exists; a session file is never overwritten") from None
         except sqlite3.Error as exc:
+            _unlock(lock_fd)
             raise SessionError(f"{path}: cannot create the session ({exc})") from None
         except OSError as exc:
+            _unlock(lock_fd)
             raise SessionError(f"{path}: cannot create the session ({exc.strerror or exc})") from None
         finally:
             with contextlib.suppress(OSError):
                 temp.unlink()
-        return cls.open(path)
+        return cls._open(path, lock_fd)
 
     @classmethod
-    def open(cls, path: str | Path) -> Session:
-        """Open an existing session to read it or continue it. SessionError (one line) for a missing, corrupt,
-        non-SQLite or foreign file, or one written by a newer schema."""
+    def open(cls, path: str | Path, write: bool = False) -> Session:
+        """Open an existing session: to read it (the default; no lock, works while another process writes it)
+        or, with ``write``, to continue it (an exclusive lock, held until :meth:`close`; SessionBusy naming the
+        holder if another process has it). SessionError (one line) for a missing, corrupt, non-SQLite or
+        foreign file, or one written by a newer schema."""
         path = Path(path)
+        check_magic(path)
+        lock_fd = _lock(path, path) if write else None
+        return cls._open(path, lock_fd)
+
+    @classmethod
+    def _open(cls, path: Path, lock_fd: int | None) -> Session:
         not_session = SessionError(f"{path} is not a session file (corrupt or not SQLite)")
+        # a reader opens read-write where it may, so that SQLite can roll back a step left half-written by a
+        # killed writer (a reader never writes otherwise); read-only media are read read-only
+        mode = "rw" if lock_fd is not None or os.access(path, os.W_OK) else "ro"
         try:
-            with path.open("rb") as f:
-                magic = f.read(len(_MAGIC))
-        except FileNotFoundError:
-            raise SessionError(f"{path}: no such session file") from None
-        except OSError as exc:
-            raise SessionError(f"{path}: cannot be read ({exc.strerror or exc})") from None
-        if magic != _MAGIC:
-            raise not_session
-        try:
-            conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode=rw", uri=True, isolation_level=None)
+            conn = sqlite3.connect(f"{path.resolve().as_uri()}?mode={mode}", uri=True, isolation_level=None,
+                                   timeout=5.0)
         except sqlite3.Error as exc:
+            _unlock(lock_fd)
             raise SessionError(f"{path}: cannot be opened ({exc})") from None
         try:
             version = conn.execute("PRAGMA user_version").fetchone()[0]
             if version > SCHEMA_VERSION:
-                raise _newer(path, version)
+                raise newer(path, version)
             if conn.execute("PRAGMA quick_check").fetchone()[0] != "ok":
                 raise not_session
             tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
@@ -188,27 +182,51 @@ class Session:
             meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
             header = {key: json.loads(value) for key, value in meta.items()}
             if int(header.get("schema", 0)) > SCHEMA_VERSION:
-                raise _newer(path, int(header["schema"]))
+                raise newer(path, int(header["schema"]))
             plan = Plan.from_json(meta["plan"])
-            _configure(conn)
+            if lock_fd is not None:
+                configure(conn)
+                conn.execute("BEGIN IMMEDIATE")
+                for statement in EXTRA_SCHEMA.split(";"):
+                    if statement.strip():
+                        conn.execute(statement)
+                conn.execute("INSERT OR REPLACE INTO writer (id, pid, host, since, command) VALUES (1, ?, ?, ?, ?)",
+                             (os.getpid(), socket.gethostname(), time.time(), " ".join(sys.argv)[:500]))
+                conn.execute("COMMIT")
+            else:
+                conn.execute("PRAGMA busy_timeout = 5000")
         except SessionError:
             conn.close()
+            _unlock(lock_fd)
             raise
+        except sqlite3.OperationalError as exc:
+            conn.close()
+            _unlock(lock_fd)
+            raise SessionError(f"{path}: cannot be opened ({exc})") from None
         except (sqlite3.Error, ValueError, KeyError, TypeError):
             conn.close()
+            _unlock(lock_fd)
             raise not_session from None
-        return cls(path, conn, header, plan)
+        return cls(path, conn, header, plan, lock_fd)
+
+    @property
+    def writable(self) -> bool:
+        """True when this object holds the session's write lock."""
+        return self._lock_fd is not None
 
     def close(self) -> None:
-        """Close the file. A run this object began and did not end is ended as failed."""
+        """Close the file (and release the write lock). A run this object began and did not end is ended as
+        failed."""
         if self._conn is None:
             return
         try:
             if self._run_id is not None:
                 self.end_run("failed", "the session was closed before the run ended")
         finally:
-            self._conn.close()
+            self._conn.close()  # before the lock: no other writer may start while SQLite still has the file
             self._conn = None
+            _unlock(self._lock_fd)
+            self._lock_fd = None
 
     def __enter__(self) -> Session:
         return self
@@ -279,6 +297,17 @@ class Session:
             self._db.execute("INSERT INTO events (t, run_id, kind, message) VALUES (?, ?, ?, ?)",
                              (time.time(), self._run_id, kind, message))
 
+    def set_connection(self, connection: dict[str, Any], message: str) -> None:
+        """Record new connection details (robot and tracker specs, site configuration) that a later resume
+        starts from (header key ``connection``; ``config`` keeps the original), with an event saying what
+        changed, in one transaction."""
+        with self._transaction("record the connection details"):
+            self._db.execute("INSERT OR REPLACE INTO meta (key, value) VALUES ('connection', ?)",
+                             (json.dumps(connection, allow_nan=False),))
+            self._db.execute("INSERT INTO events (t, run_id, kind, message) VALUES (?, ?, 'connection', ?)",
+                             (time.time(), self._run_id, message))
+        self._header["connection"] = json.loads(json.dumps(connection))
+
     def events(self) -> list[tuple[float, int | None, str, str]]:
         """Every event as (t, run_id, kind, message), oldest first."""
         return [tuple(row) for row in self._db.execute("SELECT t, run_id, kind, message FROM events ORDER BY id")]
@@ -301,6 +330,17 @@ class Session:
         Raises SessionError if the step was already recorded, does not match the plan, or no run is going.
         """
         i = record.plan_index
+        try:
+            with self._transaction(f"record step {i}"):
+                self._insert_step(record)
+        except SessionError as exc:
+            if self._db.execute("SELECT 1 FROM steps WHERE plan_index = ?", (i,)).fetchone():
+                raise SessionError(f"{self.path}: step {i} already recorded") from None
+            raise exc from None
+
+    def _insert_step(self, record: StepRecord) -> None:
+        """Check ``record`` against the plan and insert it with its readings (inside the caller's transaction)."""
+        i = record.plan_index
         if not 0 <= i < len(self._plan.steps):
             raise SessionError(f"{self.path}: step {i} is not in the plan (0..{len(self._plan.steps) - 1})")
         step = self._plan.steps[i]
@@ -321,21 +361,51 @@ class Session:
                 raise SessionError(f"{self.path}: step {i}: a reading's position has {p.size} values, not 3")
             sigma = None if reading.sigma is None else float(reading.sigma)
             readings.append((i, *map(float, p), sigma, float(reading.timestamp), reading.status, int(used)))
-        try:
-            with self._transaction(f"record step {i}"):
-                self._db.execute(
-                    "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
-                    " rejected, status, reason, t_start, t_end, run_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,"
-                    " ?, ?, ?, ?, ?)",
-                    (i, record.kind, record.sweep, record.joint, record.role, _dump_q(record.q_cmd),
-                     _dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
-                     record.reason, record.t_start, record.t_end, self._run_id))
-                self._db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used)"
-                                     " VALUES (?, ?, ?, ?, ?, ?, ?, ?)", readings)
-        except SessionError as exc:
-            if self._db.execute("SELECT 1 FROM steps WHERE plan_index = ?", (i,)).fetchone():
-                raise SessionError(f"{self.path}: step {i} already recorded") from None
-            raise exc from None
+        self._db.execute(
+            "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
+            " rejected, status, reason, t_start, t_end, run_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,"
+            " ?, ?, ?, ?, ?)",
+            (i, record.kind, record.sweep, record.joint, record.role, dump_q(record.q_cmd),
+             dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
+             record.reason, record.t_start, record.t_end, self._run_id))
+        self._db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used)"
+                             " VALUES (?, ?, ?, ?, ?, ?, ?, ?)", readings)
+
+    def retake_step(self, record: StepRecord) -> None:
+        """Store a new attempt of a step recorded as missing, keeping the earlier attempt: in one transaction the
+        missing record and its readings move to ``retired_steps``/``retired_readings`` (attempt 1, 2, ...) and
+        ``record`` takes their place. SessionError if the step is not recorded as missing."""
+        i = record.plan_index
+        row = self._db.execute("SELECT status FROM steps WHERE plan_index = ?", (i,)).fetchone()
+        if row is None or row[0] != "missing":
+            raise SessionError(f"{self.path}: step {i} is {'not recorded' if row is None else 'ok'}; only a missing "
+                               "step is measured again")
+        columns = ", ".join(c for c in STEP_COLUMNS)
+        with self._transaction(f"retire step {i}"):
+            attempt = 1 + self._db.execute("SELECT count(*) FROM retired_steps WHERE plan_index = ?",
+                                           (i,)).fetchone()[0]
+            self._db.execute(f"INSERT INTO retired_steps (attempt, run_id, {columns}) SELECT ?, run_id, {columns}"
+                             " FROM steps WHERE plan_index = ?", (attempt, i))
+            self._db.execute("INSERT INTO retired_readings (plan_index, attempt, x, y, z, sigma, t, status, used)"
+                             " SELECT plan_index, ?, x, y, z, sigma, t, status, used FROM readings"
+                             " WHERE plan_index = ? ORDER BY id", (attempt, i))
+            self._db.execute("DELETE FROM readings WHERE plan_index = ?", (i,))
+            self._db.execute("DELETE FROM steps WHERE plan_index = ?", (i,))
+            self._insert_step(record)
+
+    def missing_indices(self) -> list[int]:
+        """Plan indices of the steps recorded as missing, in plan order."""
+        return [row[0] for row in self._db.execute("SELECT plan_index FROM steps WHERE status = 'missing'"
+                                                   " ORDER BY plan_index")]
+
+    def attempts(self, plan_index: int) -> int:
+        """How many times step ``plan_index`` was recorded (0 if never)."""
+        now = self._db.execute("SELECT count(*) FROM steps WHERE plan_index = ?", (plan_index,)).fetchone()[0]
+        tables = {r[0] for r in self._db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        if "retired_steps" not in tables:
+            return now
+        return now + self._db.execute("SELECT count(*) FROM retired_steps WHERE plan_index = ?",
+                                      (plan_index,)).fetchone()[0]
 
     def recorded_indices(self) -> set[int]:
         """Plan indices of every recorded step (ok or missing)."""
@@ -354,7 +424,7 @@ class Session:
         out = []
         for row in self._step_rows():
             raw = by_step.get(row["plan_index"], [])
-            readings = tuple(TrackerReading(np.array([_nan(x), _nan(y), _nan(z)]), _nan(t), sigma, status)
+            readings = tuple(TrackerReading(np.array([nan_of(x), nan_of(y), nan_of(z)]), nan_of(t), sigma, status)
                              for x, y, z, sigma, t, status, _ in raw)
             try:
                 out.append(StepRecord(**row, readings=readings, used=tuple(bool(r[-1]) for r in raw)))
@@ -364,12 +434,12 @@ class Session:
 
     def _step_rows(self, where: str = "") -> list[dict[str, Any]]:
         """Step columns (no readings) as StepRecord keyword arguments, in plan order."""
-        cur = self._db.execute(f"SELECT {', '.join(_STEP_COLUMNS)} FROM steps {where} ORDER BY plan_index")
+        cur = self._db.execute(f"SELECT {', '.join(STEP_COLUMNS)} FROM steps {where} ORDER BY plan_index")
         out = []
         for values in cur:
-            row = dict(zip(_STEP_COLUMNS, values, strict=True))
+            row = dict(zip(STEP_COLUMNS, values, strict=True))
             x, y, z = row.pop("x"), row.pop("y"), row.pop("z")
-            row.update(q_cmd=_load_q(row["q_cmd"]), q_act=_load_q(row["q_act"]),
+            row.update(q_cmd=load_q(row["q_cmd"]), q_act=load_q(row["q_act"]),
                        position=None if x is None else (x, y, z))
             out.append(row)
         return out
@@ -395,23 +465,27 @@ class Session:
         sigma = np.array(sigmas, dtype=float) if rows and None not in sigmas else None
         return Measurements(self._plan.joint_types, q, points, sweep, joint, sigma, check, has_role=True)
 
-    def export_csv(self, path: str | Path) -> int:
+    def export_csv(self, path: str | Path, force: bool = False) -> int:
         """Write :meth:`to_measurements` as the measurement CSV (with session, robot and tracker metadata lines);
-        returns the number of rows. The file is replaced atomically."""
+        returns the number of rows. The file appears whole or not at all; an existing file is replaced only with
+        ``force``, the session itself never (OutputError)."""
         path = Path(path)
+        if same_file(path, self.path):
+            raise OutputError(f"--csv {path} is the session {self.path}; an input is never overwritten")
         meas = self.to_measurements()
         metadata = {"session": str(self.path), "robot": _identity_line(self._header.get("robot", {})),
                     "tracker": _identity_line(self._header.get("tracker", {})),
                     "software": str(self._header.get("software", "")), "exported by": f"dh-calib {__version__}"}
-        temp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-        try:
-            temp.write_text(format_measurements(meas, metadata), encoding="utf-8")
-            os.replace(temp, path)
-        except OSError as exc:
-            with contextlib.suppress(OSError):
-                temp.unlink()
-            raise SessionError(f"{path}: cannot write the CSV ({exc.strerror or exc})") from None
+        write_output(path, format_measurements(meas, metadata), force)
         return len(meas)
+
+    def backup_to(self, target: sqlite3.Connection) -> None:
+        """Copy the whole file into the open database ``target`` with SQLite's online backup API (one step: a
+        consistent snapshot; a writer's commit waits the few milliseconds it takes)."""
+        try:
+            self._db.backup(target)
+        except sqlite3.Error as exc:
+            raise SessionError(f"{self.path}: cannot be copied ({exc})") from None
 
     def drift(self) -> list[tuple[float, float]]:
         """Home re-measurements as (t, displacement) relative to the first ok one: t = the step's end time (s),
@@ -433,6 +507,8 @@ class Session:
     @contextlib.contextmanager
     def _transaction(self, what: str):
         db = self._db
+        if self._lock_fd is None:
+            raise SessionError(f"{self.path}: cannot {what}: the session was opened for reading only")
         try:
             db.execute("BEGIN IMMEDIATE")
             try:
@@ -445,47 +521,28 @@ class Session:
             raise SessionError(f"{self.path}: cannot {what} ({exc})") from None
 
 
-def _configure(conn: sqlite3.Connection) -> None:
-    mode = conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
-    if str(mode).lower() != "wal":
-        raise sqlite3.OperationalError(f"cannot use WAL journal (got {mode})")
-    conn.execute("PRAGMA synchronous = FULL")
-    conn.execute("PRAGMA foreign_keys = ON")
-    conn.execute("PRAGMA busy_timeout = 5000")
 
 
-def _newer(path: Path, version: int) -> SessionError:
-    return SessionError(f"{path} was written by schema {version}; this version reads up to {SCHEMA_VERSION}: "
-                        "upgrade dh-calib")
 
 
-def _fsync(path: Path, directory: bool = False) -> None:
-    """Flush ``path`` to disk; a directory that cannot be flushed (some platforms) is skipped."""
+def _lock(path: Path, shown: Path) -> int:
+    """The write lock of ``path`` (:func:`acquire.session_lock.write_lock`), errors as SessionError."""
     try:
-        fd = os.open(path, os.O_RDONLY)
-    except OSError:
-        if directory:
-            return
-        raise
-    try:
-        os.fsync(fd)
-    except OSError:
-        if not directory:
-            raise
-    finally:
-        os.close(fd)
+        return write_lock(path)
+    except Locked as exc:
+        raise SessionBusy(busy_message(shown, exc.holder)) from None
+    except OSError as exc:
+        raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None
 
 
-def _dump_q(q: Sequence[float] | None) -> str | None:
-    return None if q is None else json.dumps([v if math.isfinite(v) else None for v in q])
 
 
-def _load_q(text: str | None) -> tuple[float, ...] | None:
-    return None if text is None else tuple(math.nan if v is None else float(v) for v in json.loads(text))
 
 
-def _nan(v: float | None) -> float:
-    return math.nan if v is None else float(v)
+
+
+
+
 
 
 def factory_calibration(header: dict[str, Any]) -> tuple[dict[str, Any] | None, str]:

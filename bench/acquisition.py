@@ -5,8 +5,9 @@
 1. Overhead: a mock UR5e plan (6 x 36 sweep steps x 5 samples) run on simulated devices with zero
    latency, zero ringing and a virtual clock. Time spent inside device calls is measured and taken out;
    what remains is the orchestrator (loop, averaging, outlier rejection, progress) plus the session's
-   durable commit, reported apart because it is the disk's fsync (session on the working disk and on
-   tmpfs). Target: under 2 ms per step.
+   durable commit, reported apart because it is the disk's fsyncs (session on the working disk and on
+   tmpfs; rollback journal, ``synchronous=EXTRA``: bench/session_commit.py compares journal modes).
+   Target: under 2 ms per step.
 2. End to end: ``acquire --robot mock:ur5e --tracker mock`` (the default plan: sweeps, free poses, home
    checks) in-process and as a fresh process, identification included. Target: under 3 s for
    6 x 36 x 5 (the default plan has more steps; both are shown).

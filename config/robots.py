@@ -20,11 +20,13 @@ from typing import Any
 import numpy as np
 import yaml
 
+from config.geometry import RobotGeometry, geometry_from_dict
 from identify.kinematics import Array, DHModel, check_joint_types
 
 SCHEMA_VERSION = 1
 KEYS = ("schema", "name", "vendor", "description", "source", "joints", "dh", "limits", "home", "max_speed",
-        "default_speed", "default_acceleration")
+        "default_speed", "default_acceleration", "collision")
+OPTIONAL_KEYS = ("collision",)  # collision geometry: every bundled model has it (config/geometry.py)
 TEXT_KEYS = ("name", "vendor", "description", "source")
 DH_KEYS = ("theta", "d", "a", "alpha")
 ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
@@ -55,7 +57,8 @@ class RobotModel:
 
     ``nominal`` has ``base`` = identity and ``tool`` = zeros (the TP at the origin of the last DH frame).
     Arrays (read-only): ``limits`` (n, 2) and ``home`` (n,) in rad / m; ``max_speed``, ``default_speed``
-    (n,) in rad/s / m/s; ``default_acceleration`` (n,) in rad/s² / m/s².
+    (n,) in rad/s / m/s; ``default_acceleration`` (n,) in rad/s² / m/s². ``geometry``: the collision
+    capsules (:mod:`config.geometry`), None when the file has none (then no plan can be checked for collisions).
     """
 
     name: str
@@ -70,6 +73,7 @@ class RobotModel:
     default_speed: Array
     default_acceleration: Array
     path: Path
+    geometry: RobotGeometry | None = None
 
     @property
     def n_joints(self) -> int:
@@ -194,7 +198,7 @@ def _model_from_dict(path: Path, data: Any) -> RobotModel:
         if key not in KEYS:
             raise ConfigError(path, str(key), f"only the keys {', '.join(KEYS)}", "an unknown key")
     for key in KEYS:
-        if key not in data:
+        if key not in data and key not in OPTIONAL_KEYS:
             raise ConfigError(path, key, "the key to be present", "nothing (missing key)")
 
     check_schema(path, data["schema"], SCHEMA_VERSION)
@@ -248,6 +252,7 @@ def _model_from_dict(path: Path, data: Any) -> RobotModel:
     nominal = DHModel(types, table[:, 0], table[:, 1], table[:, 2], table[:, 3])
     for array in (limits, home, max_speed, default_speed, default_acc):
         array.setflags(write=False)
+    geometry = geometry_from_dict(path, data["collision"], n) if "collision" in data else None
     name, vendor, description, source = (data[key].strip() for key in TEXT_KEYS)
     return RobotModel(name, vendor, description, source, types, nominal, limits, home, max_speed,
-                      default_speed, default_acc, path)
+                      default_speed, default_acc, path, geometry)

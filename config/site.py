@@ -8,6 +8,7 @@ unknown key is rejected. Sections and keys (units: m, rad, s; per-joint values b
     tracker:  {spec, noise, settings, measure_time}
     plan:     {tp_guess, samples_per_step, settle_time, steps_per_sweep, joints, sweep_ranges,
                free_poses, check_poses, home_check_every, min_axis_distance}
+    cell:     {margin, mounting_offset, mounting_clearance, tool_a, tool_b, tool_radius, boxes, cylinders}
     timeouts: {connect, move, settle, measure}
     retries:  3
 
@@ -53,13 +54,21 @@ FIELDS: dict[str, tuple[str | None, str]] = {
     "check_poses": ("plan", "check_poses"),
     "home_check_every": ("plan", "home_check_every"),
     "min_axis_distance": ("plan", "min_axis_distance"),
+    "cell_margin": ("cell", "margin"),
+    "mounting_offset": ("cell", "mounting_offset"),
+    "mounting_clearance": ("cell", "mounting_clearance"),
+    "tool_a": ("cell", "tool_a"),
+    "tool_b": ("cell", "tool_b"),
+    "tool_radius": ("cell", "tool_radius"),
+    "boxes": ("cell", "boxes"),
+    "cylinders": ("cell", "cylinders"),
     "connect_timeout": ("timeouts", "connect"),
     "move_timeout": ("timeouts", "move"),
     "settle_timeout": ("timeouts", "settle"),
     "measure_timeout": ("timeouts", "measure"),
     "retries": (None, "retries"),
 }
-SECTIONS = ("robot", "tracker", "plan", "timeouts")
+SECTIONS = ("robot", "tracker", "plan", "cell", "timeouts")
 TOP_KEYS = ("schema", *SECTIONS, "retries")
 
 Range = tuple[float, float]
@@ -87,7 +96,13 @@ class SiteConfig:
     (None: all); ``sweep_ranges`` one ``(min, max)`` or None per joint (None: as wide as the limits
     allow); ``free_poses`` fitted free poses and ``check_poses`` held-out ones; a home check every
     ``home_check_every`` steps (0: none); ``min_axis_distance`` m, the least TP distance from a revolute
-    axis. Timeouts in s; ``retries`` per failed measurement. ``source`` names where it came from.
+    axis. Cell (base frame of the robot, m; see :mod:`acquire.collision`): ``cell_margin`` the least
+    distance between two bodies (links, tool, boxes, cylinders); the mounting surface is the robot model's
+    (z = 0 for an arm on a table), moved to ``mounting_offset`` when given, kept ``mounting_clearance``
+    away; the tool is a capsule ``tool_a``-``tool_b`` (flange frame; ``tool_b`` None: the TP guess) of
+    ``tool_radius``; ``boxes`` ``{name, min, max}`` (axis-aligned corners) and ``cylinders``
+    ``{name, a, b, radius}`` (axis ends). Timeouts in s; ``retries`` per failed measurement. ``source``
+    names where it came from.
     """
 
     robot_model: str | None = None
@@ -111,6 +126,14 @@ class SiteConfig:
     check_poses: int = 8
     home_check_every: int = 36
     min_axis_distance: float = 0.02
+    cell_margin: float = 0.02
+    mounting_offset: float | None = None
+    mounting_clearance: float = 0.05
+    tool_a: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    tool_b: tuple[float, float, float] | None = None
+    tool_radius: float = 0.03
+    boxes: tuple[dict[str, Any], ...] = ()
+    cylinders: tuple[dict[str, Any], ...] = ()
     connect_timeout: float = 10.0
     move_timeout: float = 120.0
     settle_timeout: float = 10.0
@@ -317,6 +340,49 @@ def _optional_numbers(unit: str) -> Any:
     return check
 
 
+def _obstacles(keys: tuple[str, ...], example: str) -> Any:
+    def check(v: _Validator, key: str, value: Any) -> tuple[dict[str, Any], ...]:
+        expected = f"a list of mappings {example}"
+        if value is None:
+            return ()
+        if not isinstance(value, list):
+            raise v.fail(key, expected, value)
+        out, names = [], set()
+        for i, item in enumerate(value):
+            where = f"{key}[{i}]"
+            if not isinstance(item, dict) or set(item) != set(keys):
+                raise v.fail(where, f"a mapping with exactly the keys {', '.join(keys)}, e.g. {example}", item)
+            name = v.text(f"{where}.name", item["name"])
+            if name is None or name in names:
+                raise v.fail(f"{where}.name", "a name, unique among the boxes and cylinders", item["name"])
+            names.add(name)
+            entry: dict[str, Any] = {"name": name}
+            for k in keys[1:]:
+                if k == "radius":
+                    entry[k] = v.number(f"{where}.radius", item[k], "a number > 0 (m)", 0.0, strict=True)
+                else:
+                    entry[k] = list(v.numbers(f"{where}.{k}", item[k], "[x, y, z] in the base frame (m)", 3))
+            if "min" in entry and not all(lo < hi for lo, hi in zip(entry["min"], entry["max"], strict=True)):
+                raise v.fail(where, "min < max on every axis", item)
+            out.append(entry)
+        return tuple(out)
+
+    return check
+
+
+def _optional_point(v: _Validator, key: str, value: Any) -> tuple[float, ...] | None:
+    if value is None:
+        return None
+    return v.numbers(key, value, "[x, y, z] in the flange frame (m), or null for the TP guess", 3)
+
+
+def _optional_offset(v: _Validator, key: str, value: Any) -> float | None:
+    if value is None:
+        return None
+    return v.number(key, value, "a number (m along the surface normal), or null for the robot model's", -math.inf,
+                    strict=True)
+
+
 _CHECKS: dict[str, Any] = {
     "robot_model": lambda v, key, x: v.text(key, x),
     "host": lambda v, key, x: v.text(key, x),
@@ -339,6 +405,15 @@ _CHECKS: dict[str, Any] = {
     "check_poses": lambda v, key, x: v.integer(key, x, 0),
     "home_check_every": lambda v, key, x: v.integer(key, x, 0),
     "min_axis_distance": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
+    "cell_margin": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
+    "mounting_offset": _optional_offset,
+    "mounting_clearance": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
+    "tool_a": lambda v, key, x: v.numbers(key, x, "[x, y, z] in the flange frame (m)", 3),
+    "tool_b": _optional_point,
+    "tool_radius": _positive("m"),
+    "boxes": _obstacles(("name", "min", "max"), "{name: fixture, min: [0.4, -0.2, 0], max: [0.6, 0.2, 0.3]}"),
+    "cylinders": _obstacles(("name", "a", "b", "radius"),
+                            "{name: tracker stand, a: [1.5, 0, 0], b: [1.5, 0, 1.2], radius: 0.15}"),
     "connect_timeout": _positive("s"),
     "move_timeout": _positive("s"),
     "settle_timeout": _positive("s"),

@@ -9,9 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +20,7 @@ from identify import __version__
 from identify.cpa import DEFAULT_PARALLEL_TOL
 from identify.csvio import UNITS, CsvContent, format_measurements, read_measurements
 from identify.measurements import InputError, Measurements
+from identify.outputs import check_outputs, write_output
 from identify.pipeline import Identification, identify, split_holdout
 from identify.refine import DEFAULT_MAX_OFFSET
 from identify.report import format_reference, format_report
@@ -67,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
     parser.add_argument("--noise", type=float, metavar="M",
                         help="the tracker's noise, m per axis (1 sigma), to judge the fit by (a sigma column wins)")
+    parser.add_argument("--force", action="store_true", help="replace output files that already exist")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return parser
 
@@ -170,27 +170,27 @@ def _factory_reference(header: dict[str, Any], joint_types: str) -> tuple[tuple[
 
 
 def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file in the same folder, so a crash leaves no half file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; a result file is an ordinary file
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """Write ``text`` to ``path`` whole or not at all (identify/outputs.py); :func:`_check_outputs` has refused,
+    before any work, an output that is an input or exists without ``--force``."""
+    write_output(path, text, force=True)
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Refuse, before anything is read or computed, outputs that would overwrite an input, each other, or an
+    existing file without ``--force`` (one line, exit 2)."""
+    robot_file = args.robot if args.robot and Path(args.robot).is_file() else None
+    check_outputs([args.input, robot_file], [(f"--{name.replace('_', '-')}", getattr(args, name)) for name in
+                                             ("out", "report", "urdf", "ur_calibration", "rtb", "json_out", "csv")],
+                  args.force)
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Identify per ``args``; returns the result document. Raises InputError for bad input."""
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
+    if args.noise is not None and not (args.noise > 0 and math.isfinite(args.noise)):
+        raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
+    _check_outputs(args)
     header = None
     if _is_session(Path(args.input)):
         content, header = _read_session(Path(args.input))
@@ -204,8 +204,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
                          f"{meas.joint_types}")
     _check_exports(args, meas.joint_types)
-    if args.noise is not None and not (args.noise > 0 and math.isfinite(args.noise)):
-        raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
     ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset,
                      noise=args.noise)
     ident.warnings[:0] = content.notes

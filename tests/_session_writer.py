@@ -78,7 +78,10 @@ def record_for(plan: Plan, i: int) -> StepRecord:
 def write(path: Path, sleep: float = 0.0, say=None) -> None:
     """Create (or reopen) the session at ``path`` and record every step not yet recorded, in plan order."""
     say = say or (lambda text: None)
-    session = Session.open(path) if path.exists() else Session.create(path, small_plan(), CONFIG, ROBOT, TRACKER)
+    if path.exists():
+        session = Session.open(path, write=True)
+    else:
+        session = Session.create(path, small_plan(), CONFIG, ROBOT, TRACKER)
     with session:
         session.begin_run()
         say("ready")

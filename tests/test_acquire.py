@@ -98,15 +98,18 @@ def test_protective_stop_pauses_and_resume_completes_without_duplicates(tmp_path
         assert [r.outcome for r in session.runs()] == ["failed", "complete"]
 
 
-def test_lost_target_is_retried_then_the_step_is_missing_and_the_run_goes_on(tmp_path):
+def test_lost_target_is_retried_then_the_step_is_missing_and_measured_again_at_the_end(tmp_path):
     code, path = _run(tmp_path, tracker="mock?fault=target_lost@10x4")
     assert code == 0
     with Session.open(path) as session:
         steps = session.steps()
-        missing = [s for s in steps if s.status == "missing"]
-        assert len(missing) == 1 and "TargetLost" in missing[0].reason
+        assert all(s.status == "ok" for s in steps)  # measured again at the end of the run
         assert sum(1 for e in session.events() if e[2] == "retry") == 4
-        assert len(steps) == len(session.plan.steps)
+        assert [e[3] for e in session.events() if e[2] == "remeasure"] == ["measuring 1 missing step(s) again: 9"]
+        assert len(steps) == len(session.plan.steps) and session.attempts(9) == 2
+    with sqlite3.connect(path) as db:  # the first attempt is kept
+        first = db.execute("SELECT plan_index, attempt, status, reason FROM retired_steps").fetchall()
+    assert len(first) == 1 and first[0][:3] == (9, 1, "missing") and "TargetLost" in first[0][3]
 
 
 @pytest.mark.parametrize(("robot", "tracker", "words"), [

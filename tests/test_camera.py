@@ -120,6 +120,11 @@ def test_print_board_writes_true_scale_png_and_pdf(tmp_path, capsys):
     assert pdf.read_bytes().startswith(b"%PDF")
     assert main(["print-board", "--marker", "7", "--out", str(png)]) == 2
     assert "--size" in capsys.readouterr().err
+    before = png.read_bytes()
+    assert main(["print-board", "--marker", "8", "--size", "0.05", "--out", str(png)]) == 2
+    assert "already exists; pass --force" in capsys.readouterr().err and png.read_bytes() == before
+    assert main(["print-board", "--marker", "8", "--size", "0.05", "--out", str(png), "--force"]) == 0
+    assert png.read_bytes() != before and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
 def test_probe_on_the_simulated_camera(capsys):

@@ -221,6 +221,20 @@ def _drop_home(data: dict[str, Any]) -> None:
     del data["home"]
 
 
+def _collision(change: Any) -> Any:
+    def apply(data: dict[str, Any]) -> None:
+        change(data["collision"])
+
+    return apply
+
+
+def _body(index: int, key: str, value: Any) -> Any:
+    def change(block: dict[str, Any]) -> None:
+        block["bodies"][index][key] = value
+
+    return _collision(change)
+
+
 BAD_CASES = [
     (_drop_home, "home", "missing key"),
     (_set("colour", "blue"), "colour", "unknown key"),
@@ -245,6 +259,16 @@ BAD_CASES = [
     (_set_item("default_speed", 3, -0.1), "default_speed[3]", "> 0"),
     (_set_item("default_speed", 0, 4.0), "default_speed[0]", "<= max_speed[0]"),
     (_set("default_acceleration", 1.0), "default_acceleration", "list of 6"),
+    (_set("collision", []), "collision", "a mapping with the keys source, bodies"),
+    (_collision(lambda c: c.pop("source")), "collision", "a mapping with the keys source, bodies"),
+    (_body(2, "frame", 7), "collision.bodies[2].frame", "a DH frame number 0..6"),
+    (_body(1, "radius", 0), "collision.bodies[1].radius", "a number > 0 (m)"),
+    (_body(1, "a", [0, 0]), "collision.bodies[1].a", "[x, y, z] of finite numbers"),
+    (_body(3, "name", "base"), "collision.bodies[3].name", "unique among the bodies"),
+    (_body(3, "name", "tool"), "collision.bodies[3].name", "not 'tool'"),
+    (_collision(lambda c: c.update(ignore=[["wrist 2", "gripper"]])), "collision.ignore[0]", "two different body"),
+    (_collision(lambda c: c.update(mounting={"normal": [0, 0, 0], "offset": 0.0})), "collision.mounting.normal",
+     "a non-zero vector"),
 ]
 
 

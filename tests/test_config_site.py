@@ -176,6 +176,18 @@ BAD = [
     ("schema: 1\ntimeouts: {move: fast}\n", "timeouts.move", "a number > 0 (s)"),
     ("schema: 1\ntimeouts: {settle: 0.1}\nplan: {settle_time: 1.0}\n", "timeouts.settle", "plan.settle_time"),
     ("schema: 1\nretries: -1\n", "retries", "an integer >= 0"),
+    ("schema: 1\ncell: {margin: -0.01}\n", "cell.margin", "a number >= 0 (m)"),
+    ("schema: 1\ncell: {mounting_offset: low}\n", "cell.mounting_offset", "a number (m along the surface normal)"),
+    ("schema: 1\ncell: {mounting_clearance: -1}\n", "cell.mounting_clearance", "a number >= 0 (m)"),
+    ("schema: 1\ncell: {tool_radius: 0}\n", "cell.tool_radius", "a number > 0 (m)"),
+    ("schema: 1\ncell: {tool_b: [0, 0]}\n", "cell.tool_b", "[x, y, z] in the flange frame"),
+    ("schema: 1\ncell: {boxes: [{name: a, min: [0, 0, 0]}]}\n", "cell.boxes[0]", "exactly the keys name, min, max"),
+    ("schema: 1\ncell: {boxes: [{name: a, min: [0, 0, 0], max: [1, 1, 0]}]}\n", "cell.boxes[0]", "min < max"),
+    ("schema: 1\ncell: {boxes: [{name: a, min: [0, 0, 0], max: [1, 1, 1]}, {name: a, min: [0, 0, 0], "
+     "max: [1, 1, 1]}]}\n", "cell.boxes[1].name", "unique"),
+    ("schema: 1\ncell: {cylinders: [{name: s, a: [0, 0, 0], b: [0, 0, 1], radius: -1}]}\n",
+     "cell.cylinders[0].radius", "a number > 0 (m)"),
+    ("schema: 1\ncell: {walls: []}\n", "cell.walls", "only the keys"),
     ("- 1\n- 2\n", None, "a mapping with the keys"),
 ]
 

@@ -245,9 +245,10 @@ def test_runs_outcomes_and_interrupted_run(tmp_path: Path, plan: Plan) -> None:
     assert s.outcome() is None
     first = s.begin_run()
     _record_all(s, [0])
-    s._conn.close()  # the process "dies": the run is never ended
+    s._conn.close()  # the process "dies": the run is never ended (and its lock goes with it)
     s._conn = None
-    with Session.open(path) as s:
+    os.close(s._lock_fd)
+    with Session.open(path, write=True) as s:
         assert s.outcome() == "running"
         second = s.begin_run()
         assert s.runs()[0].outcome == "failed" and "interrupted" in s.runs()[0].reason
@@ -261,14 +262,14 @@ def test_runs_outcomes_and_interrupted_run(tmp_path: Path, plan: Plan) -> None:
     assert [(r.id, r.outcome) for r in runs] == [(first, "failed"), (second, "aborted"), (second + 1, "failed")]
     assert runs[2].reason == "robot fault: protective stop line two"
     assert all(r.ended is not None and r.ended >= r.started for r in runs)
-    with Session.open(path) as s:  # closing with a run still going ends it as failed
+    with Session.open(path, write=True) as s:  # closing with a run still going ends it as failed
         s.begin_run()
     with Session.open(path) as s:
         assert s.outcome() == "failed" and "closed before the run ended" in s.runs()[-1].reason
-    with pytest.raises(RuntimeError), Session.open(path) as s:  # an exception ends the run as failed, with it
+    with pytest.raises(RuntimeError), Session.open(path, write=True) as s:  # an exception: the run failed, with it
         s.begin_run()
         raise RuntimeError("tracker cable\npulled")
-    with pytest.raises(KeyboardInterrupt), Session.open(path) as s:  # Ctrl-C: aborted by the operator
+    with pytest.raises(KeyboardInterrupt), Session.open(path, write=True) as s:  # Ctrl-C: aborted by the operator
         s.begin_run()
         raise KeyboardInterrupt
     with Session.open(path) as s:

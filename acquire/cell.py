@@ -1,0 +1,168 @@
+"""The robot in its cell, for the planner: build the collision model and ask it questions (pure, no devices).
+
+:func:`cell_from_config` joins a robot model's capsules (``config/robots/*.yaml``) and a site's cell
+(``cell:`` in the site file) into an :class:`acquire.collision.Cell`; :func:`free_interval` finds how far
+one joint may turn from home with the others at home; :func:`first_contact` the first sample of a move
+that comes too close; :func:`route` inserts the home pose where a direct move would come too close;
+:func:`clearance_of` the closest approach over a whole sequence of poses and the moves between them.
+Joint values in rad / m, lengths in m, all in the robot's base frame (DH frame 0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from acquire.collision import (
+    STEP,
+    Bodies,
+    Cell,
+    approach,
+    checked_pairs,
+    fixed_height_frames,
+    moves_samples,
+    path_samples,
+    reach_per_joint,
+)
+from config.geometry import TOOL
+from config.robots import RobotModel
+from config.site import SiteConfig
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A configuration ``q`` that comes too close: the pair ``what`` at ``distance`` m where a checked sample
+    needs ``required`` m (the cell's margin or clearance plus the guard for the motion between samples)."""
+
+    q: Array
+    what: str
+    distance: float
+    required: float
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """Over a sequence of poses and the moves between them: the closest approach ``distance`` (m, surface to
+    surface, or to the mounting plane) of the pair ``what`` on move ``move`` (0 = from the first pose to the
+    second) at configuration ``q``; and the least ``slack`` (m, distance beyond the cell's margin or clearance
+    at a checked sample; below ``guard`` the plan may not run) of the pair ``slack_what`` on move
+    ``slack_move``, ``slack_distance`` m apart."""
+
+    distance: float
+    what: str
+    move: int
+    q: Array
+    slack: float
+    slack_what: str
+    slack_move: int
+    slack_distance: float
+    guard: float = STEP
+
+
+def cell_from_config(robot: RobotModel, site: SiteConfig) -> Cell | None:
+    """The collision model of ``robot`` in the cell of ``site``; None when the model has no geometry."""
+    geo = robot.geometry
+    if geo is None:
+        return None
+    n = robot.n_joints
+    tool_b = site.tp_guess if site.tool_b is None else site.tool_b
+    bodies = Bodies((*geo.names, TOOL), np.append(geo.frame, n).astype(np.int64),
+                    np.vstack([geo.a, site.tool_a]), np.vstack([geo.b, tool_b]),
+                    np.append(geo.radius, site.tool_radius))
+    model = robot.nominal
+    boxes = site.boxes
+    cylinders = site.cylinders
+    return Cell(
+        model=model, bodies=bodies, pairs=checked_pairs(model, bodies, robot.home, set(geo.ignore)),
+        normal=geo.normal, offset=geo.offset if site.mounting_offset is None else site.mounting_offset,
+        clearance=site.mounting_clearance, margin=site.cell_margin,
+        boxes_lo=np.array([b["min"] for b in boxes], dtype=float).reshape(-1, 3),
+        boxes_hi=np.array([b["max"] for b in boxes], dtype=float).reshape(-1, 3),
+        box_names=tuple(b["name"] for b in boxes),
+        cyl_a=np.array([c["a"] for c in cylinders], dtype=float).reshape(-1, 3),
+        cyl_b=np.array([c["b"] for c in cylinders], dtype=float).reshape(-1, 3),
+        cyl_radius=np.array([c["radius"] for c in cylinders], dtype=float),
+        cyl_names=tuple(c["name"] for c in cylinders),
+        reach=reach_per_joint(model, bodies, robot.limits),
+        floor_from=fixed_height_frames(model, robot.home, geo.normal) + 1,
+    )
+
+
+def contact_at(cell: Cell, q: Array) -> Contact | None:
+    """The contact at the one configuration ``q`` (n,), None when it is clear."""
+    return first_contact(cell, q, q)
+
+
+def first_contact(cell: Cell, q_from: Array, q_to: Array, step: float = STEP) -> Contact | None:
+    """The first sample of the move ``q_from`` → ``q_to`` (ends included) that comes too close, or None."""
+    q = path_samples(cell, q_from, q_to, step)
+    return _first_bad(cell, q)
+
+
+def _first_bad(cell: Cell, q: Array) -> Contact | None:
+    app = approach(cell, q)
+    bad = np.flatnonzero(app.slack < cell.guard)
+    if not len(bad):
+        return None
+    i = int(bad[0])
+    return Contact(q[i], app.label(i), float(app.distance[i]), float(app.distance[i] - app.slack[i] + cell.guard))
+
+
+def free_interval(cell: Cell, home: Array, joint: int, lo: float, hi: float,
+                  step: float = STEP) -> tuple[float, float, Contact | None]:
+    """How far joint ``joint`` (0-based) may move from ``home[joint]`` towards ``lo`` and ``hi`` with the other
+    joints at home and every sample clear: ``(low, high, contact)``, ``contact`` the first one met (the
+    nearer to home of the two directions' ends) or None when the whole [lo, hi] is clear.
+
+    Sampled so that no body point travels more than ``step`` between samples; the returned ends are
+    clear samples (home itself must be clear: check it first)."""
+    h = float(home[joint])
+    spacing = step / cell.reach[joint]
+    found: list[Contact] = []
+    ends = []
+    for end in (lo, hi):
+        count = max(int(np.ceil(abs(end - h) / spacing)), 1)
+        values = h + (end - h) * np.arange(count + 1) / count
+        q = np.tile(np.asarray(home, dtype=float), (len(values), 1))
+        q[:, joint] = values
+        app = approach(cell, q)
+        bad = np.flatnonzero(app.slack < cell.guard)
+        if len(bad):
+            k = int(bad[0])
+            required = float(app.distance[k] - app.slack[k] + cell.guard)
+            found.append(Contact(q[k], app.label(k), float(app.distance[k]), required))
+            ends.append(float(values[max(k - 1, 0)]))
+        else:
+            ends.append(float(end))
+    nearest = min(found, key=lambda c: abs(c.q[joint] - h)) if found else None
+    return ends[0], ends[1], nearest
+
+
+def route(cell: Cell, poses: list[Array], home: Array) -> tuple[list[Array], list[int]]:
+    """``poses`` as visited from ``home``, with ``home`` inserted before every pose whose direct move from
+    the previous one comes too close; returns the poses and the indices (in the output) of the insertions.
+    Moves from and to home are assumed clear (the planner only proposes such poses)."""
+    out: list[Array] = []
+    inserted: list[int] = []
+    here = np.asarray(home, dtype=float)
+    for pose in poses:
+        pose = np.asarray(pose, dtype=float)
+        if not np.array_equal(here, home) and not np.array_equal(pose, home) and first_contact(cell, here, pose):
+            inserted.append(len(out))
+            out.append(np.asarray(home, dtype=float))
+        out.append(pose)
+        here = pose
+    return out, inserted
+
+
+def clearance_of(cell: Cell, poses: Array, step: float = STEP) -> Clearance:
+    """Closest approach over the moves between consecutive rows of ``poses`` (p, n), every sample checked."""
+    q, owner = moves_samples(cell, np.asarray(poses, dtype=float), step)
+    app = approach(cell, q)
+    i, k = int(np.argmin(app.closest)), int(np.argmin(app.slack))
+    return Clearance(float(app.closest[i]), app.labels[int(app.closest_what[i])], int(owner[i]), q[i],
+                     float(app.slack[k]), app.label(k), int(owner[k]), float(app.distance[k]), cell.guard)

@@ -1,0 +1,49 @@
+"""The ``acquire`` command's entry point: refuses a second writer of a session before the heavy imports.
+
+``acquire --resume SESSION`` while another process writes SESSION is refused by the session's write lock
+(acquire/session_lock.py). That refusal should come at once, but importing the acquisition and identification
+code takes most of a second; so this module, which imports only the lock, takes the lock of the session named
+by ``--resume`` first: if another process holds it, it prints the same one line as the full command and exits 2;
+otherwise the lock stays held and :func:`acquire.cli.main` claims it when it opens the session (so of two
+writers started together, one is refused within milliseconds). Every other command goes straight through.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from acquire.session_lock import Locked, busy_message, hold
+
+
+def resume_target(argv: list[str]) -> Path | None:
+    """The session a writing ``--resume`` names in ``argv`` (None for a dry run, another command, or none)."""
+    if not argv or argv[0] in ("export", "backup", "calibrate-camera", "print-board") or "--dry-run" in argv:
+        return None
+    for k, arg in enumerate(argv):
+        if arg == "--resume" and k + 1 < len(argv):
+            return Path(argv[k + 1])
+        if arg.startswith("--resume="):
+            return Path(arg.split("=", 1)[1])
+    return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``acquire`` with a fast refusal of a second writer; see :func:`acquire.cli.main` for the rest."""
+    argv = sys.argv[1:] if argv is None else argv
+    target = resume_target(argv)
+    if target is not None:
+        try:
+            hold(target)  # claimed by Session.open(write=True) in the full command
+        except Locked as exc:
+            print(f"acquire: error: {busy_message(target, exc.holder)}", file=sys.stderr)
+            return 2
+        except OSError:
+            pass  # a missing or unreadable file: the full command says so in its own words
+    from acquire.cli import main as full_main
+
+    return full_main(argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
