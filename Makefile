@@ -34,6 +34,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.ur || status=1; \
 	$(BIN)/python -m bench.aruco || status=1; \
 	$(BIN)/python -m bench.safety || status=1; \
+	$(BIN)/python -m bench.robustness || status=1; \
 	exit $$status
 
 clean:
