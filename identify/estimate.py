@@ -23,7 +23,7 @@ from identify.refine import NOISE_FLOOR
 Array = NDArray[np.float64]
 
 ROBUST_WIDTH = 3.0  # soft-L1 scale, in robust noise standard deviations
-PLACE_ITERATIONS = 10  # alternations before the joint least-squares finish
+PLACE_ITERATIONS = 3  # alternations before the joint least-squares finish
 ROBUST_PASSES = 2
 
 
