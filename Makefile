@@ -14,6 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
+	mkdir -p sessions
 	$(BIN)/acquire --robot mock:ur5e --tracker mock --session sessions/demo-$$(date +%Y%m%d-%H%M%S).session
 
 test: $(STAMP)
