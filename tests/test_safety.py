@@ -191,14 +191,14 @@ def test_the_issue_plan_is_now_clipped() -> None:
 
 
 def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
-    """200 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
+    """1,000 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
     robot: each plan is clear by the independent check (every step exactly, the moves at 8 samples per rad to
-    keep the test near 15 s), or refused with one line; a refusal naming a joint and angle is a real contact."""
+    keep the test near a minute), or refused with one line; a refusal naming a joint and angle is a real contact."""
     rng = np.random.default_rng(2026)
     names = robot_names()
     robots = {name: load_robot(name) for name in names}
     accepted = refused = 0
-    for trial in range(200):
+    for trial in range(1000):
         robot = robots[names[trial % len(names)]]
         n = robot.n_joints
         ranges = []
