@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
-from identify.linalg import thin_svd
+from identify.linalg import column_basis
 
 Array = NDArray[np.float64]
 
@@ -69,10 +69,7 @@ def assess(res_w: Array, jac_red: Array, unknown: NDArray[np.int64], runs: list[
     n_unknown = int(np.sum(unknown >= 0))
     dof = max(3 * m - p - n_unknown, 1)
     s2_res = float(np.sum(res_w**2)) / dof
-    flat = jac_red.reshape(-1, p)
-    scale = np.maximum(np.linalg.norm(flat, axis=0), 1e-300)
-    u, s, _ = thin_svd(flat / scale)
-    u = u[:, s > 1e-12 * s[0]].reshape(m, 3, -1)
+    u = column_basis(jac_red)
     pairs = [(r[:-1], r[1:]) for r in runs if len(r) > 1]
     s2_diff = None
     rho = 0.0

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
-from identify.linalg import thin_svd
+from identify.linalg import column_basis
 from identify.refine import NOISE_FLOOR, OUTLIER_PROBABILITY, inlier_mask
 
 Array = NDArray[np.float64]
@@ -31,11 +31,7 @@ def leverages(jac_blocks: Array, unknown: NDArray[np.int64]) -> Array:
     """Mean leverage of the parameters per sample (m,): trace of its 3x3 block of the hat matrix / 3 (a row's
     own nuisance angle, where its joint was not read, takes one more dimension: see :func:`outlier_free`).
     ``jac_blocks`` (m, 3, p) are weighted and already projected on the nuisance complement."""
-    m, _, p = jac_blocks.shape
-    j = jac_blocks.reshape(-1, p)
-    scale = np.maximum(np.linalg.norm(j, axis=0), 1e-300)
-    u, s, _ = thin_svd(j / scale)
-    u = u[:, s > 1e-12 * s[0]].reshape(m, 3, -1)
+    u = column_basis(jac_blocks)
     return np.einsum("kir,kir->k", u, u) / 3.0
 
 

@@ -21,7 +21,7 @@ from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, geometric_step, 
 from identify.dh_output import DHOutput, dh_output, near_parallel
 from identify.estimate import LinesFit, along_arc, fit, nominal_start, place_nominal
 from identify.kinematics import DHModel, frames_from_joints, points_from_joints
-from identify.linalg import thin_svd
+from identify.linalg import project_out, scaled_inverse
 from identify.measurements import InputError, Measurements, prepared_joints, validate
 from identify.outliers import sweep_neighbours
 from identify.poe import AxisLines, LineProblem, points_from_lines
@@ -116,15 +116,13 @@ class Identification:
     def predict(self, q: Array) -> Array:
         """Predicted TP (k, 3), tracker frame, at joint readings ``q`` (k, n) (positions-only data: readings
         relative to the home pose)."""
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        return points_from_joints(self.model, q) if self.exact_dh else points_from_lines(self.lines, q)
+        predict, _ = _predictor(self.exact_dh, self.model, self.refinement, self.lines, self.lines_covariance)
+        return predict(np.atleast_2d(np.asarray(q, dtype=float)))
 
     def prediction_covariances(self, q: Array) -> Array:
         """Covariance (k, 3, 3) of the predicted TP at ``q`` from the parameters' uncertainty, m²."""
-        q = np.atleast_2d(np.asarray(q, dtype=float))
-        if self.exact_dh:
-            return dh_prediction_covariances(self.model, self.refinement, q)
-        return prediction_covariances(self.lines, self.lines_covariance, q)
+        _, covariances = _predictor(self.exact_dh, self.model, self.refinement, self.lines, self.lines_covariance)
+        return covariances(np.atleast_2d(np.asarray(q, dtype=float)))
 
     def prediction_rms(self, q: Array) -> float:
         """RMS over ``q`` of the 3D standard uncertainty of predictions (m), model error included: what the
@@ -137,6 +135,14 @@ def prediction_covariances(lines: AxisLines, covariance: Array, q: Array) -> Arr
     problem = LineProblem(lines, q, np.zeros((len(q), 3)), np.ones(len(q)))
     g = problem.jacobian_blocks(np.zeros(lines.n_parameters), q=q)
     return g @ covariance @ np.swapaxes(g, 1, 2)
+
+
+def _predictor(exact_dh: bool, model: DHModel, ref: Refinement, lines: AxisLines, lines_cov: Array
+               ) -> tuple[Callable[[Array], Array], Callable[[Array], Array]]:
+    """What predicts the TP and its covariance: the DH table where it is the identified model, else the lines."""
+    if exact_dh:
+        return (lambda q: points_from_joints(model, q)), (lambda q: dh_prediction_covariances(model, ref, q))
+    return (lambda q: points_from_lines(lines, q)), (lambda q: prediction_covariances(lines, lines_cov, q))
 
 
 def dh_prediction_covariances(model: DHModel, ref: Refinement, q: Array) -> Array:
@@ -160,12 +166,8 @@ def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Ar
         origin = frames[np.arange(len(rows)), j, :3, 3]
         revolute = model.revolute[j]
         g = np.where(revolute[:, None], np.cross(axis, p[rows] - origin), axis) * weights[rows, None]
-        coef = np.einsum("ki,kip->kp", g, jac[rows]) / np.einsum("ki,ki->k", g, g)[:, None]
-        jac[rows] -= g[:, :, None] * coef[:, None, :]
-    flat = jac.reshape(-1, jac.shape[2])
-    scale = np.maximum(np.linalg.norm(flat, axis=0), 1e-300)
-    _, s, vt = thin_svd(flat / scale, left=False)
-    return (vt.T / np.maximum(s, 1e-300) ** 2) @ vt / np.outer(scale, scale)
+        project_out(jac, rows, g)
+    return scaled_inverse(jac.reshape(-1, jac.shape[2]))[0]
 
 
 def split_holdout(meas: Measurements, fraction: float, seed: int = 0) -> Measurements:
@@ -257,13 +259,10 @@ def identify(
     declared = unit if fitm.sigma is not None else noise
     runs = sweep_neighbours(group[inl], along_arc(best.q[inl], fitm.joint[inl]))
     adequacy = assess(res_w, jac_blocks, unknown[inl], runs, unit, declared)
-    jac = jac_blocks.reshape(-1, lines.n_parameters)
-    scale = np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
-    _, s, vt = thin_svd(jac / scale, left=False)
-    condition = float(s[0] / s[-1]) if s[-1] > 0 else float("inf")
-    inv = (vt.T / np.maximum(s, 1e-300) ** 2) @ vt / np.outer(scale, scale)
+    inv, condition = scaled_inverse(jac_blocks.reshape(-1, lines.n_parameters))
+    # noise variance in weighted units (1 for a right sigma column), never below the declared noise
     variance = max(adequacy.residual, declared or 0.0) ** 2 / unit**2 * adequacy.inflation
-    lines_cov = inv * variance * unit**2 if fitm.sigma is None else inv * variance
+    lines_cov = inv * variance
     near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
     fitted = (best.q[inl], fitm.points[inl], None if fitm.sigma is None else fitm.sigma[inl], weights[inl], res_w,
               variance)
@@ -305,18 +304,7 @@ def identify(
     expected = _expected_accuracy(lines, lines_cov, best.q[inl], adequacy)
     gap_rms, gap_statistic = gap
     dh_check = checks.dh_table(gap_rms, gap_statistic, expected, [f"d{i}" for i in out.capped])
-    if dh_check.status == "pass":
-        def predict(qq: Array) -> Array:
-            return points_from_joints(model, qq)
-
-        def covariances(qq: Array) -> Array:
-            return dh_prediction_covariances(model, ref, qq)
-    else:
-        def predict(qq: Array) -> Array:
-            return points_from_lines(lines, qq)
-
-        def covariances(qq: Array) -> Array:
-            return prediction_covariances(lines, lines_cov, qq)
+    predict, covariances = _predictor(dh_check.status == "pass", model, ref, lines, lines_cov)
     validation = _validate(check_rows, predict, covariances, adequacy) if len(check_rows) else None
     found = [
         checks.model_fit(ident_rms, adequacy),

@@ -24,6 +24,7 @@ from scipy.optimize import least_squares
 
 from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, unit
 from identify.kinematics import DHModel, frames_from_joints, points_from_joints
+from identify.linalg import project_out
 
 Array = NDArray[np.float64]
 
@@ -199,11 +200,8 @@ class LineProblem:
         if data:
             jac *= self.weights[:, None, None]
             if self.has_unknown:
-                g = nuisance * self.weights[:, None]
-                gg = np.maximum(np.einsum("ki,ki->k", g, g), 1e-300)
-                known = self.unknown < 0
-                coef = np.einsum("ki,kip->kp", g, jac) / gg[:, None]
-                jac -= np.where(known[:, None, None], 0.0, g[:, :, None] * coef[:, None, :])
+                rows = np.flatnonzero(self.unknown >= 0)
+                project_out(jac, rows, nuisance[rows] * self.weights[rows, None])
         return jac
 
     def jacobian(self, x: Array) -> Array:

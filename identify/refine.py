@@ -22,7 +22,7 @@ from scipy.stats import f as f_dist
 
 from identify.geometry import cross, skew
 from identify.kinematics import DH_NAMES, DHModel, frames_from_joints
-from identify.linalg import thin_svd, triangle
+from identify.linalg import triangle
 
 Array = NDArray[np.float64]
 
@@ -276,11 +276,11 @@ def refine(
     dof = max(len(res_w) - int(free.sum()), 1)
     cost = float(res_w @ res_w)
     scale2 = cost / dof
-    _, s, vt = thin_svd(jac, left=False)
+    _, s, vt = np.linalg.svd(jac, full_matrices=False)
     cov = (vt.T / s**2) @ vt
     covariance = cov * (scale2 if sigma is None else 1.0)
     col_norm = np.linalg.norm(jac, axis=0)
-    _, s_scaled, _ = thin_svd(jac / col_norm, left=False)
+    s_scaled = np.linalg.svd(jac / col_norm, compute_uv=False)
     _, predicted = full_jacobian_points(model, q)
     residuals = points - predicted
     noise = float(np.sqrt(np.sum((residuals[inliers]) ** 2) / dof))
