@@ -12,6 +12,7 @@ import numpy as np
 from identify import __version__
 from identify.kinematics import DH_NAMES, DHModel
 from identify.pipeline import Identification
+from identify.refine import parameter_names
 
 CONVENTION = (
     "standard DH (DESIGN.md forward model). Frame 0: z0 on joint 1's axis, theta1 and d1 conventional, the "
@@ -112,6 +113,7 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "model": model_to_dict(geo.model),
     }
     doc["fit_start"] = ident.start
+    doc["covariance"] = covariance_to_dict(ident)
     if nominal is not None:
         delta = ident.model.dh_table() - nominal.dh_table()
         delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
@@ -122,6 +124,22 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
     if source:
         doc["source"] = source
     return finite(doc)
+
+
+def covariance_to_dict(ident: Identification) -> dict[str, Any]:
+    """The parameters' covariance, for compensation, verification and comparison (identify/calibrated.py):
+    ``parameters`` (the free names of :func:`identify.refine.parameter_names`; base rotation a rotation vector
+    applied on the left of ``base``), ``matrix`` (their covariance, m and rad squared) and, where predictions use
+    the axis lines (``dh_table`` check not passed), ``lines`` (the covariance of ``axis_lines`` in the minimal
+    parameters of :class:`identify.poe.LineProblem`)."""
+    names = parameter_names(ident.model.n_joints)
+    free = np.flatnonzero(ident.refinement.free)
+    return {
+        "note": "covariance of the free parameters (1 sigma squared; m, rad), noise and model error included",
+        "parameters": [names[k] for k in free],
+        "matrix": _floats(ident.refinement.covariance),
+        "lines": None if ident.exact_dh else _floats(ident.lines_covariance),
+    }
 
 
 def finite(value: Any) -> Any:
