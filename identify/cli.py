@@ -223,7 +223,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     return doc
 
 
+SUBCOMMANDS = ("compensate", "compare")  # identify/compensate_cli.py, identify/compare_cli.py
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] and argv[0] in SUBCOMMANDS:
+        from importlib import import_module
+
+        return import_module(f"identify.{argv[0]}_cli").main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         doc = run(args)

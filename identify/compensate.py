@@ -8,9 +8,10 @@ each step is the least-norm one, so the solution stays on the seed's branch, nea
 their limits (a joint pushed past one is held there and the others solve the rest).
 
 Per target, ``status`` is one of :data:`STATUSES`: ``ok`` (reached), ``singular`` (the Jacobian's smallest
-singular value at the solution is below ``singular_tol``: a tiny target change needs a large motion, and the
-target may be reached or not: see its residual), ``limit`` (not reached because a joint sits at its limit) or
-``unreachable`` (not reached: outside the workspace or on no branch near the seed). Frames: the model's frame
+singular value at the solution is below ``singular_tol``: a tiny target change needs a large motion; reached, or
+missed by less than :data:`SINGULAR_REACH`: see its residual), ``limit`` (not reached, with a joint at its limit
+that would have to go beyond it) or ``unreachable`` (not reached: outside the workspace or on no branch near the
+seed). Frames: the model's frame
 (tracker, or frame 0 for a model whose ``base`` is the identity). Units: m, rad.
 """
 
@@ -32,6 +33,7 @@ ROTATION_TOL = 1e-12  # rad
 OK_POSITION = 1e-9  # m: a target counts as reached within this (and the orientation within OK_ROTATION)
 OK_ROTATION = 1e-9  # rad
 SINGULAR_TOL = 1e-3  # m/rad or rad/rad: smallest singular value of the scaled Jacobian below which a target is singular
+SINGULAR_REACH = 1e-3  # m: a target missed by less than this at a singularity is "singular", not "unreachable"
 ROTATION_LENGTH = 0.1  # m per rad: weight of orientation errors against position errors (a 100 mm tool)
 MAX_ITERATIONS = 100
 
@@ -149,9 +151,11 @@ def solve_ik(model: CalibratedModel, points: Array, seeds: Array, limits: Array 
         lam[idx[~better]] *= 10.0
     sigma = np.linalg.svd(jac, compute_uv=False).min(axis=1)
     reached = (pos <= OK_POSITION) & ((rot <= OK_ROTATION) | np.isnan(rot))
-    at_limit = np.any((q <= lo + 1e-12) | (q >= hi - 1e-12), axis=1)
-    status = np.where(sigma < singular_tol, "singular",
-                      np.where(reached, "ok", np.where(at_limit, "limit", "unreachable")))
+    descent = -np.einsum("kmn,km->kn", jac, res)  # where each joint would go to reduce the miss
+    pushed = np.any(((q <= lo + 1e-12) & (descent < 0)) | ((q >= hi - 1e-12) & (descent > 0)), axis=1)
+    near = np.linalg.norm(res, axis=1) < SINGULAR_REACH
+    status = np.where(reached, np.where(sigma < singular_tol, "singular", "ok"),
+                      np.where(pushed, "limit", np.where(near & (sigma < singular_tol), "singular", "unreachable")))
     return Solution(q, status.astype(str), pos, rot, sigma, np.max(np.abs(q - seeds), axis=1))
 
 
