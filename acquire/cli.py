@@ -7,6 +7,7 @@
     acquire --resume SESSION                            continue an interrupted session
     acquire export SESSION --csv out.csv                measurement CSV of a session
     acquire backup SESSION COPY                         a safe copy of a session, even while it is written
+    acquire verify --result RESULT                      ISO 9283-style accuracy before/after compensation
     acquire --tracker serial:/dev/ttyUSB0?protocol=polled-xyz --probe   check the tracker on site
 
 Exit codes: 0 complete, 1 the run failed (robot fault, lost connection; resumable), 2 bad input or a
@@ -61,7 +62,7 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="acquire", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:11]))
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:12]))
     p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e (mock:ur5e; on --resume: the session's,"
                    " whose address may change)")
     p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock, or none (motion "
@@ -351,6 +352,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     (open for writing, or for reading in a dry run) or None for a new one."""
     changes: tuple[str, ...] = ()
     if session is not None:
+        if "verification" in (session.header.get("config") or {}):
+            raise UsageError(f"{session.path} is a verification session: resume it with acquire verify --resume")
         options = {"--steps": args.steps, "--samples": args.samples, "--free-poses": args.free_poses}
         settings = resume_settings(session.header, args.robot, args.tracker, args.config, options)
         # a rehearsal's injected faults happened in the run that stopped; the resumed run starts clear
@@ -565,6 +568,10 @@ def main(argv: list[str] | None = None) -> int:
             return _export(argv[1:])
         if argv[:1] == ["backup"]:
             return _backup(argv[1:])
+        if argv[:1] == ["verify"]:  # ISO 9283-style verification of a calibration: acquire/verify_cli.py
+            from acquire.verify_cli import main as verify_main
+
+            return verify_main(argv[1:])
         if argv[:1] in (["calibrate-camera"], ["print-board"]):  # camera tools: acquire/camera_cli.py
             from acquire.camera_cli import main as camera_main
 

@@ -33,7 +33,7 @@ from identify.kinematics import DHModel, frames_from_joints
 from identify.refine import full_jacobian
 from identify.simulate import axis_distances, random_poses
 
-STEP_KINDS = ("sweep", "free", "home")
+STEP_KINDS = ("sweep", "free", "home", "verify")  # verify: acquire/verify.py
 JSON_KINDS = ("sweep", "free", "check", "home")  # the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
 
 

@@ -11,6 +11,7 @@ unknown key is rejected. Sections and keys (units: m, rad, s; per-joint values b
     cell:     {margin, mounting_offset, mounting_clearance, tool_a, tool_b, tool_radius, boxes, cylinders,
                camera_pose, camera_half_fov, camera_max_tilt, target_normal}
     timeouts: {connect, move, settle, measure}
+    verify:   {cube_centre, cube_edge, cycles}
     retries:  3
 
 The loaded configuration is a flat frozen :class:`SiteConfig` (``site.tracker_noise``,
@@ -71,9 +72,12 @@ FIELDS: dict[str, tuple[str | None, str]] = {
     "move_timeout": ("timeouts", "move"),
     "settle_timeout": ("timeouts", "settle"),
     "measure_timeout": ("timeouts", "measure"),
+    "verify_centre": ("verify", "cube_centre"),
+    "verify_edge": ("verify", "cube_edge"),
+    "verify_cycles": ("verify", "cycles"),
     "retries": (None, "retries"),
 }
-SECTIONS = ("robot", "tracker", "plan", "cell", "timeouts")
+SECTIONS = ("robot", "tracker", "plan", "cell", "timeouts", "verify")
 TOP_KEYS = ("schema", *SECTIONS, "retries")
 
 Range = tuple[float, float]
@@ -108,8 +112,10 @@ class SiteConfig:
     ``tool_radius``; ``boxes`` ``{name, min, max}`` (axis-aligned corners) and ``cylinders``
     ``{name, a, b, radius}`` (axis ends). A camera cell: ``camera_pose`` (base frame ← camera frame, 4x4;
     None: no camera view check), ``camera_half_fov`` and ``camera_max_tilt`` (rad) and ``target_normal``
-    (flange frame): see :mod:`acquire.camera_view`. Timeouts in s; ``retries`` per failed measurement. ``source``
-    names where it came from.
+    (flange frame): see :mod:`acquire.camera_view`. Timeouts in s; ``retries`` per failed measurement. Verification
+    (``acquire verify``, :mod:`identify.iso9283`): the test cube's ``verify_centre`` (base frame, m; None: the TP at
+    home) and ``verify_edge`` (m; None: from the robot's reach), ``verify_cycles`` per pose. ``source`` names where
+    it came from.
     """
 
     robot_model: str | None = None
@@ -150,6 +156,9 @@ class SiteConfig:
     settle_timeout: float = 10.0
     measure_timeout: float = 10.0
     retries: int = 3
+    verify_centre: tuple[float, float, float] | None = None
+    verify_edge: float | None = None
+    verify_cycles: int = 10
     source: str = field(default="<defaults>", compare=False)
 
     @classmethod
@@ -469,6 +478,11 @@ _CHECKS: dict[str, Any] = {
     "settle_timeout": _positive("s"),
     "measure_timeout": _positive("s"),
     "retries": lambda v, key, x: v.integer(key, x, 0),
+    "verify_centre": lambda v, key, x: None if x is None else v.numbers(key, x, "[x, y, z] in the base frame (m), or "
+                                                                         "null for the TP at home", 3),
+    "verify_edge": lambda v, key, x: None if x is None else v.number(key, x, "a number > 0 (m), or null for a size "
+                                                                       "from the robot's reach", 0.0, strict=True),
+    "verify_cycles": lambda v, key, x: v.integer(key, x, 2),
 }
 assert set(_CHECKS) == set(FIELDS) == {f.name for f in fields(SiteConfig)} - {"source"}
 

@@ -156,6 +156,9 @@ def _open_session(path: Path):
 def _read_session(path: Path) -> tuple[CsvContent, dict[str, Any]]:
     """The measurements of an acquisition session, and its header (with the plan's robot as ``robot_model``)."""
     with _open_session(path) as session:
+        if "verification" in (session.header.get("config") or {}):
+            raise InputError(f"{path} is a verification session (acquire verify), not measurements to identify "
+                             "from; its results are in the .verify.yaml and report beside it")
         header = {**session.header, "robot_model": session.plan.robot}
         return CsvContent(session.to_measurements(), {"session": str(path)}, []), header
 

@@ -1,0 +1,283 @@
+"""``acquire verify --result RESULT``: measure how accurate the arm is before and after compensation (ISO 9283-style).
+
+    acquire verify --result cal.result.yaml --robot mock:ur5e --tracker mock     rehearsal on the simulated rig
+    acquire verify --result cal.result.yaml --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
+    acquire verify --result cal.result.yaml --robot ur5e --dry-run             the test's poses and moves, nothing moved
+    acquire verify --resume sessions/ur5e-verify-20261122-101500.session      continue an interrupted test
+
+The test (acquire/verify.py) is planned before anything moves and checked like an acquisition plan (joint limits,
+the cell); a real robot moves only after the operator has read it and typed ``yes`` (or passed ``--yes``); Ctrl-C
+stops the motion; every wait has a timeout. The session is a session file like an acquisition's (durable,
+resumable; its header holds the test), and ``SESSION.verify.yaml`` and ``SESSION.report.html`` are written beside
+it. Exit codes: 0 complete (verdict pass or warn), 3 complete but compensation fails the test, 1 the run failed or
+left poses unmeasured (resumable), 2 bad input or a test that cannot be planned, 130 stopped by the operator.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from acquire.cli import (
+    UsageError,
+    _check_start,
+    _confirm,
+    _hms,
+    _open_devices,
+    _Parser,
+    _progress_printer,
+    _site,
+    _without_faults,
+)
+from acquire.orchestrator import Orchestrator, StopRequest, Timeouts
+from acquire.plan import estimate_duration, plan_clearance
+from acquire.plan_report import format_clearance
+from acquire.resume import resume_settings
+from acquire.session import Session, SessionError
+from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
+from config.robots import RobotModel, load_robot
+from drivers.spec import RobotSpec, TrackerSpec
+from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name
+from identify.outputs import check_outputs, check_target, write_output
+
+MM = 1e3
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="acquire verify", description=__doc__.splitlines()[0].replace("``", ""),
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:7]))
+    p.add_argument("--result", type=Path, help="the calibration to verify (result YAML, with its covariance)")
+    p.add_argument("--robot", help="robot spec (default: mock:<the result's robot>, the simulated rig)")
+    p.add_argument("--tracker", help="tracker spec (default mock)")
+    p.add_argument("--config", type=Path, help="site YAML (cell, timeouts, verify: cube_centre, cube_edge, cycles)")
+    p.add_argument("--session", type=Path,
+                   help="session file to create (default sessions/<robot>-verify-<time>.session)")
+    p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this verification session")
+    p.add_argument("--cycles", type=int, help="visits of each pose per run (site verify.cycles, 10; ISO uses 30)")
+    p.add_argument("--samples", type=int, help="tracker samples per visit (site default)")
+    p.add_argument("--dry-run", action="store_true", help="print the test and its checks; move nothing")
+    p.add_argument("--yes", action="store_true", help="do not ask before moving a real robot")
+    p.add_argument("--realtime", action="store_true", help="mock mode at the speed of a real run")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing .verify.yaml or report beside a new session")
+    for name in ("noise", "steps", "free_poses", "speed_fraction", "log", "trace_io"):  # what _site/_open read
+        p.set_defaults(**{name: None})
+    return p
+
+
+def _outputs(path: Path) -> tuple[Path, Path]:
+    return path.with_suffix(".verify.yaml"), path.with_suffix(".report.html")
+
+
+def _load(path: Path) -> tuple[CalibratedModel, dict[str, Any], str]:
+    try:
+        model, doc = load_result(str(path))
+    except ResultError as exc:
+        raise UsageError(str(exc)) from None
+    if (doc.get("verdict") or {}).get("status") == "fail":
+        raise UsageError(f"{path} fails its verdict: its model must not be used (see the result's checks)")
+    return model, doc, hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _robot_for(args: argparse.Namespace, doc: dict[str, Any], model: CalibratedModel) -> tuple[RobotSpec, RobotModel]:
+    name = nominal_name(doc)
+    spec = RobotSpec.parse(args.robot or f"mock:{name or 'ur5e'}")
+    robot = load_robot(spec.model)
+    if name is not None and name.lower() != robot.name.lower():
+        raise UsageError(f"{args.result} is a calibration of {name}; --robot {spec} is a {robot.name}")
+    if robot.joint_types != model.model.joint_types:
+        raise UsageError(f"{args.result} has joints {model.model.joint_types}, {robot.name} {robot.joint_types}")
+    return spec, robot
+
+
+def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float) -> str:
+    """The test as the operator reads it before anything moves."""
+    targets = np.array(info["targets"]) * MM
+    lines = [f"verification of {info['result']} (verdict {info['result_verdict']}) on {robot.name}: ISO 9283-style, "
+             f"5 poses x {info['cycles']} cycles, before (nominal model) then after (identified model)",
+             f"test cube: centre {', '.join(f'{v * MM:.1f}' for v in info['centre'])} mm, edge {info['edge'] * MM:.0f} "
+             "mm (base frame)",
+             "pose  target x, y, z [mm]                before: q [deg]                      predicted AP before / "
+             "after [mm]"]
+    for k in range(5):
+        qb = ", ".join(f"{np.degrees(v):.1f}" for v in info["q"]["before"][k])
+        lines.append(f"P{k + 1}    {targets[k, 0]:8.1f} {targets[k, 1]:8.1f} {targets[k, 2]:8.1f}    {qb:<36} "
+                     f"{info['predicted']['before'][k] * MM:.3f} / 0 ± {info['expected'][k] * MM:.3f}")
+    change = np.max(np.abs(np.array(info["q"]["after"]) - np.array(info["q"]["before"])))
+    lines.append(f"compensation changes the joints by up to {change * 1e3:.2f} mrad")
+    lines += [f"note: {n}" for n in info["notes"]]
+    lines.append(f"total: {len(plan.steps)} steps x {plan.samples_per_step} samples; estimated duration "
+                 f"{_hms(duration)}")
+    return "\n".join(lines)
+
+
+def format_outcome(outcome: Outcome) -> str:
+    """AP/RP per pose and run, then the verdict line."""
+    lines = ["pose   AP before   AP after   RP before   RP after  [mm]"]
+    runs = outcome.runs
+    for k in range(5):
+        cells = []
+        for key in ("ap", "rp"):
+            for mode in MODES:
+                pose = next((p for p in runs[mode].poses if p.pose == k + 1), None) if mode in runs else None
+                cells.append("       -" if pose is None else f"{getattr(pose, key) * MM:9.4f}")
+        lines.append(f"P{k + 1}   " + "  ".join([cells[0], cells[1], cells[2], cells[3]]))
+    lines.append(f"verdict: {outcome.status}: {outcome.message}")
+    return "\n".join(lines)
+
+
+def _finish(session: Session, path: Path, robot: RobotModel) -> tuple[Outcome, dict[str, Any]]:
+    info = session.header["config"]["verification"]
+    outcome = analyse(info, session.steps())
+    print(format_outcome(outcome))
+    summary = outcome.as_dict(info)
+    yaml_path, report_path = _outputs(path)
+    write_output(yaml_path, yaml.safe_dump(summary, sort_keys=False, width=120), force=True)
+    print(f"verification written to {yaml_path}")
+    try:
+        from identify.verify_report import verification_html
+    except ImportError:
+        print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
+        return outcome, summary
+    write_output(report_path, verification_html(summary, session.header, str(path), session), force=True)
+    print(f"report written to {report_path}")
+    return outcome, summary
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.resume:
+        if args.result or args.session:
+            raise UsageError("--resume continues a session's own test: --result and --session go with a new one")
+        with (Session.open(args.resume) if args.dry_run else Session.open(args.resume, write=True)) as session:
+            return _resume(args, session)
+    if args.result is None:
+        raise UsageError("give --result RESULT (the calibration to verify) or --resume SESSION")
+    model, doc, sha = _load(args.result)
+    robot_spec, robot = _robot_for(args, doc, model)
+    tracker_spec = TrackerSpec.parse(args.tracker or "mock")
+    site = _site(args)
+    cycles = site.verify_cycles if args.cycles is None else args.cycles
+    if cycles < 2:
+        raise UsageError(f"--cycles must be at least 2 (AP and RP need repeated visits), got {cycles}")
+    if not args.dry_run and args.session is not None:
+        check_outputs([args.result, args.config], [("--session", args.session),
+                                                   *zip(("result", "report"), _outputs(args.session), strict=True)],
+                      args.force)
+        check_target(args.session, option="--session")
+    if not args.dry_run:
+        from drivers.sim import check_pairing
+
+        check_pairing(robot_spec, tracker_spec)
+
+    def plan_ok(q_before: np.ndarray, q_after: np.ndarray) -> list[str]:  # two cycles hold every distinct move
+        return problems(build(robot, site, {"before": q_before, "after": q_after}, min(cycles, 2))[0], robot, site)
+
+    try:
+        d = design(model, robot, site, plan_ok)
+    except VerifyError as exc:
+        print(f"acquire verify: test refused: {exc}", file=sys.stderr)
+        return 2
+    plan, labels = build(robot, site, d.q, cycles)
+    info = header(d, labels, model, str(args.result), sha, (doc.get("verdict") or {}).get("status"), cycles)
+    print(format_design(info, robot, plan, estimate_duration(plan, robot, site.measure_time)))
+    print(format_clearance(plan_clearance(plan, robot, site), plan, site))
+    if args.dry_run:
+        print("dry run: nothing was connected or moved")
+        return 0
+    path = args.session or _default_path(robot.name)
+    _confirm(robot_spec, args, plan, f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: ")
+    config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
+              "command": " ".join(sys.argv), "verification": info}
+    return _measure(args, None, path, plan, robot_spec, tracker_spec, site, robot, config)
+
+
+def _resume(args: argparse.Namespace, session: Session) -> int:
+    info = (session.header.get("config") or {}).get("verification")
+    if info is None:
+        raise UsageError(f"{args.resume} is an acquisition session, not a verification: resume it with acquire "
+                         "--resume")
+    options = {"--cycles": None if args.cycles is None or args.cycles == info["cycles"] else args.cycles,
+               "--samples": args.samples}
+    if options["--cycles"] is not None:
+        raise UsageError(f"--cycles {args.cycles}: the session's test has {info['cycles']}; a resume cannot change it")
+    settings = resume_settings(session.header, args.robot, args.tracker, args.config, options)
+    robot = load_robot(settings.robot.model)
+    robot_spec = settings.robot if args.robot else _without_faults(settings.robot)
+    tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
+    if args.dry_run:
+        duration = estimate_duration(session.plan, robot, settings.site.measure_time)
+        print(format_design(info, robot, session.plan, duration))
+        print("dry run: nothing was connected or moved")
+        return 0
+    if session.next_index() is None:
+        print(f"{session.path} is complete: all {len(session.plan.steps)} steps recorded; nothing moved")
+        outcome, _ = _finish(session, args.resume, robot)
+        return _code(outcome)
+    _confirm(robot_spec, args, session.plan)
+    return _measure(args, session, args.resume, session.plan, robot_spec, tracker_spec, settings.site, robot, None,
+                    settings)
+
+
+def _measure(args, session: Session | None, path: Path, plan, robot_spec: RobotSpec, tracker_spec: TrackerSpec,
+             site, robot: RobotModel, config: dict[str, Any] | None, settings=None) -> int:
+    """Connect, check the first move, record the steps, then analyse and write the outputs."""
+    robot_dev, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site)
+    try:
+        first = 0 if session is None else session.next_index()
+        _check_start(robot_dev, plan, robot, site, first or 0)
+        if session is None:
+            assert config is not None
+            session = Session.create(path, plan, config, robot_dev.identity(), tracker.identity())
+        elif settings is not None and settings.changes:
+            session.set_connection(settings.connection(), "resumed with new connection details: "
+                                   + "; ".join(settings.changes))
+        print(f"session: {path}")
+        stop = StopRequest()
+        orchestrator = Orchestrator(robot_dev, tracker, session, clock,
+                                    Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
+                                    site.retries, _progress_printer(args.quiet), stop)
+        with stop.installed():
+            result = orchestrator.run()
+        if not args.quiet and sys.stderr.isatty():
+            sys.stderr.write("\n")
+        if result.outcome != "complete":
+            print(f"acquire verify: run {result.outcome}: {result.reason}", file=sys.stderr)
+            print(f"acquire verify: resume with: acquire verify --resume {path}", file=sys.stderr)
+            return 130 if result.outcome == "aborted" else 1
+        outcome, _ = _finish(session, path, robot)
+        return _code(outcome)
+    finally:
+        robot_dev.close()
+        tracker.close()
+        if session is not None:
+            session.close()
+
+
+def _code(outcome: Outcome) -> int:
+    return {"pass": 0, "warn": 0, "fail": 3}.get(outcome.status, 1)
+
+
+def _default_path(robot: str) -> Path:
+    folder = Path("sessions")
+    folder.mkdir(exist_ok=True)
+    path = folder / f"{robot}-verify-{time.strftime('%Y%m%d-%H%M%S')}.session"
+    check_target(path, option="session")
+    return path
+
+
+def main(argv: list[str]) -> int:
+    """``acquire verify``; errors as one line (the caller, acquire.cli.main, maps exceptions to exit 2)."""
+    args = build_parser().parse_args(argv)
+    try:
+        return run(args)
+    except SessionError as exc:
+        print(f"acquire verify: error: {exc}", file=sys.stderr)
+        return 2
