@@ -44,6 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", metavar="FILE", help="write the result YAML (DESIGN.md contract) to FILE")
     parser.add_argument("--json", action="store_true", help="print the full result as JSON instead of a table")
     parser.add_argument("--report", metavar="FILE", help="write a self-contained HTML report (needs matplotlib)")
+    parser.add_argument("--verification", metavar="FILE",
+                        help="with --report: show this acquire verify run (its .verify.yaml) in the headline")
     parser.add_argument("--urdf", metavar="FILE", help="write the identified robot as URDF")
     parser.add_argument("--ur-calibration", metavar="FILE",
                         help="write the UR ROS driver's kinematics calibration YAML (6R UR arms)")
@@ -84,7 +86,10 @@ def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
     """Refuse, before any work, exports that cannot be made."""
     if args.ur_calibration and joint_types != "RRRRRR":
         raise InputError(f"--ur-calibration needs a 6R UR arm; the data have joints {joint_types}")
+    if args.verification and not args.report:
+        raise InputError("--verification goes with --report (it is shown in the report's headline)")
     if args.report:
+        _verification(args.verification)
         try:
             import identify.report_html  # noqa: F401
         except ImportError:
@@ -127,11 +132,24 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
         try:
             page = report_html(ident, meas, robot.nominal if robot else None, robot.name if robot else None,
                                session=session, source=str(args.input), reference=reference,
-                               reference_note=note or None)
+                               reference_note=note or None, verification=_verification(args.verification))
         finally:
             if session is not None:
                 session.close()
         _write_atomic(Path(args.report), page)
+
+
+def _verification(path: str | None) -> dict[str, Any] | None:
+    """The summary an ``acquire verify`` run wrote (``SESSION.verify.yaml``), or None; InputError if it is not one."""
+    if path is None:
+        return None
+    try:
+        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise InputError(f"--verification {path}: cannot be read ({type(exc).__name__})") from None
+    if not isinstance(doc, dict) or not {"runs", "verdict"} <= set(doc):
+        raise InputError(f"--verification {path}: not the .verify.yaml of an acquire verify run")
+    return doc
 
 
 def _is_session(path: Path) -> bool:

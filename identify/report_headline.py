@@ -109,7 +109,8 @@ def headline_html(status: str, checks: list[tuple[str, str, str]], accuracy: dic
                                               if predicted.get("before") else ""),
                      _mm(a.get("ap_max")) + (f" (predicted 0 ± {_mm(max(verification.get('expected') or [0.0]))})"
                                               if verification.get("expected") else "")])
-        rows.append(["RP, pose repeatability (worst of 5 poses)", _mm(b.get("rp_max")), _mm(a.get("rp_max"))])
+        rows.append(["RP, pose repeatability (worst of 5 poses; tracker noise per visit included)",
+                     _mm(b.get("rp_max")), _mm(a.get("rp_max"))])
         v = verification.get("verdict") or {}
         parts.append(f"<p><b>Verification ({_e(v.get('status', '?'))}):</b> {_e(v.get('message', ''))}</p>")
     if rows:

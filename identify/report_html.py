@@ -26,9 +26,12 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from identify import __version__
-from identify.kinematics import DH_NAMES, DHModel, frames_from_joints, points_from_joints
+from identify.kinematics import DH_NAMES, DHModel
 from identify.measurements import Measurements
 from identify.pipeline import Identification
+from identify.report_figures import figure_frames, figure_joint
+from identify.report_figures import focus_on_inliers as _focus_on_inliers
+from identify.report_headline import accuracy_summary, headline_html
 
 if TYPE_CHECKING:
     from acquire.session import Session
@@ -48,7 +51,9 @@ table{border-collapse:collapse;margin:.6em 0;font-size:.92em}td,th{border:1px so
 text-align:right;white-space:nowrap}th{background:#f4f4f4}td.l,th.l{text-align:left;white-space:normal}
 .fixed{color:#888}figure{margin:1em 0}img{max-width:100%;height:auto}figcaption{font-size:.9em;color:#555}
 .warn{color:#a40}code{background:#f4f4f4}.scroll{overflow-x:auto}.verdict-pass h2{color:#063}
-.verdict-warn h2{color:#a40}.verdict-fail h2{color:#b00}
+.verdict-warn h2{color:#a40}.verdict-fail h2{color:#b00}.sides{display:flex;flex-wrap:wrap;gap:1.5em}
+#headline{border:2px solid #ccc;border-radius:6px;padding:0 1em .6em;margin:1em 0}#headline.verdict-pass{
+border-color:#063}#headline.verdict-warn{border-color:#a40}#headline.verdict-fail{border-color:#b00}
 """
 
 
@@ -65,151 +70,6 @@ def png_data_uri(fig: Figure) -> str:
 def _fit_rows(meas: Measurements) -> NDArray[np.bool_]:
     """Rows of ``meas`` the pipeline fitted (not held out, every joint reading finite), in its order."""
     return ~meas.check & np.all(np.isfinite(meas.q), axis=1)
-
-
-def _plane_basis(axis: Array) -> tuple[Array, Array]:
-    helper = np.eye(3)[int(np.argmin(np.abs(axis)))]
-    e1 = np.cross(axis, helper)
-    e1 /= np.linalg.norm(e1)
-    return e1, np.cross(axis, e1)
-
-
-def _focus_on_inliers(ax: Any, inlier_values: Array, outlier_values: Array) -> None:
-    """Scale the y axis to the inliers when rejected samples would squash them; say how many are off scale."""
-    if len(inlier_values) == 0 or len(outlier_values) == 0:
-        return
-    lo, hi = float(np.min(inlier_values)), float(np.max(inlier_values))
-    pad = 0.3 * max(hi - lo, 1e-6)
-    lo, hi = min(lo - pad, 0.0), hi + pad
-    off = int(np.sum((outlier_values < lo) | (outlier_values > hi)))
-    if off:
-        ax.set_ylim(lo, hi)
-        ax.text(0.01, 0.97, f"{off} rejected sample(s) off scale", transform=ax.transAxes, fontsize=7,
-                va="top", color="C3")
-
-
-def figure_joint(ident: Identification, fit: Measurements, joint: int) -> Figure:
-    """Joint ``joint`` (1-based): its sweep's points with the model's path (circle or line) and swept arc,
-    and the residuals against the joint reading."""
-    model, home, ref = ident.model, ident.lines.home, ident.refinement
-    j = joint - 1
-    rows = fit.joint == joint
-    q, points = fit.q[rows], fit.points[rows]
-    res = ref.residuals[rows] * MM
-    inl = ref.inliers[rows]
-    frame = frames_from_joints(model, home)[0, j]
-    origin, axis = frame[:3, 3], frame[:3, 2]
-    revolute = model.joint_types[j] == "R"
-    fig = Figure(figsize=(10, 3.8))
-    ax1, ax2 = fig.subplots(1, 2)
-    lo, hi = (q[:, j].min(), q[:, j].max()) if len(q) else (home[j], home[j])
-    if revolute:
-        full = np.tile(home, (361, 1))
-        full[:, j] = home[j] + np.linspace(-np.pi, np.pi, 361)
-        arc = np.tile(home, (100, 1))
-        arc[:, j] = np.linspace(lo, hi, 100)
-        e1, e2 = _plane_basis(axis)
-
-        def uv(p: Array) -> tuple[Array, Array]:
-            rel = (p - origin) * MM
-            return rel @ e1, rel @ e2
-
-        ax1.plot(*uv(points_from_joints(model, full)), "--", color="#999", lw=1, label="model circle")
-        ax1.plot(*uv(points_from_joints(model, arc)), "-", color="C1", lw=3, alpha=0.5,
-                 label=f"swept arc {np.degrees(hi - lo):.1f}°")
-        ax1.plot(0, 0, "+", color="k", ms=10, label="axis")
-        ax1.set_aspect("equal", adjustable="datalim")
-        ax1.set_xlabel("in-plane u [mm]")
-        ax1.set_ylabel("in-plane v [mm]")
-        u, v = uv(points)
-    else:
-        line = np.tile(home, (2, 1))
-        line[:, j] = [lo, hi]
-        ends = points_from_joints(model, line)
-        ax1.plot((ends - ends[0]) @ axis * MM, [0, 0], "-", color="C1", lw=3, alpha=0.5,
-                 label=f"stroke {(hi - lo) * MM:.1f} mm")
-        rel = points - ends[0]
-        u = rel @ axis * MM
-        v = np.linalg.norm(rel - np.outer(rel @ axis, axis), axis=1) * MM
-        ax1.set_xlabel("along the axis [mm]")
-        ax1.set_ylabel("off the model line [mm]")
-    ax1.plot(u[inl], v[inl], ".", color="C0", label="measured")
-    if np.any(~inl):
-        ax1.plot(u[~inl], v[~inl], "x", color="C3", ms=8, label="rejected")
-    if not revolute:  # the circle view keeps its equal aspect, which fixed y limits would fight
-        _focus_on_inliers(ax1, v[inl], v[~inl])
-    ax1.set_title(f"joint {joint} ({'revolute' if revolute else 'prismatic'}): points and model path")
-    ax1.legend(fontsize=7, loc="best")
-    x = q[:, j] * (DEG if revolute else MM)
-    for k, name in enumerate("xyz"):
-        ax2.plot(x, res[:, k], ".", ms=4, label=name)
-    ax2.plot(x, np.linalg.norm(res, axis=1), "k_", ms=6, label="|r|")
-    if np.any(~inl):
-        ax2.plot(x[~inl], np.linalg.norm(res[~inl], axis=1), "x", color="C3", ms=8, label="rejected")
-    _focus_on_inliers(ax2, res[inl].ravel(), np.linalg.norm(res[~inl], axis=1))
-    ax2.axhline(0, color="#999", lw=0.8)
-    ax2.set_xlabel(f"q{joint} [{'deg' if revolute else 'mm'}]")
-    ax2.set_ylabel("residual [mm]")
-    ax2.set_title("residuals (measured - model)")
-    ax2.legend(fontsize=7, ncol=5, loc="best")
-    return fig
-
-
-def figure_frames(ident: Identification, fit: Measurements, cell: dict[str, Any] | None = None) -> Figure:
-    """3D view (tracker frame, mm) of the identified joint axes and DH frames at home, with the points.
-
-    ``cell`` (optional, in DH frame 0, m): ``normal`` (3,) and ``offset`` of the mounting surface and
-    ``envelope`` (k, 3), points the arm's bodies pass through during the plan; both are drawn through the
-    identified base transform."""
-    model, home = ident.model, ident.lines.home
-    frames = frames_from_joints(model, home)[0]
-    tp = points_from_joints(model, home)[0]
-    fig = Figure(figsize=(7.5, 6.5))
-    ax = fig.add_subplot(projection="3d")
-    pts = fit.points * MM
-    ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=3, color="#777", alpha=0.5, label="measured")
-    if cell is not None:
-        _draw_cell(ax, model.base, cell)
-    span = float(np.ptp(np.vstack([pts, frames[:, :3, 3] * MM]), axis=0).max()) or 100.0
-    size = 0.08 * span
-    for i, frame in enumerate(frames):
-        o = frame[:3, 3] * MM
-        for k, color in enumerate(("r", "g", "b")):
-            end = o + frame[:3, k] * size
-            ax.plot(*zip(o, end, strict=True), color=color, lw=1.5)
-        ax.text(*o, f" {i}", fontsize=8)
-        if i < model.n_joints:
-            line = np.array([o - frame[:3, 2] * 2.5 * size, o + frame[:3, 2] * 2.5 * size])
-            ax.plot(line[:, 0], line[:, 1], line[:, 2], "--", color="C1" if model.joint_types[i] == "R" else "C4",
-                    lw=1)
-    chain = np.vstack([frames[:, :3, 3], tp]) * MM
-    ax.plot(chain[:, 0], chain[:, 1], chain[:, 2], "-", color="k", lw=1, alpha=0.6)
-    ax.scatter(*(tp * MM), color="C3", s=30, label="TP at home")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("y [mm]")
-    ax.set_zlabel("z [mm]")
-    ax.set_aspect("equal")
-    ax.set_title("DH frames 0..n at home (x red, y green, z blue), joint axes dashed")
-    ax.legend(fontsize=7)
-    return fig
-
-
-def _draw_cell(ax: Any, base: Array, cell: dict[str, Any]) -> None:
-    """The plan's swept envelope (points) and the mounting surface (a square patch under it), tracker frame."""
-    rot, shift = base[:3, :3], base[:3, 3]
-    envelope = np.asarray(cell["envelope"], dtype=float).reshape(-1, 3)
-    normal = np.asarray(cell["normal"], dtype=float)
-    if len(envelope):
-        env = (envelope @ rot.T + shift) * MM
-        ax.scatter(env[:, 0], env[:, 1], env[:, 2], s=2, color="C0", alpha=0.25, label="swept by the plan")
-    u, v = _plane_basis(normal)
-    centre = normal * float(cell["offset"])
-    extent = float(np.max(np.abs((envelope - centre) @ np.column_stack([u, v])), initial=0.5)) * 1.1
-    grid = np.linspace(-extent, extent, 2)
-    gu, gv = np.meshgrid(grid, grid)
-    corners = centre + gu[..., None] * u + gv[..., None] * v
-    world = (corners @ rot.T + shift) * MM
-    ax.plot_surface(world[..., 0], world[..., 1], world[..., 2], color="C2", alpha=0.15)
 
 
 def figure_validation(errors: Array, expected: float | None) -> Figure:
@@ -297,13 +157,11 @@ def _value_with_unit(name: str, value: float) -> str:
 
 
 def _dh_section(ident: Identification, references: list[tuple[str, DHModel]]) -> str:
+    """The DH table (value ± standard uncertainty), then one narrow table of differences per reference, side by
+    side where the page is wide enough: every column fits the page."""
     model, std = ident.model, ident.std
     fixed = {f.name for f in ident.fixed}
     head = ["joint", "type", *(f"{n} [{_UNIT[n]}]" for n in DH_NAMES)]
-    deltas = []
-    for label, ref in references:
-        head += [f"Δ{n} vs {_e(label)}" for n in DH_NAMES]
-        deltas.append(_wrap(model.dh_table() - ref.dh_table()))
     rows = []
     for i in range(model.n_joints):
         row = [str(i + 1), model.joint_types[i]]
@@ -313,11 +171,26 @@ def _dh_section(ident: Identification, references: list[tuple[str, DHModel]]) ->
                 row.append(f'<span class="fixed">{value:.4f} (fixed)</span>')
             else:
                 row.append(f"{value:.4f} ± {std[9 + 4 * i + k] * _SCALE[name]:.4f}")
-        for delta in deltas:
-            row += [f"{delta[i, k] * _SCALE[n]:+.4f}" for k, n in enumerate(DH_NAMES)]
         rows.append(row)
+    deltas = []
+    for label, ref in references:
+        delta = _wrap(model.dh_table() - ref.dh_table())
+        drows = []
+        for i in range(model.n_joints):
+            cells = []
+            for k, n in enumerate(DH_NAMES):
+                sigma = std[9 + 4 * i + k]
+                big = f"{n}{i + 1}" not in fixed and sigma > 0 and abs(delta[i, k]) > 3 * sigma
+                text = f"{delta[i, k] * _SCALE[n]:+.4f}"
+                cells.append(f"<b>{text}</b>" if big else text)
+            drows.append([str(i + 1), *cells])
+        deltas.append(f'<div class="side"><p>Δ identified vs {_e(label)}</p>'
+                      + _table(["joint", *(f"Δ{n} [{_UNIT[n]}]" for n in DH_NAMES)], drows) + "</div>")
     t, tool = model.base[:3, 3] * MM, model.tool * MM
     parts = [_table(head, rows, left=2)]
+    if deltas:
+        parts.append('<div class="sides">' + "".join(deltas) + "</div><p>Bold: more than three standard "
+                     "uncertainties from the reference.</p>")
     parts.append(f"<p>Base origin in the tracker frame: {', '.join(f'{v:.3f}' for v in t)} mm "
                  f"(± {', '.join(f'{s * MM:.3f}' for s in std[3:6])}); "
                  f"tool (TP in frame {model.n_joints}): {', '.join(f'{v:.3f}' for v in tool)} mm "
@@ -408,8 +281,11 @@ def report_html(
     source: str | None = None,
     reference_note: str | None = None,
     cell: dict[str, Any] | None = None,
+    verification: dict[str, Any] | None = None,
 ) -> str:
-    """The report as one HTML document (str).
+    """The report as one HTML document (str). It opens with the headline: the verdict, the accuracy before
+    (nominal) and after (identified) at the held-out poses, and ``verification`` (the ``.verify.yaml`` of an
+    ``acquire verify`` run of this result) when given.
 
     ``meas``: the measurements given to :func:`identify.pipeline.identify` (after the hold-out split), so
     fitted and held-out rows can be told apart. ``nominal``: deltas against it. ``reference``: (label, model)
@@ -428,7 +304,9 @@ def report_html(
             f"<p>dh-calib {_e(__version__)}, generated {_e(_when(time.time()))}"
             + (f"; source <code>{_e(source)}</code>" if source else "") + ".</p>"]
     verdict = ident.verdict
-    body.append(f'<section id="verdict" class="verdict-{verdict.status}"><h2>Verdict: {verdict.status.upper()}</h2>'
+    body.append(headline_html(verdict.status, [(c.name, c.status, c.message) for c in verdict.checks],
+                              accuracy_summary(ident, meas, nominal, nominal_name), verification))
+    body.append(f'<section id="verdict" class="verdict-{verdict.status}"><h2>Checks</h2>'
                 + _table(["check", "status", "what it found"],
                          [[_e(c.name), _e(c.status), _e(c.message)] for c in verdict.checks], left=3)
                 + "</section>")
@@ -449,8 +327,8 @@ def report_html(
         body.append(_figure_html(figure_joint(ident, fit, a.joint), caption))
     body.append("</section>")
     body.append('<section id="frames-3d"><h2>Axes and frames</h2>'
-                + _figure_html(figure_frames(ident, fit, cell), "Identified DH frames and joint axes at the home pose, "
-                               "with the measured points (tracker frame)" + (
+                + _figure_html(figure_frames(ident, fit, cell), "The identified arm at the home pose in its base frame "
+                               "(DH frame 0), with the joint axes and the measured points" + (
                                    "; the mounting surface (green) and the space the plan swept the arm through "
                                    "(blue dots)" if cell is not None else "")) + "</section>")
     body.append('<section id="validation"><h2>Held-out validation</h2>')

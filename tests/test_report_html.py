@@ -161,8 +161,8 @@ def test_report_loads_in_headless_chromium(session_path, tmp_path):
 
 
 def test_report_3d_view_shows_the_mounting_surface_and_the_swept_envelope():
-    """With a cell view (acquire passes the plan's), the 3D view draws the surface and the envelope through the
-    identified base transform."""
+    """With a cell view (acquire passes the plan's), the 3D view draws the surface and the envelope; the view is in
+    the robot's base frame (DH frame 0), where the cell is given, so the arm stands upright."""
     from identify.report_html import figure_frames
 
     robot, meas, ident = _identified("ur5e")
@@ -173,7 +173,39 @@ def test_report_3d_view_shows_the_mounting_surface_and_the_swept_envelope():
     fit = meas.subset(~meas.check)
     ax = figure_frames(ident, fit, cell).axes[0]
     drawn = next(c for c in ax.collections if c.get_label() == "swept by the plan")
-    x, y, z = drawn._offsets3d  # the envelope, mapped by the identified base into the tracker frame, mm
-    expected = (envelope @ ident.model.base[:3, :3].T + ident.model.base[:3, 3]) * 1e3
-    np.testing.assert_allclose(np.column_stack([x, y, z]), expected, atol=1e-9)
+    x, y, z = drawn._offsets3d  # the envelope in the base frame, mm
+    np.testing.assert_allclose(np.column_stack([x, y, z]), envelope * 1e3, atol=1e-9)
+    # and the measured points there too: the tracker's frame mapped through the inverse of the identified base
+    measured = next(c for c in ax.collections if c.get_label() == "measured TP")
+    base = ident.model.base
+    np.testing.assert_allclose(np.column_stack(measured._offsets3d),
+                               (fit.points - base[:3, 3]) @ base[:3, :3] * 1e3, atol=1e-6)
     assert any(type(c).__name__ == "Poly3DCollection" for c in ax.collections)  # the surface patch
+
+
+def test_report_headline_says_the_verdict_and_the_accuracy_before_and_after(tmp_path):
+    """The first section: the verdict, then the TP error of the nominal model (placed on the identified one) and
+    of the identified model at the held-out poses, predicted and measured, each with its uncertainty; with a
+    verification summary, AP and RP before and after."""
+    from identify.report_headline import accuracy_summary
+
+    robot, meas, ident = _identified("ur5e", outliers=0)
+    summary = accuracy_summary(ident, meas, robot.nominal, robot.name)
+    before, after = summary["before"], summary["after"]
+    assert summary["poses"] == 8
+    assert after["measured"] == pytest.approx(ident.validation.rms, rel=1e-12)
+    # the truth is a perturbed nominal (0.5 mm, 1 mrad): the nominal misses by millimetres, the identified model
+    # by what the noise explains; the prediction of the nominal's miss agrees with the measurement
+    assert before["measured"] > 10 * after["measured"]
+    assert abs(before["predicted"] - before["measured"]) < 3 * np.hypot(before["measured_std"], after["measured"])
+    verification = {"verdict": {"status": "pass", "message": "AP before 1.6 mm, after 0.02 mm"}, "cycles": 10,
+                    "runs": {"before": {"ap_max": 1.6e-3, "rp_max": 9e-5}, "after": {"ap_max": 2.3e-5, "rp_max": 9e-5}},
+                    "predicted": {"before": [1.61e-3] * 5, "after": [0.0] * 5}, "expected": [7e-6] * 5}
+    text = report_html(ident, meas, robot.nominal, robot.name, verification=verification)
+    parsed = _parse(text)
+    assert parsed.ids[0] == "headline"
+    head = text[text.index('id="headline"'):text.index("</section>")]
+    assert "Verdict: PASS" in head and "before (nominal ur5e)" in head and "after (identified)" in head
+    assert f"{before['measured'] * 1e3:.4f} ± {before['measured_std'] * 1e3:.4f} mm" in head
+    assert "AP, pose accuracy" in head and "1.6000 mm" in head and "0.0230 mm" in head
+    assert "Verification (pass)" in head

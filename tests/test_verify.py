@@ -185,3 +185,30 @@ def test_verification_against_the_ur_controller_emulator(tmp_path, capsys) -> No
     np.testing.assert_allclose(measured["before"], implied["before"], atol=tol)
     np.testing.assert_allclose(measured["after"], implied["after"], atol=tol)
     assert implied["before"].min() > 0.5e-3 and measured["after"].max() < 2 * NOISE
+
+
+def test_identify_report_shows_a_verification_run(tmp_path, capsys) -> None:
+    """identify --report with --verification puts the run's AP and RP in the headline; a file that is not a
+    verification summary is refused in one line."""
+    pytest.importorskip("matplotlib")
+    from identify.csvio import format_measurements
+
+    truth = SimulatedRig("ur5e", seed=0).truth
+    meas, _ = simulate(truth, ROBOT.home, ROBOT.limits, np.random.default_rng(8), noise=NOISE, steps=12,
+                       free_poses=8, check_poses=4)
+    data = tmp_path / "m.csv"
+    data.write_text(format_measurements(meas, {}))
+    summary = {"verdict": {"status": "pass", "message": "every pose within what the result predicts"}, "cycles": 10,
+               "runs": {"before": {"ap_max": 1.5e-3, "rp_max": 8e-5}, "after": {"ap_max": 2e-5, "rp_max": 8e-5}}}
+    verify_yaml = tmp_path / "v.verify.yaml"
+    verify_yaml.write_text(yaml.safe_dump(summary))
+    report = tmp_path / "r.html"
+    args = [str(data), "--robot", "ur5e", "--report", str(report)]
+    assert identify_main([*args, "--verification", str(verify_yaml)]) == 0
+    text = report.read_text()
+    assert "AP, pose accuracy" in text and "1.5000 mm" in text and "every pose within what the result predicts" in text
+    capsys.readouterr()
+    assert identify_main([*args, "--force", "--verification", str(data)]) == 2
+    assert "not the .verify.yaml" in capsys.readouterr().err
+    assert identify_main([str(data), "--verification", str(verify_yaml)]) == 2
+    assert "goes with --report" in capsys.readouterr().err
