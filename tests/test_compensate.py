@@ -20,6 +20,7 @@ from identify.pipeline import identify
 from identify.poe import lines_from_model
 from identify.result_io import result_to_dict
 from identify.simulate import random_poses, random_truth, simulate
+from tests._single_thread import run_single_threaded
 
 NOISE = 5e-5
 ROBOT = load_robot("ur5e")
@@ -67,35 +68,47 @@ def test_the_result_document_gives_the_identification_s_predictions_and_covarian
         CalibratedModel.from_document({**doc, "extensions": {"scale": {"value": 1e-4}}})
 
 
-def test_compensated_targets_are_reached_at_the_predicted_accuracy_and_nominal_misses_by_the_truth() -> None:
-    """200 random reachable targets per draw (the TP of the truth at random poses, tracker frame): with the
-    identified model the real TP lands within 1.2x the RMS the covariance predicts (pooled over 3 draws; no single
-    draw beyond 1.5x); with the nominal model it misses by the truth's deviation from it, millimetres."""
-    ratios = []
-    for seed in (21, 22, 23):
+def compensation_draws(seeds: list[int]) -> list[tuple[float, float, float, int]]:
+    """Per draw (seed): a truth, a calibration, 200 random reachable targets (the truth's TP at random poses,
+    tracker frame) compensated. Returns per draw the RMS real error of the reached targets over the RMS the
+    covariance predicts, that prediction (m), the RMS miss of the nominal model's own solutions (m), and the
+    number of targets reached; asserts along the way what holds per target."""
+    out = []
+    for seed in seeds:
         truth, ident, rng = _identified(seed)
         model = CalibratedModel.from_identification(ident)
         q_true = random_poses(ROBOT.limits, 200, rng)
         targets = points_from_joints(truth, q_true)
         result = compensate(model, targets, q_true, ROBOT.limits, nominal=_nominal_in_cell(model))
         sol = result.solution
-        assert sol.reached.sum() >= 195  # a few random poses sit at a singularity
         ok = sol.reached
         np.testing.assert_array_less(sol.position_error[ok], 1e-9)  # the identified model is on the target
         err = np.linalg.norm(points_from_joints(truth, sol.q[ok]) - targets[ok], axis=1)
         predicted = np.sqrt(np.mean(result.expected[ok] ** 2))
-        ratios.append(np.sqrt(np.mean(err**2)) / predicted)
-        assert ratios[-1] < 1.5
-        assert 0.5 * NOISE < predicted < 2 * NOISE  # 0.03 mm for this plan and noise
         # the nominal model's own solution: the real TP misses the target by the truth's deviation
         nominal_q = result.nominal.q[ok]
         nominal_err = np.linalg.norm(points_from_joints(truth, nominal_q) - targets[ok], axis=1)
         deviation = np.linalg.norm(points_from_joints(truth, nominal_q)
                                    - _nominal_in_cell(model).points(nominal_q), axis=1)
         np.testing.assert_allclose(nominal_err, deviation, atol=1e-9)
-        assert np.sqrt(np.mean(nominal_err**2)) > 0.5e-3  # millimetres
-        assert np.sqrt(np.mean(nominal_err**2)) > 10 * np.sqrt(np.mean(err**2))
-    assert np.sqrt(np.mean(np.square(ratios))) < 1.2
+        out.append((float(np.sqrt(np.mean(err**2)) / predicted), float(predicted),
+                    float(np.sqrt(np.mean(nominal_err**2))), int(ok.sum())))
+    return out
+
+
+def test_compensated_targets_are_reached_at_the_predicted_accuracy_and_nominal_misses_by_the_truth() -> None:
+    """With the identified model the real TP lands within 1.2x the RMS the covariance predicts (pooled over 3
+    draws of 200 targets; no single draw beyond 1.5x); with the nominal model it misses by the truth's deviation
+    from it, millimetres."""
+    draws = run_single_threaded(compensation_draws, [21, 22, 23])
+    ratios = np.array([d[0] for d in draws])
+    for ratio, predicted, nominal_rms, reached in draws:
+        assert reached >= 195  # a few random poses sit at a singularity
+        assert ratio < 1.5
+        assert 0.5 * NOISE < predicted < 2 * NOISE  # 0.03 mm for this plan and noise
+        assert nominal_rms > 0.5e-3  # millimetres
+        assert nominal_rms > 10 * ratio * predicted
+    assert np.sqrt(np.mean(ratios**2)) < 1.2
 
 
 def test_controller_pose_round_trip(case) -> None:
