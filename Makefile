@@ -13,9 +13,14 @@ $(STAMP): pyproject.toml
 	$(BIN)/pip install --quiet -e ".[dev]"
 	touch $(STAMP)
 
+# a mock acquisition and its identification, then an ISO 9283-style verification of that calibration on the same
+# simulated robot (5 poses x 10 cycles before and after compensation: a few seconds in mock mode)
 demo: $(STAMP)
 	mkdir -p sessions
-	$(BIN)/acquire --robot mock:ur5e --tracker mock --session sessions/demo-$$(date +%Y%m%d-%H%M%S).session
+	stamp=$$(date +%Y%m%d-%H%M%S); \
+	$(BIN)/acquire --robot mock:ur5e --tracker mock --session sessions/demo-$$stamp.session && \
+	$(BIN)/acquire verify --result sessions/demo-$$stamp.result.yaml --robot mock:ur5e --tracker mock \
+		--session sessions/demo-$$stamp-verify.session
 
 test: $(STAMP)
 	$(BIN)/ruff check .
@@ -36,6 +41,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.aruco || status=1; \
 	$(BIN)/python -m bench.safety || status=1; \
 	$(BIN)/python -m bench.robustness || status=1; \
+	$(BIN)/python -m bench.compensation || status=1; \
 	exit $$status
 
 clean:

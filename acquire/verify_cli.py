@@ -105,12 +105,13 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
              f"5 poses x {info['cycles']} cycles, before (nominal model) then after (identified model)",
              f"test cube: centre {', '.join(f'{v * MM:.1f}' for v in info['centre'])} mm, edge {info['edge'] * MM:.0f} "
              "mm (base frame)",
-             "pose  target x, y, z [mm]                before: q [deg]                      predicted AP before / "
-             "after [mm]"]
+             f"{'pose':<5} {'target x, y, z [mm]':<28} {'commanded before: q [deg]':<44} predicted AP before / after "
+             "[mm]"]
     for k in range(5):
         qb = ", ".join(f"{np.degrees(v):.1f}" for v in info["q"]["before"][k])
-        lines.append(f"P{k + 1}    {targets[k, 0]:8.1f} {targets[k, 1]:8.1f} {targets[k, 2]:8.1f}    {qb:<36} "
-                     f"{info['predicted']['before'][k] * MM:.3f} / 0 ± {info['expected'][k] * MM:.3f}")
+        xyz = " ".join(f"{v:8.1f}" for v in targets[k])
+        lines.append(f"P{k + 1:<4} {xyz:<28} {qb:<44} {info['predicted']['before'][k] * MM:.3f} / 0 ± "
+                     f"{info['expected'][k] * MM:.3f}")
     change = np.max(np.abs(np.array(info["q"]["after"]) - np.array(info["q"]["before"])))
     lines.append(f"compensation changes the joints by up to {change * 1e3:.2f} mrad")
     lines += [f"note: {n}" for n in info["notes"]]

@@ -120,8 +120,8 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
 
 
 def _labels(paths: list[str]) -> list[str]:
-    """Short names: file stems, or the whole paths where stems repeat."""
-    stems = [Path(p).stem for p in paths]
+    """Short names: file stems (without ``.result``), or the whole paths where they repeat."""
+    stems = [Path(p).stem.removesuffix(".result") for p in paths]
     return stems if len(set(stems)) == len(stems) else list(paths)
 
 
