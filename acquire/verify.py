@@ -64,46 +64,58 @@ class Design:
 
 
 def reach(robot: RobotModel) -> float:
-    """Sum of the nominal model's link lengths (m): an upper bound of the TP's distance from joint 1."""
+    """Sum of the nominal model's link lengths and prismatic strokes (m): the size of the robot's workspace."""
     m = robot.nominal
-    return float(np.sum(np.hypot(m.a, m.d)))
+    strokes = np.where(m.revolute, 0.0, robot.limits[:, 1] - robot.limits[:, 0])
+    return float(np.sum(np.hypot(m.a, m.d)) + np.sum(strokes))
 
 
 def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, plan_ok: Any = None) -> Design:
     """The test's poses and commands for ``identified`` (a result) on ``robot`` in ``site``; VerifyError (one
     line) when the poses cannot be reached or planned. ``plan_ok(q_before, q_after)`` returns the reasons a
-    candidate cannot run (none: it can); a default cube that fails is tried smaller (noted)."""
+    candidate cannot run (none: it can); a default cube that fails is tried lower, higher, then smaller (noted)."""
     ident = identified.with_base(np.eye(4))
     nominal = CalibratedModel.exact(replace(robot.nominal, tool=ident.tool()), robot.name)
     home = np.array(robot.home, dtype=float)
-    centre = (np.array(site.verify_centre) if site.verify_centre is not None else nominal.points(home)[0])
+    at_home = nominal.points(home)[0]
+    given_centre = site.verify_centre is not None
     given = site.verify_edge is not None
     edge0 = site.verify_edge if given else min(MAX_EDGE, REACH_SHARE * reach(robot))
     rotation = nominal.flanges(home)[0, :3, :3] if robot.n_joints >= 6 else None
-    notes: list[str] = []
-    last = ""
+    rot = None if rotation is None else np.broadcast_to(rotation, (5, 3, 3))
+    last, tried = "", []
     for share in (1.0,) if given else SHRINK:
         edge = edge0 * share
-        targets = cube_poses(centre, edge)
-        rot = None if rotation is None else np.broadcast_to(rotation, (5, 3, 3))
-        before = solve_ik(nominal, targets, np.tile(home, (5, 1)), robot.limits, rot)
-        after = solve_ik(ident, targets, before.q, robot.limits, rot)
-        bad = [f"P{k + 1} {s}" for k, s in enumerate(before.status) if s != "ok"]
-        bad += [f"P{k + 1} {s} (identified)" for k, s in enumerate(after.status) if s != "ok"]
-        if not bad and plan_ok is not None:
-            bad = list(plan_ok(before.q, after.q))
-        if not bad:
-            if share < 1.0:
-                notes.append(f"the default cube ({edge0 * 1e3:.0f} mm) did not fit ({last}); edge {edge * 1e3:.0f} mm")
+        # the default centre is the TP at home; where the arm leaves no room above or below it, the cube moves down
+        # or up by 40 % of its edge (P2..P5 then reach home's height)
+        shifts = (0.0,) if given_centre else (0.0, -0.4, 0.4)
+        for shift in shifts:
+            centre = np.array(site.verify_centre) if given_centre else at_home + np.array([0.0, 0.0, shift * edge])
+            tried.append((edge, centre))
+            targets = cube_poses(centre, edge)
+            before = solve_ik(nominal, targets, np.tile(home, (5, 1)), robot.limits, rot)
+            after = solve_ik(ident, targets, before.q, robot.limits, rot)
+            bad = [f"P{k + 1} {s}" for k, s in enumerate(before.status) if s != "ok"]
+            bad += [f"P{k + 1} {s} (identified)" for k, s in enumerate(after.status) if s != "ok"]
+            if not bad and plan_ok is not None:
+                bad = list(plan_ok(before.q, after.q))
+            if bad:
+                last = "; ".join(bad)
+                continue
+            notes = [] if len(tried) == 1 else [
+                f"the default cube (the TP at home, edge {edge0 * 1e3:.0f} mm) did not fit ({last}); centre "
+                f"{', '.join(f'{v * 1e3:.1f}' for v in centre)} mm, edge {edge * 1e3:.0f} mm"]
             predicted = {"before": np.linalg.norm(ident.points(before.q) - targets, axis=1), "after": np.zeros(5)}
-            expected = ident.expected_errors(after.q, frame="base")
+            # the attained positions reach the base frame through the identified base: its uncertainty counts
+            expected = identified.expected_errors(after.q)
             return Design(centre, edge, targets, rotation, {"before": before.q, "after": after.q}, predicted,
                           expected, tuple(notes))
-        last = "; ".join(bad)
-    where = f"centre {', '.join(f'{v:.3f}' for v in centre)} m, edge {edge0 * 1e3:.0f} mm"
-    hint = "change verify.cube_centre / cube_edge in the site file" if given else "set verify.cube_centre and " \
-        "cube_edge in the site file"
-    raise VerifyError(f"the test cube ({where}) cannot be run: {last}; {hint}")
+    edge, centre = tried[-1]
+    where = f"centre {', '.join(f'{v:.3f}' for v in centre)} m, edge {edge * 1e3:.0f} mm"
+    if not (given and given_centre):
+        where += f"; {len(tried)} default cubes tried, edges {edge0 * 1e3:.0f} mm down to {edge * 1e3:.0f} mm"
+    raise VerifyError(f"the test cube ({where}) cannot be run: {last}; set verify.cube_centre and cube_edge in the "
+                      "site file")
 
 
 def build(robot: RobotModel, site: SiteConfig, q: dict[str, Array], cycles: int) -> tuple[Plan, list[list[Any]]]:
@@ -168,6 +180,7 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
     inv_r, shift = base[:3, :3].T, base[:3, 3]
     targets = np.array(info["targets"], dtype=float)
     attained: dict[str, dict[int, list[Array]]] = {m: {} for m in MODES}
+    sigmas: dict[str, dict[int, list[float]]] = {m: {} for m in MODES}
     missing = 0
     for record in records:
         mode, _, pose = info["steps"][record.plan_index]
@@ -175,9 +188,12 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
             missing += 1
             continue
         attained[mode].setdefault(int(pose), []).append(inv_r @ (np.array(record.position) - shift))
+        if record.sigma is not None:
+            sigmas[mode].setdefault(int(pose), []).append(record.sigma)
     runs = {}
     for mode in MODES:
-        acc = accuracy(mode, targets, {p: np.array(v) for p, v in attained[mode].items()})
+        known = {p: np.array(v) for p, v in sigmas[mode].items() if len(v) == len(attained[mode][p])}
+        acc = accuracy(mode, targets, {p: np.array(v) for p, v in attained[mode].items()}, known)
         if acc.poses:
             runs[mode] = acc
     status, message = _verdict(runs, info)

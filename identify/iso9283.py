@@ -60,8 +60,10 @@ class PoseResult:
     ap_std: float
 
 
-def pose_result(pose: int, commanded: Array, attained: Array) -> PoseResult:
-    """ISO 9283 AP and RP of one pose from its ``attained`` positions (N, 3), N >= 2."""
+def pose_result(pose: int, commanded: Array, attained: Array, sigma: Array | None = None) -> PoseResult:
+    """ISO 9283 AP and RP of one pose from its ``attained`` positions (N, 3), N >= 2; ``sigma`` (N,): the per-axis
+    standard uncertainty of each measured position when known (then AP's uncertainty is never taken below what
+    it implies: a spread estimated from a few cycles can be far too small)."""
     attained = np.atleast_2d(np.asarray(attained, dtype=float))
     n = len(attained)
     if n < 2:
@@ -72,9 +74,12 @@ def pose_result(pose: int, commanded: Array, attained: Array) -> PoseResult:
     lengths = np.linalg.norm(attained - bary, axis=1)
     s_l = float(np.std(lengths, ddof=1))
     # the barycentre's covariance is the spread's over N; its projection on the offset is AP's uncertainty
-    cov = np.cov(attained.T, ddof=1) / n
+    cov = np.cov(attained.T, ddof=1)
     direction = offset / ap if ap > 0 else np.full(3, 1 / np.sqrt(3))
-    ap_std = float(np.sqrt(max(direction @ cov @ direction, 0.0)))
+    spread = float(direction @ cov @ direction)
+    if sigma is not None and len(sigma):
+        spread = max(spread, float(np.mean(np.square(sigma))))
+    ap_std = float(np.sqrt(max(spread, 0.0) / n))
     return PoseResult(pose, n, np.asarray(commanded, dtype=float), bary, ap, offset, float(lengths.mean() + 3 * s_l),
                       float(lengths.mean()), s_l, ap_std)
 
@@ -109,7 +114,10 @@ class Accuracy:
                           for p in self.poses]}
 
 
-def accuracy(label: str, commanded: Array, attained: dict[int, Array]) -> Accuracy:
-    """AP/RP of every pose with attained positions: ``commanded`` (5, 3) P1..P5, ``attained`` pose -> (N, 3)."""
-    return Accuracy(label, tuple(pose_result(p, commanded[p - 1], attained[p]) for p in sorted(attained)
+def accuracy(label: str, commanded: Array, attained: dict[int, Array], sigma: dict[int, Array] | None = None
+             ) -> Accuracy:
+    """AP/RP of every pose with attained positions: ``commanded`` (5, 3) P1..P5, ``attained`` pose -> (N, 3),
+    ``sigma`` pose -> (N,) per-axis standard uncertainties of those positions (optional)."""
+    sigma = sigma or {}
+    return Accuracy(label, tuple(pose_result(p, commanded[p - 1], attained[p], sigma.get(p)) for p in sorted(attained)
                                  if len(attained[p]) >= 2))
