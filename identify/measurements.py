@@ -2,7 +2,9 @@
 
 Rows follow the measurement CSV contract of DESIGN.md: ``sweep`` id, the 1-based ``joint`` moved in
 that sweep (0 for free poses), joint readings ``q`` (rad for R, m for P; NaN where a moved joint's
-reading was not logged) and the TP ``points`` in the tracker frame (metres).
+reading was not logged), the TP ``points`` in the tracker frame (metres) and the id ``tp`` of the tracked
+point each row sees (several reflectors at one pose: one row each). With a ``coupling`` the readings are
+the controller's; :func:`in_dh_joints` turns them into DH joint values.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from identify.joint_errors import Coupling
 from identify.kinematics import check_joint_types
 
 Array = NDArray[np.float64]
@@ -29,7 +32,8 @@ class Measurements:
     """One data set. Shapes: q (m, n), points (m, 3), sweep/joint (m,), sigma (m,) or None.
 
     ``check`` (m,) marks rows held out for validation (never fitted); ``row`` (m,) is the source line
-    number of each sample, for messages.
+    number of each sample, for messages; ``tp`` (m,) the tracked point's id (1 when there is one);
+    ``coupling``: how the readings give DH joint values (None: they are DH joint values).
     """
 
     joint_types: str
@@ -41,6 +45,8 @@ class Measurements:
     check: NDArray[np.bool_] | None = None
     row: NDArray[np.int64] | None = None
     has_role: bool = False
+    tp: NDArray[np.int64] | None = None
+    coupling: Coupling | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_types", check_joint_types(self.joint_types))
@@ -49,6 +55,13 @@ class Measurements:
             object.__setattr__(self, "check", np.zeros(m, dtype=bool))
         if self.row is None:
             object.__setattr__(self, "row", np.arange(1, m + 1))
+        if self.tp is None:
+            object.__setattr__(self, "tp", np.ones(m, dtype=np.int64))
+
+    @property
+    def tp_ids(self) -> list[int]:
+        """The tracked points' ids, ascending."""
+        return [int(t) for t in np.unique(self.tp)]
 
     @property
     def n_joints(self) -> int:
@@ -69,6 +82,7 @@ class Measurements:
             sigma=sigma,
             check=self.check[mask],
             row=self.row[mask],
+            tp=self.tp[mask],
         )
 
     def sweeps_of(self, joint: int) -> list[int]:
