@@ -10,14 +10,15 @@ test at the current fit, ``s = rᵀ G⊥ (G⊥ᵀ G⊥)⁻¹ G⊥ᵀ r / σ²`` 
 off the fitted parameters' (chi-square with the candidate's dof when it is absent); the best is refitted
 and kept when its likelihood ratio passes both the information criterion (BIC: ``dof · ln N``) and a
 family-wise 5 % false-selection limit over all candidates (Bonferroni), when its size is physically
-plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error), and, when there are held-out
-rows, when it does not make their error worse. Every decision is recorded.
+plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error). With held-out rows, the
+terms selected are kept only if together they do not make the held-out error grow. Every decision is
+recorded.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -174,7 +175,9 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
     """Forward selection from ``base`` (the fit without terms) over ``pool``. ``refit(terms, start)`` fits
     with ``terms``; ``score(fit, terms, remaining)`` the score statistics of the remaining candidates;
     ``chi_square(fit)`` its sum of squared weighted residuals over the noise variance; ``heldout(fit,
-    terms)`` the held-out sum of squares. Returns the terms kept, their fit and every decision."""
+    terms)`` the held-out sum of squares: the terms are kept only if they do not make it grow (one test of
+    the final set; step by step, the other terms still missing would blur it). Returns the terms kept,
+    their fit and every decision."""
     chosen, current = empty, base
     remaining = list(pool)
     decisions: list[Decision] = []
@@ -192,22 +195,23 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
         trial_terms = chosen.with_candidate(best)
         trial = refit(trial_terms, current)
         ratio = chi_square(current) - chi_square(trial)
-        held = None
-        if heldout is not None:
-            before, after = heldout(current, chosen), heldout(trial, trial_terms)
-            held = after / before if before > 0 else 1.0
         remaining.remove(best)
         if ratio <= limit:
-            decisions.append(Decision(best, best_score, ratio, limit, held, False, "likelihood ratio below the limit"))
+            decisions.append(Decision(best, best_score, ratio, limit, None, False, "likelihood ratio below the limit"))
             continue
         size = float(np.max(np.abs(trial.terms.coefs[-best.dof:])))
         if size > PLAUSIBLE[best.family]:
-            decisions.append(Decision(best, best_score, ratio, limit, held, False,
+            decisions.append(Decision(best, best_score, ratio, limit, None, False,
                                       f"implausible size {size:.3g} (> {PLAUSIBLE[best.family]:g}): another error"))
             continue
-        if held is not None and held > 1.0:
-            decisions.append(Decision(best, best_score, ratio, limit, held, False, "held-out error grew"))
-            continue
-        decisions.append(Decision(best, best_score, ratio, limit, held, True, "selected"))
+        decisions.append(Decision(best, best_score, ratio, limit, None, True, "selected"))
         chosen, current = trial_terms, trial
+    if heldout is not None and chosen.candidates:
+        before, after = heldout(base, empty), heldout(current, chosen)
+        held = after / before if before > 0 else 1.0
+        kept = held <= 1.0
+        reason = "selected" if kept else f"held-out error grew ({held:.3g}x the sum of squares without the terms)"
+        decisions = [replace(d, heldout=held, selected=kept, reason=reason) if d.selected else d for d in decisions]
+        if not kept:
+            return empty, base, decisions
     return chosen, current, decisions

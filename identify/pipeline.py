@@ -406,9 +406,10 @@ def _adequacy(best: LinesFit, data: FitData, unit: float, declared: float | None
 
 
 def _tools(model: DHModel, lines: AxisLines) -> Array:
-    """Every tracked point (k, 3) in the last DH frame of ``model``, from its position at home."""
+    """Every tracked point (k, 3) in the last DH frame of ``model``: the first is ``model.tool``, the others
+    keep their offsets from it at home (the DH table may be refitted under a convention)."""
     flange = frames_from_joints(model, lines.home[None, :])[0, -1]
-    return (lines.tps - flange[:3, 3]) @ flange[:3, :3]
+    return model.tool + (lines.tps - lines.tp_home) @ flange[:3, :3]
 
 
 def _sweep_fit(sweep: int, joint: int, ref: Refinement, rows: NDArray[np.bool_]) -> SweepFit:
