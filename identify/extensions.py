@@ -10,7 +10,9 @@ test at the current fit, ``s = rᵀ G⊥ (G⊥ᵀ G⊥)⁻¹ G⊥ᵀ r / σ²`` 
 off the fitted parameters' (chi-square with the candidate's dof when it is absent); the best is refitted
 and kept when its likelihood ratio passes both the information criterion (BIC: ``dof · ln N``) and a
 family-wise 5 % false-selection limit over all candidates (Bonferroni), when its size is physically
-plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error). With held-out rows, the
+plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error). A kind of error found on one
+joint is then fitted on every joint it can be seen on (it acts on all of them; one below the limit would
+otherwise cost accuracy far from its sweep, unreported). With held-out rows, the
 terms selected are kept only if together they do not make the held-out error grow. Every decision is
 recorded.
 """
@@ -183,6 +185,7 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
     decisions: list[Decision] = []
     while remaining:
         scores = score(current, chosen, remaining)
+        score_of = dict(zip(remaining, scores, strict=True))
         order = [k for k in np.argsort([-s if np.isfinite(s) else np.inf for s in scores])]
         best = remaining[order[0]]
         best_score = scores[order[0]]
@@ -206,6 +209,21 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
             continue
         decisions.append(Decision(best, best_score, ratio, limit, None, True, "selected"))
         chosen, current = trial_terms, trial
+        # an error of this kind acts on every joint: the others it can be seen on join it (a joint whose term
+        # stayed below the limit is still in error, and predictions far from its sweep would pay for it)
+        members = [c for c in remaining if c.family == best.family and np.isfinite(score_of[c])]
+        if members:
+            grown = chosen
+            for c in members:
+                grown = grown.with_candidate(c)
+            trial = refit(grown, current)
+            sizes = np.abs(trial.terms.coefs[len(chosen.joints):])
+            if np.all(sizes <= PLAUSIBLE[best.family]):
+                for c in members:
+                    remaining.remove(c)
+                    why = f"selected with its family ({best.family} found on joint {best.joint + 1})"
+                    decisions.append(Decision(c, score_of[c], None, limit, None, True, why))
+                chosen, current = grown, trial
     if heldout is not None and chosen.candidates:
         before, after = heldout(base, empty), heldout(current, chosen)
         held = after / before if before > 0 else 1.0
