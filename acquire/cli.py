@@ -283,7 +283,7 @@ def _cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:
 
 def _identify_session(session: Session, session_path: Path, robot: RobotModel) -> dict[str, Any]:
     meas = session.to_measurements()
-    ident = identify(meas, robot.nominal)
+    ident = identify(meas, robot.nominal, links=robot.links)
     print(format_report(ident, robot.nominal, robot.name))
     calibration, why = factory_calibration(session.header)  # the controller's own, for comparison
     reference, note = factory_reference(calibration, why, robot.joint_types)

@@ -21,12 +21,13 @@ import numpy as np
 import yaml
 
 from config.geometry import RobotGeometry, geometry_from_dict
+from identify.joint_errors import Coupling, LinkMasses
 from identify.kinematics import Array, DHModel, check_joint_types
 
 SCHEMA_VERSION = 1
 KEYS = ("schema", "name", "vendor", "description", "source", "joints", "dh", "limits", "home", "max_speed",
-        "default_speed", "default_acceleration", "collision")
-OPTIONAL_KEYS = ("collision",)  # collision geometry: every bundled model has it (config/geometry.py)
+        "default_speed", "default_acceleration", "collision", "coupling", "dynamics")
+OPTIONAL_KEYS = ("collision", "coupling", "dynamics")  # every bundled model has collision geometry
 TEXT_KEYS = ("name", "vendor", "description", "source")
 DH_KEYS = ("theta", "d", "a", "alpha")
 ROBOTS_DIR = Path(__file__).resolve().parent / "robots"
@@ -59,6 +60,9 @@ class RobotModel:
     Arrays (read-only): ``limits`` (n, 2) and ``home`` (n,) in rad / m; ``max_speed``, ``default_speed``
     (n,) in rad/s / m/s; ``default_acceleration`` (n,) in rad/s² / m/s². ``geometry``: the collision
     capsules (:mod:`config.geometry`), None when the file has none (then no plan can be checked for collisions).
+    ``coupling``: how the controller's readings give the DH joint values (None: they are the DH values);
+    ``links``: link masses and centres of mass (None when the file has no ``dynamics``), for compliance.
+    Limits, home and speeds are in DH joint values.
     """
 
     name: str
@@ -74,6 +78,8 @@ class RobotModel:
     default_acceleration: Array
     path: Path
     geometry: RobotGeometry | None = None
+    coupling: Coupling | None = None
+    links: LinkMasses | None = None
 
     @property
     def n_joints(self) -> int:
@@ -254,5 +260,44 @@ def _model_from_dict(path: Path, data: Any) -> RobotModel:
         array.setflags(write=False)
     geometry = geometry_from_dict(path, data["collision"], n) if "collision" in data else None
     name, vendor, description, source = (data[key].strip() for key in TEXT_KEYS)
+    coupling = _coupling(path, data["coupling"], n) if "coupling" in data else None
+    links = _dynamics(path, data["dynamics"], n) if "dynamics" in data else None
     return RobotModel(name, vendor, description, source, types, nominal, limits, home, max_speed,
-                      default_speed, default_acc, path, geometry)
+                      default_speed, default_acc, path, geometry, coupling, links)
+
+
+def _matrix(path: Path, key: str, value: Any, n: int, unit: str) -> Array:
+    rows = _per_joint(path, key, value, n, f"rows of {n} numbers")
+    return np.array([_numbers(path, f"{key}[{i}]", row, n, unit) for i, row in enumerate(rows)])
+
+
+def _coupling(path: Path, data: Any, n: int) -> Coupling:
+    """``coupling: {matrix: [[...] x n], offset: [...], source: text}``: q_dh = matrix · readings + offset."""
+    if not isinstance(data, dict) or "matrix" not in data or set(data) - {"matrix", "offset", "source"}:
+        raise ConfigError(path, "coupling", "a mapping {matrix: n x n rows, offset: n numbers (optional), "
+                          "source: text (optional)}", _got(data))
+    matrix = _matrix(path, "coupling.matrix", data["matrix"], n, "coefficient")
+    offset = _numbers(path, "coupling.offset", data["offset"], n, "rad / m") if "offset" in data else np.zeros(n)
+    try:
+        return Coupling(matrix, offset)
+    except ValueError as exc:
+        raise ConfigError(path, "coupling.matrix", "an invertible matrix", str(exc)) from None
+
+
+def _dynamics(path: Path, data: Any, n: int) -> LinkMasses:
+    """``dynamics: {source: text, masses: n kg, centres_of_mass: n x [x, y, z] m in DH frame i}``."""
+    if not isinstance(data, dict) or set(data) != {"source", "masses", "centres_of_mass"}:
+        raise ConfigError(path, "dynamics", "a mapping with exactly source, masses (kg) and centres_of_mass "
+                          "(m, link i in DH frame i)", _got(data))
+    if not isinstance(data["source"], str) or not data["source"].strip():
+        raise ConfigError(path, "dynamics.source", "a non-empty string naming where the values come from",
+                          _got(data["source"]))
+    masses = _numbers(path, "dynamics.masses", data["masses"], n, "kg", positive=True)
+    rows = _per_joint(path, "dynamics.centres_of_mass", data["centres_of_mass"], n, "[x, y, z] points (m)")
+    centres = np.empty((n, 3))
+    for i, row in enumerate(rows):
+        key = f"dynamics.centres_of_mass[{i}]"
+        if not isinstance(row, list) or len(row) != 3:
+            raise ConfigError(path, key, "[x, y, z] in metres", _got(row))
+        centres[i] = [_number(path, key, v) for v in row]
+    return LinkMasses(masses, centres)

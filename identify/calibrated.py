@@ -1,19 +1,19 @@
 """A calibrated robot as compensation, verification and comparison use it: one forward model with its uncertainty.
 
-Every forward prediction of those tools goes through :class:`CalibratedModel` (built from a result document or
-an :class:`~identify.pipeline.Identification`), so non-geometric terms beyond DH (the result's ``extensions``:
-joint-reading corrections ``q_true = q + Δq(q)``) have one place to apply: :meth:`CalibratedModel.true_joints`.
-This version applies none and refuses a result that carries any, rather than ignore them.
+Every forward prediction of those tools goes through :class:`CalibratedModel`, built from a result document or an
+:class:`~identify.pipeline.Identification`. Where the result has one, it predicts with the identification's own
+:class:`~identify.predict.Predictor` (controller readings -> DH joint values through the coupling -> joint errors,
+the result's ``extensions`` -> the axis lines, which are the identified model exactly), so compensation and
+verification see everything the identification found; :meth:`CalibratedModel.true_joints` is that chain's first
+half and :meth:`CalibratedModel.axes` the frames along it (for the inverse kinematics' Jacobian and tool poses).
 
 Frames: the tracker (cell) frame unless a name says ``base`` (DH frame 0 of the model). Units: m, rad.
-Predictions use the DH table where it is the identified model, and the axis lines where the DH table keeps a
-parallel-axis convention that costs measurable accuracy (verdict check ``dh_table`` not passed), as
-:meth:`identify.pipeline.Identification.predict` does.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 
 from identify.geometry import rotation_about_axis
 from identify.kinematics import DHModel, frames_from_joints
-from identify.poe import AxisLines, LineProblem, points_from_lines
+from identify.poe import AxisLines
+from identify.predict import Predictor
 from identify.refine import full_jacobian, parameter_names
 
 Array = NDArray[np.float64]
@@ -37,16 +38,15 @@ class CalibratedModel:
 
     ``model``: DH table, ``base`` (tracker <- frame 0) and default ``tool`` (TP in frame n). ``free`` (9 + 4n,)
     marks the parameters of :func:`identify.refine.parameter_names` that ``covariance`` (m, rad squared) is over
-    (None: a model known exactly, e.g. a nominal one). ``lines`` / ``lines_covariance``: the axis lines that
-    predict instead of the DH table when it is not exact. ``model_error``: m per axis, what the DH model cannot
-    hold; ``noise``: the tracker's, m per axis. ``tools``: TP id -> tool (m, frame n). ``name``: what it is.
+    (None: a model known exactly, e.g. a nominal one). ``predictor``: what predicts where the result has it (None:
+    the DH table alone). ``model_error``: m per axis, what the model cannot hold; ``noise``: the tracker's, m per
+    axis. ``tools``: TP id -> tool (m, frame n). ``name``: what it is.
     """
 
     model: DHModel
     free: NDArray[np.bool_] | None = None
     covariance: Array | None = None
-    lines: AxisLines | None = None
-    lines_covariance: Array | None = None
+    predictor: Predictor | None = None
     model_error: float = 0.0
     noise: float = 0.0
     tools: dict[int, Array] | None = None
@@ -61,64 +61,54 @@ class CalibratedModel:
 
         if not isinstance(doc, dict):
             raise ResultError("not a result document (expected a YAML mapping with joints, base, tool)")
-        extensions = doc.get("extensions")
-        if extensions:
-            names = ", ".join(map(str, extensions)) if isinstance(extensions, dict | list) else str(extensions)
-            raise ResultError(f"the result carries non-geometric extensions ({names}) that this version does not "
-                              "apply yet (identify/calibrated.py: CalibratedModel.true_joints)")
         try:
             model = model_from_dict(doc)
         except ValueError as exc:
             raise ResultError(str(exc)) from None
         cov = doc.get("covariance")
-        if not isinstance(cov, dict) or "matrix" not in cov:
-            raise ResultError("the result has no parameter covariance ('covariance:'; written by dh-calib before "
-                              "compensation existed): identify the data again")
+        if not isinstance(cov, dict) or "matrix" not in cov or cov.get("predictor") is None:
+            raise ResultError("the result has no parameter covariance ('covariance:' with its predictor; written by "
+                              "dh-calib before compensation existed): identify the data again")
         names = parameter_names(model.n_joints)
         try:
             free = np.isin(names, cov["parameters"])
             matrix = np.array(cov["matrix"], dtype=float).reshape(int(free.sum()), int(free.sum()))
-            lines = None
-            if cov.get("lines") is not None:
-                al = doc["axis_lines"]
-                lines = AxisLines(model.joint_types, np.array(al["points"], dtype=float),
-                                  np.array(al["directions"], dtype=float), np.array(al["home"], dtype=float),
-                                  np.array(al["tp_home"], dtype=float))
-            lines_cov = None if lines is None else np.array(cov["lines"], dtype=float).reshape(
-                lines.n_parameters, lines.n_parameters)
-            noise = doc.get("noise") or {}
             tools = {int(k): np.array(v, dtype=float).reshape(3) for k, v in (doc.get("tools") or {}).items()}
+            predictor = predictor_from_document(doc, model, sorted(tools) or [1])
+            noise = doc.get("noise") or {}
         except (KeyError, TypeError, ValueError) as exc:
-            raise ResultError(f"malformed covariance or axis lines in the result ({exc})") from None
+            raise ResultError(f"malformed covariance, axis lines or extensions in the result ({exc})") from None
         if len(cov["parameters"]) != free.sum() or not np.all(np.isfinite(matrix)):
             raise ResultError("the result's covariance names unknown parameters or holds non-numbers")
-        return cls(model, free, matrix, lines, lines_cov, float(noise.get("model_error_per_axis") or 0.0),
+        return cls(model, free, matrix, predictor, float(noise.get("model_error_per_axis") or 0.0),
                    float(noise.get("tracker_per_axis") or 0.0), tools or None, name)
 
     @classmethod
     def from_identification(cls, ident: Any, name: str = "identified") -> CalibratedModel:
         """The model of an :class:`~identify.pipeline.Identification` (what its result document would give)."""
-        exact = ident.exact_dh
-        return cls(ident.model, ident.refinement.free.copy(), ident.refinement.covariance,
-                   None if exact else ident.lines, None if exact else ident.lines_covariance,
-                   float(ident.adequacy.model_error), float(ident.adequacy.noise), None, name)
+        tools = {int(i): np.asarray(t, dtype=float) for i, t in zip(ident.tp_ids, ident.tools, strict=True)}
+        return cls(ident.model, ident.refinement.free.copy(), ident.refinement.covariance, ident.predictor,
+                   float(ident.adequacy.model_error), float(ident.adequacy.noise),
+                   tools if len(tools) > 1 else None, name)
 
     @classmethod
     def exact(cls, model: DHModel, name: str = "nominal") -> CalibratedModel:
-        """A model taken as exact (no covariance), e.g. the nominal one a controller uses."""
+        """A model taken as exact (no covariance, no predictor), e.g. the nominal one a controller uses."""
         return cls(model, name=name)
 
     def with_base(self, base: Array) -> CalibratedModel:
         """The same robot seen in another frame: ``base`` (4x4) replaces tracker <- frame 0 (axis lines moved
         along). Covariances are kept (the base's own uncertainty then no longer means anything)."""
         base = np.asarray(base, dtype=float)
-        lines = self.lines
-        if lines is not None:
+        predictor = self.predictor
+        if predictor is not None:
             move = base @ np.linalg.inv(self.model.base)
             rot, shift = move[:3, :3], move[:3, 3]
-            lines = AxisLines(lines.joint_types, lines.points @ rot.T + shift, lines.directions @ rot.T, lines.home,
-                              rot @ lines.tp_home + shift)
-        return replace(self, model=replace(self.model, base=base), lines=lines)
+            lines = predictor.lines
+            moved = AxisLines(lines.joint_types, lines.points @ rot.T + shift, lines.directions @ rot.T, lines.home,
+                              rot @ lines.tp_home + shift, lines.extra_tps @ rot.T + shift)
+            predictor = replace(predictor, lines=moved)
+        return replace(self, model=replace(self.model, base=base), predictor=predictor)
 
     # --- forward model --------------------------------------------------------------------------------------
 
@@ -140,18 +130,38 @@ class CalibratedModel:
         return self.tools[tp]
 
     def true_joints(self, q: Array) -> Array:
-        """Joint values the geometry sees for readings ``q`` (k, n): the one place where joint-reading
-        corrections (``extensions``) apply. None are supported yet, so ``q`` itself (as float (k, n))."""
+        """The DH joint values the geometry sees (k, n) for controller readings ``q`` (k, n): through the coupling
+        and the joint errors of the result where it has them."""
         q = np.atleast_2d(np.asarray(q, dtype=float))
         if q.shape[1] != self.n_joints:
             raise ValueError(f"joint values must have {self.n_joints} columns; got shape {q.shape}")
-        return q
+        return q if self.predictor is None else self.predictor.joints(q)
+
+    def dh_values(self, q: Array) -> Array:
+        """DH joint values (k, n) of readings ``q`` (k, n) through the coupling alone (what a nominal DH model
+        takes); the readings themselves without a coupling."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        coupling = None if self.predictor is None else self.predictor.coupling
+        return q if coupling is None else coupling.dh_from_readings(q)
+
+    def readings(self, q_dh: Array) -> Array:
+        """Readings (k, n) that give DH joint values ``q_dh`` (k, n) through the coupling (inverse of
+        :meth:`dh_values`)."""
+        q_dh = np.atleast_2d(np.asarray(q_dh, dtype=float))
+        coupling = None if self.predictor is None else self.predictor.coupling
+        return q_dh if coupling is None else coupling.readings_from_dh(q_dh)
+
+    def reading_jacobian(self) -> Array:
+        """d(DH joint values)/d(readings) (n, n): the coupling matrix (the joint errors' own slope, of order 1e-4,
+        is left out: the inverse kinematics converges all the same)."""
+        coupling = None if self.predictor is None else self.predictor.coupling
+        return np.eye(self.n_joints) if coupling is None else coupling.matrix
 
     def axes(self, q: Array) -> tuple[Array, Array, Array]:
         """At readings ``q`` (k, n): joint axis directions (k, n, 3), points on them (k, n, 3) and the flange
         frame (k, 4, 4), tracker frame. The TP is ``flange · [tool, 1]``."""
         qt = self.true_joints(q)
-        if self.lines is None:
+        if self.predictor is None:
             frames = frames_from_joints(self.model, qt)
             return frames[:, :-1, :3, 2], frames[:, :-1, :3, 3], frames[:, -1]
         return self._line_axes(qt)
@@ -160,18 +170,20 @@ class CalibratedModel:
         """Flange frames (k, 4, 4): tracker <- frame n at readings ``q`` (k, n)."""
         return self.axes(q)[2]
 
-    def points(self, q: Array, tool: Array | None = None) -> Array:
-        """Predicted TP (k, 3), tracker frame, at readings ``q`` (k, n); ``tool`` (3,) replaces the TP."""
-        if self.lines is not None and tool is None:
-            return points_from_lines(self.lines, self.true_joints(q))
+    def points(self, q: Array, tool: Array | None = None, tp: int | None = None) -> Array:
+        """Predicted TP (k, 3), tracker frame, at readings ``q`` (k, n): tracked point ``tp`` (default the first),
+        or the point ``tool`` (3,) of the flange frame."""
+        if self.predictor is not None and tool is None:
+            return self.predictor.points(np.atleast_2d(np.asarray(q, dtype=float)), tp)
         flange = self.flanges(q)
-        t = self.model.tool if tool is None else np.asarray(tool, dtype=float)
+        t = self.tool(tp) if tool is None else np.asarray(tool, dtype=float)
         return flange[:, :3, :3] @ t + flange[:, :3, 3]
 
     def _line_axes(self, q: Array) -> tuple[Array, Array, Array]:
-        """:meth:`axes` from the axis lines: each joint's screw motion at home, composed from the base."""
-        lines = self.lines
-        assert lines is not None
+        """:meth:`axes` from the axis lines at DH joint values ``q``: each joint's screw motion at home, composed
+        from the base; the flange is the DH table's at home, moved onto the lines' first tracked point."""
+        assert self.predictor is not None
+        lines = self.predictor.lines
         k, n = len(q), self.n_joints
         directions, points = np.empty((k, n, 3)), np.empty((k, n, 3))
         rot, shift = np.broadcast_to(np.eye(3), (k, 3, 3)).copy(), np.zeros((k, 3))
@@ -197,34 +209,28 @@ class CalibratedModel:
 
     # --- uncertainty ----------------------------------------------------------------------------------------
 
-    def point_covariances(self, q: Array, tool: Array | None = None, frame: str = "tracker") -> Array:
-        """Covariance (k, 3, 3) of the predicted TP (or of ``tool``, taken as exact) at ``q``, m², from the
-        parameters' uncertainty; zeros for an exact model. ``frame="base"``: the point in frame 0, from the DH
-        parameters alone (the base's uncertainty does not move a point in the robot's own frame)."""
+    def point_covariances(self, q: Array, tool: Array | None = None, frame: str = "tracker",
+                          tp: int | None = None) -> Array:
+        """Covariance (k, 3, 3) of the predicted TP ``tp`` (or of ``tool``, taken as exact) at readings ``q``,
+        m², from the parameters' uncertainty; zeros for an exact model. ``frame="base"``: the point in frame 0,
+        from the DH parameters alone (the base's uncertainty does not move a point in the robot's own frame)."""
         k = len(np.atleast_2d(q))
         if self.covariance is None or self.free is None:
             return np.zeros((k, 3, 3))
-        if self.lines is not None and self.lines_covariance is not None and tool is None and frame == "tracker":
-            qt = self.true_joints(q)
-            problem = LineProblem(self.lines, qt, np.zeros((k, 3)), np.ones(k))
-            g = problem.jacobian_blocks(np.zeros(self.lines.n_parameters), q=qt)
-            return g @ self.lines_covariance @ np.swapaxes(g, 1, 2)
-        model = self.model if tool is None else replace(self.model, tool=np.asarray(tool, dtype=float))
+        if self.predictor is not None and tool is None and frame == "tracker":
+            return self.predictor.covariances(np.atleast_2d(np.asarray(q, dtype=float)), tp)
+        t = self.tool(tp) if tool is None else np.asarray(tool, dtype=float)
+        model = replace(self.model, tool=t)
         if frame == "base":
             model = replace(model, base=np.eye(4))
         _, jac = full_jacobian(model, self.true_joints(q))
-        cov = self.covariance
-        if tool is not None or frame == "base":  # drop the tool (exact) and, in frame 0, the base
-            keep = np.ones(len(self.free), dtype=bool)
-            keep[6:9] = tool is None
-            if frame == "base":
-                keep[:6] = False
-            sel = keep[self.free]
-            cov = cov[np.ix_(sel, sel)]
-            g = jac[:, :, self.free & keep]
-        else:
-            g = jac[:, :, self.free]
-        return g @ cov @ np.swapaxes(g, 1, 2)
+        keep = np.ones(len(self.free), dtype=bool)
+        keep[6:9] = tool is None  # a given tool is exact
+        if frame == "base":
+            keep[:6] = False
+        sel = keep[self.free]
+        g = jac[:, :, self.free & keep]
+        return g @ self.covariance[np.ix_(sel, sel)] @ np.swapaxes(g, 1, 2)
 
     def expected_errors(self, q: Array, tool: Array | None = None, frame: str = "tracker") -> Array:
         """Expected 3D error (k,) of the prediction at each of ``q``, m: the RMS the parameters' uncertainty and
@@ -235,6 +241,50 @@ class CalibratedModel:
     def expected_rms(self, q: Array) -> float:
         """RMS over ``q`` of :meth:`expected_errors`, m."""
         return float(np.sqrt(np.mean(self.expected_errors(q) ** 2)))
+
+
+def predictor_from_document(doc: dict[str, Any], model: DHModel, tp_ids: list[int]) -> Predictor:
+    """The identification's predictor rebuilt from its result document: axis lines, coupling, joint-error terms
+    (``extensions``; compliance needs the nominal robot's link masses) and ``covariance.predictor``."""
+    from identify.extensions import Candidate, TermSet
+    from identify.joint_errors import Coupling, gravity_torques
+
+    al = doc["axis_lines"]
+    tps = np.array(al.get("tps") or [al["tp_home"]], dtype=float).reshape(-1, 3)
+    lines = AxisLines(model.joint_types, np.array(al["points"], dtype=float), np.array(al["directions"], dtype=float),
+                      np.array(al["home"], dtype=float), np.array(al["tp_home"], dtype=float), tps[1:])
+    coupling = None
+    if doc.get("coupling"):
+        coupling = Coupling(np.array(doc["coupling"]["matrix"], dtype=float),
+                            np.array(doc["coupling"].get("offset") or np.zeros(model.n_joints), dtype=float))
+    ext = doc.get("extensions") or {}
+    terms = ext.get("terms") or []
+    candidates: list[Candidate] = []
+    for term in terms:
+        family, joint = term["name"].rsplit("_", 1)
+        family = "eccentricity" if family.startswith("ecc_") else family
+        candidate = Candidate(family, int(joint) - 1)
+        if candidate not in candidates:
+            candidates.append(candidate)
+    torques = None
+    if any(c.family == "compliance" for c in candidates):
+        from config.robots import ConfigError, load_robot
+
+        name = nominal_name(doc)
+        try:
+            robot = load_robot(name) if name else None
+        except ConfigError:
+            robot = None
+        if robot is None or robot.links is None:
+            raise ResultError(f"the result's compliance terms need the link masses of its robot ({name or 'none'})")
+        torques = partial(gravity_torques, robot.nominal, robot.links)
+    home = np.array(ext.get("home") if ext.get("home") is not None else lines.home, dtype=float)
+    term_set = TermSet(tuple(candidates), home, torques)
+    by_name = {t["name"]: float(t["value"]) for t in terms}
+    coefs = np.array([by_name[n] for n in term_set.names], dtype=float)
+    size = lines.n_parameters + len(coefs)
+    covariance = np.array(doc["covariance"]["predictor"], dtype=float).reshape(size, size)
+    return Predictor(lines, covariance, term_set, coefs, coupling, tuple(tp_ids))
 
 
 def load_result(path: str, name: str | None = None) -> tuple[CalibratedModel, dict[str, Any]]:

@@ -10,15 +10,18 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from config.robots import RobotModel
 from identify import __version__
 from identify.cpa import DEFAULT_PARALLEL_TOL
 from identify.csvio import UNITS, CsvContent, format_measurements, read_measurements
+from identify.joint_errors import Coupling
 from identify.measurements import InputError, Measurements
 from identify.outputs import check_outputs, write_output
 from identify.pipeline import Identification, identify, split_holdout
@@ -68,6 +71,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
     parser.add_argument("--noise", type=float, metavar="M",
                         help="the tracker's noise, m per axis (1 sigma), to judge the fit by (a sigma column wins)")
+    parser.add_argument("--coupling", metavar="FILE",
+                        help="YAML with the readings' coupling, DH values = matrix . readings + offset: a row-major "
+                        "n x n list, or {matrix: ..., offset: [...]} (wins over '# coupling:' and the robot model's)")
+    parser.add_argument("--extensions", choices=("auto", "none"), default="auto",
+                        help="joint errors beyond DH (reading scale, once-per-turn, compliance with --robot "
+                        "dynamics): selected where the data support them (auto, default) or never (none)")
     parser.add_argument("--force", action="store_true", help="replace output files that already exist")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return parser
@@ -101,7 +110,7 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
     """Every export asked for, each written atomically."""
     name = robot.name if robot else "identified_robot"
     limits = robot.limits if robot else None
-    comment = f"identified from {args.input} by dh-calib {__version__}"
+    comment = "\n".join([f"identified from {args.input} by dh-calib {__version__}", *export_notes(ident)])
     if args.urdf:
         from identify.export_urdf import urdf_from_model
 
@@ -118,7 +127,8 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
     if args.rtb:
         from identify.export_rtb import rtb_snippet
 
-        _write_atomic(Path(args.rtb), rtb_snippet(ident.model, name, limits))
+        head = "".join(f"# {line}\n" for line in comment.splitlines())
+        _write_atomic(Path(args.rtb), head + rtb_snippet(ident.model, name, limits))
     if args.json_out:
         from identify.export_rtb import result_json
 
@@ -150,6 +160,25 @@ def _verification(path: str | None) -> dict[str, Any] | None:
     if not isinstance(doc, dict) or not {"runs", "verdict"} <= set(doc):
         raise InputError(f"--verification {path}: not the .verify.yaml of an acquire verify run")
     return doc
+
+
+def export_notes(ident: Identification) -> list[str]:
+    """What a DH-only export (URDF, UR calibration, Robotics Toolbox) leaves out, one line each."""
+    notes = []
+    if ident.extensions:
+        names = ", ".join(name for name, _, _ in ident.extensions)
+        notes.append(f"NOT carried: joint errors beyond DH ({names}); this format holds a DH chain only. They are in "
+                     "the result YAML's 'extensions' section; without them predictions differ from the identified "
+                     "model")
+    else:
+        notes.append("joint errors beyond DH: none selected; this file is the whole identified model")
+    if ident.coupling is not None and not ident.coupling.is_identity:
+        notes.append("joint values here are DH values; the controller's readings give them by q_dh = C . readings"
+                     f" + offset, C = {ident.coupling.matrix.tolist()}, offset = {ident.coupling.offset.tolist()}")
+    if len(ident.tp_ids) > 1:
+        notes.append(f"tool: tracked point {ident.tp_ids[0]} (of {list(ident.tp_ids)}; the others are in the result "
+                     "YAML's 'tools')")
+    return notes
 
 
 def _is_session(path: Path) -> bool:
@@ -225,8 +254,9 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
                          f"{meas.joint_types}")
     _check_exports(args, meas.joint_types)
+    meas = _with_coupling(meas, args.coupling, robot, content.notes)
     ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset,
-                     noise=args.noise)
+                     noise=args.noise, links=robot.links if robot else None, extensions=args.extensions == "auto")
     ident.warnings[:0] = content.notes
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
     if args.out:
@@ -245,6 +275,31 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
 
 SUBCOMMANDS = ("compensate", "compare")  # identify/compensate_cli.py, identify/compare_cli.py
+
+
+def _with_coupling(meas: Measurements, path: str | None, robot: RobotModel | None, notes: list[str]) -> Measurements:
+    """``meas`` with its readings' coupling: ``--coupling FILE``, else the file's, else the robot model's."""
+    n = meas.n_joints
+    if path is not None:
+        try:
+            doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            raise InputError(f"--coupling {path}: cannot be read as YAML ({exc.__class__.__name__})") from None
+        matrix, offset = (doc.get("matrix"), doc.get("offset")) if isinstance(doc, dict) else (doc, None)
+        try:
+            coupling = Coupling(np.array(matrix, dtype=float), None if offset is None else np.array(offset, float))
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"--coupling {path}: {exc}") from None
+        if coupling.n_joints != n:
+            raise InputError(f"--coupling {path}: a {coupling.n_joints}x{coupling.n_joints} matrix for {n} joints")
+        return replace(meas, coupling=coupling)
+    if meas.coupling is None and robot is not None and robot.coupling is not None:
+        notes.append(f"readings coupled as the {robot.name} model declares (q_dh = C . readings)")
+        return replace(meas, coupling=robot.coupling)
+    if meas.coupling is not None and robot is not None and robot.coupling is not None and not (
+            np.allclose(meas.coupling.matrix, robot.coupling.matrix)):
+        notes.append(f"the file's '# coupling:' differs from the {robot.name} model's; the file's is used")
+    return meas
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -76,20 +76,22 @@ def rotvecs(poses: Array) -> Array:
 
 def _evaluate(model: CalibratedModel, q: Array, points: Array, rotations: Array | None, tool: Array,
               tool_rotation: Array) -> tuple[Array, Array, Array, Array]:
-    """Weighted residuals (k, m), Jacobian (k, m, n), position errors (k,) m, rotation errors (k,) rad."""
+    """Weighted residuals (k, m), Jacobian (k, m, n) with respect to the readings, position errors (k,) m,
+    rotation errors (k,) rad."""
     z, o, flange = model.axes(q)
+    coupling = model.reading_jacobian()
     p = flange[:, :3, :3] @ tool + flange[:, :3, 3]
     rev = np.array([t == "R" for t in model.model.joint_types])
     lever = p[:, None, :] - o
     jp = np.where(rev[None, :, None], np.cross(z, lever), z)  # (k, n, 3)
     r_pos = p - points
     if rotations is None:
-        return r_pos, np.swapaxes(jp, 1, 2), np.linalg.norm(r_pos, axis=1), np.full(len(q), np.nan)
+        return r_pos, np.swapaxes(jp, 1, 2) @ coupling, np.linalg.norm(r_pos, axis=1), np.full(len(q), np.nan)
     jr = np.where(rev[None, :, None], z, 0.0)
     rot = flange[:, :3, :3] @ tool_rotation
     r_rot = Rotation.from_matrix(rot @ np.swapaxes(rotations, 1, 2)).as_rotvec()  # world-frame orientation error
     res = np.hstack([r_pos, ROTATION_LENGTH * r_rot])
-    jac = np.concatenate([np.swapaxes(jp, 1, 2), ROTATION_LENGTH * np.swapaxes(jr, 1, 2)], axis=1)
+    jac = np.concatenate([np.swapaxes(jp, 1, 2), ROTATION_LENGTH * np.swapaxes(jr, 1, 2)], axis=1) @ coupling
     return res, jac, np.linalg.norm(r_pos, axis=1), np.linalg.norm(r_rot, axis=1)
 
 

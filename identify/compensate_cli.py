@@ -204,7 +204,9 @@ def _output_csv(args: argparse.Namespace, result: Compensation, ids: list[str], 
     buf = io.StringIO()
     buf.write(f"# compensated by dh-calib {__version__} from {args.result}; targets {args.targets}"
               + (" (joints planned with the nominal model)" if args.joints_from else f" ({args.frame} frame)") + "\n")
-    buf.write(f"# identified model predicts with its {'DH table' if identified.lines is None else 'axis lines'}; "
+    how = "its DH table" if identified.predictor is None else "the identification's predictor (axis lines, " \
+        "coupling, joint errors)"
+    buf.write(f"# identified model predicts with {how}; "
               f"controller model: {robot.name if robot else 'none'}; tool {', '.join(f'{v:.6g}' for v in tcp)} m, "
               f"rotation {', '.join(f'{v:.6g}' for v in rotvecs(tcp_rot[None])[0])} rad (flange frame)\n")
     buf.write("# units: m, rad. status: ok | singular | limit | unreachable; position_error / rotation_error: what "

@@ -1,8 +1,9 @@
 """Measurement CSV of DESIGN.md: read (with one-line errors for bad input) and write.
 
 Format: UTF-8, comma separated, one header row; ``#`` lines are comments, ``# joints: RRRRRR`` and
-``# units: m, rad`` (or ``mm``) carry metadata. Columns ``sweep,joint,q1..qN,x,y,z`` plus optional
-``sigma`` and ``role`` (fit/check); any other column (``t``, ``step``...) is ignored.
+``# units: m, rad`` (or ``mm``) and ``# coupling: [[...]]`` (row-major n x n, DH values = C · readings) carry
+metadata. Columns ``sweep,joint,q1..qN,x,y,z`` plus optional ``sigma``, ``role`` (fit/check) and ``tp``
+(tracked point id); any other column (``t``, ``step``...) is ignored.
 """
 
 from __future__ import annotations
@@ -16,7 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
+from identify.joint_errors import Coupling
 from identify.kinematics import check_joint_types
 from identify.measurements import InputError, Measurements, looks_like_millimetres
 
@@ -89,6 +92,7 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
     joint = np.empty(m, dtype=np.int64)
     sigma = np.empty(m) if "sigma" in columns else None
     check = np.zeros(m, dtype=bool)
+    tp = np.ones(m, dtype=np.int64)
     line_numbers = np.array([number for number, _ in numbered[1:]], dtype=np.int64)
     for k, fields in enumerate(rows):
         line = int(line_numbers[k])
@@ -107,12 +111,34 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
             if role not in ("fit", "check"):
                 raise InputError(f"line {line}: role must be 'fit' or 'check', got {role!r}")
             check[k] = role == "check"
+        if "tp" in columns:
+            tp[k] = _integer(fields, columns["tp"], "tp", line)
+            if tp[k] < 1:
+                raise InputError(f"line {line}: tp must be a positive integer (the tracked point's id), got {tp[k]}")
     if scale == 1.0 and looks_like_millimetres(points):
         peak = float(np.max(np.abs(points)))
         raise InputError(f"x, y, z reach {peak:g}: these look like millimetres; pass --units mm "
                          "(the CSV contract uses metres)")
-    meas = Measurements(types, q, points, sweep, joint, sigma, check, line_numbers, has_role="role" in columns)
+    coupling = parse_coupling(metadata["coupling"], n) if "coupling" in metadata else None
+    meas = Measurements(types, q, points, sweep, joint, sigma, check, line_numbers, has_role="role" in columns,
+                        tp=tp, coupling=coupling)
     return CsvContent(meas, metadata, notes)
+
+
+def parse_coupling(text: str, n: int) -> Coupling:
+    """The ``# coupling:`` metadata: a row-major n x n matrix ``[[...], ...]`` (DH values = C · readings)."""
+    try:
+        value = yaml.safe_load(text)
+        matrix = np.array(value, dtype=float)
+    except (yaml.YAMLError, TypeError, ValueError):
+        raise InputError(f"'# coupling:' must be a row-major {n}x{n} matrix like [[1, 0], [0, 1]], "
+                         f"got {text!r}") from None
+    if matrix.shape != (n, n):
+        raise InputError(f"'# coupling:' must be a {n}x{n} matrix for {n} joints, got shape {matrix.shape}")
+    try:
+        return Coupling(matrix, np.zeros(n))
+    except ValueError as exc:
+        raise InputError(f"'# coupling:' {exc}") from None
 
 
 def _joint_types(joints: str | None, metadata: dict[str, str], notes: list[str]) -> str:
@@ -157,7 +183,7 @@ def _columns(header: list[str], types: str, line: int, notes: list[str]) -> dict
     if missing:
         raise InputError(f"line {line}: missing column(s) {', '.join(missing)}; expected "
                          f"sweep,joint,q1..q{n},x,y,z")
-    ignored = [name for name in header if name not in (*required, "sigma", "role")]
+    ignored = [name for name in header if name not in (*required, "sigma", "role", "tp")]
     if ignored:
         notes.append(f"ignored column(s): {', '.join(ignored)}")
     return seen
@@ -190,14 +216,22 @@ def format_measurements(meas: Measurements, metadata: dict[str, str] | None = No
     """The CSV text of ``meas`` (metres, radians), with ``# joints:``/``# units:`` and ``metadata``."""
     out = io.StringIO()
     out.write(f"# joints: {meas.joint_types}\n# units: m, rad\n")
+    if meas.coupling is not None and not meas.coupling.is_identity:
+        if np.any(meas.coupling.offset):
+            raise ValueError("the CSV coupling has no offset: add it to the readings before writing")
+        out.write(f"# coupling: {meas.coupling.matrix.tolist()}\n")
     for key, value in (metadata or {}).items():
-        out.write(f"# {key}: {value}\n")
+        if key != "coupling":
+            out.write(f"# {key}: {value}\n")
     n = meas.n_joints
     header = ["sweep", "joint", *(f"q{j}" for j in range(1, n + 1)), "x", "y", "z"]
     if meas.sigma is not None:
         header.append("sigma")
     if meas.has_role or np.any(meas.check):
         header.append("role")
+    several = bool(np.any(meas.tp != 1))
+    if several:
+        header.append("tp")
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(header)
     for k in range(len(meas)):
@@ -208,5 +242,7 @@ def format_measurements(meas: Measurements, metadata: dict[str, str] | None = No
             row.append(repr(float(meas.sigma[k])))
         if "role" in header:
             row.append("check" if meas.check[k] else "fit")
+        if several:
+            row.append(str(int(meas.tp[k])))
         writer.writerow(row)
     return out.getvalue()

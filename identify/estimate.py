@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from identify.kinematics import DHModel, frames_from_joints
 from identify.outliers import leverages, outlier_free
-from identify.poe import AxisLines, LineProblem, fit_lines, lines_from_model
+from identify.poe import AxisLines, JointTerms, LineProblem, fit_lines, lines_from_model
 from identify.refine import NOISE_FLOOR
 
 Array = NDArray[np.float64]
@@ -29,8 +29,9 @@ ROBUST_PASSES = 2
 
 @dataclass(frozen=True)
 class LinesFit:
-    """A fitted lines model. ``q`` (m, n): readings with the unread values solved; ``inliers`` (m,);
-    ``residuals`` (m, 3) measured minus predicted, metres; ``robust_cost`` compares starts."""
+    """A fitted lines model. ``q`` (m, n): joint values with joint errors applied and the unread values
+    solved; ``inliers`` (m,); ``residuals`` (m, 3) measured minus predicted, metres; ``robust_cost``
+    compares starts; ``terms`` the joint errors fitted with the lines."""
 
     lines: AxisLines
     q: Array
@@ -38,47 +39,73 @@ class LinesFit:
     residuals: Array
     robust_cost: float
     start: str
+    terms: JointTerms
 
 
-def place_nominal(nominal: DHModel, q: Array, points: Array) -> DHModel:
+def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[np.int64] | None = None
+                  ) -> tuple[DHModel, Array]:
     """``nominal`` with the base (tracker <- frame 0) and tool (TP in frame n) that best fit ``points``
     (m, 3) at readings ``q`` (m, n): alternately a point-set fit of the base (Kabsch) and a linear fit of
-    the TP, from the flange."""
-    frames = frames_from_joints(replace(nominal, base=np.eye(4)), q)[:, -1]
+    the TP, from the flange, on the first tracked point's rows; then every tracked point's tool (k, 3)
+    with the base jointly (``tp_index`` (m,), 0-based; default all the first)."""
+    tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index
+    count = int(tp_index.max()) + 1 if len(tp_index) else 1
+    first = tp_index == 0
+    all_frames = frames_from_joints(replace(nominal, base=np.eye(4)), q)[:, -1]
+    frames, points_first = all_frames[first], points[first]
+    all_points = points
     tool = np.zeros(3)
     base = np.eye(4)
     for _ in range(PLACE_ITERATIONS):
         local = np.einsum("kij,j->ki", frames[:, :3, :3], tool) + frames[:, :3, 3]  # TP in frame 0
-        centre_l, centre_p = local.mean(axis=0), points.mean(axis=0)
-        rot, _ = Rotation.align_vectors(points - centre_p, local - centre_l)
+        centre_l, centre_p = local.mean(axis=0), points_first.mean(axis=0)
+        rot, _ = Rotation.align_vectors(points_first - centre_p, local - centre_l)
         base[:3, :3] = rot.as_matrix()
         base[:3, 3] = centre_p - base[:3, :3] @ centre_l
         # TP: points = R_b (R_k t + o_k) + t_b  ->  linear least squares in t
         a = np.einsum("ij,kjl->kil", base[:3, :3], frames[:, :3, :3]).reshape(-1, 3)
-        rhs = (points - (frames[:, :3, 3] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
+        rhs = (points_first - (frames[:, :3, 3] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
         new_tool = np.linalg.lstsq(a, rhs, rcond=None)[0]
         if np.linalg.norm(new_tool - tool) < 1e-12:
             tool = new_tool
             break
         tool = new_tool
 
+    # the other tracked points: linear least squares with the base found
+    tools = np.tile(tool, (count, 1))
+    for p in range(1, count):
+        rows = tp_index == p
+        a = np.einsum("ij,kjl->kil", base[:3, :3], all_frames[rows, :3, :3]).reshape(-1, 3)
+        rhs = (all_points[rows] - (all_frames[rows, :3, 3] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
+        tools[p] = np.linalg.lstsq(a, rhs, rcond=None)[0]
+
     def residuals(x: Array) -> Array:  # the alternation can stall on short arcs: finish jointly
         rot = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
-        local = np.einsum("kij,j->ki", frames[:, :3, :3], x[6:]) + frames[:, :3, 3]
-        return (local @ rot.T + x[3:6] - points).ravel()
+        local = np.einsum("kij,ki->kj", all_frames[:, :3, :3].transpose(0, 2, 1),
+                          x[6:].reshape(-1, 3)[tp_index]) + all_frames[:, :3, 3]
+        return (local @ rot.T + x[3:6] - all_points).ravel()
 
-    x = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tool]), method="lm", xtol=1e-12,
-                      ftol=1e-12).x
+    x = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), method="lm",
+                      xtol=1e-12, ftol=1e-12).x
     base[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
     base[:3, 3] = x[3:6]
-    return replace(nominal, base=base.copy(), tool=x[6:].copy())
+    tools = x[6:].reshape(-1, 3)
+    return replace(nominal, base=base.copy(), tool=tools[0].copy()), tools.copy()
 
 
-def nominal_start(nominal: DHModel, q: Array, points: Array, unknown: NDArray[np.int64], home: Array) -> AxisLines:
+def nominal_start(nominal: DHModel, q: Array, points: Array, unknown: NDArray[np.int64], home: Array,
+                  tp_index: NDArray[np.int64] | None = None) -> AxisLines:
     """Axis lines of the nominal model placed on the rows whose readings are all known."""
     known = unknown < 0
-    placed = place_nominal(nominal, q[known], points[known])
-    return lines_from_model(placed, home)
+    placed, tools = place_nominal(nominal, q[known], points[known], None if tp_index is None else tp_index[known])
+    return with_tools(lines_from_model(placed, home), placed, tools)
+
+
+def with_tools(lines: AxisLines, model: DHModel, tools: Array) -> AxisLines:
+    """``lines`` with every tracked point ``tools`` (k, 3, in frame n of ``model``) at the home readings."""
+    flange = frames_from_joints(model, lines.home[None, :])[0, -1]
+    at_home = tools @ flange[:3, :3].T + flange[:3, 3]
+    return replace(lines, tp_home=at_home[0], extra_tps=at_home[1:])
 
 
 def robust_scale(res: Array, leverage: Array) -> float:
@@ -88,37 +115,62 @@ def robust_scale(res: Array, leverage: Array) -> float:
     return float(np.sqrt(np.median(r2) / 2.365974))
 
 
-def fit(start: AxisLines, q: Array, points: Array, weights: Array, unknown: NDArray[np.int64],
-        group: NDArray[np.int64], joint: NDArray[np.int64], robust: bool, label: str) -> LinesFit:
-    """Least squares from ``start``; if any sample fails the outlier test, a soft-L1 fit, the test again
-    on its residuals, and a final least-squares fit on the samples kept. ``group``: sweep number of each
-    row (>= 1; 0 for free poses) and ``joint`` the joint it moves, for the neighbour test."""
-    lines, q_s, res = fit_lines(start, q, points, weights, unknown)
-    inliers = np.ones(len(q), dtype=bool)
+@dataclass(frozen=True)
+class FitData:
+    """The rows a fit sees: readings ``q`` (m, n), TP ``points`` (m, 3) in the tracker frame (m), ``weights``
+    (m,) = 1/sigma, ``unknown`` (m,) 0-based unread joint or -1, ``tp_index`` (m,) 0-based tracked point,
+    ``group`` (m,) the row's sweep and tracked point (>= 1; 0 for free poses) and ``joint`` (m,) the joint
+    its sweep moves, for the neighbour test."""
+
+    q: Array
+    points: Array
+    weights: Array
+    unknown: NDArray[np.int64]
+    tp_index: NDArray[np.int64]
+    group: NDArray[np.int64]
+    joint: NDArray[np.int64]
+
+    def subset(self, rows: NDArray[np.bool_]) -> FitData:
+        return FitData(self.q[rows], self.points[rows], self.weights[rows], self.unknown[rows], self.tp_index[rows],
+                       self.group[rows], self.joint[rows])
+
+    def problem(self, lines: AxisLines, terms: JointTerms | None = None) -> LineProblem:
+        return LineProblem(lines, self.q, self.points, self.weights, self.unknown, self.tp_index, terms)
+
+    def fit(self, start: AxisLines, terms: JointTerms | None = None, loss: str = "linear", scale: float = 1.0):
+        return fit_lines(start, self.q, self.points, self.weights, self.unknown, loss, scale, self.tp_index, terms)
+
+
+def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointTerms | None = None) -> LinesFit:
+    """Least squares from ``start`` (with the joint errors ``terms``); if any sample fails the outlier
+    test, a soft-L1 fit, the test again on its residuals, and a final least-squares fit on the samples
+    kept."""
+    lines, q_s, res, terms = data.fit(start, terms)
+    inliers = np.ones(len(data.q), dtype=bool)
     if robust:
-        lev = leverages(LineProblem(lines, q, points, weights, unknown).jacobian_blocks(np.zeros(lines.n_parameters)),
-                        unknown)
-        key = along_arc(q_s, joint)
-        inliers = outlier_free(res, lev, group, key, unknown)
+        zero = np.zeros(lines.n_parameters + len(terms))
+        lev = leverages(data.problem(lines, terms).jacobian_blocks(zero), data.unknown)
+        inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown)
         if not np.all(inliers):
             for _ in range(ROBUST_PASSES):  # the scale of a fit pulled by outliers is too wide: shrink it
-                scale = max(robust_scale(res, lev), NOISE_FLOOR * float(np.median(weights)))
-                lines, q_s, res = fit_lines(lines, q, points, weights, unknown, "soft_l1", ROBUST_WIDTH * scale)
-            inliers = outlier_free(res, lev, group, along_arc(q_s, joint), unknown)
+                scale = max(robust_scale(res, lev), NOISE_FLOOR * float(np.median(data.weights)))
+                lines, q_s, res, terms = data.fit(lines, terms, "soft_l1", ROBUST_WIDTH * scale)
+            inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown)
             for _ in range(2):  # least squares on the samples kept; re-admit those it then explains
-                lines, _, _ = fit_lines(lines, q[inliers], points[inliers], weights[inliers], unknown[inliers])
-                problem = LineProblem(lines, q, points, weights, unknown)
+                kept_fit = data.subset(inliers).fit(lines, terms.subset(inliers))
+                lines, terms = kept_fit.lines, replace(terms, coefs=kept_fit.terms.coefs)
+                problem = data.problem(lines, terms)
                 q_s = problem.joints(lines)
-                res = problem.residuals(np.zeros(lines.n_parameters)).reshape(-1, 3)
+                res = problem.residuals(zero).reshape(-1, 3)
                 kept = inliers
-                lev = leverages(problem.jacobian_blocks(np.zeros(lines.n_parameters)), unknown)
-                inliers = outlier_free(res, lev, group, along_arc(q_s, joint), unknown)
+                lev = leverages(problem.jacobian_blocks(zero), data.unknown)
+                inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown)
                 if np.array_equal(inliers, kept):
                     break
     scale = max(robust_scale(res[inliers], np.zeros(int(inliers.sum()))), NOISE_FLOOR)
     r2 = np.sum(res**2, axis=1) / (ROBUST_WIDTH * scale) ** 2
     cost = float(np.sum(2.0 * (np.sqrt(1.0 + r2) - 1.0)))
-    return LinesFit(lines, q_s, inliers, -res / weights[:, None], cost, label)
+    return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms)
 
 
 def along_arc(q: Array, joint: NDArray[np.int64]) -> Array:

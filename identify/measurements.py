@@ -2,16 +2,20 @@
 
 Rows follow the measurement CSV contract of DESIGN.md: ``sweep`` id, the 1-based ``joint`` moved in
 that sweep (0 for free poses), joint readings ``q`` (rad for R, m for P; NaN where a moved joint's
-reading was not logged) and the TP ``points`` in the tracker frame (metres).
+reading was not logged), the TP ``points`` in the tracker frame (metres) and the id ``tp`` of the tracked
+point each row sees (several reflectors at one pose: one row each). With a ``coupling`` the readings are
+the controller's; :func:`in_dh_joints` turns them into DH joint values.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from identify.joint_errors import Coupling
 from identify.kinematics import check_joint_types
 
 Array = NDArray[np.float64]
@@ -29,7 +33,8 @@ class Measurements:
     """One data set. Shapes: q (m, n), points (m, 3), sweep/joint (m,), sigma (m,) or None.
 
     ``check`` (m,) marks rows held out for validation (never fitted); ``row`` (m,) is the source line
-    number of each sample, for messages.
+    number of each sample, for messages; ``tp`` (m,) the tracked point's id (1 when there is one);
+    ``coupling``: how the readings give DH joint values (None: they are DH joint values).
     """
 
     joint_types: str
@@ -41,6 +46,8 @@ class Measurements:
     check: NDArray[np.bool_] | None = None
     row: NDArray[np.int64] | None = None
     has_role: bool = False
+    tp: NDArray[np.int64] | None = None
+    coupling: Coupling | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_types", check_joint_types(self.joint_types))
@@ -49,6 +56,13 @@ class Measurements:
             object.__setattr__(self, "check", np.zeros(m, dtype=bool))
         if self.row is None:
             object.__setattr__(self, "row", np.arange(1, m + 1))
+        if self.tp is None:
+            object.__setattr__(self, "tp", np.ones(m, dtype=np.int64))
+
+    @property
+    def tp_ids(self) -> list[int]:
+        """The tracked points' ids, ascending."""
+        return [int(t) for t in np.unique(self.tp)]
 
     @property
     def n_joints(self) -> int:
@@ -69,6 +83,7 @@ class Measurements:
             sigma=sigma,
             check=self.check[mask],
             row=self.row[mask],
+            tp=self.tp[mask],
         )
 
     def sweeps_of(self, joint: int) -> list[int]:
@@ -161,3 +176,51 @@ def _rows_by_sweep(meas: Measurements) -> list[NDArray[np.int64]]:
     ids = meas.sweep[order]
     cuts = np.flatnonzero(np.diff(ids)) + 1
     return np.split(order, cuts)
+
+
+MOVED_FRACTION = 0.1  # a joint moves in a sweep when its values span over this share of the widest span
+STILL = 1e-4  # rad or m: a sweep whose joints all span less than this has not moved (repeated readings)
+
+
+def in_dh_joints(meas: Measurements) -> tuple[Measurements, list[str]]:
+    """``meas`` with DH joint values in ``q`` (its coupling applied, then dropped), and notes.
+
+    A sweep must move one DH joint: the joints whose values span more than ``MOVED_FRACTION`` of the sweep's
+    widest span. A sweep labelled with another joint than the one it moves is relabelled; one that moves
+    several joints is an error without a coupling (it names the readings that move together), and is used
+    as free poses with one (readings moved on the controller one at a time move several DH joints).
+    """
+    notes: list[str] = []
+    coupling = meas.coupling
+    q = meas.q if coupling is None else coupling.dh_from_readings(meas.q)
+    if coupling is not None:
+        bad = np.isnan(q) & ~np.isnan(meas.q)
+        if np.any(bad):
+            row = int(meas.row[np.any(bad, axis=1)][0])
+            raise InputError(f"line {row}: an empty reading that the coupling mixes into other joints; with a "
+                             "coupling, give every reading the coupling combines")
+    joint = meas.joint.copy()
+    for rows in _rows_by_sweep(meas):
+        label = int(joint[rows[0]])
+        if not 0 < label <= meas.n_joints or len(rows) < 2 or np.all(np.isnan(q[rows, label - 1])):
+            continue  # free poses, or positions only / a moved joint never read: nothing to check
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN columns of unread joints
+            span = np.nan_to_num(np.nanmax(q[rows], axis=0) - np.nanmin(q[rows], axis=0))
+        if span.max() < STILL:
+            continue
+        moved = np.flatnonzero(span > MOVED_FRACTION * span.max())
+        sweep = int(meas.sweep[rows[0]])
+        if len(moved) == 1:
+            if moved[0] + 1 != label:
+                notes.append(f"sweep {sweep} is labelled joint {label} but moves joint {moved[0] + 1}: relabelled")
+                joint[rows] = moved[0] + 1
+            continue
+        names = " and ".join(str(j + 1) for j in moved)
+        if coupling is None:
+            raise InputError(f"sweep {sweep} (joint {label}): the readings of joints {names} move together; if the "
+                             "controller couples them (e.g. FANUC J2/J3), declare the coupling (--coupling FILE, "
+                             "'coupling:' in the robot model or '# coupling:' in the CSV)")
+        notes.append(f"sweep {sweep} moves DH joints {names} together (coupling): used as free poses")
+        joint[rows] = 0
+    return replace(meas, q=q, joint=joint, coupling=None), notes

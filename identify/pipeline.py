@@ -9,7 +9,6 @@ validate it; and :mod:`identify.verdict` says whether it can be trusted.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -17,15 +16,20 @@ from numpy.typing import NDArray
 
 from identify import verdict as checks
 from identify.adequacy import Adequacy, assess
-from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, geometric_step, home_from_measurements
+from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, home_from_measurements
 from identify.dh_output import DHOutput, dh_output, near_parallel
-from identify.estimate import LinesFit, along_arc, fit, nominal_start, place_nominal
+from identify.estimate import FitData, LinesFit, along_arc, fit, place_nominal
+from identify.extend import HeldOut, select_terms
+from identify.extensions import Decision, TermSet, candidates
+from identify.joint_errors import Coupling, LinkMasses, gravity_torques
 from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.linalg import project_out, scaled_inverse
-from identify.measurements import InputError, Measurements, prepared_joints, validate
+from identify.measurements import Measurements, in_dh_joints, prepared_joints, validate
 from identify.outliers import sweep_neighbours
-from identify.poe import AxisLines, LineProblem, points_from_lines
+from identify.poe import AxisLines, points_from_lines
+from identify.predict import Predictor
 from identify.refine import DEFAULT_MAX_OFFSET, Refinement, full_jacobian, parameter_names, refine
+from identify.starts import starts
 
 Array = NDArray[np.float64]
 
@@ -87,7 +91,29 @@ class Identification:
     adequacy: Adequacy
     verdict: checks.Verdict
     start: str
+    predictor: Predictor
+    tools: Array
+    decisions: list[Decision] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+
+    @property
+    def coupling(self) -> Coupling | None:
+        """How the readings give DH joint values (None: they are DH values)."""
+        return self.predictor.coupling
+
+    @property
+    def tp_ids(self) -> tuple[int, ...]:
+        """Ids of the tracked points, ``tools`` rows in this order."""
+        return self.predictor.tp_ids
+
+    @property
+    def extensions(self) -> list[tuple[str, float, float]]:
+        """Selected joint-error coefficients: (name, value, standard uncertainty), units in
+        :data:`identify.extensions.UNITS`."""
+        pred = self.predictor
+        k = pred.lines.n_parameters
+        std = np.sqrt(np.clip(np.diag(pred.covariance)[k:], 0.0, None))
+        return list(zip(pred.terms.names, pred.coefs.tolist(), std.tolist(), strict=True))
 
     @property
     def rms(self) -> float:
@@ -113,43 +139,20 @@ class Identification:
     def verdict_check(self, name: str) -> checks.Check:
         return next(c for c in self.verdict.checks if c.name == name)
 
-    def predict(self, q: Array) -> Array:
-        """Predicted TP (k, 3), tracker frame, at joint readings ``q`` (k, n) (positions-only data: readings
-        relative to the home pose)."""
-        predict, _ = _predictor(self.exact_dh, self.model, self.refinement, self.lines, self.lines_covariance)
-        return predict(np.atleast_2d(np.asarray(q, dtype=float)))
+    def predict(self, q: Array, tp: int | NDArray[np.int64] | None = None) -> Array:
+        """Predicted TP (k, 3), tracker frame, at joint readings ``q`` (k, n) (as the controller reports them;
+        positions-only data: relative to the home pose), for tracked point id(s) ``tp`` (default the first)."""
+        return self.predictor.points(q, tp)
 
-    def prediction_covariances(self, q: Array) -> Array:
+    def prediction_covariances(self, q: Array, tp: int | NDArray[np.int64] | None = None) -> Array:
         """Covariance (k, 3, 3) of the predicted TP at ``q`` from the parameters' uncertainty, m²."""
-        _, covariances = _predictor(self.exact_dh, self.model, self.refinement, self.lines, self.lines_covariance)
-        return covariances(np.atleast_2d(np.asarray(q, dtype=float)))
+        return self.predictor.covariances(q, tp)
 
-    def prediction_rms(self, q: Array) -> float:
+    def prediction_rms(self, q: Array, tp: int | NDArray[np.int64] | None = None) -> float:
         """RMS over ``q`` of the 3D standard uncertainty of predictions (m), model error included: what the
         error against the real arm should be near."""
-        cov = self.prediction_covariances(q)
+        cov = self.prediction_covariances(q, tp)
         return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) + 3 * self.adequacy.model_error**2))
-
-
-def prediction_covariances(lines: AxisLines, covariance: Array, q: Array) -> Array:
-    problem = LineProblem(lines, q, np.zeros((len(q), 3)), np.ones(len(q)))
-    g = problem.jacobian_blocks(np.zeros(lines.n_parameters), q=q)
-    return g @ covariance @ np.swapaxes(g, 1, 2)
-
-
-def _predictor(exact_dh: bool, model: DHModel, ref: Refinement, lines: AxisLines, lines_cov: Array
-               ) -> tuple[Callable[[Array], Array], Callable[[Array], Array]]:
-    """What predicts the TP and its covariance: the DH table where it is the identified model, else the lines."""
-    if exact_dh:
-        return (lambda q: points_from_joints(model, q)), (lambda q: dh_prediction_covariances(model, ref, q))
-    return (lambda q: points_from_lines(lines, q)), (lambda q: prediction_covariances(lines, lines_cov, q))
-
-
-def dh_prediction_covariances(model: DHModel, ref: Refinement, q: Array) -> Array:
-    """Covariance (k, 3, 3) of the DH model's predictions at ``q`` from its parameters' covariance, m²."""
-    _, jac = full_jacobian(model, q)
-    g = jac[:, :, ref.free]
-    return g @ ref.covariance @ np.swapaxes(g, 1, 2)
 
 
 def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
@@ -198,29 +201,6 @@ def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
     return "placed by convention"
 
 
-def _starts(meas: Measurements, q: Array, unknown: NDArray[np.int64], home: Array, nominal: DHModel | None,
-            conventional: Array, parallel_tol: float, warnings: list[str]) -> tuple[GeometricResult | None,
-                                                                                 list[tuple[str, AxisLines]]]:
-    starts: list[tuple[str, AxisLines]] = []
-    geo = None
-    every_joint_swept = all(meas.sweeps_of(j) for j in range(1, meas.n_joints + 1))
-    if every_joint_swept:
-        try:
-            geo = geometric_step(meas, conventional, parallel_tol, nominal)
-            starts.append(("geometric step", AxisLines(meas.joint_types, np.array([ax.point for ax in geo.axes]),
-                                                       np.array([ax.direction for ax in geo.axes]), home,
-                                                       geo.tp_home)))
-        except InputError as exc:
-            if nominal is None:
-                raise
-            warnings.append(f"geometric step skipped ({exc}); started from the nominal model")
-    if nominal is not None and np.sum(unknown < 0) >= 3:
-        starts.append(("nominal", nominal_start(nominal, q, meas.points, unknown, home)))
-    if not starts:
-        raise InputError("no start for the fit: sweep every joint, or give a nominal model and free poses")
-    return geo, starts
-
-
 def identify(
     meas: Measurements,
     nominal: DHModel | None = None,
@@ -228,6 +208,8 @@ def identify(
     robust: bool = True,
     max_offset: float = DEFAULT_MAX_OFFSET,
     noise: float | None = None,
+    links: LinkMasses | None = None,
+    extensions: bool = True,
 ) -> Identification:
     """Identify the DH model from ``meas`` (fit rows; ``check`` rows are only used for validation).
 
@@ -235,37 +217,64 @@ def identify(
     the conventional values of redundant parameters and the signs of the x axes, and is checked against
     the data. ``noise`` (m per axis): the tracker's declared noise (the ``sigma`` column overrides it).
     ``max_offset`` (m): how far exact DH may move a near-parallel pair's ``d`` before the convention is kept.
+    ``links`` (with ``nominal``): link masses, for compliance; ``extensions``: select joint errors the data
+    support (:mod:`identify.extensions`). Readings are the controller's (``meas.coupling``); several tracked
+    points (``meas.tp``) share the model, each with its own tool.
     """
-    warnings = validate(meas, with_nominal=nominal is not None)
+    coupling = meas.coupling
+    meas, relabelled = in_dh_joints(meas)
+    warnings = validate(meas, with_nominal=nominal is not None) + relabelled
     n = meas.n_joints
     if nominal is not None and nominal.joint_types != meas.joint_types:
         raise ValueError(f"nominal model has joints {nominal.joint_types}, data have {meas.joint_types}")
     conventional = np.zeros((n, 4)) if nominal is None else nominal.dh_table()
+    tp_ids = meas.tp_ids
     fitm = meas.subset(~meas.check)
     home = home_from_measurements(fitm)
     q, unknown = prepared_joints(fitm, home)
+    tp_index = np.searchsorted(tp_ids, fitm.tp)
     weights = np.ones(len(q)) if fitm.sigma is None else 1.0 / fitm.sigma
     numbers = {s: k + 1 for k, s in enumerate(np.unique(fitm.sweep[fitm.joint > 0]))}
-    group = np.array([numbers.get(int(s), 0) if j > 0 else 0 for s, j in zip(fitm.sweep, fitm.joint, strict=True)])
-    geo, starts = _starts(fitm, q, unknown, home, nominal, conventional, parallel_tol, warnings)
-    fits = [fit(start, q, fitm.points, weights, unknown, group, fitm.joint, robust, label) for label, start in starts]
+    sweep_group = np.array([numbers.get(int(s), 0) if j > 0 else 0 for s, j in zip(fitm.sweep, fitm.joint,
+                                                                                     strict=True)])
+    group = np.where(sweep_group > 0, sweep_group * len(tp_ids) + tp_index, 0)  # neighbours: same sweep and point
+    data = FitData(q, fitm.points, weights, unknown, tp_index, group, fitm.joint)
+    geo, found_starts = starts(fitm, q, unknown, tp_index, home, nominal, conventional, parallel_tol, warnings)
+    fits = [fit(start, data, robust, label) for label, start in found_starts]
     best: LinesFit = min(fits, key=lambda f: f.robust_cost)
-    lines, inl = best.lines, best.inliers
-    problem = LineProblem(lines, q[inl], fitm.points[inl], weights[inl], unknown[inl])
-    x0 = np.zeros(lines.n_parameters)
-    jac_blocks = problem.jacobian_blocks(x0)
-    res_w = problem.residuals(x0).reshape(-1, 3)
     unit = 1.0 if fitm.sigma is None else float(np.median(fitm.sigma))
     declared = unit if fitm.sigma is not None else noise
-    runs = sweep_neighbours(group[inl], along_arc(best.q[inl], fitm.joint[inl]))
-    adequacy = assess(res_w, jac_blocks, unknown[inl], runs, unit, declared)
-    inv, condition = scaled_inverse(jac_blocks.reshape(-1, lines.n_parameters))
+    adequacy = _adequacy(best, data, unit, declared)
+    torques = None if links is None or nominal is None else (lambda x: gravity_torques(nominal, links, x))
+    empty = TermSet((), home, torques)
+    terms, decisions = empty, []
+    base_rms = float(np.sqrt(np.mean(np.sum(best.residuals[best.inliers] ** 2, axis=1))))
+    if extensions and base_rms < checks.GROSS_MISFIT:  # joint errors are corrections, not a wrong model
+        pool = candidates(meas.joint_types, q[best.inliers], torques)
+        check_all = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
+        held = None if not len(check_all) else HeldOut(
+            check_all.q, check_all.points, np.ones(len(check_all)) if check_all.sigma is None else 1 / check_all.sigma,
+            np.searchsorted(tp_ids, check_all.tp))
+        variance = max(adequacy.noise, declared or 0.0) ** 2 / unit**2
+        terms, _, decisions = select_terms(best, data, empty, pool, variance, held)
+        if terms.candidates:
+            best = fit(best.lines, data, robust, best.start, terms.terms(q, None, best.q))
+            adequacy = _adequacy(best, data, unit, declared)
+    lines, inl = best.lines, best.inliers
+    problem = data.subset(inl).problem(lines, best.terms.subset(inl))
+    x0 = np.zeros(problem.size)
+    jac_blocks = problem.jacobian_blocks(x0)
+    res_w = problem.residuals(x0).reshape(-1, 3)
+    inv, condition = scaled_inverse(jac_blocks.reshape(-1, problem.size))
     # noise variance in weighted units (1 for a right sigma column), never below the declared noise
     variance = max(adequacy.residual, declared or 0.0) ** 2 / unit**2 * adequacy.inflation
-    lines_cov = inv * variance
+    covariance = inv * variance
+    n_lines = lines.n_parameters
+    lines_cov = covariance[:n_lines, :n_lines]
     near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
-    fitted = (best.q[inl], fitm.points[inl], None if fitm.sigma is None else fitm.sigma[inl], weights[inl], res_w,
-              variance)
+    first = tp_index[inl] == 0
+    fitted = (best.q[inl][first], fitm.points[inl][first], None if fitm.sigma is None else fitm.sigma[inl][first],
+              weights[inl][first], res_w[first], variance)
     out, dh_fit, gap = _written_dh(lines, conventional, nominal, near, fitted, adequacy.noise)
     if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
         # the data resolve the misalignment: exact DH wherever it stays within --max-offset
@@ -273,10 +282,11 @@ def identify(
     if dh_fit is None:  # exact DH: the lines' covariance carried over
         model = out.model
         free = np.any(out.jacobian != 0.0, axis=1)
-        cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
+        cov_free = (out.jacobian @ lines_cov[:out.jacobian.shape[1], :out.jacobian.shape[1]]
+                    @ out.jacobian.T)[np.ix_(free, free)]
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
         model, free = dh_fit.model, dh_fit.free
-        cov_free = dh_covariance(model, free, best.q[inl], weights[inl], unknown[inl]) * variance
+        cov_free = dh_covariance(model, free, best.q[inl][first], weights[inl][first], unknown[inl][first]) * variance
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     residuals = best.residuals
@@ -292,7 +302,7 @@ def identify(
     vector = np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
     fixed = [FixedParameter(names[k], float(vector[k]), _reason(names[k], n, meas.joint_types, out.capped))
              for k in np.flatnonzero(~free)]
-    sweeps = [_sweep_fit(int(sid), int(fitm.joint[group == g][0]), ref, group == g)
+    sweeps = [_sweep_fit(int(sid), int(fitm.joint[sweep_group == g][0]), ref, sweep_group == g)
               for sid, g in numbers.items()]
     if np.any(fitm.joint == 0):
         sweeps.append(_sweep_fit(0, 0, ref, fitm.joint == 0))
@@ -301,11 +311,12 @@ def identify(
             warnings.append(f"sweep {sw.sweep}: {sw.rejected} sample(s) rejected as outliers")
     ident_rms = float(np.sqrt(np.mean(np.sum(residuals[inl] ** 2, axis=1))))
     check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
-    expected = _expected_accuracy(lines, lines_cov, best.q[inl], adequacy)
+    predictor = Predictor(lines, covariance, terms, best.terms.coefs, None, tuple(tp_ids))
+    fitted_tp = np.asarray(tp_ids)[tp_index[inl]]
+    expected = _expected_accuracy(predictor, best.q[inl], fitted_tp, adequacy)
     gap_rms, gap_statistic = gap
     dh_check = checks.dh_table(gap_rms, gap_statistic, expected, [f"d{i}" for i in out.capped])
-    predict, covariances = _predictor(dh_check.status == "pass", model, ref, lines, lines_cov)
-    validation = _validate(check_rows, predict, covariances, adequacy) if len(check_rows) else None
+    validation = _validate(check_rows, predictor, adequacy) if len(check_rows) else None
     found = [
         checks.model_fit(ident_rms, adequacy),
         checks.conditioning(condition),
@@ -316,9 +327,12 @@ def identify(
         found.append(checks.holdout(validation.samples, validation.rms, validation.expected))
     if nominal is not None and np.sum(unknown < 0) >= 3:
         known = unknown < 0
-        placed = place_nominal(nominal, best.q[known], points_from_lines(lines, best.q[known]))
+        placed, _ = place_nominal(nominal, best.q[known], points_from_lines(lines, best.q[known]))
         gap = points_from_joints(placed, best.q[known]) - points_from_lines(lines, best.q[known])
         found.append(checks.nominal("model", float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))))
+    if decisions:
+        kept = [d.candidate.names for d in decisions if d.selected]
+        warnings.append("joint errors selected: " + (", ".join(n for names in kept for n in names) if kept else "none"))
     return Identification(
         model=model,
         std=std,
@@ -335,6 +349,9 @@ def identify(
         adequacy=adequacy,
         verdict=checks.Verdict(tuple(found)),
         start=best.start,
+        predictor=replace(predictor, coupling=coupling),
+        tools=_tools(model, lines),
+        decisions=decisions,
         warnings=warnings,
     )
 
@@ -369,10 +386,30 @@ def _lost(sweeps: list[SweepFit]) -> list[str]:
             if s.joint > 0 and (s.rejected * 2 > s.samples or s.samples - s.rejected < 3)]
 
 
-def _expected_accuracy(lines: AxisLines, covariance: Array, q: Array, adequacy: Adequacy) -> float:
-    """RMS 3D prediction uncertainty at the fitted configurations, model error included (m)."""
-    cov = prediction_covariances(lines, covariance, q)
+def _expected_accuracy(predictor: Predictor, q: Array, tp: NDArray[np.int64], adequacy: Adequacy) -> float:
+    """RMS 3D prediction uncertainty at the fitted configurations (DH values with joint errors: the
+    predictor without coupling), model error included (m)."""
+    plain = replace(predictor, coefs=np.zeros_like(predictor.coefs))  # q already carries the joint errors
+    cov = plain.covariances(q, tp)
     return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) + 3 * adequacy.model_error**2))
+
+
+def _adequacy(best: LinesFit, data: FitData, unit: float, declared: float | None) -> Adequacy:
+    """Adequacy of ``best`` on its inliers (see :mod:`identify.adequacy`)."""
+    inl = best.inliers
+    rows = data.subset(inl)
+    problem = rows.problem(best.lines, best.terms.subset(inl))
+    zero = np.zeros(problem.size)
+    runs = sweep_neighbours(rows.group, along_arc(best.q[inl], rows.joint))
+    return assess(problem.residuals(zero).reshape(-1, 3), problem.jacobian_blocks(zero), rows.unknown, runs, unit,
+                  declared)
+
+
+def _tools(model: DHModel, lines: AxisLines) -> Array:
+    """Every tracked point (k, 3) in the last DH frame of ``model``: the first is ``model.tool``, the others
+    keep their offsets from it at home (the DH table may be refitted under a convention)."""
+    flange = frames_from_joints(model, lines.home[None, :])[0, -1]
+    return model.tool + (lines.tps - lines.tp_home) @ flange[:3, :3]
 
 
 def _sweep_fit(sweep: int, joint: int, ref: Refinement, rows: NDArray[np.bool_]) -> SweepFit:
@@ -382,10 +419,10 @@ def _sweep_fit(sweep: int, joint: int, ref: Refinement, rows: NDArray[np.bool_])
     return SweepFit(sweep, joint, int(rows.sum()), int((rows & ~ref.inliers).sum()), rms)
 
 
-def _validate(check: Measurements, predict: Callable[[Array], Array], covariances: Callable[[Array], Array],
-              adequacy: Adequacy) -> Validation:
-    err = np.linalg.norm(check.points - predict(check.q), axis=1)
-    cov = covariances(check.q)
+def _validate(check: Measurements, predictor: Predictor, adequacy: Adequacy) -> Validation:
+    """Held-out rows (DH joint values: ``predictor`` is used without coupling)."""
+    err = np.linalg.norm(check.points - predictor.points(check.q, check.tp), axis=1)
+    cov = predictor.covariances(check.q, check.tp)
     bound = float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))))
     noise2 = adequacy.noise**2 if check.sigma is None else float(np.mean(check.sigma**2))
     return Validation(len(check), float(np.sqrt(np.mean(err**2))), float(err.max()), bound,

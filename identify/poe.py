@@ -7,6 +7,10 @@ this fit is well conditioned where DH is not; its lines are then turned into DH 
 Parameters: per revolute joint, 2 tilts of the direction and 2 shifts of the point; per prismatic, 2
 tilts; then the TP at home (3). That is exactly what position-only data determine (4R + 2P + 3).
 
+Several tracked points (reflectors) share the lines; each has its own position at home (``tps``). Joint
+errors beyond the lines (:mod:`identify.joint_errors`) enter as ``q + R · c``: per-row regressors ``R``
+(m, T), each acting on one joint, with coefficients ``c`` fitted with the lines.
+
 A row whose moved joint was not read (a sweep jogged by hand, or positions-only data) carries that
 joint's value as a nuisance parameter. It is eliminated in closed form (variable projection): for given
 lines the best angle (or stroke) of each such row is computed exactly, and the Jacobian is projected
@@ -16,7 +20,8 @@ complement for the covariance.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,18 +37,30 @@ Array = NDArray[np.float64]
 @dataclass(frozen=True)
 class AxisLines:
     """Joint axes at the home pose: ``points`` (n, 3) on each line, unit ``directions`` (n, 3), the
-    ``home`` readings (n,) and the TP there, ``tp_home`` (3,). Prismatic points are meaningless."""
+    ``home`` readings (n,) and the TP there, ``tp_home`` (3,); with several tracked points the others'
+    positions at home, ``extra_tps`` (k - 1, 3). Prismatic points are meaningless."""
 
     joint_types: str
     points: Array
     directions: Array
     home: Array
     tp_home: Array
+    extra_tps: Array = field(default_factory=lambda: np.zeros((0, 3)))
+
+    @property
+    def tps(self) -> Array:
+        """Every tracked point at home (k, 3), the first being ``tp_home``."""
+        return np.vstack([self.tp_home, self.extra_tps])
+
+    @property
+    def n_line_parameters(self) -> int:
+        """4 per revolute joint, 2 per prismatic."""
+        return sum(4 if t == "R" else 2 for t in self.joint_types)
 
     @property
     def n_parameters(self) -> int:
-        """Size of the minimal parameter vector: 4 per revolute joint, 2 per prismatic, 3 for the TP."""
-        return sum(4 if t == "R" else 2 for t in self.joint_types) + 3
+        """Size of the minimal parameter vector: the lines', then 3 per tracked point."""
+        return self.n_line_parameters + 3 * len(self.tps)
 
 
 def lines_from_model(model: DHModel, home: Array) -> AxisLines:
@@ -54,16 +71,22 @@ def lines_from_model(model: DHModel, home: Array) -> AxisLines:
     return AxisLines(model.joint_types, frames[:-1, :3, 3].copy(), frames[:-1, :3, 2].copy(), home.copy(), tp)
 
 
-def points_from_lines(lines: AxisLines, q: Array) -> Array:
-    """Predicted TP (m, 3) at joint readings ``q`` (m, n)."""
-    p, _ = _chain(lines, q)
+def points_from_lines(lines: AxisLines, q: Array, tp_index: NDArray[np.int64] | None = None) -> Array:
+    """Predicted TP (m, 3) at joint readings ``q`` (m, n); ``tp_index`` (m,): which tracked point (0-based
+    row of ``lines.tps``; default the first)."""
+    p, _ = _chain(lines, q, tp_index)
     return p
 
 
-def _chain(lines: AxisLines, q: Array) -> tuple[Array, list[tuple[Array, Array, Array, Array]]]:
+def _home_points(lines: AxisLines, m: int, tp_index: NDArray[np.int64] | None) -> Array:
+    return np.tile(lines.tp_home, (m, 1)) if tp_index is None else lines.tps[tp_index]
+
+
+def _chain(lines: AxisLines, q: Array, tp_index: NDArray[np.int64] | None = None
+           ) -> tuple[Array, list[tuple[Array, Array, Array, Array]]]:
     """TP and, per joint from the tip, (input point u, output point w, rotation R, angle or stroke)."""
     m = len(q)
-    x = np.tile(lines.tp_home, (m, 1))
+    x = _home_points(lines, m, tp_index)
     steps = []
     for i in reversed(range(len(lines.joint_types))):
         delta = q[:, i] - lines.home[i]
@@ -90,7 +113,8 @@ def _apply(lines: AxisLines, q: Array, joints: range, x: Array) -> Array:
     return x
 
 
-def solve_unknown(lines: AxisLines, q: Array, points: Array, unknown: NDArray[np.int64]) -> Array:
+def solve_unknown(lines: AxisLines, q: Array, points: Array, unknown: NDArray[np.int64],
+                  tp_index: NDArray[np.int64] | None = None) -> Array:
     """``q`` with each row's unknown joint (0-based index in ``unknown``, -1 for none) set to the value
     that brings the predicted TP closest to the measured ``points`` (closed form; rad or m)."""
     q = q.copy()
@@ -99,7 +123,8 @@ def solve_unknown(lines: AxisLines, q: Array, points: Array, unknown: NDArray[np
         qr = q[rows]
         qr[:, j] = lines.home[j]
         n = len(lines.joint_types)
-        tip = _apply(lines, qr, range(j + 1, n), np.tile(lines.tp_home, (len(rows), 1)))
+        tip = _apply(lines, qr, range(j + 1, n), _home_points(lines, len(rows), None if tp_index is None
+                                                               else tp_index[rows]))
         # the joints before j move rigidly: undo them on the measurement (A^-1 y = R_Aᵀ (y - A(0)))
         origin = _apply(lines, qr, range(j), np.zeros((len(rows), 3)))
         cols = [_apply(lines, qr, range(j), np.tile(e, (len(rows), 1))) - origin for e in np.eye(3)]
@@ -118,21 +143,57 @@ def solve_unknown(lines: AxisLines, q: Array, points: Array, unknown: NDArray[np
     return q
 
 
+@dataclass(frozen=True)
+class JointTerms:
+    """Joint errors in the fit: ``regressors`` (m, T) per row, each column acting on joint ``joints[t]``
+    (0-based), with coefficients ``coefs`` (T,): the joints stand at ``q + Σ_t regressors[:, t] · coefs[t]``."""
+
+    regressors: Array
+    joints: NDArray[np.int64]
+    coefs: Array
+
+    @classmethod
+    def none(cls, m: int) -> JointTerms:
+        return cls(np.zeros((m, 0)), np.zeros(0, dtype=np.int64), np.zeros(0))
+
+    def __len__(self) -> int:
+        return len(self.joints)
+
+    def corrected(self, q: Array, coefs: Array | None = None) -> Array:
+        """``q`` (m, n) plus the joint errors (unread values, NaN, stay NaN)."""
+        if not len(self):
+            return q
+        coefs = self.coefs if coefs is None else coefs
+        out = q.copy()
+        for t, j in enumerate(self.joints):
+            out[:, j] += self.regressors[:, t] * coefs[t]
+        return out
+
+    def subset(self, rows: NDArray[np.bool_] | NDArray[np.int64]) -> JointTerms:
+        return JointTerms(self.regressors[rows], self.joints, self.coefs)
+
+
 class LineProblem:
     """Weighted residuals and (projected) Jacobian of the lines model over its minimal parameters.
 
-    ``unknown`` (m,): 0-based index of each row's unread joint, -1 where every reading is known.
-    Parameters are increments on ``start`` (zero at the start).
+    ``unknown`` (m,): 0-based index of each row's unread joint, -1 where every reading is known;
+    ``tp_index`` (m,): each row's tracked point (0-based row of ``start.tps``); ``terms``: joint errors
+    fitted with the lines. Parameters are increments on ``start`` (and on ``terms.coefs``), zero at the start:
+    lines, then 3 per tracked point, then one per joint-error coefficient.
     """
 
     def __init__(self, start: AxisLines, q: Array, points: Array, weights: Array,
-                 unknown: NDArray[np.int64] | None = None):
+                 unknown: NDArray[np.int64] | None = None, tp_index: NDArray[np.int64] | None = None,
+                 terms: JointTerms | None = None):
         self.start, self.q, self.points, self.weights = start, q, points, weights
         self.unknown = np.full(len(q), -1) if unknown is None else np.asarray(unknown)
         self.has_unknown = bool(np.any(self.unknown >= 0))
+        self.tp_index = None if tp_index is None or not np.any(tp_index) else np.asarray(tp_index)
+        self.terms = JointTerms.none(len(q)) if terms is None else terms
         self.types = start.joint_types
         self.bases = [np.array(perpendicular_basis(d)) for d in start.directions]
-        self.size = start.n_parameters
+        self.n_lines = start.n_parameters
+        self.size = self.n_lines + len(self.terms)
 
     def lines(self, x: Array) -> tuple[AxisLines, list[Array]]:
         pts, dirs, tangents, k = [], [], [], 0
@@ -149,24 +210,35 @@ class LineProblem:
             else:
                 pts.append(self.start.points[i])
                 k += 2
-        lines = AxisLines(self.types, np.array(pts), np.array(dirs), self.start.home, x[k:k + 3] + self.start.tp_home)
+        tps = x[k:self.n_lines].reshape(-1, 3) + self.start.tps
+        lines = AxisLines(self.types, np.array(pts), np.array(dirs), self.start.home, tps[0], tps[1:])
         return lines, tangents
 
-    def joints(self, lines: AxisLines) -> Array:
-        """Readings with every unknown value at its best estimate for ``lines``."""
-        return solve_unknown(lines, self.q, self.points, self.unknown) if self.has_unknown else self.q
+    def coefs(self, x: Array) -> Array:
+        """Joint-error coefficients at ``x``."""
+        return self.terms.coefs + x[self.n_lines:]
+
+    def joints(self, lines: AxisLines, coefs: Array | None = None) -> Array:
+        """Joint values with the joint errors applied and every unknown value at its best estimate."""
+        q = self.terms.corrected(self.q, coefs)
+        return solve_unknown(lines, q, self.points, self.unknown, self.tp_index) if self.has_unknown else q
 
     def residuals(self, x: Array) -> Array:
         lines, _ = self.lines(x)
-        return ((points_from_lines(lines, self.joints(lines)) - self.points) * self.weights[:, None]).ravel()
+        predicted = points_from_lines(lines, self.joints(lines, self.coefs(x)), self.tp_index)
+        return ((predicted - self.points) * self.weights[:, None]).ravel()
 
-    def jacobian_blocks(self, x: Array, q: Array | None = None) -> Array:
-        """Jacobian of the (weighted) predictions at readings ``q`` (default: the data's), (m, 3, size),
-        before the projection of the nuisance parameters."""
+    def jacobian_blocks(self, x: Array, q: Array | None = None, tp_index: NDArray[np.int64] | None = None,
+                        regressors: Array | None = None) -> Array:
+        """Jacobian of the (weighted) predictions at joint values ``q`` (default: the data's, with their
+        tracked points and regressors), (m, 3, size), after the projection of the nuisance parameters."""
         lines, tangents = self.lines(x)
         data = q is None
-        q = self.joints(lines) if data else q
-        _, steps = _chain(lines, q)
+        if data:
+            q, tp_index, regressors = self.joints(lines, self.coefs(x)), self.tp_index, self.terms.regressors
+        elif regressors is None:
+            regressors = np.zeros((len(q), len(self.terms)))
+        _, steps = _chain(lines, q, tp_index)
         m = len(q)
         jac = np.zeros((m, 3, self.size))
         nuisance = np.zeros((m, 3))
@@ -174,13 +246,16 @@ class LineProblem:
         k = 0
         for i, t in enumerate(self.types):
             u, w, rot, delta = steps[i]
-            if data and self.has_unknown:
-                rows = self.unknown == i
-                if t == "R":
-                    nuisance[rows] = np.einsum("kij,kj->ki", left[rows], cross(lines.directions[i],
-                                                                                   w[rows] - lines.points[i]))
+            acting = np.flatnonzero(self.terms.joints == i)
+            if (data and self.has_unknown) or len(acting):
+                if t == "R":  # dp/dq_i
+                    column = np.einsum("kij,kj->ki", left, cross(lines.directions[i], w - lines.points[i]))
                 else:
-                    nuisance[rows] = left[rows] @ lines.directions[i]
+                    column = left @ lines.directions[i]
+                rows = self.unknown == i if data else np.zeros(m, dtype=bool)
+                nuisance[rows] = column[rows]
+                for c in acting:
+                    jac[:, :, self.n_lines + c] = column * regressors[:, c, None]
             if t == "R":
                 # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
                 # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i)
@@ -196,7 +271,12 @@ class LineProblem:
                 jac[:, :, k:k + 2] = (left @ tangents[i].T) * delta[:, None, None]
                 k += 2
             left = left @ rot
-        jac[:, :, k:k + 3] = left
+        if tp_index is None:
+            jac[:, :, k:k + 3] = left
+        else:
+            for p in range(len(lines.tps)):
+                rows = tp_index == p
+                jac[rows, :, k + 3 * p:k + 3 * p + 3] = left[rows]
         if data:
             jac *= self.weights[:, None, None]
             if self.has_unknown:
@@ -208,18 +288,28 @@ class LineProblem:
         return self.jacobian_blocks(x).reshape(-1, self.size)
 
 
+class LeastSquares(NamedTuple):
+    """A least-squares fit: ``lines``, joint values ``q`` (m, n) with joint errors applied and unknown
+    values solved, weighted ``residuals`` (m, 3) predicted minus measured, and the joint ``terms`` fitted."""
+
+    lines: AxisLines
+    q: Array
+    residuals: Array
+    terms: JointTerms
+
+
 def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None = None,
               unknown: NDArray[np.int64] | None = None, loss: str = "linear",
-              scale: float = 1.0) -> tuple[AxisLines, Array, Array]:
+              scale: float = 1.0, tp_index: NDArray[np.int64] | None = None,
+              terms: JointTerms | None = None) -> LeastSquares:
     """Least-squares axis lines and TP for readings ``q`` (m, n) and TP ``points`` (m, 3).
 
-    ``weights`` (m,) = 1/sigma per sample; ``unknown`` marks rows whose one joint was not read (see
-    :class:`LineProblem`); ``loss``/``scale`` select a robust loss of scipy's ``least_squares`` (scale in
-    weighted units). Returns the lines, the readings with unknown values solved, and the weighted
-    residuals (m, 3).
+    ``weights`` (m,) = 1/sigma per sample; ``unknown`` marks rows whose one joint was not read, ``tp_index``
+    each row's tracked point and ``terms`` the joint errors to fit (see :class:`LineProblem`);
+    ``loss``/``scale`` select a robust loss of scipy's ``least_squares`` (scale in weighted units).
     """
     weights = np.ones(len(q)) if weights is None else weights
-    problem = LineProblem(start, q, points, weights, unknown)
+    problem = LineProblem(start, q, points, weights, unknown, tp_index, terms)
     n_nuisance = int(np.sum(problem.unknown >= 0))
     linear = loss == "linear"
     method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
@@ -229,9 +319,10 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
                         max_nfev=200 if linear else 60)
     lines, _ = problem.lines(fit.x)
     lines = _canonical(lines)
-    q_solved = problem.joints(lines) if problem.has_unknown else q
-    residuals = (points_from_lines(lines, q_solved) - points) * weights[:, None]
-    return lines, q_solved, residuals
+    coefs = problem.coefs(fit.x)
+    q_solved = problem.joints(lines, coefs)
+    residuals = (points_from_lines(lines, q_solved, problem.tp_index) - points) * weights[:, None]
+    return LeastSquares(lines, q_solved, residuals, JointTerms(problem.terms.regressors, problem.terms.joints, coefs))
 
 
 def _canonical(lines: AxisLines) -> AxisLines:
@@ -242,4 +333,4 @@ def _canonical(lines: AxisLines) -> AxisLines:
             d = lines.directions[i]
             pts[i] = pts[i] + ((lines.tp_home - pts[i]) @ d) * d
     return AxisLines(lines.joint_types, pts, np.array([unit(d) for d in lines.directions]), lines.home,
-                     lines.tp_home)
+                     lines.tp_home, lines.extra_tps)

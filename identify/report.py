@@ -47,6 +47,14 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     tool = model.tool * 1e3
     lines.append(f"tool (TP in frame {model.n_joints}) [mm]: {tool[0]:.3f}, {tool[1]:.3f}, {tool[2]:.3f}"
                  f"  (± {', '.join(f'{s * 1e3:.3f}' for s in std[6:9])})")
+    for tp_id, t in zip(ident.tp_ids[1:], ident.tools[1:], strict=True):
+        lines.append(f"tool of tracked point {tp_id} (frame {model.n_joints}) [mm]: "
+                     + ", ".join(f"{x * 1e3:.3f}" for x in t))
+    if ident.coupling is not None and not ident.coupling.is_identity:
+        coupled = "; ".join(f"q{g[0] + 1} from readings {', '.join(str(r + 1) for r in g[1:])}"
+                            for g in ident.coupling.coupled_groups())
+        lines.append(f"coupled readings (q_dh = C . readings + offset): {coupled}")
+    lines += format_extensions(ident)
     if ident.parallel:
         lines.append(f"parallel axes (within tolerance) at links {ident.parallel}: their d is conventional")
     lines.append(f"fixed (undetermined by the data): {', '.join(f.name for f in ident.fixed) or 'none'}")
@@ -74,6 +82,28 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     for warning in ident.warnings + ref.notes:
         lines.append(f"note: {warning}")
     return "\n".join(lines)
+
+
+_EXT_SCALE = {"scale": (1e6, "ppm"), "ecc_sin": (np.degrees(1.0) * 3600, "arcsec"),
+              "ecc_cos": (np.degrees(1.0) * 3600, "arcsec"), "compliance": (np.degrees(1.0) * 3600, "arcsec/(N m)")}
+
+
+def format_extensions(ident: Identification) -> list[str]:
+    """Joint errors selected beyond DH (with uncertainty) and why the others were not, one line each."""
+    if not ident.decisions:
+        return []
+    out = []
+    for name, value, std in ident.extensions:
+        family = name.rsplit("_", 1)[0]
+        scale, unit = _EXT_SCALE[family]
+        out.append(f"joint error {name}: {value * scale:+.3f} ± {std * scale:.3f} {unit}")
+    rejected = [d for d in ident.decisions if not d.selected and d.ratio is not None]
+    if not ident.extensions:
+        out.append(f"joint errors: none selected ({len(ident.decisions)} candidates tested; statistics below "
+                   "the information criterion)")
+    for d in rejected:
+        out.append(f"joint error {d.candidate.family} on joint {d.candidate.joint + 1} not selected: {d.reason}")
+    return out
 
 
 def format_reference(ident: Identification, label: str, reference: DHModel) -> str:

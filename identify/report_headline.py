@@ -55,9 +55,10 @@ def accuracy_summary(ident: Identification, meas: Measurements, nominal: DHModel
     }
     if nominal is not None:
         ref = ident.refinement
-        q_fit = ref.q[ref.inliers]
-        placed = place_nominal(nominal, q_fit, model.points(q_fit))
-        before = points_from_joints(placed, check.q)
+        q_fit = ref.q[ref.inliers]  # DH joint values (the nominal model's); the identified model takes readings
+        finite = np.all(np.isfinite(q_fit), axis=1)
+        placed, _ = place_nominal(nominal, q_fit[finite], model.points(model.readings(q_fit[finite])))
+        before = points_from_joints(placed, model.dh_values(check.q))
         out["before"] = {"label": f"nominal {nominal_name or ''}".strip(), "predicted": _rms(predicted - before),
                          "predicted_std": after_pred, "measured": _rms(check.points - before),
                          "measured_std": rms_std(_rms(check.points - before), k)}

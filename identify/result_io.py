@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from identify import __version__
+from identify.extensions import EQUATIONS, UNITS
 from identify.kinematics import DH_NAMES, DHModel
 from identify.pipeline import Identification
 from identify.refine import parameter_names
@@ -53,7 +54,13 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
     n = ident.model.n_joints
     std = ident.std
     doc = model_to_dict(ident.model)
+    if len(ident.tp_ids) > 1:  # DESIGN.md: every tracked point's tool; ``tool`` is the smallest id's
+        doc["tools"] = {int(i): _floats(t) for i, t in zip(ident.tp_ids, ident.tools, strict=True)}
     doc["verdict"] = ident.verdict.as_dict()
+    if ident.coupling is not None and not ident.coupling.is_identity:
+        doc["coupling"] = {**ident.coupling.as_dict(), "note": "the joint values of this model are DH values; "
+                           "the controller's readings give them by this equation"}
+    doc["extensions"] = extensions_to_dict(ident)
     lines = ident.lines
     doc["axis_lines"] = {
         "note": "the identified model as joint axes at the home readings (tracker frame, m): exact even where "
@@ -62,6 +69,7 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "points": _floats(lines.points),
         "directions": _floats(lines.directions),
         "tp_home": _floats(lines.tp_home),
+        **({"tps": _floats(lines.tps)} if len(lines.tps) > 1 else {}),
     }
     a = ident.adequacy
     doc["noise"] = {
@@ -126,19 +134,39 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
     return finite(doc)
 
 
+def extensions_to_dict(ident: Identification) -> dict[str, Any]:
+    """The ``extensions`` section: joint errors selected (value, uncertainty, equation) and every decision."""
+    terms = [{"name": name, "value": value, "std": std, "unit": UNITS[name.rsplit("_", 1)[0]]}
+             for name, value, std in ident.extensions]
+    families = sorted({d.candidate.family for d in ident.decisions if d.selected})
+    return {
+        "note": "joint errors beyond the DH table: the joint stands at q + dq(q) (q: DH joint value, rad or m); "
+                "a reader that ignores this section gets the DH model without them",
+        "home": _floats(ident.predictor.terms.home),
+        "terms": terms,
+        "equations": {f: EQUATIONS[f] for f in families},
+        "selection": [
+            {"term": d.candidate.family, "joint": d.candidate.joint + 1, "statistic": d.score,
+             "likelihood_ratio": d.ratio, "limit": d.limit, "heldout_ratio": d.heldout, "selected": d.selected,
+             "reason": d.reason}
+            for d in ident.decisions
+        ],
+    }
+
+
 def covariance_to_dict(ident: Identification) -> dict[str, Any]:
     """The parameters' covariance, for compensation, verification and comparison (identify/calibrated.py):
     ``parameters`` (the free names of :func:`identify.refine.parameter_names`; base rotation a rotation vector
-    applied on the left of ``base``), ``matrix`` (their covariance, m and rad squared) and, where predictions use
-    the axis lines (``dh_table`` check not passed), ``lines`` (the covariance of ``axis_lines`` in the minimal
-    parameters of :class:`identify.poe.LineProblem`)."""
+    applied on the left of ``base``) and ``matrix`` (their covariance, m and rad squared: the DH table's), and
+    ``predictor``: the covariance of what predicts (the axis lines' minimal parameters, the tracked points', then
+    the joint-error coefficients: :class:`identify.predict.Predictor`)."""
     names = parameter_names(ident.model.n_joints)
     free = np.flatnonzero(ident.refinement.free)
     return {
         "note": "covariance of the free parameters (1 sigma squared; m, rad), noise and model error included",
         "parameters": [names[k] for k in free],
         "matrix": _floats(ident.refinement.covariance),
-        "lines": None if ident.exact_dh else _floats(ident.lines_covariance),
+        "predictor": _floats(ident.predictor.covariance),
     }
 
 

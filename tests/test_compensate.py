@@ -57,29 +57,75 @@ def test_the_result_document_gives_the_identification_s_predictions_and_covarian
     q = random_poses(ROBOT.limits, 30, rng)
     np.testing.assert_allclose(model.points(q), ident.predict(q), atol=1e-12)
     np.testing.assert_allclose(model.point_covariances(q), ident.prediction_covariances(q), rtol=1e-9, atol=1e-20)
-    # the axis-line predictor (used where the DH table is not exact) gives the same frames for the same robot
-    lines = replace(model, lines=lines_from_model(ident.model, ROBOT.home), lines_covariance=np.eye(27))
-    np.testing.assert_allclose(lines.flanges(q), model.flanges(q), atol=1e-12)
-    for got, want in zip(lines.axes(q)[:1], model.axes(q)[:1], strict=True):
-        np.testing.assert_allclose(got, want, atol=1e-12)
-    # where the DH table keeps a convention that costs accuracy (check dh_table not passed), the document carries the
-    # axis lines' covariance and predictions come from the lines, as the identification's do
-    from identify.verdict import Check, Verdict
+    # the frames along the predictor's axis lines are the DH model's for the same robot (the IK's Jacobian, tool poses)
+    from identify.extensions import TermSet
+    from identify.predict import Predictor
 
-    checks = tuple(Check(c.name, "warn", c.value, c.limit, c.message) if c.name == "dh_table" else c
-                   for c in ident.verdict.checks)
-    by_lines = replace(ident, verdict=Verdict(checks))
-    assert not by_lines.exact_dh
-    doc_lines = yaml.safe_load(yaml.safe_dump(result_to_dict(by_lines, ROBOT.nominal, "ur5e")))
-    model_lines = CalibratedModel.from_document(doc_lines)
-    assert model_lines.lines is not None and doc_lines["covariance"]["lines"] is not None
-    np.testing.assert_allclose(model_lines.points(q), by_lines.predict(q), atol=1e-12)
-    np.testing.assert_allclose(model_lines.point_covariances(q), by_lines.prediction_covariances(q), rtol=1e-9,
-                               atol=1e-20)
+    exact = CalibratedModel.exact(ident.model)
+    by_lines = replace(exact, predictor=Predictor(lines_from_model(ident.model, ROBOT.home), np.eye(27),
+                                                  TermSet((), ROBOT.home, None), np.zeros(0), None, (1,)))
+    np.testing.assert_allclose(by_lines.flanges(q), exact.flanges(q), atol=1e-12)
+    np.testing.assert_allclose(by_lines.axes(q)[0], exact.axes(q)[0], atol=1e-12)
+    np.testing.assert_allclose(np.cross(by_lines.axes(q)[1] - exact.axes(q)[1], exact.axes(q)[0]), 0.0, atol=1e-12)
     with pytest.raises(ResultError, match="no parameter covariance"):
         CalibratedModel.from_document({k: v for k, v in doc.items() if k != "covariance"})
-    with pytest.raises(ResultError, match="extensions"):
-        CalibratedModel.from_document({**doc, "extensions": {"scale": {"value": 1e-4}}})
+
+
+def _joint_error_result(tmp_path):
+    """A UR10e whose joints bend under gravity (1e-6 rad/(N m): 0.1 mm at the TP) and a FANUC whose controller
+    reads J3 against the horizontal, each identified (compliance selected; coupling declared) and written."""
+    from identify.joint_errors import JointErrors
+    from identify.simulate import sweep_readings
+    from identify.simulate_joints import RealArm, measure
+
+    out = []
+    for name, errors in (("ur10e", JointErrors(np.zeros(6), np.zeros(6), np.zeros(6), np.full(6, 1e-6))),
+                         ("fanuc_lrmate200id", None)):
+        robot = load_robot(name)
+        rng = np.random.default_rng(150)
+        truth = random_truth(robot.nominal, robot.home, rng)
+        q, sweep, joint = sweep_readings(robot.joint_types, robot.home, robot.limits, 24)
+        extra = random_poses(robot.limits, 50, rng)
+        q = np.vstack([q, extra])
+        sweep = np.concatenate([sweep, 100 + np.arange(50)])
+        joint = np.concatenate([joint, np.zeros(50, dtype=np.int64)])
+        held = np.zeros(len(q), dtype=bool)
+        held[-20:] = True
+        coupling = robot.coupling
+        readings = q if coupling is None else coupling.readings_from_dh(q)
+        arm = RealArm(truth, coupling, errors, robot.links)
+        meas = measure(arm, readings, sweep, joint, 2e-5, np.random.default_rng(1), held)
+        ident = identify(meas, robot.nominal, noise=2e-5, links=robot.links)
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(result_to_dict(ident, robot.nominal, name)))
+        out.append((robot, arm, ident, path))
+    return out
+
+
+def test_coupled_readings_and_joint_errors_are_compensated_through_the_result(tmp_path) -> None:
+    """The result's coupling and joint errors (its extensions) predict through the document exactly as in the
+    identification; compensated readings put the real arm on the targets within what the covariance predicts."""
+    for robot, arm, ident, path in _joint_error_result(tmp_path):
+        doc = yaml.safe_load(path.read_text())
+        model = CalibratedModel.from_document(doc)
+        rng = np.random.default_rng(7)
+        readings = random_poses(robot.limits, 100, rng)
+        if robot.coupling is not None:
+            readings = robot.coupling.readings_from_dh(readings)
+            assert doc.get("coupling")
+        else:
+            assert [t["name"] for t in doc["extensions"]["terms"]], "compliance should be selected"
+        np.testing.assert_allclose(model.points(readings), ident.predict(readings), atol=1e-12)
+        np.testing.assert_allclose(model.point_covariances(readings), ident.prediction_covariances(readings),
+                                   rtol=1e-9, atol=1e-20)
+        targets = arm.points(readings)
+        start = readings + rng.normal(0, 0.01, readings.shape)
+        result = compensate(model, targets, start, robot.limits)
+        ok = result.solution.reached
+        assert ok.sum() >= 95, result.solution.status
+        np.testing.assert_allclose(model.points(result.solution.q[ok]), targets[ok], atol=1e-9)
+        err = np.linalg.norm(arm.points(result.solution.q[ok]) - targets[ok], axis=1)
+        assert np.sqrt(np.mean(err**2)) < 2.0 * np.sqrt(np.mean(result.expected[ok] ** 2))
 
 
 def compensation_draws(seeds: list[int]) -> list[tuple[float, float, float, int]]:

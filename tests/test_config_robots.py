@@ -15,6 +15,7 @@ from identify.kinematics import frames_from_joints, points_from_joints
 
 UR_NAMES = ["ur3", "ur5", "ur10", "ur3e", "ur5e", "ur10e", "ur16e", "ur20", "ur30"]
 EXAMPLES = ["scara", "iiwa7", "track_ur5e", "gantry"]
+VENDOR = ["fanuc_lrmate200id"]  # from a vendor data sheet, with a coupling
 
 # Universal Robots, "DH Parameters for calculations of kinematics and dynamics": d1, a2, a3, d4, d5, d6 (m).
 UR_PUBLISHED = {
@@ -38,10 +39,10 @@ UR_SPEED_DEG = {
 
 
 def test_bundled_names() -> None:
-    assert robot_names() == sorted(UR_NAMES + EXAMPLES)
+    assert robot_names() == sorted(UR_NAMES + EXAMPLES + VENDOR)
 
 
-@pytest.mark.parametrize("name", sorted(UR_NAMES + EXAMPLES))
+@pytest.mark.parametrize("name", sorted(UR_NAMES + EXAMPLES + VENDOR))
 def test_every_bundled_model_loads_consistently(name: str) -> None:
     robot = load_robot(name)
     n = robot.n_joints
@@ -58,7 +59,7 @@ def test_every_bundled_model_loads_consistently(name: str) -> None:
     assert np.all(robot.limits[:, 0] < robot.home) and np.all(robot.home < robot.limits[:, 1])
     assert np.all(robot.default_speed > 0) and np.all(robot.default_speed <= 0.5 * robot.max_speed)
     assert np.all(robot.default_acceleration > 0)
-    if name not in UR_NAMES:
+    if name in EXAMPLES:
         assert "example geometry, not a vendor table" in robot.source
 
 
@@ -144,7 +145,7 @@ def test_gantry_strokes_are_orthogonal() -> None:
     np.testing.assert_allclose(robot.limits[:3, 1] - robot.limits[:3, 0], [1.0, 1.0, 0.5])
 
 
-@pytest.mark.parametrize("name", sorted(UR_NAMES + EXAMPLES))
+@pytest.mark.parametrize("name", sorted(UR_NAMES + EXAMPLES + VENDOR))
 def test_home_is_regular_with_the_flange_off_the_axes(name: str) -> None:
     robot = load_robot(name)
     m = robot.nominal
@@ -324,3 +325,26 @@ def test_top_level_must_be_a_mapping(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match="expected a mapping with keys schema, name") as info:
         load_robot(path)
     assert str(info.value).startswith(f"{_shown(path)}: expected")
+
+
+def test_fanuc_model_matches_its_data_sheet_and_couples_j3_to_j2() -> None:
+    """LR Mate 200iD data sheet: J2 330 mm up and 50 mm out, upper arm 330 mm, J3 offset 35 mm, forearm 335 mm,
+    faceplate 80 mm; the controller's J3 is against the horizontal, so q3 = J2 + J3."""
+    robot = load_robot("fanuc_lrmate200id")
+    m = robot.nominal
+    np.testing.assert_allclose([m.d[0], m.a[0], m.a[1], m.a[2], m.d[3], m.d[5]], [0.33, 0.05, 0.33, 0.035, 0.335, 0.08])
+    assert robot.coupling is not None and robot.coupling.coupled_groups() == [[2, 1, 2]]
+    readings = np.array([[0.1, 0.2, 0.3, 0.4, 0.5, 0.6]])
+    np.testing.assert_allclose(robot.coupling.dh_from_readings(readings)[0, 2], 0.5)
+    np.testing.assert_allclose(robot.coupling.readings_from_dh(robot.coupling.dh_from_readings(readings)), readings)
+
+
+def test_ur_dynamics_match_the_published_masses() -> None:
+    """UR 'DH Parameters for calculations of kinematics and dynamics': link masses (kg)."""
+    published = {"ur3e": [1.98, 3.4445, 1.437, 0.871, 0.805, 0.261], "ur5e": [3.761, 8.058, 2.846, 1.37, 1.3, 0.365],
+                 "ur10e": [7.369, 13.051, 3.989, 2.1, 1.98, 0.615]}
+    for name, masses in published.items():
+        links = load_robot(name).links
+        assert links is not None
+        np.testing.assert_array_equal(links.masses, masses)
+        assert links.centres.shape == (6, 3)

@@ -1,0 +1,235 @@
+"""Which joint errors beyond the DH table the data support (DESIGN.md note 8), and their regressors.
+
+Candidates, per joint the data move (:mod:`identify.joint_errors` for the equations): reading scale,
+once-per-turn error (revolute joints; sin and cos together) and, when the robot model gives link masses,
+compliance under gravity (joints whose gravity torque varies). Each acts on the joint value as
+``Δq_i = Σ coefficient · (f(q) - f(home))``; the constant ``f(home)`` is a zero offset the lines absorb.
+
+Forward selection: at each step every remaining candidate is scored by the Lagrange-multiplier (score)
+test at the current fit, ``s = rᵀ G⊥ (G⊥ᵀ G⊥)⁻¹ G⊥ᵀ r / σ²`` with ``G⊥`` the candidate's columns projected
+off the fitted parameters' (chi-square with the candidate's dof when it is absent); the best is refitted
+and kept when its likelihood ratio passes both the information criterion (BIC: ``dof · ln N``) and a
+family-wise 5 % false-selection limit over all candidates (Bonferroni), when its size is physically
+plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error). A kind of error found on one
+joint is then fitted on every joint it can be seen on (it acts on all of them; one below the limit would
+otherwise cost accuracy far from its sweep, unreported). With held-out rows, the
+terms selected are kept only if together they do not make the held-out error grow. Every decision is
+recorded.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from identify.poe import JointTerms, LeastSquares
+
+Array = NDArray[np.float64]
+
+FAMILY_WISE = 0.05  # chance of selecting any term when the data hold none
+MIN_INDEPENDENT = 1e-6  # a candidate whose columns the lines absorb to this fraction is not identifiable
+PLAUSIBLE = {"scale": 1e-2, "eccentricity": 1e-2, "compliance": 1e-3}  # beyond these a term hides another error
+UNITS = {"scale": "1", "ecc_sin": "rad", "ecc_cos": "rad", "compliance": "rad/(N m)"}
+EQUATIONS = {
+    "scale": "dq_i = scale_i * (q_i - home_i)",
+    "eccentricity": "dq_i = ecc_sin_i * (sin q_i - sin home_i) + ecc_cos_i * (cos q_i - cos home_i)",
+    "compliance": "dq_i = compliance_i * (tau_i(q) - tau_i(home)); tau_i: gravity torque about joint i (N m)",
+}
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One joint-error term: ``family`` (scale, eccentricity, compliance) on 0-based ``joint``."""
+
+    family: str
+    joint: int
+
+    @property
+    def names(self) -> list[str]:
+        """Its coefficients' names, e.g. ``ecc_sin_3``, ``ecc_cos_3`` (1-based joints)."""
+        if self.family == "eccentricity":
+            return [f"ecc_sin_{self.joint + 1}", f"ecc_cos_{self.joint + 1}"]
+        return [f"{self.family}_{self.joint + 1}"]
+
+    @property
+    def dof(self) -> int:
+        return 2 if self.family == "eccentricity" else 1
+
+    def columns(self, q: Array, home: Array, torques: Callable[[Array], Array] | None,
+                filled: Array | None = None) -> Array:
+        """Regressors (m, dof) at joint values ``q`` (m, n); NaN (unread) values give 0 (their value is a
+        nuisance parameter). ``filled`` (m, n): ``q`` with the unread values estimated, for the torques."""
+        j = self.joint
+        x, h = q[:, j], home[j]
+        if self.family == "scale":
+            cols = (x - h)[:, None]
+        elif self.family == "eccentricity":
+            cols = np.stack([np.sin(x) - np.sin(h), np.cos(x) - np.cos(h)], axis=1)
+        else:
+            if torques is None:
+                raise ValueError("compliance needs the robot model's link masses")
+            filled = np.where(np.isnan(q), home, q) if filled is None else filled
+            cols = (torques(filled)[:, j] - torques(home[None, :])[0, j])[:, None]
+            cols[np.isnan(x)] = 0.0
+        return np.nan_to_num(cols)
+
+
+@dataclass(frozen=True)
+class TermSet:
+    """Selected terms with what computes their regressors: ``home`` (n,) joint values, ``torques`` the
+    gravity torques (m, n) at joint values (m, n), or None without link masses."""
+
+    candidates: tuple[Candidate, ...]
+    home: Array
+    torques: Callable[[Array], Array] | None
+
+    @property
+    def names(self) -> list[str]:
+        return [name for c in self.candidates for name in c.names]
+
+    @property
+    def joints(self) -> NDArray[np.int64]:
+        return np.array([c.joint for c in self.candidates for _ in range(c.dof)], dtype=np.int64)
+
+    def regressors(self, q: Array, filled: Array | None = None) -> Array:
+        """Regressors (m, T) at joint values ``q`` (m, n) (``filled``: see :meth:`Candidate.columns`)."""
+        if not self.candidates:
+            return np.zeros((len(q), 0))
+        return np.hstack([c.columns(q, self.home, self.torques, filled) for c in self.candidates])
+
+    def terms(self, q: Array, coefs: Array | None = None, filled: Array | None = None) -> JointTerms:
+        """The joint terms at joint values ``q`` (m, n) with ``coefs`` (default zero)."""
+        joints = self.joints
+        return JointTerms(self.regressors(q, filled), joints, np.zeros(len(joints)) if coefs is None else coefs)
+
+    def with_candidate(self, candidate: Candidate) -> TermSet:
+        return TermSet((*self.candidates, candidate), self.home, self.torques)
+
+
+def candidates(joint_types: str, q: Array, torques: Callable[[Array], Array] | None) -> list[Candidate]:
+    """Every term the data could show: joints the data move (their values span more than 1e-6 rad or m)."""
+    out: list[Candidate] = []
+    span = np.nanmax(q, axis=0) - np.nanmin(q, axis=0)
+    tau = None
+    if torques is not None:
+        tau = torques(np.where(np.isnan(q), np.nanmedian(q, axis=0), q))
+    for j, kind in enumerate(joint_types):
+        if not span[j] > 1e-6:
+            continue
+        out.append(Candidate("scale", j))
+        if kind == "R":
+            out.append(Candidate("eccentricity", j))
+    if tau is not None:
+        out += [Candidate("compliance", j) for j in range(len(joint_types)) if np.ptp(tau[:, j]) > 1e-3]
+    return out
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One candidate's fate: the score and likelihood-ratio statistics, the limit it had to pass, the
+    held-out change (ratio of held-out sums of squares, with / without; None without held-out rows)."""
+
+    candidate: Candidate
+    score: float
+    ratio: float | None
+    limit: float
+    heldout: float | None
+    selected: bool
+    reason: str
+
+
+def score_statistics(res_w: Array, jac: Array, columns: Array, groups: list[NDArray[np.int64]], variance: float
+                     ) -> list[float]:
+    """Score statistic of each column group (indices into ``columns``' last axis) at a fit with weighted
+    residuals ``res_w`` (m, 3), Jacobian ``jac`` (m, 3, p) and candidate columns (m, 3, c), both weighted
+    and projected; ``variance`` the noise variance in weighted units. NaN when the lines absorb a group."""
+    q_basis, _ = np.linalg.qr(jac.reshape(-1, jac.shape[2]))
+    r = res_w.reshape(-1)
+    r_perp = r - q_basis @ (q_basis.T @ r)
+    out = []
+    for idx in groups:
+        g = columns[:, :, idx].reshape(-1, len(idx))
+        g_perp = g - q_basis @ (q_basis.T @ g)
+        if np.linalg.norm(g_perp) <= MIN_INDEPENDENT * max(np.linalg.norm(g), 1e-300):
+            out.append(float("nan"))
+            continue
+        coef, *_ = np.linalg.lstsq(g_perp, r_perp, rcond=None)
+        out.append(float(np.sum((g_perp @ coef) ** 2) / variance))
+    return out
+
+
+def limit_for(dof: int, n_candidates: int, n_observations: int) -> float:
+    """The statistic a term of ``dof`` coefficients must exceed: BIC and the family-wise limit."""
+    return max(dof * np.log(max(n_observations, 2)), float(chi2.isf(FAMILY_WISE / max(n_candidates, 1), dof)))
+
+
+Refit = Callable[[TermSet, LeastSquares], LeastSquares]
+Score = Callable[[LeastSquares, TermSet, list[Candidate]], list[float]]
+
+
+def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Refit, score: Score,
+           chi_square: Callable[[LeastSquares], float], heldout: Callable[[LeastSquares, TermSet], float] | None,
+           n_observations: int) -> tuple[TermSet, LeastSquares, list[Decision]]:
+    """Forward selection from ``base`` (the fit without terms) over ``pool``. ``refit(terms, start)`` fits
+    with ``terms``; ``score(fit, terms, remaining)`` the score statistics of the remaining candidates;
+    ``chi_square(fit)`` its sum of squared weighted residuals over the noise variance; ``heldout(fit,
+    terms)`` the held-out sum of squares: the terms are kept only if they do not make it grow (one test of
+    the final set; step by step, the other terms still missing would blur it). Returns the terms kept,
+    their fit and every decision."""
+    chosen, current = empty, base
+    remaining = list(pool)
+    decisions: list[Decision] = []
+    while remaining:
+        scores = score(current, chosen, remaining)
+        score_of = dict(zip(remaining, scores, strict=True))
+        order = [k for k in np.argsort([-s if np.isfinite(s) else np.inf for s in scores])]
+        best = remaining[order[0]]
+        best_score = scores[order[0]]
+        limit = limit_for(best.dof, len(pool), n_observations)
+        if not np.isfinite(best_score) or best_score <= limit:
+            decisions += [Decision(c, s, None, limit_for(c.dof, len(pool), n_observations), None, False,
+                                   "score below the limit" if np.isfinite(s) else "not identifiable beside the lines")
+                          for c, s in zip(remaining, scores, strict=True)]
+            break
+        trial_terms = chosen.with_candidate(best)
+        trial = refit(trial_terms, current)
+        ratio = chi_square(current) - chi_square(trial)
+        remaining.remove(best)
+        if ratio <= limit:
+            decisions.append(Decision(best, best_score, ratio, limit, None, False, "likelihood ratio below the limit"))
+            continue
+        size = float(np.max(np.abs(trial.terms.coefs[-best.dof:])))
+        if size > PLAUSIBLE[best.family]:
+            decisions.append(Decision(best, best_score, ratio, limit, None, False,
+                                      f"implausible size {size:.3g} (> {PLAUSIBLE[best.family]:g}): another error"))
+            continue
+        decisions.append(Decision(best, best_score, ratio, limit, None, True, "selected"))
+        chosen, current = trial_terms, trial
+        # an error of this kind acts on every joint: the others it can be seen on join it (a joint whose term
+        # stayed below the limit is still in error, and predictions far from its sweep would pay for it)
+        members = [c for c in remaining if c.family == best.family and np.isfinite(score_of[c])]
+        if members:
+            grown = chosen
+            for c in members:
+                grown = grown.with_candidate(c)
+            trial = refit(grown, current)
+            sizes = np.abs(trial.terms.coefs[len(chosen.joints):])
+            if np.all(sizes <= PLAUSIBLE[best.family]):
+                for c in members:
+                    remaining.remove(c)
+                    why = f"selected with its family ({best.family} found on joint {best.joint + 1})"
+                    decisions.append(Decision(c, score_of[c], None, limit, None, True, why))
+                chosen, current = grown, trial
+    if heldout is not None and chosen.candidates:
+        before, after = heldout(base, empty), heldout(current, chosen)
+        held = after / before if before > 0 else 1.0
+        kept = held <= 1.0
+        reason = "selected" if kept else f"held-out error grew ({held:.3g}x the sum of squares without the terms)"
+        decisions = [replace(d, heldout=held, selected=kept, reason=reason) if d.selected else d for d in decisions]
+        if not kept:
+            return empty, base, decisions
+    return chosen, current, decisions
