@@ -217,7 +217,7 @@ class Orchestrator:
         if not readings:
             return self._missing(step, q_cmd, t_start, reason, q_act)
         points, used = average_points(readings)
-        several = any(r.tp != 1 for r in readings)
+        several = getattr(self.tracker, "points", 1) > 1 or any(r.tp != 1 for r in readings)
         return StepRecord.from_step(
             step, q_cmd=q_cmd, q_act=q_act, position=points[0].position, sigma=points[0].sigma, samples=sum(used),
             rejected=len(used) - sum(used), status="ok", reason="", t_start=t_start, t_end=self.clock.now(),

@@ -101,5 +101,6 @@ class Tracker(Protocol):
         """``count`` consecutive readings of the TP; raises MeasurementError subclasses, DeviceTimeout,
         ConnectionFailed. A tracker that sees several points returns ``count`` readings of each point in sight
         (each with its ``tp``); a point out of sight has none, and only when no point is in sight does it raise
-        TargetLost."""
+        TargetLost. A tracker that can see several points says how many in an attribute ``points`` (optional:
+        one when absent)."""
         ...

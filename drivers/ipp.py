@@ -159,6 +159,11 @@ class IppTracker:
         self.reconnects = 0
 
     @property
+    def points(self) -> int:
+        """How many tracked points each reading reports (one per tool of ``tools``, else one)."""
+        return max(len(self.tools), 1)
+
+    @property
     def where(self) -> str:
         return f"ipp://{self.host}:{self.port}"
 

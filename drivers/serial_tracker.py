@@ -120,6 +120,11 @@ class SerialTracker:
         self._discard_first = False
         self.resets = 0  # device resets seen (and recovered from)
 
+    @property
+    def points(self) -> int:
+        """How many tracked points each trigger reports (the profile's ``points``)."""
+        return self.profile.points
+
     # --- link -----------------------------------------------------------------------------------------
 
     def connect(self, timeout: float) -> None:

@@ -28,6 +28,11 @@ class SimulatedTracker:
     def __init__(self, rig: SimulatedRig) -> None:
         self.rig = rig
 
+    @property
+    def points(self) -> int:
+        """How many tracked points (reflectors) it can see."""
+        return self.rig.points
+
     def connect(self, timeout: float) -> None:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
