@@ -76,7 +76,7 @@ RING_FREQUENCY = 8.0  # Hz, of the oscillation after a move
 POLL_PERIOD = 0.01  # s between joint readings in wait_until_still
 STILL_TOLERANCE = 1e-6  # rad (m): joints within this of each other count as still
 MOTION_CHUNK = 0.05  # s of motion between checks for stop()
-_EPS = 1e-9  # s: time comparisons on the clock (large epoch values carry rounding errors)
+_EPS = 1e-6  # s: time comparisons on the clock (epoch values near 1.8e9 s are only resolved to 2.4e-7 s)
 # When several faults fall on one move / measurement, the first of these happens (the others are dropped).
 _PRIORITY = ("disconnect", "emergency_stop", "protective_stop", "slow", "unsettled", "target_lost", "bad_reading")
 

@@ -4,6 +4,7 @@ session files, the real ``acquire export`` command, per-point averaging, resume 
 from __future__ import annotations
 
 import sqlite3
+import threading
 from dataclasses import replace
 from itertools import combinations
 from pathlib import Path
@@ -146,3 +147,23 @@ def test_points_options_are_checked() -> None:
     assert rig.points == 3 and np.array_equal(rig.tools[0], rig.truth.tool)
     plain = SimulatedRig.from_spec("mock:ur5e", "mock")
     assert np.array_equal(plain.truth.base, rig.truth.base)  # the reflectors leave the rest of the world alone
+
+
+def test_settling_ends_on_a_clock_of_epoch_size() -> None:
+    """A settle time that is no multiple of the polling period ends (its last sliver of time is below what a clock
+    near 1.8e9 s resolves; it once looped for ever)."""
+    rig = SimulatedRig("ur5e", clock=VirtualClock(1.8e9 + 0.123))
+    arm = SimulatedRobot(rig)
+    arm.connect(1.0)
+    waited: list[float] = []
+
+    def settle_all() -> None:
+        for settle in (0.1, 0.37, 0.5):
+            start = rig.clock.now()
+            arm.wait_until_still(settle, 5.0)
+            waited.append(rig.clock.now() - start)
+
+    worker = threading.Thread(target=settle_all, daemon=True)
+    worker.start()
+    worker.join(10.0)
+    assert len(waited) == 3 and np.allclose(waited, [0.1, 0.37, 0.5], atol=1e-5)
