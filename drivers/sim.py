@@ -64,7 +64,9 @@ from drivers.errors import (
     RobotFault,
     SpecError,
 )
-from drivers.motion import motion_time
+from drivers.motion import joint_durations as _durations
+from drivers.motion import move_duration as move_duration  # re-exported: the simulated robot's timing
+from drivers.motion import profile_fraction as _fraction
 from drivers.sim_tracker import SimulatedTracker as SimulatedTracker  # re-exported: the mock backend's tracker
 from drivers.sim_tracker import open_tracker as open_tracker
 from drivers.sim_world import errors_as_dict, has_errors, joint_errors_for, reflector_tools, true_joints
@@ -79,33 +81,6 @@ MOTION_CHUNK = 0.05  # s of motion between checks for stop()
 _EPS = 1e-6  # s: time comparisons on the clock (epoch values near 1.8e9 s are only resolved to 2.4e-7 s)
 # When several faults fall on one move / measurement, the first of these happens (the others are dropped).
 _PRIORITY = ("disconnect", "emergency_stop", "protective_stop", "slow", "unsettled", "target_lost", "bad_reading")
-
-
-def move_duration(start: Sequence[float], target: Sequence[float], speed: Sequence[float],
-                  acceleration: Sequence[float]) -> float:
-    """Duration (s) of a synchronised joint move: the trapezoidal profile (triangular for short moves) of
-    the slowest joint, accelerating at ``acceleration`` up to ``speed`` and braking at ``acceleration``."""
-    return float(np.max(_durations(start, target, speed, acceleration), initial=0.0))
-
-
-def _durations(start: Sequence[float], target: Sequence[float], speed: Sequence[float],
-               acceleration: Sequence[float]) -> Array:
-    return motion_time(np.asarray(target, dtype=float) - np.asarray(start, dtype=float), speed, acceleration)
-
-
-def _fraction(t: float, duration: float, speed: float, acceleration: float, distance: float) -> float:
-    """Share of the distance covered at time ``t`` of a trapezoidal profile lasting ``duration``."""
-    if duration <= 0 or distance <= 0 or t >= duration:
-        return 1.0
-    ramp = min(speed / acceleration, duration / 2)
-    peak = acceleration * ramp
-    if t < ramp:
-        covered = 0.5 * acceleration * t * t
-    elif t <= duration - ramp:
-        covered = 0.5 * acceleration * ramp * ramp + peak * (t - ramp)
-    else:
-        covered = distance - 0.5 * acceleration * (duration - t) ** 2
-    return min(max(covered / distance, 0.0), 1.0)
 
 
 @dataclass
