@@ -421,7 +421,7 @@ def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clear
 
 
 def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int,
-                 session: Session | None) -> None:
+                 session: Session | None = None) -> None:
     """The plan is checked from home; the arm may stand elsewhere (jogged, or stopped mid-move before a
     resume). UsageError unless the move from where it stands to step ``index`` is clear too. The robot's
     readings give DH values through the session's coupling (a new session: the model's)."""
@@ -460,7 +460,7 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
     robot = open_robot(robot_spec, rig=rig, site=site)
     robot.connect(site.timeouts.connect)
     try:
-        _check_start(robot, plan, load_robot(robot_spec.model), site, 0, None)
+        _check_start(robot, plan, load_robot(robot_spec.model), site, 0)
     except UsageError:
         robot.close()
         raise

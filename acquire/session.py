@@ -374,7 +374,7 @@ class Session:
             sigma = None if reading.sigma is None else float(reading.sigma)
             readings.append((i, *map(float, p), sigma, float(reading.timestamp), reading.status, int(used),
                              int(reading.tp)))
-        if record.points and int(self._header.get("schema", SCHEMA_VERSION)) < NEWEST_SCHEMA:
+        if record.points and self._db.execute("PRAGMA user_version").fetchone()[0] < NEWEST_SCHEMA:
             self._mark_newest()
         self._db.execute(
             "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
@@ -390,11 +390,11 @@ class Session:
                              [(i, p.tp, *p.position, p.sigma, p.samples, p.rejected) for p in record.points])
 
     def _mark_newest(self) -> None:
-        """Mark the file schema 2 (inside the caller's transaction): its steps now see several tracked points, which
-        a reader of schema 1 would misread."""
+        """Mark the file schema 2 (inside the caller's transaction, so a rollback undoes it too): its steps now see
+        several tracked points, which a reader of schema 1 would misread. The header read at open says so from the
+        next open on."""
         self._db.execute(f"PRAGMA user_version = {NEWEST_SCHEMA}")
         self._db.execute("UPDATE meta SET value = ? WHERE key = 'schema'", (json.dumps(NEWEST_SCHEMA),))
-        self._header["schema"] = NEWEST_SCHEMA
 
     def retake_step(self, record: StepRecord) -> None:
         """Store a new attempt of a step recorded as missing, keeping the earlier attempt: in one transaction the
