@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import yaml
 import pytest
 
 from acquire.cli import main
@@ -117,8 +118,10 @@ def test_acquire_runs_the_issue_mock_spec_end_to_end(tmp_path: Path, capsys: pyt
     path, csv = tmp_path / "m.session", tmp_path / "m.csv"
     code = main(["--robot", "mock:ur10e?compliance=1e-6&points=3", "--tracker", "mock", "--session", str(path),
                  "--steps", "8", "--samples", "2", "--free-poses", "4", "--quiet"])
-    assert code in (0, 3)  # the session is complete; 3: its identification fails its verdict
-    assert path.with_suffix(".result.yaml").exists()
+    assert code == 0  # complete, and its identification passes its verdict
+    doc = yaml.safe_load(path.with_suffix(".result.yaml").read_text())
+    assert set(doc["tools"]) == {1, 2, 3}
+    assert {"compliance_2", "compliance_3"} <= {t["name"] for t in doc["extensions"]["terms"]}
     assert main(["export", str(path), "--csv", str(csv)]) == 0
     assert read_measurements(csv).measurements.tp_ids == [1, 2, 3]
     capsys.readouterr()
