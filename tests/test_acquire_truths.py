@@ -9,8 +9,8 @@ import math
 from pathlib import Path
 
 import numpy as np
-import yaml
 import pytest
+import yaml
 
 from acquire.cli import main
 from acquire.session import Session
