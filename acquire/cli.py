@@ -184,59 +184,6 @@ def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bo
     return robot, tracker, clock
 
 
-def probe(args: argparse.Namespace) -> int:
-    """The operator's first check on site: open the tracker, take readings, show them and their spread.
-
-    Exit 0 when every reading worked, 1 when any failed (each failure is one line), 2 for bad input."""
-    import numpy as np
-
-    from drivers.errors import DeviceTimeout, MeasurementError
-
-    if args.count < 1:
-        raise UsageError(f"--count must be at least 1, got {args.count}")
-    site = _site(args)
-    tracker_spec = TrackerSpec.parse(args.tracker or "mock")
-    rig = None
-    if tracker_spec.backend == "mock" or str(tracker_spec).startswith("aruco:sim"):  # a simulated tracker
-        # looks at a simulated robot standing at home
-        from drivers.sim import SimulatedRig
-
-        robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
-        robot_spec = robot_spec if robot_spec.backend == "mock" else RobotSpec.parse(f"mock:{robot_spec.model}")
-        rig = SimulatedRig.from_spec(robot_spec, tracker_spec, VirtualClock())
-    tracker = _open_tracker(tracker_spec, rig, site, args.trace_io)
-    tracker.connect(site.timeouts.connect)
-    points, failed = [], 0
-    try:
-        identity = tracker.identity()
-        if not args.json:
-            print(f"tracker: {identity.model}" + (f", serial {identity.serial}" if identity.serial else ""))
-        for k in range(1, args.count + 1):
-            try:
-                reading = tracker.measure(1, site.timeouts.measure)[0]
-            except (MeasurementError, DeviceTimeout) as exc:
-                failed += 1
-                print(f"reading {k}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
-                continue
-            p = np.asarray(reading.position, dtype=float)
-            points.append(p)
-            if args.json:
-                print(json.dumps({"x": p[0], "y": p[1], "z": p[2], "timestamp": reading.timestamp,
-                                  "sigma": reading.sigma, "status": reading.status}))
-            else:
-                print(f"reading {k}: x {p[0] * 1e3:.4f}  y {p[1] * 1e3:.4f}  z {p[2] * 1e3:.4f} mm  "
-                      f"({reading.status})")
-    finally:
-        tracker.close()
-    if points and not args.json:
-        pts = np.array(points)
-        spread = np.std(pts, axis=0, ddof=1) if len(pts) > 1 else np.zeros(3)
-        worst = np.linalg.norm(pts - pts.mean(axis=0), axis=1).max()
-        print(f"{len(pts)} of {args.count} readings; spread (std) x {spread[0] * 1e3:.4f}, y {spread[1] * 1e3:.4f}, "
-              f"z {spread[2] * 1e3:.4f} mm; largest distance from the mean {worst * 1e3:.4f} mm")
-    return 1 if failed else 0
-
-
 def _progress_printer(quiet: bool):
     """Progress to the log always, and to the terminal unless ``quiet``."""
     tty = sys.stderr.isatty()
@@ -310,6 +257,8 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
 
 def run(args: argparse.Namespace) -> int:
     if args.probe:
+        from acquire.probe import probe
+
         return probe(args)
     _check_files(args)
     if args.log:  # our own handler: basicConfig would do nothing where logging is already configured
@@ -404,11 +353,11 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     try:
         first = 0 if session is None else session.next_index()
         if first is not None:
-            _check_start(robot, plan, robot_model, site, first)
+            _check_start(robot, plan, robot_model, site, first, session)
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv)}
-            session = Session.create(path, plan, config, robot.identity(), tracker.identity())
+            session = Session.create(path, plan, config, robot.identity(), tracker.identity(), robot_model.coupling)
         elif changes:
             session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))
         print(f"session: {path}")
@@ -474,9 +423,11 @@ def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clear
             f"{clearance.guard * 1e3:g} mm for the motion between samples)"]
 
 
-def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int) -> None:
+def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int,
+                 session: Session | None = None) -> None:
     """The plan is checked from home; the arm may stand elsewhere (jogged, or stopped mid-move before a
-    resume). UsageError unless the move from where it stands to step ``index`` is clear too."""
+    resume). UsageError unless the move from where it stands to step ``index`` is clear too. The robot's
+    readings give DH values through the session's coupling (a new session: the model's)."""
     import numpy as np
 
     from acquire.cell import cell_from_config, first_contact
@@ -485,6 +436,9 @@ def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, i
     if cell is None or not plan.steps:
         return
     here = np.asarray(robot.read_joints(), dtype=float)
+    coupling = robot_model.coupling if session is None else session.coupling
+    if coupling is not None:
+        here = coupling.dh_from_readings(here[None, :])[0]
     contact = first_contact(cell, here, np.asarray(plan.steps[index].q))
     if contact is not None:
         home = ", ".join(f"{np.degrees(v):.1f}" if t == "R" else f"{v:.3f}"
@@ -523,7 +477,7 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
     stop = StopRequest()
     try:
         with stop.installed():
-            result = rehearse(robot, plan, site.timeouts.move, stop, show)
+            result = rehearse(robot, plan, site.timeouts.move, stop, show, load_robot(robot_spec.model).coupling)
     finally:
         robot.close()
     log.info("rehearsal %s%s; %d of %d steps reached", result.outcome, f" ({result.reason})" if result.reason else "",

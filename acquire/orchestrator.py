@@ -6,6 +6,11 @@ committed to the session before the next move. Tracker failures are retried a bo
 of times, then the step is recorded as missing and the run goes on; robot faults and lost connections
 stop the motion, end the run as failed and return (the session says how to resume); Ctrl-C stops the
 motion at once and ends the run as aborted. Every device call has a timeout.
+
+The plan is in DH joint values; a robot whose controller reports coupled readings (the session's ``coupling``,
+e.g. FANUC J2/J3) is commanded the readings that give them, and its readings are recorded as they come. A
+tracker that sees several points gives readings of each (``tp``): each point is averaged on its own, and a
+step is recorded when at least one point was seen.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acquire.plan import Plan, Step
-from acquire.records import StepRecord
+from acquire.records import PointRecord, StepRecord
 from acquire.session import Session
 from drivers.averaging import robust_mean
 from drivers.base import Robot, RobotState, Tracker, TrackerReading
@@ -80,6 +85,20 @@ def average_readings(readings: list[TrackerReading]) -> tuple[Array, float | Non
     return mean, (spread_sigma if used.sum() >= 3 else None), used
 
 
+def average_points(readings: list[TrackerReading]) -> tuple[list[PointRecord], list[bool]]:
+    """Each tracked point's readings averaged apart (:func:`average_readings`): the points in ascending id, and
+    the kept flag of every reading (parallel to ``readings``)."""
+    used = [False] * len(readings)
+    points = []
+    for tp in sorted({r.tp for r in readings}):
+        mine = [k for k, r in enumerate(readings) if r.tp == tp]
+        mean, sigma, kept = average_readings([readings[k] for k in mine])
+        for k, keep in zip(mine, kept, strict=True):
+            used[k] = bool(keep)
+        points.append(PointRecord(tp, tuple(float(v) for v in mean), sigma, int(kept.sum()), int((~kept).sum())))
+    return points, used
+
+
 class StopRequest:
     """Set by Ctrl-C (first press); the loop checks it between phases. A second press raises at once."""
 
@@ -126,6 +145,7 @@ class Orchestrator:
         self.on_progress = on_progress
         self.stop = stop or StopRequest()
         self.plan: Plan = session.plan
+        self.coupling = session.coupling
 
     def run(self) -> RunResult:
         """Record every remaining step of the plan, then measure once more each step recorded as missing (this
@@ -187,24 +207,34 @@ class Orchestrator:
         state = self.robot.state()
         if state is not RobotState.READY:
             raise RobotFault(f"robot is not ready ({state.value}) before step {step.index}")
-        self.robot.move_joints(step.q, self.plan.speed, self.plan.acceleration, self.timeouts.move)
+        q_cmd = self._command(step)
+        self.robot.move_joints(q_cmd, self.plan.speed, self.plan.acceleration, self.timeouts.move)
         if self.stop.requested:
-            return self._missing(step, t_start, "stopped by the operator")
+            return self._missing(step, q_cmd, t_start, "stopped by the operator")
         self.robot.wait_until_still(self.plan.settle_time, self.timeouts.settle)
         q_act = tuple(float(v) for v in self.robot.read_joints())
         readings, reason = self._measure(step)
         if not readings:
-            return self._missing(step, t_start, reason, q_act)
-        position, sigma, used = average_readings(readings)
+            return self._missing(step, q_cmd, t_start, reason, q_act)
+        points, used = average_points(readings)
+        several = getattr(self.tracker, "points", 1) > 1 or any(r.tp != 1 for r in readings)
         return StepRecord.from_step(
-            step, q_act=q_act, position=tuple(float(v) for v in position), sigma=sigma, samples=int(used.sum()),
-            rejected=int((~used).sum()), status="ok", reason="", t_start=t_start, t_end=self.clock.now(),
-            readings=readings, used=[bool(u) for u in used],
+            step, q_cmd=q_cmd, q_act=q_act, position=points[0].position, sigma=points[0].sigma, samples=sum(used),
+            rejected=len(used) - sum(used), status="ok", reason="", t_start=t_start, t_end=self.clock.now(),
+            readings=readings, used=used, points=tuple(points) if several else (),
         )
 
-    def _missing(self, step: Step, t_start: float, reason: str, q_act: tuple[float, ...] | None = None) -> StepRecord:
-        return StepRecord.from_step(step, q_act=q_act, position=None, sigma=None, samples=0, rejected=0,
-                                    status="missing", reason=reason, t_start=t_start, t_end=self.clock.now())
+    def _command(self, step: Step) -> tuple[float, ...]:
+        """The joint readings to command for ``step`` (its DH values through the coupling, if any)."""
+        if self.coupling is None:
+            return step.q
+        return tuple(float(v) for v in self.coupling.readings_from_dh(np.array([step.q]))[0])
+
+    def _missing(self, step: Step, q_cmd: tuple[float, ...], t_start: float, reason: str,
+                 q_act: tuple[float, ...] | None = None) -> StepRecord:
+        return StepRecord.from_step(step, q_cmd=q_cmd, q_act=q_act, position=None, sigma=None, samples=0,
+                                    rejected=0, status="missing", reason=reason, t_start=t_start,
+                                    t_end=self.clock.now())
 
     def _measure(self, step: Step) -> tuple[list[TrackerReading], str]:
         """Readings of the step, retried up to ``retries`` times on measurement errors and timeouts."""
@@ -224,9 +254,10 @@ class Orchestrator:
         elapsed = self.clock.now() - started
         remaining = elapsed / count * (total - count)
         residual = None
-        if record.position is not None and step.kind == "sweep" and self.plan.joint_types[step.joint - 1] == "R":
+        first = record.positions().get(1)  # the same point all along the sweep
+        if first is not None and step.kind == "sweep" and self.plan.joint_types[step.joint - 1] == "R":
             pts = sweep_points.setdefault(step.sweep, [])
-            pts.append(np.array(record.position))
+            pts.append(np.array(first[0]))
             if len(pts) >= 5:
                 residual = _circle_residual(np.array(pts))
         return Progress(step, count, total, elapsed, remaining, record.samples, record.status, residual)

@@ -201,6 +201,9 @@ def build_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
                         f"{j + 1} at home (< {minimum} m): mount the target off the axis and set plan.tp_guess")
     notes = [f"TP guess {list(site.tp_guess)} m in the flange frame, kept >= {minimum * 1e3:g} mm off every "
              "revolute axis"]
+    if robot.coupling is not None and not robot.coupling.is_identity:
+        notes.append("joint values here are DH values; the controller reports coupled readings (coupling in "
+                     f"{robot.path.name}): each step is commanded, and recorded, as the readings that give them")
 
     cell = cell_from_config(robot, site)
     if cell is None:

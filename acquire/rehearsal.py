@@ -11,17 +11,21 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
+
 from acquire.orchestrator import RunResult, StopRequest
 from acquire.plan import Plan, Step
 from drivers.base import Robot, RobotState
 from drivers.errors import ConnectionFailed, DeviceTimeout, RobotFault
+from identify.joint_errors import Coupling
 
 
 def rehearse(robot: Robot, plan: Plan, move_timeout: float, stop: StopRequest,
-             on_step: Callable[[Step, int, int], None] | None = None) -> RunResult:
+             on_step: Callable[[Step, int, int], None] | None = None, coupling: Coupling | None = None) -> RunResult:
     """Move ``robot`` through every step of ``plan`` in order at the plan's speeds; ``move_timeout`` s per move.
 
-    ``on_step(step, done, total)`` after each move. Returns how the run ended (``recorded`` counts the steps
+    ``on_step(step, done, total)`` after each move; ``coupling``: the robot's (its controller is commanded the
+    readings that give each step's DH values). Returns how the run ended (``recorded`` counts the steps
     reached; ``missing`` is 0: nothing is measured)."""
     stop.on_request = robot.stop
     reached = 0
@@ -33,7 +37,8 @@ def rehearse(robot: Robot, plan: Plan, move_timeout: float, stop: StopRequest,
             state = robot.state()
             if state is not RobotState.READY:
                 raise RobotFault(f"robot is not ready ({state.value}) before step {step.index}")
-            robot.move_joints(step.q, plan.speed, plan.acceleration, move_timeout)
+            q = step.q if coupling is None else coupling.readings_from_dh(np.array([step.q]))[0]
+            robot.move_joints(q, plan.speed, plan.acceleration, move_timeout)
             if stop.requested:
                 return RunResult(aborted.outcome, aborted.reason, reached, 0)
             reached += 1

@@ -30,7 +30,7 @@ import socket
 import sqlite3
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -40,7 +40,7 @@ import numpy as np
 from acquire.plan import Plan
 from acquire.records import StepRecord
 from acquire.session_file import (  # the errors and SCHEMA_VERSION are part of this module's interface too
-    EXTRA_SCHEMA,
+    NEWEST_SCHEMA,
     SCHEMA,
     SCHEMA_VERSION,
     STEP_COLUMNS,
@@ -50,15 +50,16 @@ from acquire.session_file import (  # the errors and SCHEMA_VERSION are part of 
     configure,
     dump_q,
     fsync_path,
-    load_q,
-    nan_of,
+    migrate,
     newer,
 )
 from acquire.session_lock import Locked, busy_message, write_lock
 from acquire.session_lock import unlock as _unlock
-from drivers.base import DeviceIdentity, TrackerReading
+from acquire.session_rows import coupling_of, drift_from, measurements_from, point_rows, reading_rows, step_rows
+from drivers.base import DeviceIdentity
 from identify import __version__
 from identify.csvio import format_measurements
+from identify.joint_errors import Coupling
 from identify.measurements import Measurements
 from identify.outputs import OutputError, check_target, commit_file, same_file, write_output
 
@@ -93,9 +94,10 @@ class Session:
 
     @classmethod
     def create(cls, path: str | Path, plan: Plan, config: dict[str, Any], robot: DeviceIdentity,
-               tracker: DeviceIdentity) -> Session:
+               tracker: DeviceIdentity, coupling: Coupling | None = None) -> Session:
         """A new session file at ``path`` with its header, open for writing (locked); refuses to overwrite
-        anything and to create folders (SessionError).
+        anything and to create folders (SessionError). ``coupling``: how the robot's readings give its DH joint
+        values (the robot model's; None or the identity: they are the DH values); a coupled session is schema 2.
 
         The file appears complete or not at all: it is written under a temporary name, then linked into place.
         """
@@ -107,8 +109,12 @@ class Session:
                                                 "overwritten (choose another name)")) from None
         if any(step.index != i for i, step in enumerate(plan.steps)):
             raise SessionError(f"{path}: plan step indices must be 0..{len(plan.steps) - 1} in order")
-        header = {"schema": SCHEMA_VERSION, "created": time.time(), "software": __version__, "config": config,
-                  "robot": robot.as_dict(), "tracker": tracker.as_dict()}
+        coupled = coupling is not None and not coupling.is_identity
+        header = {"schema": NEWEST_SCHEMA if coupled else SCHEMA_VERSION, "created": time.time(),
+                  "software": __version__, "config": config, "robot": robot.as_dict(), "tracker": tracker.as_dict()}
+        if coupled:
+            assert coupling is not None
+            header["coupling"] = coupling.as_dict()
         try:
             rows = [(key, json.dumps(value, allow_nan=False)) for key, value in header.items()]
         except (TypeError, ValueError) as exc:
@@ -122,11 +128,12 @@ class Session:
             try:
                 configure(conn)
                 conn.execute("BEGIN IMMEDIATE")
-                for statement in (SCHEMA + EXTRA_SCHEMA).split(";"):
+                for statement in SCHEMA.split(";"):
                     if statement.strip():
                         conn.execute(statement)
+                migrate(conn)
                 conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", rows)
-                conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+                conn.execute(f"PRAGMA user_version = {header['schema']}")
                 conn.execute("COMMIT")
             finally:
                 conn.close()
@@ -172,7 +179,7 @@ class Session:
             raise SessionError(f"{path}: cannot be opened ({exc})") from None
         try:
             version = conn.execute("PRAGMA user_version").fetchone()[0]
-            if version > SCHEMA_VERSION:
+            if version > NEWEST_SCHEMA:
                 raise newer(path, version)
             if conn.execute("PRAGMA quick_check").fetchone()[0] != "ok":
                 raise not_session
@@ -181,15 +188,14 @@ class Session:
                 raise not_session
             meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
             header = {key: json.loads(value) for key, value in meta.items()}
-            if int(header.get("schema", 0)) > SCHEMA_VERSION:
+            if int(header.get("schema", 0)) > NEWEST_SCHEMA:
                 raise newer(path, int(header["schema"]))
             plan = Plan.from_json(meta["plan"])
+            coupling_of(header)  # a coupling that cannot be read is not a session
             if lock_fd is not None:
                 configure(conn)
                 conn.execute("BEGIN IMMEDIATE")
-                for statement in EXTRA_SCHEMA.split(";"):
-                    if statement.strip():
-                        conn.execute(statement)
+                migrate(conn)
                 conn.execute("INSERT OR REPLACE INTO writer (id, pid, host, since, command) VALUES (1, ?, ?, ?, ?)",
                              (os.getpid(), socket.gethostname(), time.time(), " ".join(sys.argv)[:500]))
                 conn.execute("COMMIT")
@@ -254,8 +260,14 @@ class Session:
 
     @property
     def header(self) -> dict[str, Any]:
-        """schema, created (s), software, config, robot, tracker (dicts), plan (as a dict)."""
+        """schema, created (s), software, config, robot, tracker (dicts), plan (as a dict); coupling when the
+        robot's readings are coupled."""
         return json.loads(json.dumps(self._header))
+
+    @property
+    def coupling(self) -> Coupling | None:
+        """How the recorded joint readings give the DH joint values (None: they are the DH values)."""
+        return coupling_of(self._header)
 
     # --- runs and events ------------------------------------------------------------------------------------
 
@@ -360,7 +372,10 @@ class Session:
             if p.shape != (3,):
                 raise SessionError(f"{self.path}: step {i}: a reading's position has {p.size} values, not 3")
             sigma = None if reading.sigma is None else float(reading.sigma)
-            readings.append((i, *map(float, p), sigma, float(reading.timestamp), reading.status, int(used)))
+            readings.append((i, *map(float, p), sigma, float(reading.timestamp), reading.status, int(used),
+                             int(reading.tp)))
+        if record.points and self._db.execute("PRAGMA user_version").fetchone()[0] < NEWEST_SCHEMA:
+            self._mark_newest()
         self._db.execute(
             "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
             " rejected, status, reason, t_start, t_end, run_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,"
@@ -368,8 +383,18 @@ class Session:
             (i, record.kind, record.sweep, record.joint, record.role, dump_q(record.q_cmd),
              dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
              record.reason, record.t_start, record.t_end, self._run_id))
-        self._db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used)"
-                             " VALUES (?, ?, ?, ?, ?, ?, ?, ?)", readings)
+        self._db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used, tp)"
+                             " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", readings)
+        self._db.executemany("INSERT INTO step_points (plan_index, tp, x, y, z, sigma, samples, rejected)"
+                             " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                             [(i, p.tp, *p.position, p.sigma, p.samples, p.rejected) for p in record.points])
+
+    def _mark_newest(self) -> None:
+        """Mark the file schema 2 (inside the caller's transaction, so a rollback undoes it too): its steps now see
+        several tracked points, which a reader of schema 1 would misread. The header read at open says so from the
+        next open on."""
+        self._db.execute(f"PRAGMA user_version = {NEWEST_SCHEMA}")
+        self._db.execute("UPDATE meta SET value = ? WHERE key = 'schema'", (json.dumps(NEWEST_SCHEMA),))
 
     def retake_step(self, record: StepRecord) -> None:
         """Store a new attempt of a step recorded as missing, keeping the earlier attempt: in one transaction the
@@ -386,8 +411,8 @@ class Session:
                                            (i,)).fetchone()[0]
             self._db.execute(f"INSERT INTO retired_steps (attempt, run_id, {columns}) SELECT ?, run_id, {columns}"
                              " FROM steps WHERE plan_index = ?", (attempt, i))
-            self._db.execute("INSERT INTO retired_readings (plan_index, attempt, x, y, z, sigma, t, status, used)"
-                             " SELECT plan_index, ?, x, y, z, sigma, t, status, used FROM readings"
+            self._db.execute("INSERT INTO retired_readings (plan_index, attempt, x, y, z, sigma, t, status, used, tp)"
+                             " SELECT plan_index, ?, x, y, z, sigma, t, status, used, tp FROM readings"
                              " WHERE plan_index = ? ORDER BY id", (attempt, i))
             self._db.execute("DELETE FROM readings WHERE plan_index = ?", (i,))
             self._db.execute("DELETE FROM steps WHERE plan_index = ?", (i,))
@@ -417,53 +442,31 @@ class Session:
         return next((i for i in range(len(self._plan.steps)) if i not in done), None)
 
     def steps(self) -> list[StepRecord]:
-        """Every recorded step in plan order, with its raw readings."""
-        by_step: dict[int, list[tuple[Any, ...]]] = {}
-        for row in self._db.execute("SELECT plan_index, x, y, z, sigma, t, status, used FROM readings ORDER BY id"):
-            by_step.setdefault(row[0], []).append(row[1:])
+        """Every recorded step in plan order, with its raw readings and, when it saw several tracked points,
+        their averages."""
+        by_step, points = reading_rows(self._db), point_rows(self._db)
         out = []
-        for row in self._step_rows():
+        for row in step_rows(self._db):
             raw = by_step.get(row["plan_index"], [])
-            readings = tuple(TrackerReading(np.array([nan_of(x), nan_of(y), nan_of(z)]), nan_of(t), sigma, status)
-                             for x, y, z, sigma, t, status, _ in raw)
             try:
-                out.append(StepRecord(**row, readings=readings, used=tuple(bool(r[-1]) for r in raw)))
+                out.append(StepRecord(**row, readings=tuple(r for r, _ in raw), used=tuple(u for _, u in raw),
+                                      points=tuple(points.get(row["plan_index"], ()))))
             except ValueError as exc:
                 raise SessionError(f"{self.path}: inconsistent record ({exc})") from None
-        return out
-
-    def _step_rows(self, where: str = "") -> list[dict[str, Any]]:
-        """Step columns (no readings) as StepRecord keyword arguments, in plan order."""
-        cur = self._db.execute(f"SELECT {', '.join(STEP_COLUMNS)} FROM steps {where} ORDER BY plan_index")
-        out = []
-        for values in cur:
-            row = dict(zip(STEP_COLUMNS, values, strict=True))
-            x, y, z = row.pop("x"), row.pop("y"), row.pop("z")
-            row.update(q_cmd=load_q(row["q_cmd"]), q_act=load_q(row["q_act"]),
-                       position=None if x is None else (x, y, z))
-            out.append(row)
         return out
 
     # --- export ---------------------------------------------------------------------------------------------
 
     def to_measurements(self) -> Measurements:
-        """The ok steps as measurement-CSV rows, in plan order: q = ACTUAL joints, points = averaged TP.
+        """The ok steps as measurement-CSV rows, in plan order: q = ACTUAL joint readings, points = averaged TP,
+        one row per tracked point seen (``tp``: its id), ``coupling`` as the header records it.
 
         Sweeps and free poses keep the plan's sweep id, joint and role. Home re-measurements become free poses
         (joint 0) with role "check": held out, they validate the model at home and never bias the fit. Missing
-        steps are skipped. ``sigma`` is given only when every exported step has one.
+        steps are skipped. ``sigma`` is given only when every exported row has one.
         """
-        rows = self._step_rows("WHERE status = 'ok'")
-        n = len(self._plan.joint_types)
-        q = np.array([r["q_act"] for r in rows], dtype=float).reshape(len(rows), n)
-        points = np.array([r["position"] for r in rows], dtype=float).reshape(len(rows), 3)
-        home = np.array([r["kind"] == "home" for r in rows], dtype=bool)
-        joint = np.where(home, 0, np.array([r["joint"] for r in rows], dtype=np.int64)).astype(np.int64)
-        sweep = np.array([r["sweep"] for r in rows], dtype=np.int64)
-        check = home | np.array([r["role"] == "check" for r in rows], dtype=bool)
-        sigmas = [r["sigma"] for r in rows]
-        sigma = np.array(sigmas, dtype=float) if rows and None not in sigmas else None
-        return Measurements(self._plan.joint_types, q, points, sweep, joint, sigma, check, has_role=True)
+        return measurements_from(step_rows(self._db, "WHERE status = 'ok'"), point_rows(self._db),
+                                 self._plan.joint_types, self.coupling)
 
     def export_csv(self, path: str | Path, force: bool = False) -> int:
         """Write :meth:`to_measurements` as the measurement CSV (with session, robot and tracker metadata lines);
@@ -473,6 +476,9 @@ class Session:
         if same_file(path, self.path):
             raise OutputError(f"--csv {path} is the session {self.path}; an input is never overwritten")
         meas = self.to_measurements()
+        if meas.coupling is not None and np.any(meas.coupling.offset):  # the CSV's coupling has no offset
+            shift = np.linalg.solve(meas.coupling.matrix, meas.coupling.offset)
+            meas = replace(meas, q=meas.q + shift, coupling=Coupling(meas.coupling.matrix, np.zeros(len(shift))))
         metadata = {"session": str(self.path), "robot": _identity_line(self._header.get("robot", {})),
                     "tracker": _identity_line(self._header.get("tracker", {})),
                     "software": str(self._header.get("software", "")), "exported by": f"dh-calib {__version__}"}
@@ -489,12 +495,9 @@ class Session:
 
     def drift(self) -> list[tuple[float, float]]:
         """Home re-measurements as (t, displacement) relative to the first ok one: t = the step's end time (s),
-        displacement = distance of its averaged TP from the first's (m)."""
-        homes = self._step_rows("WHERE kind = 'home' AND status = 'ok'")
-        if not homes:
-            return []
-        first = np.array(homes[0]["position"])
-        return [(r["t_end"], float(np.linalg.norm(np.array(r["position"]) - first))) for r in homes]
+        displacement = distance of its averaged TP from the first's (m; with several tracked points the mean over
+        the points, each from where it was first seen at home)."""
+        return drift_from(step_rows(self._db, "WHERE kind = 'home' AND status = 'ok'"), point_rows(self._db))
 
     # --- internals ------------------------------------------------------------------------------------------
 
@@ -521,10 +524,6 @@ class Session:
             raise SessionError(f"{self.path}: cannot {what} ({exc})") from None
 
 
-
-
-
-
 def _lock(path: Path, shown: Path) -> int:
     """The write lock of ``path`` (:func:`acquire.session_lock.write_lock`), errors as SessionError."""
     try:
@@ -533,16 +532,6 @@ def _lock(path: Path, shown: Path) -> int:
         raise SessionBusy(busy_message(shown, exc.holder)) from None
     except OSError as exc:
         raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None
-
-
-
-
-
-
-
-
-
-
 
 
 def factory_calibration(header: dict[str, Any]) -> tuple[dict[str, Any] | None, str]:

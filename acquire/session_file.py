@@ -13,15 +13,25 @@ The file (stdlib ``sqlite3``, rollback journal ``DELETE``, ``synchronous=EXTRA``
 - ``steps(plan_index PRIMARY KEY, ...)``: one row per plan step, commanded and actual joints, averaged TP,
   its per-axis sigma, sample counts, status (``ok``/``missing``), reason, timestamps and run id. The
   primary key makes recording a step twice impossible.
-- ``readings(id, plan_index, x, y, z, sigma, t, status, used)``: every raw tracker reading of a step and
-  whether it was kept after outlier rejection. SQLite stores NaN as NULL; NULL coordinates read back NaN.
+- ``readings(id, plan_index, x, y, z, sigma, t, status, used, tp)``: every raw tracker reading of a step and
+  whether it was kept after outlier rejection; ``tp`` the id of the tracked point it sees (1 when the tracker
+  sees one). SQLite stores NaN as NULL; NULL coordinates read back NaN.
+- ``step_points(plan_index, tp, x, y, z, sigma, samples, rejected)``: with a tracker that sees several points,
+  the average of every point seen at an ok step (``steps`` then holds the smallest id's); no rows otherwise.
 - ``events(id, t, run_id, kind, message)``: pauses, faults, retries, resumes, changed connection details.
 - ``retired_steps`` / ``retired_readings``: earlier attempts of steps measured again (``attempt`` 1, 2...),
   with the columns of ``steps`` / ``readings``; ``steps`` always holds the latest attempt.
 - ``writer(pid, host, since, command)``: the process that last opened the file for writing (for messages).
-  The last three tables are created by the first writer that needs them; files without them are schema 1 too.
+  The last three tables, ``step_points`` and the ``tp`` columns are created by the first writer that needs
+  them (:func:`migrate`); files without them are schema 1 too, and read as if every reading saw tracked point 1.
 
 Tables and columns are added, never changed, so that every reader of schema 1 reads every file of schema 1.
+**Schema 2** (:data:`NEWEST_SCHEMA`) has the same tables; it marks a file that a reader of schema 1 would
+misread: one whose steps saw several tracked points (``step_points`` rows), or whose joint readings are a
+coupled controller's (header key ``coupling``: ``{matrix, offset, equation}``, DH joint values = matrix ·
+readings + offset; ``q_cmd`` and ``q_act`` hold the controller's readings). Only such files are written as
+schema 2 (a session becomes one in the transaction of its first step with several points); every other file
+stays schema 1, readable by older versions.
 """
 
 from __future__ import annotations
@@ -33,7 +43,8 @@ import sqlite3
 from collections.abc import Sequence
 from pathlib import Path
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 1  # a plain session's
+NEWEST_SCHEMA = 2  # several tracked points or coupled readings; the newest this version reads
 MAGIC = b"SQLite format 3\x00"
 STEP_COLUMNS = ("plan_index", "kind", "sweep", "joint", "role", "q_cmd", "q_act", "x", "y", "z", "sigma", "samples",
                  "rejected", "status", "reason", "t_start", "t_end")
@@ -52,7 +63,8 @@ CREATE TABLE steps (
     t_start REAL NOT NULL, t_end REAL NOT NULL, run_id INTEGER NOT NULL REFERENCES runs (id));
 CREATE TABLE readings (
     id INTEGER PRIMARY KEY, plan_index INTEGER NOT NULL REFERENCES steps (plan_index),
-    x REAL, y REAL, z REAL, sigma REAL, t REAL, status TEXT NOT NULL, used INTEGER NOT NULL CHECK (used IN (0, 1)));
+    x REAL, y REAL, z REAL, sigma REAL, t REAL, status TEXT NOT NULL, used INTEGER NOT NULL CHECK (used IN (0, 1)),
+    tp INTEGER NOT NULL DEFAULT 1);
 CREATE INDEX readings_by_step ON readings (plan_index);
 CREATE TABLE events (
     id INTEGER PRIMARY KEY, t REAL NOT NULL, run_id INTEGER REFERENCES runs (id), kind TEXT NOT NULL,
@@ -68,6 +80,10 @@ CREATE TABLE IF NOT EXISTS retired_steps (
 CREATE TABLE IF NOT EXISTS retired_readings (
     id INTEGER PRIMARY KEY, plan_index INTEGER NOT NULL, attempt INTEGER NOT NULL, x REAL, y REAL, z REAL,
     sigma REAL, t REAL, status TEXT NOT NULL, used INTEGER NOT NULL);
+CREATE TABLE IF NOT EXISTS step_points (
+    plan_index INTEGER NOT NULL REFERENCES steps (plan_index), tp INTEGER NOT NULL, x REAL NOT NULL,
+    y REAL NOT NULL, z REAL NOT NULL, sigma REAL, samples INTEGER NOT NULL, rejected INTEGER NOT NULL,
+    PRIMARY KEY (plan_index, tp));
 CREATE TABLE IF NOT EXISTS writer (
     id INTEGER PRIMARY KEY CHECK (id = 1), pid INTEGER NOT NULL, host TEXT NOT NULL, since REAL NOT NULL,
     command TEXT NOT NULL);
@@ -93,6 +109,22 @@ def configure(conn: sqlite3.Connection) -> None:
     conn.execute("PRAGMA foreign_keys = ON")
 
 
+def columns(conn: sqlite3.Connection, table: str) -> set[str]:
+    """The column names of ``table`` (empty if there is no such table)."""
+    return {row[1] for row in conn.execute(f"PRAGMA table_info({table})")}
+
+
+def migrate(conn: sqlite3.Connection) -> None:
+    """Bring a file of an older version up to this one's tables (inside the writer's transaction): the tables of
+    :data:`EXTRA_SCHEMA` and the ``tp`` column of the reading tables (1 for every reading already there)."""
+    for statement in EXTRA_SCHEMA.split(";"):
+        if statement.strip():
+            conn.execute(statement)
+    for table in ("readings", "retired_readings"):
+        if "tp" not in columns(conn, table):
+            conn.execute(f"ALTER TABLE {table} ADD COLUMN tp INTEGER NOT NULL DEFAULT 1")
+
+
 def check_magic(path: Path) -> None:
     """SessionError unless ``path`` is a readable SQLite file."""
     try:
@@ -109,7 +141,7 @@ def check_magic(path: Path) -> None:
 
 
 def newer(path: Path, version: int) -> SessionError:
-    return SessionError(f"{path} was written by schema {version}; this version reads up to {SCHEMA_VERSION}: "
+    return SessionError(f"{path} was written by schema {version}; this version reads up to {NEWEST_SCHEMA}: "
                         "upgrade dh-calib")
 
 

@@ -15,9 +15,13 @@ A profile holds (keys of :data:`KEYS`; see the bundled files for commented examp
     start: "STREAM ON"              # streaming only, optional: sent after init
     stop: "STREAM OFF"              # streaming only, optional: sent before close
     response:                       # either a regular expression with named groups x, y, z and optional
-      pattern: '^(?P<x>\\S+) (?P<y>\\S+) (?P<z>\\S+)$'   # status, sigma, checksum, payload ...
-      # ... or a delimiter (null: white space) and the field order (x, y, z, status, sigma, checksum, or null
-      # for a field to skip):   delimiter: ",",  fields: [null, x, y, z, status, checksum]
+      pattern: '^(?P<x>\\S+) (?P<y>\\S+) (?P<z>\\S+)$'   # status, sigma, checksum, payload, tp ...
+      # ... or a delimiter (null: white space) and the field order (x, y, z, status, sigma, checksum, tp, or
+      # null for a field to skip):   delimiter: ",",  fields: [null, x, y, z, status, checksum]
+    points: 3                       # optional (default 1), polled only: the trigger is answered by this many
+                                    # lines, one per tracked point in id order; the response needs a ``tp``
+                                    # field (the line's id, checked); a point out of sight answers with a
+                                    # target-lost status (its id is read too) or error reply
     units: mm                       # mm, m or inch (x, y, z and sigma)
     max_abs: 100.0                  # metres; a coordinate beyond it is out of range (BadReading)
     sigma: 1.5e-5                   # metres per axis, the device's stated uncertainty (optional)
@@ -48,9 +52,10 @@ from drivers.errors import BadReading, MeasurementError, TargetLost
 SCHEMA_VERSION = 1
 TRACKERS_DIR = Path(__file__).resolve().parent.parent / "config" / "trackers"
 KEYS = ("schema", "name", "description", "serial", "line_ending", "init", "identify", "mode", "trigger", "start",
-        "stop", "response", "units", "max_abs", "sigma", "checksum", "status", "errors", "reset", "simulation")
+        "stop", "response", "points", "units", "max_abs", "sigma", "checksum", "status", "errors", "reset",
+        "simulation")
 UNITS = {"mm": 1e-3, "m": 1.0, "inch": 0.0254}
-FIELDS = ("x", "y", "z", "status", "sigma", "checksum")
+FIELDS = ("x", "y", "z", "status", "sigma", "checksum", "tp")
 SERIAL_KEYS = ("baud", "parity", "bytesize", "stopbits")
 MAX_LINE = 512  # characters; a longer run without a line ending is garbage
 _PRINTABLE = bytes(range(32, 127)) + b"\t"
@@ -60,6 +65,14 @@ _LINE_BREAK = re.compile(rb"\r\n|\r|\n")
 
 class DeviceReset(MeasurementError):
     """The device printed its start-up banner: it was reset and must be initialised again."""
+
+
+class PointLost(TargetLost):
+    """A reply whose status says target lost, with the id ``tp`` of the tracked point it is about."""
+
+    def __init__(self, message: str, tp: int) -> None:
+        super().__init__(message)
+        self.tp = tp
 
 
 @dataclass(frozen=True)
@@ -97,6 +110,7 @@ class Profile:
     errors: tuple[tuple[re.Pattern[str], str], ...]
     reset: re.Pattern[str] | None
     simulation: dict[str, Any] = field(default_factory=dict)
+    points: int = 1
 
     @property
     def has_status(self) -> bool:
@@ -105,11 +119,13 @@ class Profile:
 
 @dataclass(frozen=True)
 class ParsedLine:
-    """One parsed reading: ``position`` (x, y, z) in metres, ``status`` word, ``sigma`` metres or None."""
+    """One parsed reading: ``position`` (x, y, z) in metres, ``status`` word, ``sigma`` metres or None, ``tp`` the
+    tracked point's id when the reply has a ``tp`` field (else None)."""
 
     position: tuple[float, float, float]
     status: str = "ok"
     sigma: float | None = None
+    tp: int | None = None
 
 
 def profile_names() -> list[str]:
@@ -226,6 +242,13 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
             raise ConfigError(src, "response.fields", f"a list of distinct field names ({', '.join(FIELDS)}) or "
                               "null, with x, y and z", _got(fields))
         fields, names = tuple(fields), tuple(named)
+    points = data.get("points", 1)
+    if isinstance(points, bool) or not isinstance(points, int) or points < 1:
+        raise ConfigError(src, "points", "an integer >= 1 (tracked points per trigger)", _got(points))
+    if points > 1 and mode != "polled":
+        raise ConfigError(src, "points", "1 in mode streaming (several points per reply need a trigger)", _got(points))
+    if points > 1 and "tp" not in names:
+        raise ConfigError(src, "response", "a tp field (the tracked point's id) with points > 1", "none")
     units = data["units"]
     if units not in UNITS:
         raise ConfigError(src, "units", f"one of {', '.join(UNITS)}", _got(units))
@@ -280,7 +303,7 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
         max_abs=float(max_abs), sigma=None if sigma is None else float(sigma), checksum=checksum,
         checksum_covers=covers, status_ok=_strings(src, "status.ok", status.get("ok")),
         status_lost=_strings(src, "status.target_lost", status.get("target_lost")), errors=tuple(errors),
-        reset=reset, simulation=dict(simulation))
+        reset=reset, simulation=dict(simulation), points=points)
 
 
 def checksum_of(text: str, algorithm: str) -> str:
@@ -391,9 +414,17 @@ def parse_line(profile: Profile, line: str) -> ParsedLine:
             raise BadReading(f"{profile.name}: checksum mismatch in reply {_short(line)} (got {given!r}, computed "
                              f"{expected!r})")
     status = "ok"
+    tp = None
+    if values.get("tp") is not None:
+        text = values["tp"].strip()
+        if not text.isdigit() or int(text) < 1:
+            raise BadReading(f"{profile.name}: bad tracked point id {text!r} in reply {_short(line)}")
+        tp = int(text)
     if profile.has_status:
         word = values.get("status")
         if word in profile.status_lost:
+            if tp is not None:
+                raise PointLost(f"{profile.name}: tracked point {tp} out of sight (status {word!r})", tp)
             raise TargetLost(f"{profile.name}: target lost (status {word!r})")
         if word not in profile.status_ok:
             raise BadReading(f"{profile.name}: unknown status {word!r} in reply {_short(line)}")
@@ -406,4 +437,4 @@ def parse_line(profile: Profile, line: str) -> ParsedLine:
         sigma = _number(profile, line, "sigma", values["sigma"]) * profile.scale
         if sigma < 0:
             raise BadReading(f"{profile.name}: negative sigma in reply {_short(line)}")
-    return ParsedLine((xyz[0], xyz[1], xyz[2]), status, sigma)
+    return ParsedLine((xyz[0], xyz[1], xyz[2]), status, sigma, tp)

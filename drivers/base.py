@@ -44,12 +44,14 @@ class DeviceIdentity:
 @dataclass(frozen=True)
 class TrackerReading:
     """One TP measurement: ``position`` (3,) m in the tracker frame, ``timestamp`` s, the device's
-    per-axis standard uncertainty ``sigma`` (m) when it reports one, and its ``status`` word."""
+    per-axis standard uncertainty ``sigma`` (m) when it reports one, its ``status`` word, and ``tp``: the id
+    (1..N) of the tracked point it sees (several reflectors or markers on the flange; 1 when there is one)."""
 
     position: Array
     timestamp: float
     sigma: float | None = None
     status: str = "ok"
+    tp: int = 1
 
 
 @runtime_checkable
@@ -97,5 +99,8 @@ class Tracker(Protocol):
 
     def measure(self, count: int, timeout: float) -> list[TrackerReading]:
         """``count`` consecutive readings of the TP; raises MeasurementError subclasses, DeviceTimeout,
-        ConnectionFailed."""
+        ConnectionFailed. A tracker that sees several points returns ``count`` readings of each point in sight
+        (each with its ``tp``); a point out of sight has none, and only when no point is in sight does it raise
+        TargetLost. A tracker that can see several points says how many in an attribute ``points`` (optional:
+        one when absent)."""
         ...

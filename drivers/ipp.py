@@ -2,12 +2,12 @@
 
 URL form (``--tracker``)::
 
-    ipp://HOST[:PORT][?timeout=S&retries=N&average=N&averaging=auto|client|PROPERTY&trace=FILE]
+    ipp://HOST[:PORT][?timeout=S&retries=N&average=N&averaging=auto|client|PROPERTY&tools=A,B,C&trace=FILE]
 
 ``PORT`` defaults to 1294. ``timeout``: s to wait for one command's completion (default 2); ``retries``: extra
 attempts per reading after an error reply, a timeout or a dropped connection (default 2); ``average``: raw
-points averaged into each reading (default 1); ``averaging``: who averages (below); ``trace``: a file logging
-every byte both ways. Other options are rejected with one line.
+points averaged into each reading (default 1); ``averaging``: who averages (below); ``tools``: several tracked
+points (below); ``trace``: a file logging every byte both ways. Other options are rejected with one line.
 
 Protocol (I++ DME 1.4.3, section 6): the client sends ``TAG Command(args)\\r\\n`` with a five-digit tag
 (00001..99999, wrapping); the server answers ``TAG &`` (acknowledged), ``TAG # data`` (zero or more), then
@@ -39,6 +39,13 @@ and each reading is one ``Get`` of the server's average (no ``sigma``: the stand
 uncertainty). Otherwise (no such property, or ``EnumAllProp`` refused) the client averages: ``average`` raw
 ``Get`` points per reading, outliers rejected (:func:`drivers.averaging.robust_mean`), their spread as the
 reading's ``sigma`` (per-axis standard uncertainty of the mean, m).
+
+Several tracked points (``tools=A,B,C``): a server that follows several targets (reflectors on the flange)
+exposes each as a tool; the names are the server's, and their order gives the points' ids (``tp`` 1, 2, 3...).
+Each reading is, per tool, ``SetTool("A")`` (the standard's command that makes a tool active without a tool
+change) then the point as above (averaging found and set up per tool at connect). A tool whose reading still
+fails after its retries (e.g. a target out of sight) has no reading; only when every tool fails does the reading
+fail.
 """
 
 from __future__ import annotations
@@ -48,7 +55,7 @@ import logging
 import re
 import socket
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import IO, Any
 
@@ -61,8 +68,8 @@ from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 
 DEFAULT_PORT = 1294
-OPTIONS = ("timeout", "retries", "average", "averaging", "trace")
-FORM = "ipp://HOST[:PORT][?timeout=S&retries=N&average=N&averaging=auto|client|PROPERTY&trace=FILE]"
+OPTIONS = ("timeout", "retries", "average", "averaging", "tools", "trace")
+FORM = "ipp://HOST[:PORT][?timeout=S&retries=N&average=N&averaging=auto|client|PROPERTY&tools=A,B&trace=FILE]"
 #: Last names (case-insensitive) of a tool property that sets how many points the server averages.
 AVERAGE_NAMES = ("average", "averages", "averaging", "averagecount", "avgcount", "numaverages")
 MAX_AVERAGE = 100_000
@@ -74,6 +81,7 @@ _ERROR = re.compile(r"^Error\(\s*(?P<severity>\d+)\s*,\s*(?P<code>\d+)\s*,\s*(?P
 _AXIS = re.compile(r"\b(?P<axis>[XYZ])\(\s*(?P<value>[-+0-9.eE]+)\s*\)")
 _PROPERTY = re.compile(r'^"(?P<name>[A-Za-z][A-Za-z0-9.]*)"\s*,\s*"(?P<type>[A-Za-z]+)"$')
 _PATH = re.compile(r"^[A-Za-z][A-Za-z0-9]*(\.[A-Za-z][A-Za-z0-9]*)*$")
+_TOOL = re.compile(r"^[A-Za-z0-9_.+-]+$")
 MAX_LINE = 65536  # the standard's longest line (section 6.2)
 
 log = logging.getLogger("drivers.ipp")
@@ -121,17 +129,22 @@ class IppTracker:
     ``average``: raw points per reading; ``averaging``: "auto", "client" or a property path (module doc).
     After :meth:`connect`, ``server_average`` is the server's averaging property (None: the client averages)
     and ``server_count`` the count the server reported in force; ``warnings`` collects every
-    :class:`IppNotice`; ``events`` the raw event lines (``E`` tags).
+    :class:`IppNotice`; ``events`` the raw event lines (``E`` tags). ``tools``: the server's tools of several
+    tracked points, in id order (empty: the active tool, one point); each tool's averaging is in ``per_tool``.
     """
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, *, timeout: float = 2.0, retries: int = 2,
-                 average: int = 1, averaging: str = "auto", trace_io: str | Path | IO[str] | None = None) -> None:
+                 average: int = 1, averaging: str = "auto", tools: tuple[str, ...] = (),
+                 trace_io: str | Path | IO[str] | None = None) -> None:
         if int(average) != average or not 1 <= average <= MAX_AVERAGE:
             raise ValueError(f"average must be an integer in 1..{MAX_AVERAGE}, got {average!r}")
         if averaging not in ("auto", "client") and not _PATH.match(averaging):
             raise ValueError(f"averaging must be auto, client or a property path such as Tool.XX.Average, "
                              f"got {averaging!r}")
-        self.host, self.port = host, port
+        if any(not _TOOL.match(t) for t in tools) or len(set(tools)) != len(tools):
+            raise ValueError(f"tools must be distinct names of letters, digits and _.+-, got {list(tools)}")
+        self.host, self.port, self.tools = host, port, tuple(tools)
+        self.per_tool: dict[str, tuple[str | None, int]] = {}
         self.reply_timeout, self.retries = float(timeout), int(retries)
         self.average, self.averaging = int(average), averaging
         self._trace = ByteTrace(trace_io)
@@ -144,6 +157,11 @@ class IppTracker:
         self.events: list[str] = []
         self.warnings: list[IppNotice] = []
         self.reconnects = 0
+
+    @property
+    def points(self) -> int:
+        """How many tracked points each reading reports (one per tool of ``tools``, else one)."""
+        return max(len(self.tools), 1)
 
     @property
     def where(self) -> str:
@@ -171,7 +189,15 @@ class IppTracker:
             raise ConnectionFailed(f"the I++ server {self.where} refused the session: {exc}") from exc
         match = re.search(r'DMEVersion\(\s*"?([^")]*)"?\s*\)', " ".join(data))
         self.version = match.group(1) if match else ""
-        self._find_averaging(deadline)
+        for tool in self.tools:  # each tool's averaging, found with that tool active
+            try:
+                self._set_tool(tool, deadline)
+            except IppError as exc:
+                raise ConnectionFailed(f"the I++ server {self.where} has no tool {tool!r} (tools=): {exc}") from exc
+            self._find_averaging(deadline)
+            self.per_tool[tool] = (self.server_average, self.server_count)
+        if not self.tools:
+            self._find_averaging(deadline)
 
     def close(self) -> None:
         if self._sock is not None:
@@ -185,8 +211,10 @@ class IppTracker:
             averaging = f"server: {self.server_average} = {self.server_count}"
         else:
             averaging = f"client: {self.average} point(s) per reading"
-        return DeviceIdentity("tracker", "I++ DME server", firmware=self.version,
-                              details={"address": self.where, "protocol": "I++ DME", "averaging": averaging})
+        details = {"address": self.where, "protocol": "I++ DME", "averaging": averaging}
+        if self.tools:
+            details["tools"] = ",".join(self.tools)
+        return DeviceIdentity("tracker", "I++ DME server", firmware=self.version, details=details)
 
     def measure(self, count: int, timeout: float) -> list[TrackerReading]:
         """``count`` readings of the current point (m), each averaged as set up at connect; errors of
@@ -197,11 +225,28 @@ class IppTracker:
         if self._sock is None:
             raise ConnectionFailed(f"I++ tracker {self.where} is not connected (call connect())")
         deadline = time.monotonic() + timeout
-        return [self._one_reading(deadline) for _ in range(int(count))]
+        if not self.tools:
+            return [self._one_reading(deadline) for _ in range(int(count))]
+        return [reading for _ in range(int(count)) for reading in self._each_tool(deadline)]
 
     # --- readings -----------------------------------------------------------------------------------------
 
-    def _one_reading(self, deadline: float) -> TrackerReading:
+    def _each_tool(self, deadline: float) -> list[TrackerReading]:
+        """One reading of every tool (``tp`` its place in ``tools``); a tool that fails has none; the last error
+        when all fail."""
+        out, last = [], None
+        for tp, tool in enumerate(self.tools, start=1):
+            try:
+                out.append(replace(self._one_reading(deadline, tool), tp=tp))
+            except MeasurementError as exc:
+                last = exc
+                self._trace.event(f"tool {tool} (point {tp}) has no reading: {exc}")
+        if not out:
+            assert last is not None
+            raise last
+        return out
+
+    def _one_reading(self, deadline: float, tool: str | None = None) -> TrackerReading:
         last: Exception | None = None
         reconnected = False
         attempts = 0
@@ -211,6 +256,8 @@ class IppTracker:
             try:
                 if self._sock is None:
                     self.connect(max(deadline - time.monotonic(), 0.1))
+                if tool is not None:
+                    self._set_tool(tool, deadline)
                 reading = self._averaged_point(deadline)
                 news = [str(n) for n in self.warnings[noticed:]]
                 return reading if not news else TrackerReading(reading.position, reading.timestamp, reading.sigma,
@@ -233,6 +280,12 @@ class IppTracker:
         if isinstance(last, IppError):
             raise IppError(message, last.severity, last.code, last.text) from last
         raise type(last)(message) from last
+
+    def _set_tool(self, tool: str, deadline: float) -> None:
+        """Make ``tool`` the active one (``SetTool``) and take up its averaging (found at connect)."""
+        self.command(f'SetTool("{tool}")', min(deadline, time.monotonic() + self.reply_timeout))
+        if tool in self.per_tool:
+            self.server_average, self.server_count = self.per_tool[tool]
 
     def _averaged_point(self, deadline: float) -> TrackerReading:
         """One reading: the server's (averaged) point, or the robust mean of ``average`` raw points."""
@@ -442,11 +495,15 @@ def open_tracker(spec: TrackerSpec | str, rig: Any = None, site: Any = None, *,
                         "average": f"an integer in 1..{MAX_AVERAGE}"}[key]
                 raise SpecError(f"tracker spec {str(spec)!r}: option {key}={raw[key]} must be {need}; "
                                 f"expected {FORM}")
+    tools = tuple(t for t in str(raw.get("tools", "")).split(",") if t)
+    if "tools" in raw and (not tools or any(not _TOOL.match(t) for t in tools) or len(set(tools)) != len(tools)):
+        raise SpecError(f"tracker spec {str(spec)!r}: option tools={raw['tools']} must be distinct tool names "
+                        f"separated by commas (letters, digits, _.+-); expected {FORM}")
     averaging = str(raw.get("averaging", "auto"))
     if averaging not in ("auto", "client") and not _PATH.match(averaging):
         raise SpecError(f"tracker spec {str(spec)!r}: option averaging={averaging} must be auto, client or a "
                         f"property path such as Tool.XX.Average; expected {FORM}")
     host, port = spec.address
     return IppTracker(host, port or DEFAULT_PORT, timeout=values["timeout"], retries=values["retries"],
-                      average=values["average"], averaging=averaging,
+                      average=values["average"], averaging=averaging, tools=tools,
                       trace_io=trace_io if trace_io is not None else raw.get("trace"))

@@ -16,6 +16,12 @@ With ``rfc2217://`` the port settings travel to the remote port over RFC 2217; t
 the connect timeout (unless the URL gives pyserial's own ``?timeout=``), and writes have no timeout of their
 own (pyserial's RFC 2217 client has none).
 
+Several tracked points: a profile with ``points: N`` answers each trigger with N lines, one per point in id
+order (``tp`` 1..N, checked against the reply's ``tp`` field: a line out of step, e.g. left over from an
+abandoned trigger, is a bad reading and the trigger is retried); a line with the profile's target-lost reply
+is a point out of sight (it has no reading); only when every point is out of sight is the reading TargetLost
+(and retried).
+
 Faults: a missing or busy port raises ConnectionFailed; a lost link ConnectionFailed; no reply within the
 reply timeout (after ``retries`` re-sent triggers) DeviceTimeout; bad lines are retried, then BadReading;
 target lost TargetLost; the device's reset banner makes the driver initialise it again and carry on.
@@ -33,7 +39,15 @@ import numpy as np
 from config.robots import ConfigError
 from drivers.ascii_profile import DeviceReset, LineSplitter, ParsedLine, Profile, load_profile, parse_line
 from drivers.base import DeviceIdentity, TrackerReading
-from drivers.errors import BackendUnavailable, BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, SpecError
+from drivers.errors import (
+    BackendUnavailable,
+    BadReading,
+    ConnectionFailed,
+    DeviceTimeout,
+    MeasurementError,
+    SpecError,
+    TargetLost,
+)
 from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 
@@ -106,6 +120,11 @@ class SerialTracker:
         self._discard_first = False
         self.resets = 0  # device resets seen (and recovered from)
 
+    @property
+    def points(self) -> int:
+        """How many tracked points each trigger reports (the profile's ``points``)."""
+        return self.profile.points
+
     # --- link -----------------------------------------------------------------------------------------
 
     def connect(self, timeout: float) -> None:
@@ -159,17 +178,45 @@ class SerialTracker:
     # --- measurements -----------------------------------------------------------------------------------
 
     def measure(self, count: int, timeout: float) -> list[TrackerReading]:
-        """``count`` readings (m, tracker frame). Bad lines, timeouts and resets are retried ``retries`` times
-        per reading; then BadReading / TargetLost / DeviceTimeout. ``timeout`` bounds the whole call."""
+        """``count`` readings (m, tracker frame) of each tracked point in sight. Bad lines, timeouts and resets are
+        retried ``retries`` times per reading; then BadReading / TargetLost / DeviceTimeout. ``timeout`` bounds
+        the whole call."""
         if int(count) != count or count < 1 or not timeout > 0:
             raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
         if self._port is None:
             raise ConnectionFailed(f"serial tracker {self.url} is not connected (call connect())")
         deadline = time.monotonic() + timeout
         self._flush()
-        return [self._one_reading(deadline) for _ in range(int(count))]
+        return [reading for _ in range(int(count)) for reading in self._one_reading(deadline)]
 
-    def _one_reading(self, deadline: float) -> TrackerReading:
+    def _read_frame(self, deadline: float) -> list[TrackerReading]:
+        """The lines answering one trigger: one reading, or with ``points`` > 1 one line per point in id order
+        (those out of sight left out; TargetLost if all are)."""
+        points, frame, lost = self.profile.points, [], None
+        for k in range(1, points + 1):
+            what = "a measurement" if points == 1 else f"point {k} of a measurement"
+            line = self._read_reply(min(deadline, time.monotonic() + self.reply_timeout), what)
+            stamp = time.time()
+            try:
+                parsed: ParsedLine = parse_line(self.profile, line)
+            except TargetLost as exc:
+                if points == 1:
+                    raise
+                if getattr(exc, "tp", k) != k:
+                    raise BadReading(f"{self.url}: reply {line!r} is about point {getattr(exc, 'tp', k)} where point "
+                                     f"{k} was due (one line per point, in id order)") from exc
+                lost = exc
+                continue
+            if points > 1 and parsed.tp is not None and parsed.tp != k:
+                raise BadReading(f"{self.url}: reply {line!r} is point {parsed.tp} where point {k} was due (one line "
+                                 "per point, in id order)")
+            frame.append(TrackerReading(np.array(parsed.position), stamp, sigma=parsed.sigma, status=parsed.status,
+                                        tp=k))
+        if not frame:
+            raise TargetLost(f"{self.url}: every one of the {points} tracked points is out of sight ({lost})")
+        return frame
+
+    def _one_reading(self, deadline: float) -> list[TrackerReading]:
         last: Exception | None = None
         attempts = 0
         for attempt in range(self.retries + 1):
@@ -179,10 +226,7 @@ class SerialTracker:
             if self.profile.trigger is not None:
                 self._send(self.profile.trigger)
             try:
-                line = self._read_reply(min(deadline, time.monotonic() + self.reply_timeout), "a measurement")
-                stamp = time.time()
-                parsed: ParsedLine = parse_line(self.profile, line)
-                return TrackerReading(np.array(parsed.position), stamp, sigma=parsed.sigma, status=parsed.status)
+                return self._read_frame(deadline)
             except DeviceReset as exc:
                 last = exc
                 self._recover("device reset")

@@ -9,7 +9,15 @@ The world (:class:`SimulatedRig`):
 
 - the true robot: ``random_truth(nominal, home, default_rng(seed))`` of the model's nominal DH table (seeded
   perturbations, a random base pose in the tracker frame, a random TP off every axis); the tracker sees
-  ``identify.kinematics.points_from_joints(truth, q)`` of the arm's actual joints ``q``, never its own model;
+  ``identify.kinematics.points_from_joints(truth, q)`` at the joints' true DH values ``q``, never its own model;
+- the robot's readings are the controller's: with a coupled model (``coupling:`` in its YAML, e.g. FANUC J2/J3)
+  ``move_joints`` takes and ``read_joints`` gives readings, and the true DH values are
+  ``coupling.dh_from_readings(readings)``; joint limits are checked on those DH values;
+- joint errors (options ``scale``, ``eccentricity``, ``compliance``; drivers/sim_world.py): the joints really
+  stand at ``q + Δq(q)`` of those DH values (``rig.joint_errors``, recorded in the robot's identity);
+- ``points=N`` reflectors on the flange (``rig.tools``, (N, 3) in the flange frame; the first is the truth's
+  TP), 150-250 mm apart on a plate: the tracker reports each one (``tp`` 1..N) with its own noise; with
+  ``occlusion=P`` each point is out of sight at a measurement with probability P (all out of sight: TargetLost);
 - a move is synchronised: every joint follows the trapezoidal profile of the slowest one
   (:func:`move_duration`); the arm comes to rest at the target plus a repeatability error
   N(0, ``repeatability``) per joint, then rings: ``q(t) = rest + A·exp(-Δt/ring_tau)·cos(2π·f·Δt)`` with
@@ -36,6 +44,7 @@ call (robot) or ``measure`` call (tracker), 1-based from the rig's creation:
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
@@ -44,20 +53,23 @@ from typing import Any
 import numpy as np
 
 from config.robots import ConfigError, RobotModel, load_robot
-from drivers.base import Array, DeviceIdentity, RobotState, TrackerReading
+from drivers.base import Array, DeviceIdentity, RobotState
 from drivers.clock import Clock, VirtualClock
 from drivers.errors import (
     BackendUnavailable,
-    BadReading,
     ConnectionFailed,
     DeviceTimeout,
     EmergencyStop,
     ProtectiveStop,
     RobotFault,
     SpecError,
-    TargetLost,
 )
-from drivers.motion import motion_time
+from drivers.motion import joint_durations as _durations
+from drivers.motion import move_duration as move_duration  # re-exported: the simulated robot's timing
+from drivers.motion import profile_fraction as _fraction
+from drivers.sim_tracker import SimulatedTracker as SimulatedTracker  # re-exported: the mock backend's tracker
+from drivers.sim_tracker import open_tracker as open_tracker
+from drivers.sim_world import errors_as_dict, has_errors, joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
 from identify.kinematics import frames_from_joints, points_from_joints
 from identify.simulate import random_truth
@@ -66,36 +78,9 @@ RING_FREQUENCY = 8.0  # Hz, of the oscillation after a move
 POLL_PERIOD = 0.01  # s between joint readings in wait_until_still
 STILL_TOLERANCE = 1e-6  # rad (m): joints within this of each other count as still
 MOTION_CHUNK = 0.05  # s of motion between checks for stop()
-_EPS = 1e-9  # s: time comparisons on the clock (large epoch values carry rounding errors)
+_EPS = 1e-6  # s: time comparisons on the clock (epoch values near 1.8e9 s are only resolved to 2.4e-7 s)
 # When several faults fall on one move / measurement, the first of these happens (the others are dropped).
 _PRIORITY = ("disconnect", "emergency_stop", "protective_stop", "slow", "unsettled", "target_lost", "bad_reading")
-
-
-def move_duration(start: Sequence[float], target: Sequence[float], speed: Sequence[float],
-                  acceleration: Sequence[float]) -> float:
-    """Duration (s) of a synchronised joint move: the trapezoidal profile (triangular for short moves) of
-    the slowest joint, accelerating at ``acceleration`` up to ``speed`` and braking at ``acceleration``."""
-    return float(np.max(_durations(start, target, speed, acceleration), initial=0.0))
-
-
-def _durations(start: Sequence[float], target: Sequence[float], speed: Sequence[float],
-               acceleration: Sequence[float]) -> Array:
-    return motion_time(np.asarray(target, dtype=float) - np.asarray(start, dtype=float), speed, acceleration)
-
-
-def _fraction(t: float, duration: float, speed: float, acceleration: float, distance: float) -> float:
-    """Share of the distance covered at time ``t`` of a trapezoidal profile lasting ``duration``."""
-    if duration <= 0 or distance <= 0 or t >= duration:
-        return 1.0
-    ramp = min(speed / acceleration, duration / 2)
-    peak = acceleration * ramp
-    if t < ramp:
-        covered = 0.5 * acceleration * t * t
-    elif t <= duration - ramp:
-        covered = 0.5 * acceleration * ramp * ramp + peak * (t - ramp)
-    else:
-        covered = distance - 0.5 * acceleration * (duration - t) ** 2
-    return min(max(covered / distance, 0.0), 1.0)
 
 
 @dataclass
@@ -115,16 +100,20 @@ def _setting(name: str, value: float, upper: float = math.inf) -> float:
 class SimulatedRig:
     """One simulated world: the true robot, the arm's actual state, the clock and the fault schedule.
 
-    ``model``: a bundled robot name or a RobotModel; ``seed`` seeds the truth (``random_truth``) and the
-    robot's random errors, ``tracker_seed`` (default: ``seed``) the tracker's noise and dropouts. The other
-    settings are those of :data:`drivers.spec.MOCK_ROBOT_OPTIONS` and ``MOCK_TRACKER_OPTIONS``.
-    Attributes: ``model``, ``truth`` (DHModel), ``clock``, ``moves`` and ``measurements`` (calls so far).
+    ``model``: a bundled robot name or a RobotModel; ``seed`` seeds the truth (``random_truth``), the
+    reflectors, the joint errors and the robot's random errors, ``tracker_seed`` (default: ``seed``) the tracker's
+    noise, dropouts and occlusions. The other settings are those of :data:`drivers.spec.MOCK_ROBOT_OPTIONS` and
+    ``MOCK_TRACKER_OPTIONS`` (``eccentricity`` in degrees, as in the spec).
+    Attributes: ``model``, ``truth`` (DHModel), ``tools`` (points, 3), ``joint_errors`` (JointErrors),
+    ``coupling`` (the model's, or None), ``clock``, ``moves`` and ``measurements`` (calls so far).
     """
 
     def __init__(self, model: str | RobotModel = "ur5e", *, clock: Clock | None = None, seed: int = 0,
                  repeatability: float = 2e-6, ring: float = 1e-5, ring_tau: float = 0.1,
                  noise: float = 5e-5, latency: float = 0.002, dropout: float = 0.0, tracker_seed: int | None = None,
-                 robot_faults: Iterable[FaultSpec] = (), tracker_faults: Iterable[FaultSpec] = ()) -> None:
+                 robot_faults: Iterable[FaultSpec] = (), tracker_faults: Iterable[FaultSpec] = (),
+                 points: int = 1, occlusion: float = 0.0, scale: float = 0.0, eccentricity: float = 0.0,
+                 compliance: float = 0.0) -> None:
         self.model = model if isinstance(model, RobotModel) else load_robot(model)
         self.clock: Clock = VirtualClock() if clock is None else clock
         self.seed = int(seed)
@@ -135,11 +124,23 @@ class SimulatedRig:
         self.noise = _setting("noise", noise)
         self.latency = _setting("latency", latency)
         self.dropout = _setting("dropout", dropout, upper=1.0)
+        self.occlusion = _setting("occlusion", occlusion, upper=1.0)
+        self.scale, self.eccentricity = _setting("scale", scale), _setting("eccentricity", eccentricity)
+        self.compliance = _setting("compliance", compliance)
+        if int(points) != points or points < 1:
+            raise ValueError(f"simulated rig: points must be an integer >= 1, got {points!r}")
+        self.points = int(points)
         home = np.array(self.model.home, dtype=float)
         self.truth = random_truth(self.model.nominal, home, np.random.default_rng(self.seed))
+        self.coupling = self.model.coupling
+        # the world's extras have generators of their own: a rig without them is the rig of before
+        self.joint_errors = joint_errors_for(self.model, self.scale, math.radians(self.eccentricity),
+                                             self.compliance, np.random.default_rng([self.seed, 5]))
+        self.tools = reflector_tools(self.truth, home, self.points, np.random.default_rng([self.seed, 4]))
         self._robot_rng = np.random.default_rng([self.seed, 1])
         self._tracker_rng = np.random.default_rng([self.tracker_seed, 2])
-        self._rest = home  # where the arm came to rest (actual values)
+        self._occlusion_rng = np.random.default_rng([self.tracker_seed, 3])
+        self._rest = self.readings_of(home)  # where the arm came to rest (actual readings)
         self._ring_amp, self._ring_start, self._ring_decays = np.zeros(self.model.n_joints), self.clock.now(), True
         self.moves = self.measurements = 0  # move_joints / measure calls so far
         self.robot_connected = self.tracker_connected = False
@@ -166,6 +167,7 @@ class SimulatedRig:
         camera = tracker is not None and is_simulated_camera(tracker)
         r = robot.mock_settings()
         t = tracker.mock_settings() if tracker is not None and not camera else TrackerSpec("mock").mock_settings()
+        world = _points_settings(robot, tracker, r, t)
         view = None
         if camera:  # only the camera's pixels are simulated: the rig takes its faults, seed and placement
             assert tracker is not None
@@ -178,9 +180,16 @@ class SimulatedRig:
             model = load_robot(robot.model)
         except ConfigError as exc:
             raise SpecError(f"robot spec {str(robot)!r}: {exc}") from exc
-        rig = cls(model, clock=clock, seed=r["seed"], repeatability=r["repeatability"], ring=r["ring"],
-                  ring_tau=r["ring_tau"], noise=t["noise"], latency=t["latency"], dropout=t["dropout"],
-                  tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"])
+        if camera and world["points"] > 1:
+            raise SpecError(f"{str(robot)!r} with {str(tracker)!r}: the simulated camera sees one target; "
+                            "points=N needs the mock tracker")
+        try:
+            rig = cls(model, clock=clock, seed=r["seed"], repeatability=r["repeatability"], ring=r["ring"],
+                      ring_tau=r["ring_tau"], noise=t["noise"], latency=t["latency"], dropout=t["dropout"],
+                      tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"], scale=r["scale"],
+                      eccentricity=r["eccentricity"], compliance=r["compliance"], **world)
+        except ValueError as exc:
+            raise SpecError(f"robot spec {str(robot)!r}: {exc}") from None
         rig.robot_spec, rig.tracker_spec = robot, tracker
         if view is not None:
             rig.face_tracker(*view)
@@ -200,21 +209,40 @@ class SimulatedRig:
         wave = envelope * np.cos(2 * np.pi * RING_FREQUENCY * dt)
         return self._rest + np.multiply.outer(wave, self._ring_amp)
 
+    def readings_of(self, q: Array) -> Array:
+        """The controller's readings (n,) or (m, n) that give the DH joint values ``q`` (the same without a
+        coupling)."""
+        q = np.asarray(q, dtype=float)
+        return q.copy() if self.coupling is None else self.coupling.readings_from_dh(np.atleast_2d(q)).reshape(q.shape)
+
+    def true_joints(self, t: float | Array | None = None) -> Array:
+        """Where the joints really stand at clock time ``t`` (default now), DH values: the DH values of the
+        actual readings plus the joint errors (drivers/sim_world.py): (n,), or (m, n) for m times."""
+        return true_joints(self.actual_joints(t), self.coupling, self.joint_errors, self.truth, self.model.links)
+
+    def true_points(self, t: float | Array | None = None) -> Array:
+        """The true positions of every reflector, m in the tracker frame, at clock time ``t`` (default now):
+        (points, 3), or (m, points, 3) for m times; reflector k is ``tools[k]`` on the flange."""
+        q = np.atleast_2d(self.true_joints(t))
+        out = np.stack([points_from_joints(replace(self.truth, tool=tool), q) for tool in self.tools], axis=1)
+        return out if np.ndim(t) else out[0]
+
     def true_point(self, t: float | None = None) -> Array:
-        """The true TP (3,), m in the tracker frame, at clock time ``t`` (default now)."""
-        return points_from_joints(self.truth, self.actual_joints(t))[0]
+        """The true TP (3,) (the first reflector), m in the tracker frame, at clock time ``t`` (default now)."""
+        return points_from_joints(self.truth, self.true_joints(t))[0]
 
     def flange_pose(self, t: float | None = None) -> Array:
         """The true last DH frame (the flange; the TP is ``truth.tool`` in it) at clock time ``t`` (default
         now): 4x4, tracker frame <- flange frame, metres."""
-        return frames_from_joints(self.truth, self.actual_joints(t))[0, -1]
+        return frames_from_joints(self.truth, self.true_joints(t))[0, -1]
 
     def face_tracker(self, distance: float, tilt: float = 0.0, roll: float = 0.0) -> None:
         """Re-place the true robot's base for a camera tracker: at home the TP lies ``distance`` m down the
         tracker's z axis and the flange's z axis points back at the tracker, turned by ``tilt`` rad about
         the tracker's x axis and then by ``roll`` rad about its z axis (a marker on the flange faces the
         camera). The DH table and the TP stay as they were."""
-        home = np.array(self.model.home, dtype=float)
+        home = true_joints(self.readings_of(self.model.home), self.coupling, self.joint_errors, self.truth,
+                           self.model.links)
         at_home = frames_from_joints(replace(self.truth, base=np.eye(4)), home)[0, -1]  # base <- flange
         cr, sr, ct, st = math.cos(roll), math.sin(roll), math.cos(tilt), math.sin(tilt)
         facing = np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])  # flange z towards the tracker
@@ -348,6 +376,10 @@ class SimulatedRobot:
         rig = self.rig
         details = {"truth_seed": str(rig.seed), "repeatability": f"{rig.repeatability:g}", "ring": f"{rig.ring:g}",
                    "ring_tau": f"{rig.ring_tau:g}"}
+        if has_errors(rig.joint_errors):  # the truth of the joint errors, for benchmarks to compare with
+            details["joint_errors"] = json.dumps(errors_as_dict(rig.joint_errors))
+        if rig.points > 1:
+            details["tools"] = json.dumps(rig.tools.tolist())  # the reflectors' true tool vectors, flange frame
         return DeviceIdentity("robot", f"simulated {rig.model.name}", serial=f"SIM-R{rig.seed}", firmware="sim",
                               details=details)
 
@@ -355,14 +387,16 @@ class SimulatedRobot:
         return self.rig.robot_state
 
     def read_joints(self) -> Array:
-        """Actual joint values (n,), rad / m, including the repeatability error and any ringing."""
+        """Actual joint readings (n,), rad / m, including the repeatability error and any ringing (the
+        controller's readings: with a coupled model not the DH values)."""
         self._require_link()
         return self.rig.actual_joints()
 
     def move_joints(self, q: Sequence[float], speed: Sequence[float], acceleration: Sequence[float],
                     timeout: float) -> None:
-        """Move to ``q`` (blocking; the clock advances by the move's duration). ValueError for a target out of
-        the limits or a speed above the model's maximum; faults as in the module docstring."""
+        """Move to the readings ``q`` (blocking; the clock advances by the move's duration). ValueError for a
+        target whose DH values are out of the limits or a speed above the model's maximum; faults as in the
+        module docstring."""
         rig = self.rig
         self._require_link()
         if rig._latched is not None:
@@ -428,7 +462,8 @@ class SimulatedRobot:
         for name, values in (("target", target), ("speed", v), ("acceleration", a)):
             if values.shape != (n,) or not np.all(np.isfinite(values)):
                 raise ValueError(f"{name} must be {n} finite numbers, got {values.tolist()}")
-        for i, (value, (lo, hi)) in enumerate(zip(target, model.limits, strict=True)):
+        dh = target if self.rig.coupling is None else self.rig.coupling.dh_from_readings(target[None, :])[0]
+        for i, (value, (lo, hi)) in enumerate(zip(dh, model.limits, strict=True)):
             if not lo <= value <= hi:
                 raise ValueError(f"joint {i + 1} target {value:.6g} is outside its limits [{lo:.6g}, {hi:.6g}] "
                                  "(the plan should have caught it)")
@@ -439,64 +474,6 @@ class SimulatedRobot:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
         return target, v, a
-
-
-class SimulatedTracker:
-    """The simulated tracker (implements :class:`drivers.base.Tracker`): sees the rig's true TP."""
-
-    def __init__(self, rig: SimulatedRig) -> None:
-        self.rig = rig
-
-    def connect(self, timeout: float) -> None:
-        if not timeout > 0:
-            raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
-        self.rig.tracker_connected = True
-
-    def close(self) -> None:
-        self.rig.tracker_connected = False
-
-    def identity(self) -> DeviceIdentity:
-        rig = self.rig
-        details = {"noise": f"{rig.noise:g}", "latency": f"{rig.latency:g}", "dropout": f"{rig.dropout:g}"}
-        return DeviceIdentity("tracker", "simulated tracker", serial=f"SIM-T{rig.tracker_seed}", firmware="sim",
-                              details=details)
-
-    def measure(self, count: int, timeout: float) -> list[TrackerReading]:
-        """``count`` readings of the TP (m, tracker frame) with ``sigma`` = the noise; the clock advances by
-        ``count · latency``. Raises TargetLost, BadReading, DeviceTimeout, ConnectionFailed."""
-        rig = self.rig
-        if not rig.tracker_connected:
-            raise ConnectionFailed("the simulated tracker is not connected (call connect(); after a lost link, "
-                                   "connect again)")
-        if int(count) != count or count < 1 or not timeout > 0:
-            raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
-        number = rig.measurements = rig.measurements + 1
-        fault = rig._take("tracker", number)
-        clock, latency = rig.clock, rig.latency
-        if fault == "disconnect":
-            rig.tracker_connected = False
-            raise ConnectionFailed(f"lost the connection to the simulated tracker at measurement {number}")
-        if fault == "slow" or count * latency > timeout:
-            clock.sleep(timeout)
-            raise DeviceTimeout(f"measurement {number} ({count} readings) got no answer within {timeout:g} s")
-        if fault == "target_lost":
-            clock.sleep(latency)
-            raise TargetLost(f"simulated tracker lost the target (line of sight) at measurement {number}")
-        if fault == "bad_reading":
-            clock.sleep(latency)
-            raise BadReading(f"simulated tracker sent garbage at measurement {number}: '#?!\\x00 1.2e+9?'")
-        t0 = clock.now()
-        times = t0 + latency * np.arange(count)
-        points = points_from_joints(rig.truth, rig.actual_joints(times))
-        points += rig._tracker_rng.normal(0.0, rig.noise, points.shape)
-        if rig.dropout > 0:
-            lost = np.flatnonzero(rig._tracker_rng.random(count) < rig.dropout)
-            if lost.size:
-                clock.sleep(latency * (lost[0] + 1))
-                raise TargetLost(f"simulated tracker lost the target in reading {lost[0] + 1} of measurement "
-                                 f"{number}")
-        clock.sleep(latency * count)
-        return [TrackerReading(points[i], float(times[i]), sigma=rig.noise) for i in range(count)]
 
 
 def is_simulated_camera(spec: TrackerSpec) -> bool:
@@ -510,6 +487,22 @@ def check_pairing(robot: RobotSpec, tracker: TrackerSpec) -> None:
     simulated = (robot.is_mock, tracker.is_mock or is_simulated_camera(tracker))
     if simulated[0] != simulated[1]:
         raise _unpaired(robot, tracker)
+
+
+def _points_settings(robot: RobotSpec, tracker: TrackerSpec | None, r: dict[str, Any],
+                     t: dict[str, Any]) -> dict[str, Any]:
+    """The rig's ``points`` and ``occlusion``: given on the robot spec (the reflectors on its flange) or on the
+    tracker spec (what it sees), the robot's default otherwise; SpecError when the two specs disagree."""
+    out = {}
+    for key in ("points", "occlusion"):
+        value = r[key]
+        if t[key] is not None:
+            if key in robot.options and t[key] != r[key]:
+                raise SpecError(f"{key}= is {r[key]:g} in {str(robot)!r} but {t[key]:g} in {str(tracker)!r}; give "
+                                "it once (either spec) or the same on both")
+            value = t[key]
+        out[key] = value
+    return out
 
 
 def _unpaired(robot: RobotSpec, tracker: TrackerSpec | None) -> SpecError:
@@ -530,22 +523,8 @@ def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock:
         raise ValueError("the clock belongs to the rig: give it to SimulatedRig.from_spec, not open_robot")
     if spec.model.lower() != rig.model.name.lower():
         raise ValueError(f"spec {str(spec)!r} names model {spec.model!r} but the rig simulates {rig.model.name!r}")
-    ours = {key: getattr(rig, key) for key in ("seed", "repeatability", "ring", "ring_tau")}
+    ours = {key: getattr(rig, key) for key in ("seed", "repeatability", "ring", "ring_tau", "scale", "eccentricity",
+                                                "compliance")}
+    ours.update({key: getattr(rig, key) for key in ("points", "occlusion") if key in spec.options})
     rig._check_settings(spec, ours, spec.mock_settings(), rig.robot_spec)
     return SimulatedRobot(rig)
-
-
-def open_tracker(spec: TrackerSpec | str, *, rig: SimulatedRig | None = None, site: object = None) -> SimulatedTracker:
-    """The simulated tracker of ``mock?...``, looking at ``rig``'s robot (required); ``site`` is not needed."""
-    spec = spec if isinstance(spec, TrackerSpec) else TrackerSpec.parse(spec)
-    if not spec.is_mock:
-        raise SpecError(f"drivers.sim opens the mock tracker only, got {str(spec)!r}")
-    if rig is None:
-        raise ValueError("a mock tracker needs the simulated robot it looks at: pass "
-                         "rig=SimulatedRig.from_spec(robot_spec, tracker_spec, clock)")
-    given = spec.mock_settings()
-    given["seed"] = rig.seed if given["seed"] is None else given["seed"]
-    ours = {"noise": rig.noise, "latency": rig.latency, "dropout": rig.dropout, "seed": rig.tracker_seed}
-    rig._check_settings(spec, ours, given, rig.tracker_spec)
-    return SimulatedTracker(rig)
-

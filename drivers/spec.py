@@ -49,6 +49,11 @@ TRACKER_FAULTS = ("target_lost", "bad_reading", "disconnect", "slow")
 #: Faults that last until cleared (stops: ``rig.clear_faults()``; disconnect: ``connect()``); no ``xK``.
 PERSISTENT_FAULTS = ("protective_stop", "emergency_stop", "disconnect")
 
+#: Most tracked points (reflectors) the simulated rig puts on the flange (all 150-250 mm apart on a plate).
+MAX_POINTS = 4
+_POINTS = f"tracked points (reflectors) on the flange, 1..{MAX_POINTS}, 150-250 mm apart"
+_OCCLUSION = "probability that a tracked point is out of sight at a measurement (line of sight blocked)"
+
 #: Options of ``mock:MODEL``: name -> (kind, default, meaning).
 MOCK_ROBOT_OPTIONS: dict[str, tuple[str, object, str]] = {
     "seed": ("int", 0, "seed of the true robot and of the robot's random errors"),
@@ -56,6 +61,13 @@ MOCK_ROBOT_OPTIONS: dict[str, tuple[str, object, str]] = {
     "repeatability": ("float", 2e-6, "standard deviation of the reached joint position, rad (m)"),
     "ring": ("float", 1e-5, "amplitude of the oscillation after a move, rad (m)"),
     "ring_tau": ("float", 0.1, "decay time of that oscillation, s"),
+    "scale": ("float", 0.0, "joint reading scale error (gear ratio): per joint this times a seeded random sign"),
+    "eccentricity": ("float", 0.0, "once-per-turn joint error amplitude, degrees (revolute joints; seeded "
+                     "random phase per joint)"),
+    "compliance": ("float", 0.0, "joint compliance under gravity, rad/(N m) (m/N), every joint; needs the "
+                   "model's dynamics"),
+    "points": ("points", 1, _POINTS),
+    "occlusion": ("probability", 0.0, _OCCLUSION),
 }
 #: Options of ``mock``: name -> (kind, default, meaning).
 MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
@@ -64,6 +76,8 @@ MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
     "dropout": ("probability", 0.0, "probability that a reading is lost (TargetLost)"),
     "seed": ("int", None, "seed of the tracker's noise and dropouts (default: the robot's seed)"),
     "fault": ("faults", (), "simulated faults, " + "|".join(TRACKER_FAULTS) + "[@MEASUREMENT][xCOUNT],..."),
+    "points": ("points", None, _POINTS + " (default: the robot spec's, 1)"),
+    "occlusion": ("probability", None, _OCCLUSION + " (default: the robot spec's, 0)"),
 }
 
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*\Z")
@@ -144,6 +158,10 @@ def _typed(kind: str, key: str, value: str, device: str) -> object:
     if kind == "int":
         if not value.isdigit():
             raise ValueError(f"option {key}={value} must be a non-negative integer")
+        return int(value)
+    if kind == "points":
+        if not value.isdigit() or not 1 <= int(value) <= MAX_POINTS:
+            raise ValueError(f"option {key}={value} must be an integer in 1..{MAX_POINTS}")
         return int(value)
     try:
         number = float(value)

@@ -155,10 +155,11 @@ def test_direct_construction_is_validated() -> None:
 def test_mock_settings_are_typed_with_defaults() -> None:
     robot = RobotSpec.parse("mock:ur5e?seed=3&fault=protective_stop@40,slow@5x2,unsettled").mock_settings()
     assert robot == {"seed": 3, "repeatability": 2e-6, "ring": 1e-5, "ring_tau": 0.1,
-                     "fault": (FaultSpec("protective_stop", 40), FaultSpec("slow", 5, 2), FaultSpec("unsettled"))}
+                     "fault": (FaultSpec("protective_stop", 40), FaultSpec("slow", 5, 2), FaultSpec("unsettled")),
+                     "scale": 0.0, "eccentricity": 0.0, "compliance": 0.0, "points": 1, "occlusion": 0.0}
     tracker = TrackerSpec.parse("mock?noise=1e-4&dropout=0.02&fault=target_lost@10x3").mock_settings()
     assert tracker == {"noise": 1e-4, "latency": 0.002, "dropout": 0.02, "seed": None,
-                       "fault": (FaultSpec("target_lost", 10, 3),)}
+                       "fault": (FaultSpec("target_lost", 10, 3),), "points": None, "occlusion": None}
     assert str(FaultSpec("target_lost", 10, 3)) == "target_lost@10x3"
     assert str(FaultSpec("slow")) == "slow"
 

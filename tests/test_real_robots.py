@@ -139,7 +139,7 @@ def test_compliance_under_gravity_is_selected_and_sized():
 
 
 def test_no_joint_error_selects_nothing_and_changes_nothing():
-    robot, _arm, meas, rng = _ur10e_arm(144, None)
+    robot, _, meas, rng = _ur10e_arm(144, None)
     ident = identify(meas, robot.nominal, noise=NOISE, links=robot.links)
     assert ident.extensions == [] and len(ident.decisions) == 16
     assert all(not d.selected for d in ident.decisions)

@@ -14,7 +14,9 @@ streaming device). Faults, each for the next ``count`` replies (``device.inject(
   initialised again) and drops the request; ``silence``: no answer.
 
 ``echo=True`` echoes every command line back first. ``mixed_endings=True`` ends each line with a random one
-of CRLF, LF and CR.
+of CRLF, LF and CR. A profile with ``points: N`` answers each trigger with N lines (reflector k at
+``rig.true_points()[k-1]``, written in one piece); ids in ``device.hidden`` answer the ``lost`` reply (out of
+sight); a fault spoils the first line (``target_lost``: every line).
 """
 
 from __future__ import annotations
@@ -95,6 +97,7 @@ class AsciiDevice(_Served):
         self.rng = np.random.default_rng(seed)
         self._random = random.Random(seed)
         self.faults: list[str] = []
+        self.hidden: set[int] = set()  # tracked point ids out of sight (profiles with several points)
         self.initialised = not self.sim.get("needs_init", False)
         self.streaming = not self.sim.get("needs_start", False)
         self.replies = 0
@@ -215,6 +218,8 @@ class AsciiDevice(_Served):
         if fault == "truncated":
             line = line[: len(line) // 2]
         eol = self._eol()
+        for tp in range(2, self.profile.points + 1):  # the other points' lines follow in the same write
+            line += eol.decode() + self._format(lost=fault == "target_lost" or tp in self.hidden, tp=tp)
         if fault == "noise":
             self._write(b"\x00\x13\xfe\x7f" + line.encode() + b"\x01" + eol)
         elif fault == "partial":
@@ -225,16 +230,18 @@ class AsciiDevice(_Served):
         else:
             self._write(line.encode() + eol)
 
-    def _format(self, lost: bool = False, far: bool = False) -> str:
+    def _format(self, lost: bool = False, far: bool = False, tp: int = 1) -> str:
         sim = self.sim
+        lost = lost or (self.profile.points > 1 and tp in self.hidden)
         if lost and "lost" in sim:
-            return str(sim["lost"])
-        point = np.asarray(self.rig.true_point(), dtype=float) + self.rng.normal(0.0, self.noise, 3)
+            return str(sim["lost"]).format(tp=tp)
+        true = self.rig.true_points()[tp - 1] if self.profile.points > 1 else self.rig.true_point()
+        point = np.asarray(true, dtype=float) + self.rng.normal(0.0, self.noise, 3)
         if far:
             point = np.full(3, 1e6)
         x, y, z = point / self.profile.scale
         status = sim.get("lost_status", "TL") if lost else sim.get("ok", "OK")
-        values = {"x": x, "y": y, "z": z, "status": status}
+        values = {"x": x, "y": y, "z": z, "status": status, "tp": tp}
         if "payload" in sim:
             payload = str(sim["payload"]).format(**values)
             algorithm = self.profile.checksum or "xor"
@@ -277,11 +284,15 @@ class IppServer(_Served):
     point follows), ``event_warning`` (an unsolicited E0000 warning, then the point), ``outlier`` (the point
     5 mm off), ``silence`` (no answer), ``drop`` (the server resets: connection closed, session ended),
     ``no_ack`` (data without the ``&``).
+
+    ``tools``: names of the targets it follows (reflector k of the rig, ``rig.true_points()[k]``, is tool k);
+    ``SetTool("NAME")`` makes one active (an unknown name: error 0510, severity 3) and Get answers its point;
+    a tool in ``hidden`` answers Get with error 0511 (severity 2, "Target not visible").
     """
 
     def __init__(self, rig: SimulatedRig | None = None, *, noise: float = 2e-5, seed: int = 0,
                  events: bool = False, averaging: str | None = None, max_average: int = 64,
-                 enum_props: bool = True) -> None:
+                 enum_props: bool = True, tools: tuple[str, ...] = ()) -> None:
         super().__init__()
         self.rig = rig if rig is not None else SimulatedRig("ur5e", seed=seed)
         self.noise, self.events = noise, events
@@ -292,6 +303,7 @@ class IppServer(_Served):
         self.faults: list[str] = []
         self.in_error = False
         self.session = False
+        self.tools, self.active, self.hidden = tuple(tools), (tools[0] if tools else None), set[str]()
         self.properties: dict[str, float] = dict.fromkeys(IPP_TOOL_PROPERTIES, 10.0)
         if averaging is not None:
             self.properties[averaging] = 1.0
@@ -367,7 +379,14 @@ class IppServer(_Served):
         elif command == "GetErrStatusE()":
             send(f"# ErrStatus({1 if self.in_error else 0})")
         elif command.replace(" ", "") == "Get(X(),Y(),Z())":
+            if self.active in self.hidden:
+                return error(2, "0511", "Target not visible")
             return self._get(conn, send, error, fault)
+        elif name == "SetTool" and self.tools:
+            wanted = command[len("SetTool("):-1].strip().strip('"')
+            if wanted not in self.tools:
+                return error(3, "0510", "Bad tool")
+            self.active = wanted
         elif command == "EnumAllProp(Tool())" and self.enum_props:
             for prop in self.properties:
                 send(f'# "{prop}", "Number"')
@@ -390,7 +409,8 @@ class IppServer(_Served):
         elif fault == "event_warning":
             conn.sendall(b'E0000 ! Error(1, 8001, Thermometer, "Air temperature changed by 1.2 K")\r\n')
         n = int(self.properties.get(self.averaging, 1)) if self.averaging else 1
-        point = np.asarray(self.rig.true_point()) + self.rng.normal(0.0, self.noise, (n, 3)).mean(axis=0)
+        true = self.rig.true_points()[self.tools.index(self.active)] if self.tools else self.rig.true_point()
+        point = np.asarray(true) + self.rng.normal(0.0, self.noise, (n, 3)).mean(axis=0)
         if fault == "outlier":
             point = point + 5e-3
         x, y, z = point * 1000.0
