@@ -50,8 +50,9 @@ class VerifyError(ValueError):
 class Design:
     """What the test commands: cube ``centre`` (3,) and ``edge`` (m), ``targets`` (5, 3) P1..P5 (TP positions),
     ``rotation`` (3, 3) of the flange at every pose (None with fewer than six joints), commands ``q`` per mode
-    (5, n), ``predicted`` per mode (5,): the identified model's prediction of AP (before: where the nominal
-    command lands; after: 0), ``expected`` (5,): the 3D uncertainty of those predictions, m; ``notes``."""
+    (5, n; DH joint values, as every plan: a coupled controller is commanded their readings), ``predicted`` per
+    mode (5,): the identified model's prediction of AP (before: where the nominal command lands; after: 0),
+    ``expected`` (5,): the 3D uncertainty of those predictions, m; ``notes``."""
 
     centre: Array
     edge: float
@@ -83,6 +84,7 @@ def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, pla
     edge0 = site.verify_edge if given else min(MAX_EDGE, REACH_SHARE * reach(robot))
     rotation = nominal.flanges(home)[0, :3, :3] if robot.n_joints >= 6 else None
     rot = None if rotation is None else np.broadcast_to(rotation, (5, 3, 3))
+    coupled = not np.array_equal(ident.reading_jacobian(), np.eye(robot.n_joints))  # limits bound DH values
     last, tried = "", []
     for share in (1.0,) if given else SHRINK:
         edge = edge0 * share
@@ -93,8 +95,8 @@ def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, pla
             centre = np.array(site.verify_centre) if given_centre else at_home + np.array([0.0, 0.0, shift * edge])
             tried.append((edge, centre))
             targets = cube_poses(centre, edge)
-            before = solve_ik(nominal, targets, np.tile(home, (5, 1)), robot.limits, rot)
-            after = solve_ik(ident, targets, before.q, robot.limits, rot)
+            before = solve_ik(nominal, targets, np.tile(home, (5, 1)), robot.limits, rot)  # DH joint values
+            after = solve_ik(ident, targets, ident.readings(before.q), None if coupled else robot.limits, rot)
             bad = [f"P{k + 1} {s}" for k, s in enumerate(before.status) if s != "ok"]
             bad += [f"P{k + 1} {s} (identified)" for k, s in enumerate(after.status) if s != "ok"]
             if not bad and plan_ok is not None:
@@ -105,11 +107,12 @@ def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, pla
             notes = [] if len(tried) == 1 else [
                 f"the default cube (the TP at home, edge {edge0 * 1e3:.0f} mm) did not fit ({last}); centre "
                 f"{', '.join(f'{v * 1e3:.1f}' for v in centre)} mm, edge {edge * 1e3:.0f} mm"]
-            predicted = {"before": np.linalg.norm(ident.points(before.q) - targets, axis=1), "after": np.zeros(5)}
+            predicted = {"before": np.linalg.norm(ident.points(ident.readings(before.q)) - targets, axis=1),
+                         "after": np.zeros(5)}
             # the attained positions reach the base frame through the identified base: its uncertainty counts
             expected = identified.expected_errors(after.q)
-            return Design(centre, edge, targets, rotation, {"before": before.q, "after": after.q}, predicted,
-                          expected, tuple(notes))
+            return Design(centre, edge, targets, rotation, {"before": before.q, "after": ident.dh_values(after.q)},
+                          predicted, expected, tuple(notes))
     edge, centre = tried[-1]
     where = f"centre {', '.join(f'{v:.3f}' for v in centre)} m, edge {edge * 1e3:.0f} mm"
     if not (given and given_centre):

@@ -233,10 +233,10 @@ def _measure(args, session: Session | None, path: Path, plan, robot_spec: RobotS
     robot_dev, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site)
     try:
         first = 0 if session is None else session.next_index()
-        _check_start(robot_dev, plan, robot, site, first or 0)
+        _check_start(robot_dev, plan, robot, site, first or 0, session)
         if session is None:
             assert config is not None
-            session = Session.create(path, plan, config, robot_dev.identity(), tracker.identity())
+            session = Session.create(path, plan, config, robot_dev.identity(), tracker.identity(), robot.coupling)
         elif settings is not None and settings.changes:
             session.set_connection(settings.connection(), "resumed with new connection details: "
                                    + "; ".join(settings.changes))

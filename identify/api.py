@@ -139,7 +139,8 @@ def controller_pose_strings(result: Result, q: ArrayLike, tcp: ArrayLike | None 
         raise InputError("the controller's model is unknown: the result names no nominal robot")
     nominal = CalibratedModel.exact(result.robot.nominal)
     tcp = result.model.tool() if tcp is None else np.asarray(tcp, dtype=float)
-    return [ur_pose(p) for p in controller_poses(nominal, np.atleast_2d(np.asarray(q, dtype=float)), tcp)]
+    q_dh = result.model.dh_values(np.atleast_2d(np.asarray(q, dtype=float)))
+    return [ur_pose(p) for p in controller_poses(nominal, q_dh, tcp)]
 
 
 def compare(results: list[Result], labels: list[str] | None = None, alpha: float = 0.01, poses: int = 500,

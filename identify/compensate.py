@@ -176,17 +176,26 @@ def compensate(identified: CalibratedModel, points: Array, seeds: Array, limits:
                rotations: Array | None = None, tool: Array | None = None, tool_rotation: Array | None = None,
                nominal: CalibratedModel | None = None, frame: str = "tracker") -> Compensation:
     """Solve the targets (``points`` (k, 3), optional ``rotations`` (k, 3, 3)) with ``identified``, each seeded by
-    ``nominal``'s solution from ``seeds`` where it has one (else by the seed). Targets are in ``identified``'s frame
+    ``nominal``'s solution from ``seeds`` where it has one (else by the seed). ``seeds`` and the solution are the
+    controller's readings (the DH values through the result's coupling for the nominal model; ``limits`` bound
+    the DH values). Targets are in ``identified``'s frame
     (and in ``nominal``'s: give both models the same base). ``frame`` names the frame the expected errors are
     quoted in: ``tracker`` (the TP as the tracker sees it) or ``base`` (the robot's frame 0: the base's own
     uncertainty left out). ``tool`` (3,) in the flange frame, taken as exact; default the identified TP."""
     start = np.atleast_2d(np.asarray(seeds, dtype=float))
     nominal_solution = None
-    if nominal is not None:
+    if nominal is not None:  # the nominal model works in DH joint values, the identified one in readings
         nominal_tool = identified.tool() if tool is None else tool
-        nominal_solution = solve_ik(nominal, points, start, limits, rotations, nominal_tool, tool_rotation)
-        start = np.where(nominal_solution.reached[:, None], nominal_solution.q, start)
-    solution = solve_ik(identified, points, start, limits, rotations, tool, tool_rotation)
+        nominal_solution = solve_ik(nominal, points, identified.dh_values(start), limits, rotations, nominal_tool,
+                                    tool_rotation)
+        start = np.where(nominal_solution.reached[:, None], identified.readings(nominal_solution.q), start)
+    coupled = not np.array_equal(identified.reading_jacobian(), np.eye(identified.n_joints))
+    solution = solve_ik(identified, points, start, None if coupled else limits, rotations, tool, tool_rotation)
+    if coupled and limits is not None:  # the limits bound DH joint values: a box in readings they are not
+        dh = identified.dh_values(solution.q)
+        beyond = np.any((dh < np.asarray(limits)[:, 0]) | (dh > np.asarray(limits)[:, 1]), axis=1)
+        solution = Solution(solution.q, np.where(beyond, "limit", solution.status).astype(str),
+                            solution.position_error, solution.rotation_error, solution.sigma_min, solution.seed_change)
     expected = identified.expected_errors(solution.q, tool, frame)
     expected[~solution.reached] = np.nan
     # the seed change is counted from the caller's seeds, not from the nominal solution

@@ -9,7 +9,9 @@ Targets (CSV, one header row, ``#`` comment lines; metres and radians):
 - ``--joints-from nominal``: ``q1..qN`` planned with the nominal model: the targets are where the nominal model
   puts the tool there (position and, for six joints or more, orientation; base frame).
 
-Optional ``q1..qN`` columns seed the solution (default: the robot's home); an ``id`` column is copied through.
+Joint values (``q1..qN`` seeds, rows of ``--joints-from nominal``, and the output) are the controller's readings
+(for a coupled robot, as its controller reports them). Optional ``q1..qN`` columns seed the solution (default:
+the robot's home); an ``id`` column is copied through.
 Each target is solved with the nominal model first and the identified model from there (the branch of the
 seed). ``--as controller-pose`` also writes the pose the controller (nominal model) must be given so that the
 real arm reaches the target, as UR's ``p[x, y, z, rx, ry, rz]``.
@@ -170,7 +172,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     if args.joints_from:
         if nominal is None:
             raise InputError("--joints-from nominal needs the nominal model: give --robot (the result names none)")
-        flange = nominal.flanges(seeds)
+        flange = nominal.flanges(identified.dh_values(seeds))  # rows are readings; the nominal takes DH values
         points = flange[:, :3, :3] @ tcp + flange[:, :3, 3]
         rotations = flange[:, :3, :3] @ tcp_rot if n >= 6 else None
     else:
@@ -190,8 +192,8 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
                         nominal, frame)
     poses = None
     if args.output == "controller-pose":
-        poses = controller_poses(replace(nominal, model=replace(nominal.model, base=np.eye(4))), result.solution.q,
-                                 tcp, tcp_rot)
+        poses = controller_poses(replace(nominal, model=replace(nominal.model, base=np.eye(4))),
+                                 identified.dh_values(result.solution.q), tcp, tcp_rot)
     text = _output_csv(args, result, ids, poses, n, tcp, tcp_rot, identified, robot)
     write_output(args.out, text, force=args.force)
     summary = _summary(result, args, status, robot)

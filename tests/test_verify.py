@@ -212,3 +212,37 @@ def test_identify_report_shows_a_verification_run(tmp_path, capsys) -> None:
     assert "not the .verify.yaml" in capsys.readouterr().err
     assert identify_main([str(data), "--verification", str(verify_yaml)]) == 2
     assert "goes with --report" in capsys.readouterr().err
+
+
+def coupled_run(folder: str) -> tuple[int, int, str]:
+    """A FANUC whose controller reads J3 against the horizontal: a small mock acquisition (the result carries the
+    coupling), then its verification; exit codes and the verification session's path."""
+    import contextlib
+    import io
+
+    cal, ver = Path(folder) / "f.session", Path(folder) / "fv.session"
+    with contextlib.redirect_stdout(io.StringIO()):
+        code_a = acquire(["--robot", "mock:fanuc_lrmate200id", "--tracker", "mock", "--steps", "12", "--free-poses",
+                          "10", "--session", str(cal), "--quiet"])
+        code_v = acquire(["verify", "--result", str(cal.with_suffix(".result.yaml")), "--robot",
+                          "mock:fanuc_lrmate200id", "--session", str(ver), "--cycles", "4", "--quiet"])
+    return code_a, code_v, str(ver)
+
+
+def test_verification_of_a_coupled_robot_commands_its_readings(tmp_path) -> None:
+    """The plan holds DH values; the coupled controller is commanded their readings (the session's coupling); the
+    identified model, which takes readings, is solved and converted: AP agrees with the simulated truth."""
+    from tests._single_thread import run_single_threaded
+
+    code_a, code_v, path = run_single_threaded(coupled_run, str(tmp_path))
+    assert (code_a, code_v) == (0, 0)
+    with Session.open(path) as s:
+        assert s.coupling is not None and not s.coupling.is_identity
+        first = s.steps()[0]
+    # the step records the controller's readings; the plan (and the command's record) its DH values
+    np.testing.assert_allclose(s.coupling.dh_from_readings(np.array([first.q_act])), [first.q_cmd], atol=1e-4)
+    implied, measured = _truth_implied(Path(path), SimulatedRig("fanuc_lrmate200id", seed=0).truth)
+    tol = _tolerance(NOISE, 4 * SAMPLES)
+    np.testing.assert_allclose(measured["before"], implied["before"], atol=tol)
+    np.testing.assert_allclose(measured["after"], implied["after"], atol=tol)
+    assert implied["before"].min() > 0.5e-3 and measured["after"].max() < 2 * NOISE
