@@ -77,7 +77,7 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
         robot = load_robot(robot_name)
     except (SessionError, ConfigError) as exc:
         raise InputError(str(exc)) from None
-    ident = identify(meas, robot.nominal)
+    ident = identify(meas, robot.nominal, links=robot.links)  # as acquire identifies its sessions
     if ident.verdict.status == "fail":
         raise InputError(f"{path}: its identification fails its verdict ({ident.verdict.summary()})")
     serial = (header.get("robot") or {}).get("serial") or None
