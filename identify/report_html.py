@@ -26,6 +26,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from identify import __version__
+from identify.extensions import UNITS
 from identify.kinematics import DH_NAMES, DHModel
 from identify.measurements import Measurements
 from identify.pipeline import Identification
@@ -211,6 +212,38 @@ def _dh_section(ident: Identification, references: list[tuple[str, DHModel]]) ->
     return "".join(parts)
 
 
+def _beyond_dh_section(ident: Identification, fit: Measurements) -> str:
+    """Tracked points, coupled readings and joint errors beyond the DH table (issue 14), with the decisions."""
+    parts = ['<section id="beyond-dh"><h2>Tracked points, coupling and joint errors</h2>']
+    rows = []
+    for tp_id, tool in zip(ident.tp_ids, ident.tools, strict=True):
+        count = int(np.sum(fit.tp == tp_id))
+        rows.append([str(tp_id), ", ".join(f"{x * MM:.3f}" for x in tool), str(count)])
+    parts.append("<p>Each tracked point's position in the last DH frame (mm); the first is the contract's "
+                 "<code>tool</code>.</p>" + _table(["tp", "tool [mm]", "fitted rows"], rows))
+    coupling = ident.coupling
+    if coupling is not None and not coupling.is_identity:
+        parts.append("<p>Readings are coupled: <code>q_dh = C · readings + offset</code>, C = "
+                     f"<code>{_e(coupling.matrix.tolist())}</code>, offset = <code>{_e(coupling.offset.tolist())}"
+                     "</code>. Joint values in this report are DH values.</p>")
+    if ident.extensions:
+        terms = [[_e(name), f"{value:.4g}", f"{std:.2g}", _e(UNITS[name.rsplit('_', 1)[0]])]
+                 for name, value, std in ident.extensions]
+        parts.append("<p>Joint errors selected (the joint stands at q + Δq(q); equations in the result YAML's "
+                     "<code>extensions</code>; URDF and UR calibration exports cannot carry them):</p>"
+                     + _table(["term", "value", "± std", "unit"], terms))
+    if ident.decisions:
+        decisions = [[_e(d.candidate.family), str(d.candidate.joint + 1),
+                      "-" if not np.isfinite(d.score) else f"{d.score:.1f}", f"{d.limit:.1f}",
+                      "yes" if d.selected else "no", _e(d.reason)] for d in ident.decisions]
+        parts.append("<p>Every candidate, with its score statistic (chi-square when absent) and the limit it had "
+                     "to pass (information criterion and 5 % family-wise):</p>"
+                     + _table(["term", "joint", "statistic", "limit", "selected", "why"], decisions, left=6))
+    else:
+        parts.append("<p>No joint errors were tested (switched off, or a misfit too large for corrections).</p>")
+    return "".join(parts) + "</section>"
+
+
 def _acquisition_section(session: Session) -> tuple[str, Figure | None]:
     header = session.header
     devices = []
@@ -317,6 +350,7 @@ def report_html(
     body.append('<section id="dh-table"><h2>DH parameters</h2><p>Standard DH (lengths mm, angles deg, ± one '
                 "standard uncertainty).</p>" + _dh_section(ident, references)
                 + (f'<p class="warn">{_e(reference_note)}</p>' if reference_note else "") + "</section>")
+    body.append(_beyond_dh_section(ident, fit))
     body.append('<section id="joints"><h2>Per joint</h2>')
     for axis in [] if ident.geometric is None else ident.geometric.axes:
         a = axis

@@ -173,3 +173,21 @@ def test_cli_records_coupling_tools_and_extensions_and_exports_say_what_they_lac
     capsys.readouterr()
     assert main([str(csv_path), "--extensions", "none", "--json"]) == 2  # the missing coupling, in one line
     assert "move together" in capsys.readouterr().err
+
+
+def test_report_shows_every_tracked_point_the_coupling_and_the_joint_error_decisions(tmp_path):
+    robot = load_robot("fanuc_lrmate200id")
+    rng = np.random.default_rng(146)
+    truth = random_truth(robot.nominal, robot.home, rng)
+    q_dh, sweep, joint, held = _poses(robot, rng, 24, 30, 10)
+    arm = RealArm(truth, robot.coupling, JointErrors(np.full(6, 2e-4), np.zeros(6), np.zeros(6), np.zeros(6)),
+                  tools=reflector_plate(rng, 2))
+    csv_path, report = tmp_path / "fanuc.csv", tmp_path / "report.html"
+    csv_path.write_text(format_measurements(measure(arm, robot.coupling.readings_from_dh(q_dh), sweep, joint, NOISE,
+                                                    rng, held)))
+    assert main([str(csv_path), "--report", str(report)]) == 0
+    html = report.read_text()
+    section = html[html.index('id="beyond-dh"'):]
+    section = section[:section.index("</section>")]
+    assert section.count("<tr>") >= 2 + 1 + 12  # two tracked points, the terms, every candidate's decision
+    assert "q_dh = C · readings + offset" in section and "scale_3" in section
