@@ -44,8 +44,8 @@ from identify.kinematics import frames_from_joints
 from identify.pipeline import identify
 from identify.poe import AxisLines, lines_from_model, points_from_lines
 from identify.predict import scatter
-from identify.simulate import line_parameter_count, moved_lines, random_poses, random_truth, sweep_readings
-from identify.simulate_joints import RealArm, measure, reflector_plate
+from identify.simulate import line_parameter_count, moved_lines, random_poses, random_truth
+from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 
 Array = NDArray[np.float64]
 
@@ -60,15 +60,7 @@ FOUND_TARGET, FALSE_TARGET = 0.95, 0.05
 
 
 def poses(robot, rng: np.random.Generator, steps: int, free: int, check: int):
-    """Sweeps of every joint (``steps`` samples), ``free`` fitted and ``check`` held-out free poses, DH values."""
-    q, sweep, joint = sweep_readings(robot.joint_types, robot.home, robot.limits, steps)
-    extra = random_poses(robot.limits, free + check, rng)
-    q = np.vstack([q, extra])
-    sweep = np.concatenate([sweep, 1000 + np.arange(free + check)])
-    joint = np.concatenate([joint, np.zeros(free + check, dtype=np.int64)])
-    held = np.zeros(len(q), dtype=bool)
-    held[len(q) - check:] = True
-    return q, sweep, joint, held
+    return sweeps_and_poses(robot.joint_types, robot.home, robot.limits, rng, steps, free, check)
 
 
 def true_lines(arm: RealArm, home: Array) -> AxisLines:

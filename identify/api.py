@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
-from identify.calibrated import CalibratedModel, ResultError, nominal_name
+from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compare import CompareError, Comparison, check_same_robot
 from identify.compare import compare as _compare
 from identify.compensate import Compensation, controller_poses, ur_pose
@@ -67,17 +67,6 @@ class Result:
         write_output(path, yaml.safe_dump(self.document, sort_keys=False, width=120), force=force)
 
 
-def _robot(name: str | None) -> Any:
-    if name is None:
-        return None
-    from config.robots import ConfigError, load_robot
-
-    try:
-        return load_robot(name)
-    except ConfigError as exc:
-        raise InputError(str(exc)) from None
-
-
 def load_measurements(path: str | Path, joints: str | None = None, units: str | None = None) -> Measurements:
     """The measurements of a CSV (the contract of DESIGN.md; ``joints``/``units`` as ``identify --joints/--units``)
     or of an acquisition session."""
@@ -93,7 +82,7 @@ def calibrate(meas: Measurements, robot: str | None = None, noise: float | None 
               seed: int = 0) -> Result:
     """Identify ``meas`` (against the nominal model ``robot``, e.g. ``"ur5e"`` or a YAML path), holding out
     ``holdout`` of the free poses (seeded) to validate; ``noise`` the tracker's, m per axis, when known."""
-    model = _robot(robot)
+    model = robot_model(robot)
     meas = split_holdout(meas, holdout, seed)
     ident = identify(meas, None if model is None else model.nominal, noise=noise)
     doc = result_to_dict(ident, None if model is None else model.nominal, None if model is None else model.name)
@@ -108,7 +97,7 @@ def load_result(path: str | Path) -> Result:
         model, doc = _load(str(path))
     except ResultError as exc:
         raise InputError(str(exc)) from None
-    return Result(doc, model, None, _robot(nominal_name(doc)))
+    return Result(doc, model, None, robot_model(nominal_name(doc)))
 
 
 def compensate(result: Result, targets: ArrayLike, seeds: ArrayLike | None = None, frame: str = "tracker",

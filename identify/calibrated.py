@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from identify.geometry import rotation_about_axis
 from identify.kinematics import DHModel, frames_from_joints
+from identify.measurements import InputError
 from identify.poe import AxisLines
 from identify.predict import Predictor
 from identify.refine import full_jacobian, parameter_names
@@ -312,3 +313,16 @@ def nominal_name(doc: dict[str, Any]) -> str | None:
     """The nominal model a result was identified against (``nominal.name``), or None."""
     nominal = doc.get("nominal") if isinstance(doc, dict) else None
     return nominal.get("name") if isinstance(nominal, dict) else None
+
+
+def robot_model(name: str | None):
+    """The robot model named ``name`` (bundled name or YAML path), None for None; a bad name or file is an
+    :class:`~identify.measurements.InputError` (one line)."""
+    if name is None:
+        return None
+    from config.robots import ConfigError, load_robot
+
+    try:
+        return load_robot(name)
+    except ConfigError as exc:
+        raise InputError(str(exc)) from None

@@ -19,6 +19,7 @@ import yaml
 
 from config.robots import RobotModel
 from identify import __version__
+from identify.calibrated import robot_model
 from identify.cpa import DEFAULT_PARALLEL_TOL
 from identify.csvio import UNITS, CsvContent, format_measurements, read_measurements
 from identify.joint_errors import Coupling
@@ -80,15 +81,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--force", action="store_true", help="replace output files that already exist")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return parser
-
-
-def _load_robot(name: str) -> RobotModel:
-    from config.robots import ConfigError, load_robot
-
-    try:
-        return load_robot(name)
-    except ConfigError as exc:
-        raise InputError(str(exc)) from None
 
 
 def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
@@ -248,7 +240,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         content = read_measurements(args.input, args.joints, args.units)
     meas = split_holdout(content.measurements, args.holdout, args.seed)
     robot_name = args.robot or (header or {}).get("robot_model")  # a session knows its robot
-    robot = _load_robot(robot_name) if robot_name else None
+    robot = robot_model(robot_name)
     nominal, nominal_name = (robot.nominal, robot.name) if robot else (None, None)
     if nominal is not None and nominal.joint_types != meas.joint_types:
         raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "

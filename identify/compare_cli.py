@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name
+from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name, robot_model
 from identify.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
 from identify.measurements import InputError
 from identify.outputs import check_outputs, write_output
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
     if len({s for s, _ in serials}) > 1:
         a, b = sorted(serials)[:2]
         raise InputError(f"{a[1]} is robot serial {a[0]}, {b[1]} serial {b[0]}: different robots cannot be compared")
-    robot = _robot(args.robot or next((r for _, r, *_ in loaded if r), None))
+    robot = robot_model(args.robot or next((r for _, r, *_ in loaded if r), None))
     if robot is not None and robot.joint_types != models[0].model.joint_types:
         raise InputError(f"--robot {robot.name} has joints {robot.joint_types}, the inputs "
                          f"{models[0].model.joint_types}")
@@ -123,17 +123,6 @@ def _labels(paths: list[str]) -> list[str]:
     """Short names: file stems (without ``.result``), or the whole paths where they repeat."""
     stems = [Path(p).stem.removesuffix(".result") for p in paths]
     return stems if len(set(stems)) == len(stems) else list(paths)
-
-
-def _robot(name: str | None):
-    if name is None:
-        return None
-    from config.robots import ConfigError, load_robot
-
-    try:
-        return load_robot(name)
-    except ConfigError as exc:
-        raise InputError(str(exc)) from None
 
 
 def as_dict(c: Comparison) -> dict[str, Any]:

@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from identify import __version__
-from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name
+from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name, robot_model
 from identify.compensate import Compensation, compensate, controller_poses, pose_matrices, rotvecs, ur_pose
 from identify.measurements import InputError
 from identify.outputs import check_outputs, write_output
@@ -120,18 +120,6 @@ def _need(columns: dict[str, np.ndarray], names: list[str], path: str, why: str)
     return np.column_stack([columns[c] for c in names])
 
 
-def _robot(args: argparse.Namespace, doc: dict[str, Any]):
-    from config.robots import ConfigError, load_robot
-
-    name = args.robot or nominal_name(doc)
-    if name is None:
-        return None
-    try:
-        return load_robot(name)
-    except ConfigError as exc:
-        raise InputError(str(exc)) from None
-
-
 def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     """Compensate per ``args``; returns the summary and the exit code. InputError for bad input."""
     robot_file = args.robot if args.robot and Path(args.robot).is_file() else None
@@ -143,7 +131,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     status = (doc.get("verdict") or {}).get("status")
     if status == "fail":
         raise InputError(f"{args.result} fails its verdict: its model must not be used (see the result's checks)")
-    robot = _robot(args, doc)
+    robot = robot_model(args.robot or nominal_name(doc))
     n = identified.n_joints
     if robot is not None and robot.joint_types != identified.model.joint_types:
         raise InputError(f"--robot {robot.name} has joints {robot.joint_types}, the result "

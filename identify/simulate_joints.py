@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from identify.joint_errors import Coupling, JointErrors, LinkMasses, gravity_torques
 from identify.kinematics import DHModel, points_from_joints
 from identify.measurements import Measurements
+from identify.simulate import random_poses, sweep_readings
 
 Array = NDArray[np.float64]
 
@@ -76,3 +77,17 @@ def reflector_plate(rng: np.random.Generator, count: int = 3, spacing: tuple[flo
         if min(gaps) >= spacing[0] and max(gaps) <= spacing[1]:
             return points
     raise RuntimeError("no reflector layout with that spacing; widen it")
+
+
+def sweeps_and_poses(joint_types: str, home: Array, limits: Array, rng: np.random.Generator, steps: int, free: int,
+                     check: int) -> tuple[Array, NDArray[np.int64], NDArray[np.int64], NDArray[np.bool_]]:
+    """DH joint values of a sweep of every joint (``steps`` samples), ``free`` fitted and ``check`` held-out
+    random free poses: (q (m, n), sweep ids, moved joint 1-based (0 free), held-out mask)."""
+    q, sweep, joint = sweep_readings(joint_types, home, limits, steps)
+    extra = random_poses(limits, free + check, rng)
+    q = np.vstack([q, extra])
+    sweep = np.concatenate([sweep, 1000 + np.arange(free + check)])
+    joint = np.concatenate([joint, np.zeros(free + check, dtype=np.int64)])
+    held = np.zeros(len(q), dtype=bool)
+    held[len(q) - check:] = True
+    return q, sweep, joint, held

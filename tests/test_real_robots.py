@@ -18,22 +18,15 @@ from identify.csvio import format_measurements, parse_measurements
 from identify.joint_errors import JointErrors
 from identify.measurements import InputError
 from identify.pipeline import identify
-from identify.simulate import random_poses, random_truth, sweep_readings
-from identify.simulate_joints import RealArm, measure, reflector_plate
+from identify.simulate import random_poses, random_truth
+from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 
 NOISE = 2e-5
 ERROR_FACTOR = 2.0  # RMS error vs reported accuracy over 200 poses: chi-square(600) stays far below 2x
 
 
-def _poses(robot, rng, steps: int, free: int, check: int):
-    q, sweep, joint = sweep_readings(robot.joint_types, robot.home, robot.limits, steps)
-    extra = random_poses(robot.limits, free + check, rng)
-    q = np.vstack([q, extra])
-    sweep = np.concatenate([sweep, 100 + np.arange(free + check)])
-    joint = np.concatenate([joint, np.zeros(free + check, dtype=np.int64)])
-    held = np.zeros(len(q), dtype=bool)
-    held[len(q) - check:] = True
-    return q, sweep, joint, held
+def _poses(robot, rng: np.random.Generator, steps: int, free: int, check: int):
+    return sweeps_and_poses(robot.joint_types, robot.home, robot.limits, rng, steps, free, check)
 
 
 def _error(ident, arm: RealArm, readings, tp=None) -> float:
