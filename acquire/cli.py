@@ -361,15 +361,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         elif changes:
             session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))
         print(f"session: {path}")
-        stop = StopRequest()
-        orchestrator = Orchestrator(robot, tracker, session, clock,
-                                    Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
-                                    site.retries, _progress_printer(args.quiet), stop)
-        with stop.installed():
-            result = orchestrator.run()
-        if not args.quiet and sys.stderr.isatty():
-            sys.stderr.write("\n")
-        return _finish(result, session, path, robot_model)
+        return _finish(run_session(robot, tracker, session, clock, site, args.quiet), session, path, robot_model)
     finally:
         robot.close()
         tracker.close()
@@ -488,6 +480,20 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
         return 130 if result.outcome == "aborted" else 1
     print(f"rehearsal complete: {result.recorded} steps reached, nothing measured or recorded")
     return 0
+
+
+def run_session(robot, tracker, session: Session, clock, site: SiteConfig, quiet: bool) -> RunResult:
+    """Run ``session``'s remaining steps on the devices (Ctrl-C stops the motion; the site's timeouts and
+    retries), printing progress unless ``quiet``."""
+    stop = StopRequest()
+    orchestrator = Orchestrator(robot, tracker, session, clock,
+                                Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
+                                site.retries, _progress_printer(quiet), stop)
+    with stop.installed():
+        result = orchestrator.run()
+    if not quiet and sys.stderr.isatty():
+        sys.stderr.write("\n")
+    return result
 
 
 def _finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -> int:

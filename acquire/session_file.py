@@ -125,6 +125,15 @@ def migrate(conn: sqlite3.Connection) -> None:
             conn.execute(f"ALTER TABLE {table} ADD COLUMN tp INTEGER NOT NULL DEFAULT 1")
 
 
+def is_session_file(path: Path) -> bool:
+    """True when ``path`` is a readable SQLite file (a session), not a CSV; False when it cannot be read."""
+    try:
+        with path.open("rb") as f:
+            return f.read(len(MAGIC)) == MAGIC
+    except OSError:
+        return False
+
+
 def check_magic(path: Path) -> None:
     """SessionError unless ``path`` is a readable SQLite file."""
     try:

@@ -32,11 +32,10 @@ from acquire.cli import (
     _hms,
     _open_devices,
     _Parser,
-    _progress_printer,
     _site,
     _without_faults,
+    run_session,
 )
-from acquire.orchestrator import Orchestrator, StopRequest, Timeouts
 from acquire.plan import estimate_duration, plan_clearance
 from acquire.plan_report import format_clearance
 from acquire.resume import resume_settings
@@ -241,14 +240,7 @@ def _measure(args, session: Session | None, path: Path, plan, robot_spec: RobotS
             session.set_connection(settings.connection(), "resumed with new connection details: "
                                    + "; ".join(settings.changes))
         print(f"session: {path}")
-        stop = StopRequest()
-        orchestrator = Orchestrator(robot_dev, tracker, session, clock,
-                                    Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
-                                    site.retries, _progress_printer(args.quiet), stop)
-        with stop.installed():
-            result = orchestrator.run()
-        if not args.quiet and sys.stderr.isatty():
-            sys.stderr.write("\n")
+        result = run_session(robot_dev, tracker, session, clock, site, args.quiet)
         if result.outcome != "complete":
             print(f"acquire verify: run {result.outcome}: {result.reason}", file=sys.stderr)
             print(f"acquire verify: resume with: acquire verify --resume {path}", file=sys.stderr)

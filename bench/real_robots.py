@@ -38,12 +38,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from config.robots import load_robot
+from identify.estimate import with_tools
 from identify.extensions import TermSet, candidates
 from identify.joint_errors import JointErrors, gravity_torques
-from identify.kinematics import frames_from_joints
 from identify.pipeline import identify
 from identify.poe import AxisLines, lines_from_model, points_from_lines
-from identify.predict import scatter
 from identify.simulate import line_parameter_count, moved_lines, random_poses, random_truth
 from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 
@@ -65,11 +64,8 @@ def poses(robot, rng: np.random.Generator, steps: int, free: int, check: int):
 
 def true_lines(arm: RealArm, home: Array) -> AxisLines:
     """The arm's axis lines at ``home`` with every tracked point."""
-    lines = lines_from_model(replace(arm.truth, tool=np.zeros(3)), home)
     tools = np.atleast_2d(arm.truth.tool if arm.tools is None else arm.tools)
-    flange = frames_from_joints(arm.truth, home[None, :])[0, -1]
-    at_home = tools @ flange[:3, :3].T + flange[:3, 3]
-    return replace(lines, tp_home=at_home[0], extra_tps=at_home[1:])
+    return with_tools(lines_from_model(arm.truth, home), arm.truth, tools)
 
 
 def extended_bound(lines: AxisLines, q_fit: Array, tp_fit: NDArray[np.int64], terms: TermSet, q_check: Array,
@@ -86,7 +82,7 @@ def extended_bound(lines: AxisLines, q_fit: Array, tp_fit: NDArray[np.int64], te
     def predict(x: Array, q: Array, regs: Array, tp: NDArray[np.int64]) -> Array:
         moved = moved_lines(lines, x[:size])
         moved = replace(moved, extra_tps=lines.extra_tps + x[size:size + 3 * (k - 1)].reshape(-1, 3))
-        qc = q + (regs * x[size + 3 * (k - 1):]) @ scatter(terms.joints, q.shape[1]) if n_terms else q
+        qc = q + (regs * x[size + 3 * (k - 1):]) @ np.eye(q.shape[1])[terms.joints]  # each term on its joint
         return points_from_lines(moved, qc, tp)
 
     def jacobian(q: Array, regs: Array, tp: NDArray[np.int64]) -> Array:

@@ -70,10 +70,11 @@ class Result:
 def load_measurements(path: str | Path, joints: str | None = None, units: str | None = None) -> Measurements:
     """The measurements of a CSV (the contract of DESIGN.md; ``joints``/``units`` as ``identify --joints/--units``)
     or of an acquisition session."""
-    from identify.cli import _is_session, _read_session
+    from acquire.session_file import is_session_file
+    from identify.cli import _read_session
     from identify.csvio import read_measurements
 
-    if _is_session(Path(path)):
+    if is_session_file(Path(path)):
         return _read_session(Path(path))[0].measurements
     return read_measurements(str(path), joints, units).measurements
 

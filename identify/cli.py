@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from acquire.session_file import is_session_file
 from config.robots import RobotModel
 from identify import __version__
 from identify.calibrated import robot_model
@@ -130,7 +131,7 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
     if args.report:
         from identify.report_html import report_html
 
-        session = _open_session(Path(args.input)) if _is_session(Path(args.input)) else None
+        session = _open_session(Path(args.input)) if is_session_file(Path(args.input)) else None
         try:
             page = report_html(ident, meas, robot.nominal if robot else None, robot.name if robot else None,
                                session=session, source=str(args.input), reference=reference,
@@ -171,15 +172,6 @@ def export_notes(ident: Identification) -> list[str]:
         notes.append(f"tool: tracked point {ident.tp_ids[0]} (of {list(ident.tp_ids)}; the others are in the result "
                      "YAML's 'tools')")
     return notes
-
-
-def _is_session(path: Path) -> bool:
-    """True for an SQLite file (an acquisition session) rather than a CSV."""
-    try:
-        with path.open("rb") as fh:
-            return fh.read(16) == b"SQLite format 3\x00"
-    except OSError:
-        return False
 
 
 def _open_session(path: Path):
@@ -234,7 +226,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
     _check_outputs(args)
     header = None
-    if _is_session(Path(args.input)):
+    if is_session_file(Path(args.input)):
         content, header = _read_session(Path(args.input))
     else:
         content = read_measurements(args.input, args.joints, args.units)

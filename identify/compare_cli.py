@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from acquire.session_file import is_session_file
 from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name, robot_model
 from identify.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
 from identify.measurements import InputError
@@ -43,20 +44,12 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _is_session(path: Path) -> bool:
-    try:
-        with path.open("rb") as fh:
-            return fh.read(16) == b"SQLite format 3\x00"
-    except OSError:
-        return False
-
-
 def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, float | None]:
     """The model of a result or session, its robot name, robot serial and time (s since the epoch, or None)."""
     p = Path(path)
     if not p.exists():
         raise InputError(f"{path}: no such result or session")
-    if not _is_session(p):
+    if not is_session_file(p):
         try:
             model, doc = load_result(path, p.stem)
         except ResultError as exc:

@@ -11,7 +11,6 @@ from numpy.typing import NDArray
 from identify.estimate import FitData, LinesFit
 from identify.extensions import Candidate, Decision, TermSet, score_statistics, select
 from identify.poe import JointTerms, LeastSquares, points_from_lines
-from identify.predict import scatter
 
 Array = NDArray[np.float64]
 
@@ -62,7 +61,7 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
 
     def held(fit: LeastSquares, terms: TermSet) -> float:
         assert heldout is not None
-        q = heldout.q + (terms.regressors(heldout.q) * fit.terms.coefs) @ scatter(terms.joints, heldout.q.shape[1])
+        q = terms.terms(heldout.q, fit.terms.coefs).corrected(heldout.q)
         err = (points_from_lines(fit.lines, q, heldout.tp_index) - heldout.points) * heldout.weights[:, None]
         return float(np.sum(err**2))
 

@@ -186,9 +186,8 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
     while remaining:
         scores = score(current, chosen, remaining)
         score_of = dict(zip(remaining, scores, strict=True))
-        order = [k for k in np.argsort([-s if np.isfinite(s) else np.inf for s in scores])]
-        best = remaining[order[0]]
-        best_score = scores[order[0]]
+        top = int(np.argmax([s if np.isfinite(s) else -np.inf for s in scores]))
+        best, best_score = remaining[top], scores[top]
         limit = limit_for(best.dof, len(pool), n_observations)
         if not np.isfinite(best_score) or best_score <= limit:
             decisions += [Decision(c, s, None, limit_for(c.dof, len(pool), n_observations), None, False,

@@ -282,8 +282,7 @@ def identify(
     if dh_fit is None:  # exact DH: the lines' covariance carried over
         model = out.model
         free = np.any(out.jacobian != 0.0, axis=1)
-        cov_free = (out.jacobian @ lines_cov[:out.jacobian.shape[1], :out.jacobian.shape[1]]
-                    @ out.jacobian.T)[np.ix_(free, free)]
+        cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
         model, free = dh_fit.model, dh_fit.free
         cov_free = dh_covariance(model, free, best.q[inl][first], weights[inl][first], unknown[inl][first]) * variance

@@ -37,9 +37,7 @@ class Predictor:
         q = np.atleast_2d(np.asarray(readings, dtype=float))
         if self.coupling is not None:
             q = self.coupling.dh_from_readings(q)
-        if len(self.coefs):
-            q = q + (self.terms.regressors(q) * self.coefs) @ scatter(self.terms.joints, q.shape[1])
-        return q
+        return self.terms.terms(q, self.coefs).corrected(q)
 
     def tp_index(self, tp: int | NDArray[np.int64] | None, m: int) -> NDArray[np.int64] | None:
         """0-based rows of ``lines.tps`` for tracked point id(s) ``tp`` (None: the first)."""
@@ -69,10 +67,3 @@ class Predictor:
         g = problem.jacobian_blocks(np.zeros(problem.size), q=q, tp_index=self.tp_index(tp, len(q)),
                                     regressors=regressors)
         return g @ self.covariance @ np.swapaxes(g, 1, 2)
-
-
-def scatter(joints: NDArray[np.int64], n: int) -> Array:
-    """(T, n) matrix sending each coefficient's correction to its joint."""
-    out = np.zeros((len(joints), n))
-    out[np.arange(len(joints)), joints] = 1.0
-    return out
