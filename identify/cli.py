@@ -267,12 +267,20 @@ def _with_coupling(meas: Measurements, path: str | None, robot: RobotModel | Non
     if path is not None:
         try:
             doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise InputError(f"--coupling {path}: no such file") from None
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
             raise InputError(f"--coupling {path}: cannot be read as YAML ({exc.__class__.__name__})") from None
         matrix, offset = (doc.get("matrix"), doc.get("offset")) if isinstance(doc, dict) else (doc, None)
         try:
-            coupling = Coupling(np.array(matrix, dtype=float), None if offset is None else np.array(offset, float))
-        except (TypeError, ValueError) as exc:
+            matrix = np.array(matrix, dtype=float)
+            offset = None if offset is None else np.array(offset, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"--coupling {path}: expected a {n}x{n} list of numbers, or {{matrix: ..., offset: "
+                             "[...]}") from None
+        try:
+            coupling = Coupling(matrix, offset)
+        except ValueError as exc:
             raise InputError(f"--coupling {path}: {exc}") from None
         if coupling.n_joints != n:
             raise InputError(f"--coupling {path}: a {coupling.n_joints}x{coupling.n_joints} matrix for {n} joints")

@@ -24,7 +24,7 @@ from identify.extensions import Decision, TermSet, candidates
 from identify.joint_errors import Coupling, LinkMasses, gravity_torques
 from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.linalg import project_out, scaled_inverse
-from identify.measurements import Measurements, in_dh_joints, prepared_joints, validate
+from identify.measurements import InputError, Measurements, in_dh_joints, prepared_joints, validate
 from identify.outliers import sweep_neighbours
 from identify.poe import AxisLines, points_from_lines
 from identify.predict import Predictor
@@ -223,7 +223,10 @@ def identify(
     """
     coupling = meas.coupling
     meas, relabelled = in_dh_joints(meas)
-    warnings = validate(meas, with_nominal=nominal is not None) + relabelled
+    try:
+        warnings = validate(meas, with_nominal=nominal is not None) + relabelled
+    except InputError as exc:  # say what the coupling did to the sweeps when it matters
+        raise InputError("; ".join([str(exc), *relabelled])) from None
     n = meas.n_joints
     if nominal is not None and nominal.joint_types != meas.joint_types:
         raise ValueError(f"nominal model has joints {nominal.joint_types}, data have {meas.joint_types}")
