@@ -104,3 +104,76 @@ class Tracker(Protocol):
         TargetLost. A tracker that can see several points says how many in an attribute ``points`` (optional:
         one when absent)."""
         ...
+
+
+# --- continuous motion: streams ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class JointStreamBatch:
+    """Joint samples the robot controller recorded: ``t`` (k,) s on the controller's own clock (its
+    timestamp, not the host's), ``q`` (k, n) actual joint positions (rad / m), ``gaps``: (start, end) pairs
+    of controller times between which samples were lost (a dropped packet, a restarted link), so that
+    nothing is interpolated across them."""
+
+    t: Array
+    q: Array
+    gaps: tuple[tuple[float, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class TrackerStreamBatch:
+    """Tracker samples: ``t`` (k,) s on the tracker's own clock, ``points`` (k, 3) m in the tracker frame,
+    ``tp`` (k,) tracked-point ids, ``sigma`` (k,) m per axis (NaN when the device reports none), ``gaps``:
+    (start, end) tracker times between which the target was lost or samples were dropped."""
+
+    t: Array
+    points: Array
+    tp: NDArray[np.int64]
+    sigma: Array
+    gaps: tuple[tuple[float, float], ...] = ()
+
+
+@runtime_checkable
+class StreamingRobot(Protocol):
+    """A robot that records its joint positions at the controller's native rate while it moves (continuous
+    acquisition). Recording runs in the background (the UR driver's worker process); reads never block."""
+
+    def start_joint_stream(self, timeout: float) -> float:
+        """Start recording now; returns the native rate, Hz."""
+        ...
+
+    def read_joint_stream(self) -> JointStreamBatch:
+        """Everything recorded since the last read (empty arrays when nothing new)."""
+        ...
+
+    def stop_joint_stream(self, timeout: float) -> JointStreamBatch:
+        """Stop recording; returns what was recorded since the last read."""
+        ...
+
+    def start_move(self, q: Sequence[float], speed: Sequence[float], acceleration: Sequence[float],
+                   timeout: float) -> None:
+        """Begin a move to ``q`` and return at once (the move's checks as in ``move_joints``)."""
+        ...
+
+    def motion_done(self) -> bool:
+        """True once the move begun by ``start_move`` has ended; raises RobotFault (protective stop...),
+        ConnectionFailed."""
+        ...
+
+
+@runtime_checkable
+class StreamingTracker(Protocol):
+    """A tracker that streams timestamped positions at its own rate."""
+
+    def start_stream(self, rate: float, timeout: float) -> float:
+        """Start streaming at about ``rate`` Hz; returns the rate the device runs at."""
+        ...
+
+    def read_stream(self) -> TrackerStreamBatch:
+        """Every sample since the last read (empty arrays when nothing new); never blocks."""
+        ...
+
+    def stop_stream(self, timeout: float) -> TrackerStreamBatch:
+        """Stop streaming; returns the samples since the last read."""
+        ...
