@@ -3,7 +3,9 @@
 Format: UTF-8, comma separated, one header row; ``#`` lines are comments, ``# joints: RRRRRR`` and
 ``# units: m, rad`` (or ``mm``) and ``# coupling: [[...]]`` (row-major n x n, DH values = C · readings) carry
 metadata. Columns ``sweep,joint,q1..qN,x,y,z`` plus optional ``sigma``, ``role`` (fit/check) and ``tp``
-(tracked point id); any other column (``t``, ``step``...) is ignored.
+(tracked point id); ``t`` (the sample's time, s) is kept; any other column (``step``...) is ignored.
+Continuous motion: ``# streamed: 3, 4`` lists the sweeps recorded while the robot moved (their joint values
+interpolated from the joint stream at robot time ``t + clock_offset``), ``# clock_offset: 0.0123`` (s).
 """
 
 from __future__ import annotations
@@ -93,6 +95,7 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
     sigma = np.empty(m) if "sigma" in columns else None
     check = np.zeros(m, dtype=bool)
     tp = np.ones(m, dtype=np.int64)
+    t = np.full(m, np.nan) if "t" in columns else None
     line_numbers = np.array([number for number, _ in numbered[1:]], dtype=np.int64)
     for k, fields in enumerate(rows):
         line = int(line_numbers[k])
@@ -111,6 +114,8 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
             if role not in ("fit", "check"):
                 raise InputError(f"line {line}: role must be 'fit' or 'check', got {role!r}")
             check[k] = role == "check"
+        if t is not None:
+            t[k] = _number(fields, columns["t"], "t", line, allow_empty=True)
         if "tp" in columns:
             tp[k] = _integer(fields, columns["tp"], "tp", line)
             if tp[k] < 1:
@@ -120,9 +125,36 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
         raise InputError(f"x, y, z reach {peak:g}: these look like millimetres; pass --units mm "
                          "(the CSV contract uses metres)")
     coupling = parse_coupling(metadata["coupling"], n) if "coupling" in metadata else None
+    streamed, offset = _streams(metadata, sweep, t)
     meas = Measurements(types, q, points, sweep, joint, sigma, check, line_numbers, has_role="role" in columns,
-                        tp=tp, coupling=coupling)
+                        tp=tp, coupling=coupling, t=t, streamed=streamed, clock_offset=offset)
     return CsvContent(meas, metadata, notes)
+
+
+def _streams(metadata: dict[str, str], sweep: np.ndarray, t: np.ndarray | None) -> tuple[np.ndarray, float]:
+    """Rows of the ``# streamed:`` sweeps, and the ``# clock_offset:`` (s)."""
+    streamed = np.zeros(len(sweep), dtype=bool)
+    text = metadata.get("streamed", "").strip()
+    if text:
+        try:
+            ids = [int(part) for part in text.replace(",", " ").split()]
+        except ValueError:
+            raise InputError(f"'# streamed:' must list sweep ids like '3, 4', got {text!r}") from None
+        unknown = sorted(set(ids) - set(sweep.tolist()))
+        if unknown:
+            raise InputError(f"'# streamed:' names sweep(s) {unknown} that have no rows")
+        if t is None:
+            raise InputError("'# streamed:' sweeps need a t column (the sample's time, s)")
+        streamed = np.isin(sweep, ids)
+        if np.any(np.isnan(t[streamed])):
+            raise InputError("every row of a '# streamed:' sweep needs its time t (s)")
+    try:
+        offset = float(metadata.get("clock_offset", "0").split()[0])
+    except (ValueError, IndexError):
+        raise InputError(f"'# clock_offset:' must be a number of seconds, got {metadata['clock_offset']!r}") from None
+    if not math.isfinite(offset):
+        raise InputError("'# clock_offset:' must be a finite number of seconds")
+    return streamed, offset
 
 
 def parse_coupling(text: str, n: int) -> Coupling:
@@ -183,7 +215,7 @@ def _columns(header: list[str], types: str, line: int, notes: list[str]) -> dict
     if missing:
         raise InputError(f"line {line}: missing column(s) {', '.join(missing)}; expected "
                          f"sweep,joint,q1..q{n},x,y,z")
-    ignored = [name for name in header if name not in (*required, "sigma", "role", "tp")]
+    ignored = [name for name in header if name not in (*required, "sigma", "role", "tp", "t")]
     if ignored:
         notes.append(f"ignored column(s): {', '.join(ignored)}")
     return seen
@@ -220,8 +252,11 @@ def format_measurements(meas: Measurements, metadata: dict[str, str] | None = No
         if np.any(meas.coupling.offset):
             raise ValueError("the CSV coupling has no offset: add it to the readings before writing")
         out.write(f"# coupling: {meas.coupling.matrix.tolist()}\n")
+    if meas.has_streams:
+        out.write(f"# streamed: {', '.join(str(s) for s in np.unique(meas.sweep[meas.streamed]))}\n")
+        out.write(f"# clock_offset: {meas.clock_offset!r}\n")
     for key, value in (metadata or {}).items():
-        if key != "coupling":
+        if key not in ("coupling", "streamed", "clock_offset"):
             out.write(f"# {key}: {value}\n")
     n = meas.n_joints
     header = ["sweep", "joint", *(f"q{j}" for j in range(1, n + 1)), "x", "y", "z"]
@@ -232,6 +267,8 @@ def format_measurements(meas: Measurements, metadata: dict[str, str] | None = No
     several = bool(np.any(meas.tp != 1))
     if several:
         header.append("tp")
+    if meas.t is not None:
+        header.append("t")
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(header)
     for k in range(len(meas)):
@@ -244,5 +281,7 @@ def format_measurements(meas: Measurements, metadata: dict[str, str] | None = No
             row.append("check" if meas.check[k] else "fit")
         if several:
             row.append(str(int(meas.tp[k])))
+        if meas.t is not None:
+            row.append("" if math.isnan(meas.t[k]) else repr(float(meas.t[k])))
         writer.writerow(row)
     return out.getvalue()

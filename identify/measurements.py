@@ -35,6 +35,10 @@ class Measurements:
     ``check`` (m,) marks rows held out for validation (never fitted); ``row`` (m,) is the source line
     number of each sample, for messages; ``tp`` (m,) the tracked point's id (1 when there is one);
     ``coupling``: how the readings give DH joint values (None: they are DH joint values).
+
+    Continuous motion: ``t`` (m,) the sample's time, s on the tracker's clock (NaN or None when unknown);
+    ``streamed`` (m,) marks rows recorded while the robot moved, whose ``q`` were interpolated from the
+    robot's joint stream at robot time ``t + clock_offset`` (s); the fit refines that timing.
     """
 
     joint_types: str
@@ -48,6 +52,9 @@ class Measurements:
     has_role: bool = False
     tp: NDArray[np.int64] | None = None
     coupling: Coupling | None = None
+    t: Array | None = None
+    streamed: NDArray[np.bool_] | None = None
+    clock_offset: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_types", check_joint_types(self.joint_types))
@@ -58,6 +65,15 @@ class Measurements:
             object.__setattr__(self, "row", np.arange(1, m + 1))
         if self.tp is None:
             object.__setattr__(self, "tp", np.ones(m, dtype=np.int64))
+        if self.streamed is None:
+            object.__setattr__(self, "streamed", np.zeros(m, dtype=bool))
+        if np.any(self.streamed) and (self.t is None or np.any(np.isnan(self.t[self.streamed]))):
+            raise InputError("streamed rows need their time t (s): the fit interpolates the joints in time")
+
+    @property
+    def has_streams(self) -> bool:
+        """True when some rows were recorded in continuous motion."""
+        return bool(np.any(self.streamed))
 
     @property
     def tp_ids(self) -> list[int]:
@@ -84,6 +100,8 @@ class Measurements:
             check=self.check[mask],
             row=self.row[mask],
             tp=self.tp[mask],
+            t=None if self.t is None else self.t[mask],
+            streamed=self.streamed[mask],
         )
 
     def sweeps_of(self, joint: int) -> list[int]:
