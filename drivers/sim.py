@@ -67,6 +67,7 @@ from drivers.errors import (
 from drivers.motion import joint_durations as _durations
 from drivers.motion import move_duration as move_duration  # re-exported: the simulated robot's timing
 from drivers.motion import profile_fraction as _fraction
+from drivers.sim_stream import JointStreaming, StreamSettings
 from drivers.sim_tracker import SimulatedTracker as SimulatedTracker  # re-exported: the mock backend's tracker
 from drivers.sim_tracker import open_tracker as open_tracker
 from drivers.sim_world import errors_as_dict, has_errors, joint_errors_for, reflector_tools, true_joints
@@ -113,7 +114,7 @@ class SimulatedRig:
                  noise: float = 5e-5, latency: float = 0.002, dropout: float = 0.0, tracker_seed: int | None = None,
                  robot_faults: Iterable[FaultSpec] = (), tracker_faults: Iterable[FaultSpec] = (),
                  points: int = 1, occlusion: float = 0.0, scale: float = 0.0, eccentricity: float = 0.0,
-                 compliance: float = 0.0) -> None:
+                 compliance: float = 0.0, stream: StreamSettings | None = None) -> None:
         self.model = model if isinstance(model, RobotModel) else load_robot(model)
         self.clock: Clock = VirtualClock() if clock is None else clock
         self.seed = int(seed)
@@ -149,6 +150,9 @@ class SimulatedRig:
         self._faults: list[_Fault] = []
         self.robot_spec: RobotSpec | None = None
         self.tracker_spec: TrackerSpec | None = None
+        self.stream, self.stream_epoch = stream or StreamSettings(), self.clock.now()  # drivers/sim_stream.py
+        self._stream_rng = np.random.default_rng([self.tracker_seed, 16])
+        self._path: Any = None  # a streamed move (drivers/sim_stream.py), overlaid on the rest-and-ring model
         for fault in robot_faults:
             self.inject(fault.name, at_move=fault.at, count=fault.count, device="robot")
         for fault in tracker_faults:
@@ -187,7 +191,8 @@ class SimulatedRig:
             rig = cls(model, clock=clock, seed=r["seed"], repeatability=r["repeatability"], ring=r["ring"],
                       ring_tau=r["ring_tau"], noise=t["noise"], latency=t["latency"], dropout=t["dropout"],
                       tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"], scale=r["scale"],
-                      eccentricity=r["eccentricity"], compliance=r["compliance"], **world)
+                      eccentricity=r["eccentricity"], compliance=r["compliance"],
+                      stream=StreamSettings.from_settings(r, t), **world)
         except ValueError as exc:
             raise SpecError(f"robot spec {str(robot)!r}: {exc}") from None
         rig.robot_spec, rig.tracker_spec = robot, tracker
@@ -207,7 +212,8 @@ class SimulatedRig:
         else:
             envelope = np.zeros_like(dt)
         wave = envelope * np.cos(2 * np.pi * RING_FREQUENCY * dt)
-        return self._rest + np.multiply.outer(wave, self._ring_amp)
+        out = self._rest + np.multiply.outer(wave, self._ring_amp)
+        return out if self._path is None else self._path.overlay(self.clock.now() if t is None else t, out)
 
     def readings_of(self, q: Array) -> Array:
         """The controller's readings (n,) or (m, n) that give the DH joint values ``q`` (the same without a
@@ -273,7 +279,7 @@ class SimulatedRig:
         k = int(np.argmax(durations))
         duration, distance = float(durations[k]), abs(float(target[k] - start[k]))
         elapsed, remaining = 0.0, until
-        self._moving, self._stop_requested = True, False
+        self._moving, self._stop_requested, self._path = True, False, None
         try:
             while remaining > 0 and not self._stop_requested:
                 step = min(MOTION_CHUNK, remaining)
@@ -353,8 +359,9 @@ class SimulatedRig:
                              "open the devices with the specs the rig was made from")
 
 
-class SimulatedRobot:
-    """The simulated robot arm (implements :class:`drivers.base.Robot`); a view of ``rig``'s arm."""
+class SimulatedRobot(JointStreaming):
+    """The simulated robot arm (implements :class:`drivers.base.Robot` and ``StreamingRobot``: the streams are in
+    drivers/sim_stream.py); a view of ``rig``'s arm."""
 
     def __init__(self, rig: SimulatedRig) -> None:
         self.rig, self.joint_types = rig, rig.model.joint_types
@@ -526,5 +533,6 @@ def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock:
     ours = {key: getattr(rig, key) for key in ("seed", "repeatability", "ring", "ring_tau", "scale", "eccentricity",
                                                 "compliance")}
     ours.update({key: getattr(rig, key) for key in ("points", "occlusion") if key in spec.options})
+    ours.update(rig.stream.robot_options())
     rig._check_settings(spec, ours, spec.mock_settings(), rig.robot_spec)
     return SimulatedRobot(rig)

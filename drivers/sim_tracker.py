@@ -16,14 +16,16 @@ import numpy as np
 
 from drivers.base import DeviceIdentity, TrackerReading
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, SpecError, TargetLost
+from drivers.sim_stream import TrackerStreaming
 from drivers.spec import TrackerSpec
 
 if TYPE_CHECKING:
     from drivers.sim import SimulatedRig
 
 
-class SimulatedTracker:
-    """The simulated tracker (implements :class:`drivers.base.Tracker`): sees the rig's true reflectors."""
+class SimulatedTracker(TrackerStreaming):
+    """The simulated tracker (implements :class:`drivers.base.Tracker` and ``StreamingTracker``, the stream in
+    drivers/sim_stream.py): sees the rig's true reflectors."""
 
     def __init__(self, rig: SimulatedRig) -> None:
         self.rig = rig
@@ -108,5 +110,6 @@ def open_tracker(spec: TrackerSpec | str, *, rig: SimulatedRig | None = None, si
     given["seed"] = rig.seed if given["seed"] is None else given["seed"]
     ours = {"noise": rig.noise, "latency": rig.latency, "dropout": rig.dropout, "seed": rig.tracker_seed}
     ours.update({key: getattr(rig, key) for key in ("points", "occlusion") if given[key] is not None})
+    ours.update(rig.stream.tracker_options())
     rig._check_settings(spec, ours, given, rig.tracker_spec)
     return SimulatedTracker(rig)

@@ -68,6 +68,8 @@ MOCK_ROBOT_OPTIONS: dict[str, tuple[str, object, str]] = {
                    "model's dynamics"),
     "points": ("points", 1, _POINTS),
     "occlusion": ("probability", 0.0, _OCCLUSION),
+    "rate": ("rate", 500.0, "joint stream rate, Hz (continuous motion; drivers/sim_stream.py)"),
+    "drop": ("probability", 0.0, "probability that a joint-stream packet is lost (a gap in the stream)"),
 }
 #: Options of ``mock``: name -> (kind, default, meaning).
 MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
@@ -78,6 +80,12 @@ MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
     "fault": ("faults", (), "simulated faults, " + "|".join(TRACKER_FAULTS) + "[@MEASUREMENT][xCOUNT],..."),
     "points": ("points", None, _POINTS + " (default: the robot spec's, 1)"),
     "occlusion": ("probability", None, _OCCLUSION + " (default: the robot spec's, 0)"),
+    "rate": ("rate", 250.0, "stream rate, Hz (continuous motion; drivers/sim_stream.py)"),
+    "clock_offset": ("signed", 0.0, "the tracker clock's offset from the robot's, s"),
+    "drift": ("drift", 0.0, "the tracker clock's rate error, a fraction in [-0.01, 0.01] (1e-3: 0.1 %)"),
+    "jitter": ("float", 0.0, "standard deviation of a streamed sample's timestamp, s"),
+    "lost": ("interval", (0.0, 2.0), "the target is out of sight for DURATION s from START s (default 2) into "
+             "every stream: DURATION[@START]"),
 }
 
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*\Z")
@@ -159,6 +167,15 @@ def _typed(kind: str, key: str, value: str, device: str) -> object:
         if not value.isdigit():
             raise ValueError(f"option {key}={value} must be a non-negative integer")
         return int(value)
+    if kind == "interval":
+        duration, _, start = value.partition("@")
+        try:
+            out = (float(duration), float(start or 2.0))
+        except ValueError:
+            out = (math.nan, math.nan)
+        if not all(math.isfinite(v) and v >= 0 for v in out):
+            raise ValueError(f"option {key}={value} must be DURATION[@START], seconds >= 0")
+        return out
     if kind == "points":
         if not value.isdigit() or not 1 <= int(value) <= MAX_POINTS:
             raise ValueError(f"option {key}={value} must be an integer in 1..{MAX_POINTS}")
@@ -167,8 +184,15 @@ def _typed(kind: str, key: str, value: str, device: str) -> object:
         number = float(value)
     except ValueError:
         number = math.nan
-    if not math.isfinite(number) or number < 0 or (kind == "probability" and number >= 1):
-        expected = "a probability in [0, 1)" if kind == "probability" else "a finite number >= 0"
+    if kind == "signed" and math.isfinite(number):
+        return number
+    if kind == "drift" and math.isfinite(number) and abs(number) <= 0.01:
+        return number
+    if kind == "rate" and not (math.isfinite(number) and 0 < number <= 10000):
+        raise ValueError(f"option {key}={value} must be a rate in (0, 10000] Hz")
+    if kind == "drift" or not math.isfinite(number) or number < 0 or (kind == "probability" and number >= 1):
+        expected = {"probability": "a probability in [0, 1)", "drift": "a fraction in [-0.01, 0.01]",
+                    "signed": "a finite number"}.get(kind, "a finite number >= 0")
         raise ValueError(f"option {key}={value} must be {expected}")
     return number
 
