@@ -9,7 +9,7 @@ rig's creation) and delivered ``latency`` s after τ. So a tracker sample stampe
 
 Streams (spec options, drivers/spec.py): ``mock:MODEL?rate=500&drop=P`` (joint samples every 1/rate s of the
 robot clock; each packet lost with probability P, the lost stretch reported as a gap between the kept samples
-around it); ``mock?rate=250&latency=0.02&clock_offset=0.1&drift=1e-3&jitter=1e-4&lost=0.5@2`` (tracker samples
+around it); ``mock?rate=250&latency=0.02&clock_offset=0.1&drift=1e-3&stamp_jitter=1e-4&lost=0.5@2`` (tracker samples
 every 1/rate s of physical time, each reflector with the rig's noise; ``lost=D@S``: the target is out of sight
 for D s from S s into every stream, reported as a gap). Reads return every sample delivered between the last
 read and ``clock.now()``; nothing blocks.
@@ -56,7 +56,7 @@ class StreamSettings:
     def from_settings(cls, robot: dict[str, Any], tracker: dict[str, Any]) -> StreamSettings:
         """From the typed mock options of the robot and tracker specs (``spec.mock_settings()``)."""
         return cls(robot["rate"], robot["drop"], tracker["rate"], tracker["clock_offset"], tracker["drift"],
-                   tracker["jitter"], tuple(tracker["lost"]))
+                   tracker["stamp_jitter"], tuple(tracker["lost"]))
 
     def robot_options(self) -> dict[str, Any]:
         """The robot spec's options these settings came from (to check a spec against the rig)."""
@@ -64,7 +64,7 @@ class StreamSettings:
 
     def tracker_options(self) -> dict[str, Any]:
         return {"rate": self.tracker_rate, "clock_offset": self.clock_offset, "drift": self.drift,
-                "jitter": self.jitter, "lost": self.lost}
+                "stamp_jitter": self.jitter, "lost": self.lost}
 
 
 class StreamedMove:

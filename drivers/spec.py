@@ -83,7 +83,7 @@ MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
     "rate": ("rate", 250.0, "stream rate, Hz (continuous motion; drivers/sim_stream.py)"),
     "clock_offset": ("signed", 0.0, "the tracker clock's offset from the robot's, s"),
     "drift": ("drift", 0.0, "the tracker clock's rate error, a fraction in [-0.01, 0.01] (1e-3: 0.1 %)"),
-    "jitter": ("float", 0.0, "standard deviation of a streamed sample's timestamp, s"),
+    "stamp_jitter": ("float", 0.0, "standard deviation of a streamed sample's timestamp, s"),
     "lost": ("interval", (0.0, 2.0), "the target is out of sight for DURATION s from START s (default 2) into "
              "every stream: DURATION[@START]"),
 }
