@@ -33,15 +33,19 @@ from identify.kinematics import DHModel, frames_from_joints
 from identify.refine import full_jacobian
 from identify.simulate import axis_distances, random_poses
 
-STEP_KINDS = ("sweep", "free", "home", "verify")  # verify: acquire/verify.py
-JSON_KINDS = ("sweep", "free", "check", "home")  # the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
+STEP_KINDS = ("sweep", "free", "home", "verify", "stream")  # verify: acquire/verify.py; stream: plan_continuous.py
+# the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
+JSON_KINDS = ("sweep", "free", "check", "home", "stream")
 
 
 @dataclass(frozen=True)
 class Step:
     """One commanded pose. ``index`` is its 0-based place in the plan; ``sweep`` the CSV sweep id;
     ``joint`` the 1-based joint a sweep moves (0 for free poses and home checks); ``q`` the commanded
-    joint values; ``role`` is "fit" or "check" (held out for validation)."""
+    joint values; ``role`` is "fit" or "check" (held out for validation). A ``stream`` step (continuous motion,
+    acquire/plan_continuous.py) moves ``joint`` from ``start`` to ``q`` at the constant ``speed`` (rad/s or m/s),
+    ramping at ``acceleration`` (rad/s², m/s²), while both devices stream; other steps have none of the three
+    (and their JSON none of the keys)."""
 
     index: int
     kind: str
@@ -49,6 +53,9 @@ class Step:
     joint: int
     q: tuple[float, ...]
     role: str = "fit"
+    start: tuple[float, ...] | None = None
+    speed: float | None = None
+    acceleration: float | None = None
 
 
 @dataclass(frozen=True)
@@ -70,12 +77,23 @@ class Plan:
     notes: tuple[str, ...] = field(default_factory=tuple)
 
     def to_json(self) -> str:
-        return json.dumps(asdict(self))
+        data = asdict(self)
+        for step in data["steps"]:  # a stop-and-go plan reads as it always did
+            for key in ("start", "speed", "acceleration"):
+                if step[key] is None:
+                    del step[key]
+        return json.dumps(data)
+
+    @property
+    def continuous(self) -> bool:
+        """True when some steps are streamed (continuous motion)."""
+        return any(s.kind == "stream" for s in self.steps)
 
     @classmethod
     def from_json(cls, text: str) -> Plan:
         data: dict[str, Any] = json.loads(text)
-        steps = tuple(Step(**{**s, "q": tuple(s["q"])}) for s in data.pop("steps"))
+        steps = tuple(Step(**{**s, "q": tuple(s["q"]), **({"start": tuple(s["start"])} if s.get("start") else {})})
+                      for s in data.pop("steps"))
         tuples = {k: tuple(data[k]) for k in ("home", "speed", "acceleration", "notes")}
         return cls(steps=steps, **{**data, **tuples})
 
@@ -538,9 +556,17 @@ def check_plan(plan: Plan, robot: RobotModel) -> list[str]:
             out.append(f"{where}: kind '{step.kind}', expected one of {', '.join(STEP_KINDS)}")
         if step.role not in ("fit", "check"):
             out.append(f"{where}: role '{step.role}', expected fit or check")
-        if step.kind == "sweep" and not 1 <= step.joint <= n:
+        if step.kind in ("sweep", "stream") and not 1 <= step.joint <= n:
             out.append(f"{where}: a sweep must name a joint 1..{n}")
         pose(where, step.q)
+        if step.kind == "stream":
+            if step.start is None or not all(v is not None and math.isfinite(v) and v > 0
+                                             for v in (step.speed, step.acceleration)):
+                out.append(f"{where}: a stream step needs its start, a speed > 0 and an acceleration > 0")
+            else:
+                pose(f"{where} start", step.start)
+                if 1 <= step.joint <= n and step.speed > robot.max_speed[step.joint - 1]:
+                    out.append(f"{where}: speed {step.speed:.4f} above the max_speed of joint {step.joint}")
     return out
 
 

@@ -7,7 +7,7 @@ unknown key is rejected. Sections and keys (units: m, rad, s; per-joint values b
     robot:    {model, host, hosts, speed_fraction, acceleration_fraction, speed, acceleration}
     tracker:  {spec, noise, settings, measure_time}
     plan:     {tp_guess, samples_per_step, settle_time, steps_per_sweep, joints, sweep_ranges,
-               free_poses, check_poses, home_check_every, min_axis_distance}
+               free_poses, check_poses, home_check_every, min_axis_distance, stream_speed, stream_rate}
     cell:     {margin, mounting_offset, mounting_clearance, tool_a, tool_b, tool_radius, boxes, cylinders,
                camera_pose, camera_half_fov, camera_max_tilt, target_normal}
     timeouts: {connect, move, settle, measure}
@@ -56,6 +56,8 @@ FIELDS: dict[str, tuple[str | None, str]] = {
     "check_poses": ("plan", "check_poses"),
     "home_check_every": ("plan", "home_check_every"),
     "min_axis_distance": ("plan", "min_axis_distance"),
+    "stream_speed": ("plan", "stream_speed"),
+    "stream_rate": ("plan", "stream_rate"),
     "cell_margin": ("cell", "margin"),
     "mounting_offset": ("cell", "mounting_offset"),
     "mounting_clearance": ("cell", "mounting_clearance"),
@@ -139,6 +141,8 @@ class SiteConfig:
     check_poses: int = 8
     home_check_every: int = 36
     min_axis_distance: float = 0.02
+    stream_speed: float | None = None  # continuous sweeps: a cap on the swept joint's speed, rad/s or m/s
+    stream_rate: float = 250.0  # continuous sweeps: the tracker stream rate asked for, Hz
     cell_margin: float = 0.02
     mounting_offset: float | None = None
     mounting_clearance: float = 0.05
@@ -460,6 +464,9 @@ _CHECKS: dict[str, Any] = {
     "check_poses": lambda v, key, x: v.integer(key, x, 0),
     "home_check_every": lambda v, key, x: v.integer(key, x, 0),
     "min_axis_distance": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
+    "stream_speed": lambda v, key, x: None if x is None else v.number(key, x, "a speed > 0 (rad/s or m/s), or null",
+                                                                        0.0, strict=True),
+    "stream_rate": lambda v, key, x: v.number(key, x, "a rate > 0 (Hz)", 0.0, strict=True),
     "cell_margin": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
     "mounting_offset": _optional_offset,
     "mounting_clearance": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),

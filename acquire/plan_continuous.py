@@ -1,0 +1,232 @@
+"""The continuous-motion plan (``acquire --mode continuous``): each sweep one constant-speed move while both devices
+stream, plus a short stop-and-go part (pure, no devices).
+
+Built from the stop-and-go plan of the same robot and site (:func:`acquire.plan.build_plan`), so that the sweep
+ranges are the same (the joint limits, the site's ``plan.sweep_ranges``, clipped to the collision-free interval
+around home) and so are the free and check poses. Per swept joint, last to first: a stop-and-go pose at the
+range start (kind ``free``, a sweep id of its own: it pins the timing down and is a stop-and-go sample), then
+a ``stream`` step that moves the joint from the start to the range end at a constant speed, then home (kind
+``home``, which checks the drift and makes every move between sweeps one from or to home: clear by
+construction). The free and check poses follow as in the stop-and-go plan. The move of a stream step is a
+joint-space line like every other move, so :func:`acquire.plan.plan_clearance` checks it the same way (sampled
+so that no body point travels more than 1 cm between checks); :func:`build_continuous_plan` also checks the TP's
+distance to every revolute axis along it (1° steps) and keeps the longest clear stretch.
+
+**Speed of a sweep** (rad/s or m/s of the swept joint): the plan's speed for that joint (the model's default
+times ``robot.speed_fraction``), capped by the site's ``plan.stream_speed`` and by the deflection model: the
+arm's dynamic deflection must stay below :data:`DEFLECTION_SHARE` of the tracker noise. The model, for a
+revolute joint j with link masses (``dynamics:`` in the robot model): the outboard links' inertia about the
+axis at home, ``I_j = Σ_k m_k d_k²`` (kg·m², ``d_k`` the distance of link k's centre of mass from the axis),
+a joint compliance :data:`JOINT_COMPLIANCE` (rad/(N·m)) and the TP's distance ``r_j`` from the axis give a TP
+deflection ``δ = c · I_j · r_j · max(ω², α)`` under the acceleration α of the ramps and, conservatively, the
+same for the centripetal load ω² at cruise. So ``ω ≤ sqrt(share·σ / (c·I_j·r_j))`` and α is capped the same
+way. A model without link masses, or a prismatic joint, sweeps at :data:`DEFAULT_STREAM_SPEED` at most.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from acquire.plan import (
+    EVAL_POSES,
+    HOME_SWEEP,
+    SUBSPACE_TOL,
+    Array,
+    Plan,
+    Step,
+    _gram,
+    _whitened,
+    axis_distances_many,
+    build_plan,
+    tp_model,
+)
+from config.robots import RobotModel
+from config.site import SiteConfig
+from drivers.motion import motion_time
+from identify.kinematics import DHModel, frames_from_joints
+from identify.simulate import random_poses
+
+DEFLECTION_SHARE = 0.2  # the dynamic deflection stays below this share of the tracker noise
+JOINT_COMPLIANCE = 1e-5  # rad/(N·m): a joint's assumed compliance (a UR-size harmonic drive, conservatively)
+DEFAULT_STREAM_SPEED = 0.25  # rad/s (m/s): the cap without link masses, and for prismatic joints
+AXIS_CHECK_STEP = math.radians(1.0)  # rad (or 1 mm): the TP's axis distance is checked this finely along a sweep
+STREAM_START_SLACK = 0.5  # s: streams start this long before the move and stop this long after it
+
+
+def deflection_limits(robot: RobotModel, model: DHModel, j: int, noise: float) -> tuple[float, float]:
+    """(speed, acceleration) limits (rad/s, rad/s²) of joint ``j`` (1-based) from the deflection model of the
+    module docstring at home, for tracker ``noise`` (m per axis); (inf, inf) where the model does not apply."""
+    if robot.links is None or robot.joint_types[j - 1] != "R":
+        return math.inf, math.inf
+    frames = frames_from_joints(replace(model, base=np.eye(4)), np.asarray(robot.home, dtype=float))[0]
+    axis_point, axis = frames[j - 1, :3, 3], frames[j - 1, :3, 2]
+    inertia = 0.0
+    for k in range(j, robot.n_joints + 1):  # links j..n move with joint j; link k's frame is DH frame k
+        centre = frames[k, :3, :3] @ robot.links.centres[k - 1] + frames[k, :3, 3] - axis_point
+        radial = centre - (centre @ axis) * axis
+        inertia += float(robot.links.masses[k - 1]) * float(radial @ radial)
+    reach = float(axis_distances_many(model, np.asarray(robot.home, dtype=float)[None, :])[0, j - 1])
+    load = JOINT_COMPLIANCE * inertia * max(reach, 1e-3)
+    if load <= 0:
+        return math.inf, math.inf
+    limit = DEFLECTION_SHARE * noise / load
+    return math.sqrt(limit), limit
+
+
+def stream_speed(robot: RobotModel, site: SiteConfig, plan: Plan, j: int) -> tuple[float, float]:
+    """(speed, acceleration) of the continuous sweep of joint ``j`` (1-based): the plan's, capped by
+    ``site.stream_speed``, the deflection model and, without it, :data:`DEFAULT_STREAM_SPEED`."""
+    model = tp_model(robot, site.tp_guess)
+    v_max, a_max = deflection_limits(robot, model, j, site.tracker_noise)
+    speed = min(plan.speed[j - 1], v_max, float(robot.max_speed[j - 1]))
+    if math.isinf(v_max):
+        speed = min(speed, DEFAULT_STREAM_SPEED)
+    if site.stream_speed is not None:
+        speed = min(speed, site.stream_speed)
+    return speed, min(plan.acceleration[j - 1], a_max)
+
+
+def _clear_stretch(model: DHModel, home: Array, j: int, lo: float, hi: float, minimum: float) -> tuple[float, float]:
+    """The longest stretch of [lo, hi] (joint ``j``, the others at home) where the TP stays ``minimum`` m off every
+    revolute axis, checked every :data:`AXIS_CHECK_STEP`."""
+    count = max(2, math.ceil((hi - lo) / AXIS_CHECK_STEP) + 1)
+    values = np.linspace(lo, hi, count)
+    q = np.tile(home, (count, 1))
+    q[:, j - 1] = values
+    ok = np.all(axis_distances_many(model, q) >= minimum, axis=1)
+    best, run = (0, -1), None
+    for i, good in enumerate(ok):
+        if good and run is None:
+            run = i
+        if (not good or i == count - 1) and run is not None:
+            end = i if good else i - 1
+            if end - run > best[1] - best[0]:
+                best = (run, end)
+            run = None
+    if best[1] <= best[0]:
+        return lo, lo
+    return float(values[best[0]]), float(values[best[1]])
+
+
+def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
+    """The continuous plan of ``robot`` under ``site`` (module docstring): stream steps over the stop-and-go
+    plan's sweep ranges, the stop-and-go part (range starts, home checks, free and check poses) around them.
+    Raises PlanError as :func:`acquire.plan.build_plan` does."""
+    base = build_plan(robot, site, rng_seed)
+    model = tp_model(robot, site.tp_guess)
+    home = np.asarray(base.home, dtype=float)
+    notes = [n for n in base.notes if "sweep:" not in n]
+    sweeps: dict[int, list[Step]] = {}
+    for s in base.steps:
+        if s.kind == "sweep":
+            sweeps.setdefault(s.sweep, []).append(s)
+    poses: list[tuple[str, int, tuple[float, ...], str, tuple[float, ...] | None, tuple[float, float] | None]] = [
+        ("home", 0, tuple(home), "fit", None, None)]
+    for steps in sweeps.values():
+        j = steps[0].joint
+        values = [s.q[j - 1] for s in steps]
+        lo, hi = _clear_stretch(model, home, j, min(values), max(values), site.min_axis_distance)
+        if hi - lo < 1e-6:
+            notes.append(f"joint {j} continuous sweep left out: no stretch keeps the TP off the axes")
+            continue
+        if (lo, hi) != (min(values), max(values)):
+            notes.append(f"joint {j} continuous sweep narrowed to where the TP stays off every axis")
+        speed, acceleration = stream_speed(robot, site, base, j)
+        start, end = home.copy(), home.copy()
+        start[j - 1], end[j - 1] = lo, hi
+        poses.append(("free", 0, tuple(start), "fit", None, None))
+        poses.append(("stream", j, tuple(end), "fit", tuple(start), (speed, acceleration)))
+        poses.append(("home", 0, tuple(home), "fit", None, None))
+        notes.append(f"joint {j}: one continuous sweep at {_speed_text(speed, robot.joint_types[j - 1])} "
+                     f"(acceleration {acceleration:.3g}), {motion_time(hi - lo, speed, acceleration):.1f} s")
+    first_free = next((i for i, s in enumerate(base.steps) if s.kind == "free"), len(base.steps))
+    for s in base.steps[first_free:]:
+        poses.append((s.kind, s.joint, s.q, s.role, None, None))
+    if poses[-1][0] != "home":
+        poses.append(("home", 0, tuple(home), "fit", None, None))
+    steps: list[Step] = []
+    sweep_id = 0
+    for kind, joint, q, role, start, motion in poses:
+        sweep_id += kind != "home"  # every stop-and-go pose and every stream a sweep id of its own
+        speed, acceleration = motion if motion is not None else (None, None)
+        steps.append(Step(len(steps), kind, HOME_SWEEP if kind == "home" else sweep_id, joint, tuple(q), role,
+                          start, speed, acceleration))
+    notes.insert(0, "continuous motion: every sweep is one constant-speed move recorded by both streams (speed "
+                    f"from the model, plan.stream_speed and a deflection below {DEFLECTION_SHARE:g} x the tracker "
+                    "noise: acquire/plan_continuous.py)")
+    return replace(base, steps=tuple(steps), notes=tuple(notes))
+
+
+def _speed_text(speed: float, kind: str) -> str:
+    return f"{math.degrees(speed):.1f}°/s" if kind == "R" else f"{speed * 1e3:.0f} mm/s"
+
+
+def estimate_continuous_duration(plan: Plan, measure_time_per_sample: float) -> float:
+    """Seconds to run a continuous ``plan`` from home: stop-and-go steps as :func:`acquire.plan.estimate_duration`
+    (move, settle, samples); a stream step: the move to its start at the plan's speed, the constant-speed move at
+    its own speed and acceleration, and the streams' slack before and after it."""
+    here = np.asarray(plan.home, dtype=float)
+    total = 0.0
+    speed, acc = np.asarray(plan.speed), np.asarray(plan.acceleration)
+    for s in plan.steps:
+        if s.kind == "stream":
+            assert s.start is not None and s.speed is not None and s.acceleration is not None
+            start = np.asarray(s.start)
+            total += float(motion_time(start - here, speed, acc).max())
+            total += float(motion_time(s.q[s.joint - 1] - start[s.joint - 1], s.speed, s.acceleration))
+            total += 2 * STREAM_START_SLACK
+        else:
+            total += float(motion_time(np.asarray(s.q) - here, speed, acc).max())
+            total += plan.settle_time + plan.samples_per_step * measure_time_per_sample
+        here = np.asarray(s.q, dtype=float)
+    return total
+
+
+def stream_poses(plan: Plan, rate: float, most: int = 400) -> tuple[Array, Array]:
+    """The joint values the streams of ``plan`` will sample at ``rate`` Hz (one tracker sample each): at most
+    ``most`` per sweep, evenly along it, and each one's weight (how many samples it stands for): (m, n), (m,)."""
+    rows, weights = [], []
+    for s in plan.steps:
+        if s.kind != "stream" or s.start is None or s.speed is None or s.acceleration is None:
+            continue
+        distance = s.q[s.joint - 1] - s.start[s.joint - 1]
+        count = max(2, int(rate * float(motion_time(distance, s.speed, s.acceleration))))
+        used = min(count, most)
+        q = np.tile(np.asarray(s.start), (used, 1))
+        q[:, s.joint - 1] += np.linspace(0.0, distance, used)
+        rows.append(q)
+        weights.append(np.full(used, count / used))
+    n = len(plan.home)
+    if not rows:
+        return np.zeros((0, n)), np.zeros(0)
+    return np.vstack(rows), np.concatenate(weights)
+
+
+def predicted_accuracy_continuous(plan: Plan, robot: RobotModel, tp_guess: object, noise: float, rate: float,
+                                  rng_seed: int = 1, eval_poses: int = EVAL_POSES) -> dict[str, float]:
+    """Cramér-Rao bound (m) of the RMS TP error at random held-out poses (as
+    :func:`acquire.plan_report.predicted_accuracy`) for a continuous plan: every streamed sample with the tracker
+    ``noise`` (m per axis), the stop-and-go poses (range starts and fitted free poses) with noise / √samples. Keys
+    ``with_free``, ``sweeps_only`` (the streams alone), ``samples`` (streamed samples expected), ``noise``. The
+    timing error of the streams is not in the bound (the identification estimates the clock offset)."""
+    model = tp_model(robot, tp_guess)
+    q_eval = random_poses(robot.limits, eval_poses, np.random.default_rng(rng_seed))
+    q_stream, weight = stream_poses(plan, rate)
+    q_steps = np.array([s.q for s in plan.steps if s.kind == "free" and s.role == "fit"]).reshape(-1, robot.n_joints)
+    step_noise = noise / math.sqrt(max(plan.samples_per_step, 1))
+
+    def bound(with_steps: bool) -> float:
+        if not len(q_stream):
+            return math.inf
+        g_stream, g_steps, g_eval = _whitened(model, q_stream, q_steps if with_steps else q_steps[:0], q_eval)
+        info = _gram(g_stream * np.sqrt(weight)[:, None, None]) / noise**2 + _gram(g_steps) / step_noise**2
+        values = np.linalg.eigvalsh(info)
+        if values[0] <= SUBSPACE_TOL**2 * values[-1]:
+            return math.inf
+        return float(np.sqrt(np.trace(np.linalg.inv(info) @ _gram(g_eval)) / len(q_eval)))
+
+    return {"with_free": bound(True), "sweeps_only": bound(False), "samples": float(weight.sum()),
+            "noise": float(noise)}
