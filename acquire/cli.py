@@ -32,6 +32,7 @@ import yaml
 from acquire.cell import Clearance
 from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
 from acquire.plan import Plan, build_plan, check_plan, estimate_duration, plan_clearance
+from acquire.plan_continuous import build_continuous_plan, estimate_continuous_duration, format_modes
 from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.resume import ResumeRefused, resume_settings
 from acquire.session import Session, SessionError, factory_calibration
@@ -91,6 +92,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed-fraction", type=float, metavar="F",
                    help="joint speeds and accelerations as this fraction of the model's defaults (site "
                         "robot.speed_fraction; 0.25 with --tracker none)")
+    p.add_argument("--mode", choices=("step", "continuous"), default=None,
+                   help="step: stop-and-go sweeps (the default); continuous: each sweep one constant-speed move while "
+                        "robot and tracker stream (both must stream); the dry run compares the two")
     p.add_argument("--trace-io", type=Path, metavar="FILE",
                    help="log every byte to and from the tracker (serial and I++ trackers)")
     return p
@@ -105,6 +109,12 @@ def _export(argv: list[str]) -> int:
     check_outputs([args.session], [("--csv", args.csv)], args.force)
     with Session.open(args.session) as session:
         rows = session.export_csv(args.csv, force=args.force)
+        if session.plan.continuous:
+            from acquire.session_streams import stream_summary
+
+            summary = stream_summary(session)
+            if summary is not None:
+                print(summary.line())
     print(f"wrote {args.csv} ({rows} rows)")
     return 0
 
@@ -326,7 +336,12 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
     robot_model = load_robot(robot_spec.model)
     if plan is None:
-        plan = build_plan(robot_model, site)
+        plan = build_continuous_plan(robot_model, site) if args.mode == "continuous" else build_plan(robot_model, site)
+    elif args.mode is not None and (args.mode == "continuous") != plan.continuous:
+        raise UsageError(f"--mode {args.mode}: the session's plan is {'continuous' if plan.continuous else 'step'}; "
+                         "a resume cannot change the plan")
+    if plan.continuous and rehearsal:
+        raise UsageError("--tracker none rehearses stop-and-go plans; use --mode step")
     problems = check_plan(plan, robot_model)
     clearance = plan_clearance(plan, robot_model, site)
     problems += _motion_problems(plan, robot_model, robot_spec, clearance, site)
@@ -337,10 +352,16 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if args.json:
         print(json.dumps(plan_json(plan, clearance)))
         return 0
-    duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
-    accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
+    if plan.continuous:
+        duration = estimate_continuous_duration(plan, site.measure_time)
+        accuracy = None
+    else:
+        duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
+        accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
     print(format_plan(plan, robot_model, duration, accuracy))
     print(format_clearance(clearance, plan, site))
+    if args.dry_run and not rehearsal and session is None:
+        print(format_modes(robot_model, site, plan))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
@@ -431,7 +452,8 @@ def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, i
     coupling = robot_model.coupling if session is None else session.coupling
     if coupling is not None:
         here = coupling.dh_from_readings(here[None, :])[0]
-    contact = first_contact(cell, here, np.asarray(plan.steps[index].q))
+    step = plan.steps[index]
+    contact = first_contact(cell, here, np.asarray(step.start if step.start is not None else step.q))
     if contact is not None:
         home = ", ".join(f"{np.degrees(v):.1f}" if t == "R" else f"{v:.3f}"
                          for v, t in zip(plan.home, plan.joint_types, strict=True))
@@ -488,7 +510,7 @@ def run_session(robot, tracker, session: Session, clock, site: SiteConfig, quiet
     stop = StopRequest()
     orchestrator = Orchestrator(robot, tracker, session, clock,
                                 Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
-                                site.retries, _progress_printer(quiet), stop)
+                                site.retries, _progress_printer(quiet), stop, site.stream_rate)
     with stop.installed():
         result = orchestrator.run()
     if not quiet and sys.stderr.isatty():

@@ -1,6 +1,7 @@
 """The acquisition loop: move, wait until still, read the joints, measure, reject outliers, record.
 
-A plain loop over the plan's unrecorded steps (so a resumed session continues where it stopped), then
+A plain loop over the plan's unrecorded steps (a continuous sweep, kind ``stream``, is one step:
+acquire/stream_loop.py) (so a resumed session continues where it stopped), then
 one more attempt at each step recorded as missing (the first attempt stays in the session). Each step is
 committed to the session before the next move. Tracker failures are retried a bounded number
 of times, then the step is recorded as missing and the run goes on; robot faults and lost connections
@@ -19,7 +20,7 @@ import signal
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -139,6 +140,7 @@ class Orchestrator:
         retries: int = 3,
         on_progress: Callable[[Progress], None] | None = None,
         stop: StopRequest | None = None,
+        stream_rate: float = 250.0,
     ) -> None:
         self.robot, self.tracker, self.session, self.clock = robot, tracker, session, clock
         self.timeouts, self.retries = timeouts, retries
@@ -146,6 +148,7 @@ class Orchestrator:
         self.stop = stop or StopRequest()
         self.plan: Plan = session.plan
         self.coupling = session.coupling
+        self.stream_rate = stream_rate  # Hz asked of a streaming tracker (continuous sweeps)
 
     def run(self) -> RunResult:
         """Record every remaining step of the plan, then measure once more each step recorded as missing (this
@@ -203,6 +206,11 @@ class Orchestrator:
         return RunResult(outcome, reason, recorded, len(self.session.missing_indices()))
 
     def _do_step(self, step: Step) -> StepRecord:
+        if step.kind == "stream":  # a continuous sweep: acquire/stream_loop.py
+            from acquire.stream_loop import run_stream
+
+            return run_stream(self.robot, self.tracker, self.session, self.clock, step, self.plan, self.timeouts,
+                              self.stop, lambda q: self._command(replace(step, q=q)), self.stream_rate)
         t_start = self.clock.now()
         state = self.robot.state()
         if state is not RobotState.READY:

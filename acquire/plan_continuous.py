@@ -230,3 +230,32 @@ def predicted_accuracy_continuous(plan: Plan, robot: RobotModel, tp_guess: objec
 
     return {"with_free": bound(True), "sweeps_only": bound(False), "samples": float(weight.sum()),
             "noise": float(noise)}
+
+
+def format_modes(robot: RobotModel, site: SiteConfig, shown: Plan) -> str:
+    """The dry run's comparison of the two modes for ``robot`` under ``site``: robot time (the duration estimate),
+    samples and predicted accuracy (Cramér-Rao bound of the held-out RMS TP error) of the stop-and-go plan and of
+    the continuous one (``shown`` is one of them)."""
+    from acquire.plan import estimate_duration
+    from acquire.plan_report import predicted_accuracy
+
+    step = shown if not shown.continuous else build_plan(robot, site)
+    cont = shown if shown.continuous else build_continuous_plan(robot, site)
+    t_step = estimate_duration(step, robot, site.measure_time)
+    t_cont = estimate_continuous_duration(cont, site.measure_time)
+    a_step = predicted_accuracy(step, robot, site.tp_guess, site.tracker_noise)["with_free"]
+    acc = predicted_accuracy_continuous(cont, robot, site.tp_guess, site.tracker_noise, site.stream_rate)
+    samples_step = len(step.steps) * step.samples_per_step
+    samples_cont = int(acc["samples"]) + sum(1 for s in cont.steps if s.kind != "stream") * cont.samples_per_step
+    lines = ["", "modes (--mode step | continuous):",
+             f"  {'mode':<11} {'robot time':>10} {'samples':>8} {'predicted accuracy (RMS, held out)':>36}",
+             f"  {'step':<11} {_clock(t_step):>10} {samples_step:>8} {a_step * 1e3:>33.4f} mm",
+             f"  {'continuous':<11} {_clock(t_cont):>10} {samples_cont:>8} {acc['with_free'] * 1e3:>33.4f} mm",
+             f"  continuous: {t_cont / t_step:.2f} x the robot time; streams at {site.stream_rate:g} Hz, every sample "
+             "with the tracker noise; its bound leaves out the timing error, which the identification estimates"]
+    return "\n".join(lines)
+
+
+def _clock(seconds: float) -> str:
+    total = round(seconds)
+    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"

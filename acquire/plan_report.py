@@ -113,14 +113,15 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
              f"{'sweep':>5}  {'joint':>5}  {'from':>10}  {'to':>10}  {'steps':>5}"]
     sweeps: dict[int, list[Step]] = {}
     for s in plan.steps:
-        if s.kind == "sweep":
+        if s.kind in ("sweep", "stream"):
             sweeps.setdefault(s.sweep, []).append(s)
     for sweep, steps in sweeps.items():
         j = steps[0].joint
-        values = [s.q[j - 1] for s in steps]
+        values = [s.q[j - 1] for s in steps] + [s.start[j - 1] for s in steps if s.start is not None]
         kind = types[j - 1] if 0 < j <= len(types) else "P"
+        count = "cont." if steps[0].kind == "stream" else str(len(steps))
         lines.append(f"{sweep:>5}  {j:>5}  {_fmt(min(values), kind):>10}  {_fmt(max(values), kind):>10}  "
-                     f"{len(steps):>5}")
+                     f"{count:>5}")
     count = {k: sum(1 for s in plan.steps if s.kind == k) for k in STEP_KINDS}
     check = sum(1 for s in plan.steps if s.kind == "free" and s.role == "check")
     lines += ["",
@@ -155,6 +156,9 @@ def plan_json(plan: Plan, clearance: Clearance | None) -> dict[str, Any]:
     robot model has no collision geometry)."""
     steps = [{"index": s.index, "kind": "check" if s.kind == "free" and s.role == "check" else s.kind,
               "joint": s.joint, "q": list(s.q)} for s in plan.steps]
+    for out, s in zip(steps, plan.steps, strict=True):  # a continuous sweep: where it starts, how fast it moves
+        if s.kind == "stream":
+            out.update(start=list(s.start or ()), speed=s.speed, acceleration=s.acceleration)
     return {"robot": plan.robot, "joint_types": plan.joint_types, "home": list(plan.home), "steps": steps,
             "clearance_m": None if clearance is None else clearance.distance}
 

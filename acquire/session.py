@@ -41,9 +41,11 @@ from acquire.plan import Plan
 from acquire.records import StepRecord
 from acquire.session_file import (  # the errors and SCHEMA_VERSION are part of this module's interface too
     NEWEST_SCHEMA,
+    POINTS_SCHEMA,
     SCHEMA,
     SCHEMA_VERSION,
     STEP_COLUMNS,
+    STREAMS_SCHEMA,
     SessionBusy,
     SessionError,
     check_magic,
@@ -110,7 +112,8 @@ class Session:
         if any(step.index != i for i, step in enumerate(plan.steps)):
             raise SessionError(f"{path}: plan step indices must be 0..{len(plan.steps) - 1} in order")
         coupled = coupling is not None and not coupling.is_identity
-        header = {"schema": NEWEST_SCHEMA if coupled else SCHEMA_VERSION, "created": time.time(),
+        schema = STREAMS_SCHEMA if plan.continuous else POINTS_SCHEMA if coupled else SCHEMA_VERSION
+        header = {"schema": schema, "created": time.time(),
                   "software": __version__, "config": config, "robot": robot.as_dict(), "tracker": tracker.as_dict()}
         if coupled:
             assert coupling is not None
@@ -374,7 +377,7 @@ class Session:
             sigma = None if reading.sigma is None else float(reading.sigma)
             readings.append((i, *map(float, p), sigma, float(reading.timestamp), reading.status, int(used),
                              int(reading.tp)))
-        if record.points and self._db.execute("PRAGMA user_version").fetchone()[0] < NEWEST_SCHEMA:
+        if record.points and self._db.execute("PRAGMA user_version").fetchone()[0] < POINTS_SCHEMA:
             self._mark_newest()
         self._db.execute(
             "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
@@ -393,8 +396,8 @@ class Session:
         """Mark the file schema 2 (inside the caller's transaction, so a rollback undoes it too): its steps now see
         several tracked points, which a reader of schema 1 would misread. The header read at open says so from the
         next open on."""
-        self._db.execute(f"PRAGMA user_version = {NEWEST_SCHEMA}")
-        self._db.execute("UPDATE meta SET value = ? WHERE key = 'schema'", (json.dumps(NEWEST_SCHEMA),))
+        self._db.execute(f"PRAGMA user_version = {POINTS_SCHEMA}")
+        self._db.execute("UPDATE meta SET value = ? WHERE key = 'schema'", (json.dumps(POINTS_SCHEMA),))
 
     def retake_step(self, record: StepRecord) -> None:
         """Store a new attempt of a step recorded as missing, keeping the earlier attempt: in one transaction the
@@ -465,8 +468,13 @@ class Session:
         (joint 0) with role "check": held out, they validate the model at home and never bias the fit. Missing
         steps are skipped. ``sigma`` is given only when every exported row has one.
         """
-        return measurements_from(step_rows(self._db, "WHERE status = 'ok'"), point_rows(self._db),
-                                 self._plan.joint_types, self.coupling)
+        steps = measurements_from(step_rows(self._db, "WHERE status = 'ok' AND kind != 'stream'"),
+                                  point_rows(self._db), self._plan.joint_types, self.coupling)
+        if not self._plan.continuous:
+            return steps
+        from acquire.session_streams import with_streams  # continuous motion: streamed samples as rows
+
+        return with_streams(self._db, self._plan, steps)[0]
 
     def export_csv(self, path: str | Path, force: bool = False) -> int:
         """Write :meth:`to_measurements` as the measurement CSV (with session, robot and tracker metadata lines);

@@ -25,6 +25,15 @@ The file (stdlib ``sqlite3``, rollback journal ``DELETE``, ``synchronous=EXTRA``
   The last three tables, ``step_points`` and the ``tp`` columns are created by the first writer that needs
   them (:func:`migrate`); files without them are schema 1 too, and read as if every reading saw tracked point 1.
 
+Continuous motion (acquire/session_streams.py): ``streams(id, plan_index, sweep, attempt, run_id, status,
+superseded, joint_rate, tracker_rate, started, ended, reason)``: one row per attempt of a stream step (status
+``recording`` until it ends ``complete`` or ``interrupted``; a new attempt supersedes the earlier ones, whose
+samples stay); ``joint_samples(stream, t, q)`` (robot clock, s; q a JSON list), ``tracker_samples(stream, t, x, y,
+z, tp, sigma)`` (tracker clock, s; m), ``stream_gaps(stream, device, t_start, t_end)`` (robot / tracker clock) and
+``stream_batches(stream, t, joint_samples, tracker_samples)`` (each commit: the host clock's time, s, and the
+samples it held). **Schema 3** (:data:`STREAMS_SCHEMA`) marks a session whose plan has stream steps (set at
+creation); older versions refuse it.
+
 Tables and columns are added, never changed, so that every reader of schema 1 reads every file of schema 1.
 **Schema 2** (:data:`NEWEST_SCHEMA`) has the same tables; it marks a file that a reader of schema 1 would
 misread: one whose steps saw several tracked points (``step_points`` rows), or whose joint readings are a
@@ -44,7 +53,9 @@ from collections.abc import Sequence
 from pathlib import Path
 
 SCHEMA_VERSION = 1  # a plain session's
-NEWEST_SCHEMA = 2  # several tracked points or coupled readings; the newest this version reads
+POINTS_SCHEMA = 2  # several tracked points or coupled readings
+STREAMS_SCHEMA = 3  # continuous motion: stream steps in the plan, samples in the stream tables
+NEWEST_SCHEMA = STREAMS_SCHEMA  # the newest this version reads
 MAGIC = b"SQLite format 3\x00"
 STEP_COLUMNS = ("plan_index", "kind", "sweep", "joint", "role", "q_cmd", "q_act", "x", "y", "z", "sigma", "samples",
                  "rejected", "status", "reason", "t_start", "t_end")
@@ -84,6 +95,24 @@ CREATE TABLE IF NOT EXISTS step_points (
     plan_index INTEGER NOT NULL REFERENCES steps (plan_index), tp INTEGER NOT NULL, x REAL NOT NULL,
     y REAL NOT NULL, z REAL NOT NULL, sigma REAL, samples INTEGER NOT NULL, rejected INTEGER NOT NULL,
     PRIMARY KEY (plan_index, tp));
+CREATE TABLE IF NOT EXISTS streams (
+    id INTEGER PRIMARY KEY, plan_index INTEGER NOT NULL, sweep INTEGER NOT NULL, attempt INTEGER NOT NULL,
+    run_id INTEGER, status TEXT NOT NULL CHECK (status IN ('recording', 'complete', 'interrupted')),
+    superseded INTEGER NOT NULL DEFAULT 0 CHECK (superseded IN (0, 1)), joint_rate REAL, tracker_rate REAL,
+    started REAL NOT NULL, ended REAL, reason TEXT NOT NULL DEFAULT '');
+CREATE TABLE IF NOT EXISTS joint_samples (
+    stream INTEGER NOT NULL REFERENCES streams (id), t REAL NOT NULL, q TEXT NOT NULL);
+CREATE INDEX IF NOT EXISTS joint_samples_by_stream ON joint_samples (stream);
+CREATE TABLE IF NOT EXISTS tracker_samples (
+    stream INTEGER NOT NULL REFERENCES streams (id), t REAL NOT NULL, x REAL, y REAL, z REAL,
+    tp INTEGER NOT NULL DEFAULT 1, sigma REAL);
+CREATE INDEX IF NOT EXISTS tracker_samples_by_stream ON tracker_samples (stream);
+CREATE TABLE IF NOT EXISTS stream_gaps (
+    stream INTEGER NOT NULL REFERENCES streams (id), device TEXT NOT NULL CHECK (device IN ('robot', 'tracker')),
+    t_start REAL NOT NULL, t_end REAL NOT NULL);
+CREATE TABLE IF NOT EXISTS stream_batches (
+    stream INTEGER NOT NULL REFERENCES streams (id), t REAL NOT NULL, joint_samples INTEGER NOT NULL,
+    tracker_samples INTEGER NOT NULL);
 CREATE TABLE IF NOT EXISTS writer (
     id INTEGER PRIMARY KEY CHECK (id = 1), pid INTEGER NOT NULL, host TEXT NOT NULL, since REAL NOT NULL,
     command TEXT NOT NULL);
