@@ -323,6 +323,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
             return 0
     else:
         site = _site(args)
+        if args.mode == "continuous" and args.free_poses is None:  # the streams carry the fit (plan_continuous.py)
+            site = site.with_overrides(free_poses=0)
         robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
         tracker_arg = args.tracker or "mock"
         tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)

@@ -7,14 +7,18 @@ around home) and so are the free and check poses. Per swept joint, last to first
 range start (kind ``free``, a sweep id of its own: it pins the timing down and is a stop-and-go sample), then
 a ``stream`` step that moves the joint from the start to the range end at a constant speed, then home (kind
 ``home``, which checks the drift and makes every move between sweeps one from or to home: clear by
-construction). The free and check poses follow as in the stop-and-go plan. The move of a stream step is a
+construction) unless the direct move from the range end to the next sweep's start is clear (checked like
+every move). The free and check poses follow as in the stop-and-go plan; ``acquire --mode continuous`` asks
+for none of the fitted free poses unless ``--free-poses`` is given: the streamed sweeps alone predict a
+smaller held-out error than the whole stop-and-go plan (the dry run shows both). The move of a stream step is a
 joint-space line like every other move, so :func:`acquire.plan.plan_clearance` checks it the same way (sampled
 so that no body point travels more than 1 cm between checks); :func:`build_continuous_plan` also checks the TP's
 distance to every revolute axis along it (1° steps) and keeps the longest clear stretch.
 
-**Speed of a sweep** (rad/s or m/s of the swept joint): the plan's speed for that joint (the model's default
-times ``robot.speed_fraction``), capped by the site's ``plan.stream_speed`` and by the deflection model: the
-arm's dynamic deflection must stay below :data:`DEFLECTION_SHARE` of the tracker noise. The model, for a
+**Speed of a sweep** (rad/s or m/s of the swept joint): the model's ``max_speed`` times ``robot.speed_fraction``,
+capped by :data:`STREAM_SPEED_CAP` (a conservative 1 rad/s, UR's default joint speed), by the site's
+``plan.stream_speed`` and by the deflection model: the arm's dynamic deflection must stay below
+:data:`DEFLECTION_SHARE` of the tracker noise. The model, for a
 revolute joint j with link masses (``dynamics:`` in the robot model): the outboard links' inertia about the
 axis at home, ``I_j = Σ_k m_k d_k²`` (kg·m², ``d_k`` the distance of link k's centre of mass from the axis),
 a joint compliance :data:`JOINT_COMPLIANCE` (rad/(N·m)) and the TP's distance ``r_j`` from the axis give a TP
@@ -30,6 +34,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from acquire.cell import cell_from_config, first_contact
+from acquire.collision import Cell
 from acquire.plan import (
     EVAL_POSES,
     HOME_SWEEP,
@@ -52,6 +58,7 @@ from identify.simulate import random_poses
 DEFLECTION_SHARE = 0.2  # the dynamic deflection stays below this share of the tracker noise
 JOINT_COMPLIANCE = 1e-5  # rad/(N·m): a joint's assumed compliance (a UR-size harmonic drive, conservatively)
 DEFAULT_STREAM_SPEED = 0.25  # rad/s (m/s): the cap without link masses, and for prismatic joints
+STREAM_SPEED_CAP = 1.0  # rad/s (m/s): no sweep is faster, whatever the model allows
 AXIS_CHECK_STEP = math.radians(1.0)  # rad (or 1 mm): the TP's axis distance is checked this finely along a sweep
 STREAM_START_SLACK = 0.5  # s: streams start this long before the move and stop this long after it
 
@@ -77,11 +84,11 @@ def deflection_limits(robot: RobotModel, model: DHModel, j: int, noise: float) -
 
 
 def stream_speed(robot: RobotModel, site: SiteConfig, plan: Plan, j: int) -> tuple[float, float]:
-    """(speed, acceleration) of the continuous sweep of joint ``j`` (1-based): the plan's, capped by
-    ``site.stream_speed``, the deflection model and, without it, :data:`DEFAULT_STREAM_SPEED`."""
+    """(speed, acceleration) of the continuous sweep of joint ``j`` (1-based): the module docstring's speed, and
+    the plan's acceleration capped by the deflection model."""
     model = tp_model(robot, site.tp_guess)
     v_max, a_max = deflection_limits(robot, model, j, site.tracker_noise)
-    speed = min(plan.speed[j - 1], v_max, float(robot.max_speed[j - 1]))
+    speed = min(float(robot.max_speed[j - 1]) * site.speed_fraction, STREAM_SPEED_CAP, v_max)
     if math.isinf(v_max):
         speed = min(speed, DEFAULT_STREAM_SPEED)
     if site.stream_speed is not None:
@@ -111,12 +118,19 @@ def _clear_stretch(model: DHModel, home: Array, j: int, lo: float, hi: float, mi
     return float(values[best[0]]), float(values[best[1]])
 
 
+def _clear(cell: Cell | None, a: Array, b: Array) -> bool:
+    """True when the straight joint move from ``a`` to ``b`` stays clear of the cell (always without one: the plan
+    is then for a simulated robot only, and home is not needed between sweeps either)."""
+    return cell is None or first_contact(cell, a, b) is None
+
+
 def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
     """The continuous plan of ``robot`` under ``site`` (module docstring): stream steps over the stop-and-go
     plan's sweep ranges, the stop-and-go part (range starts, home checks, free and check poses) around them.
     Raises PlanError as :func:`acquire.plan.build_plan` does."""
     base = build_plan(robot, site, rng_seed)
     model = tp_model(robot, site.tp_guess)
+    cell = cell_from_config(robot, site)
     home = np.asarray(base.home, dtype=float)
     notes = [n for n in base.notes if "sweep:" not in n]
     sweeps: dict[int, list[Step]] = {}
@@ -137,11 +151,14 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
         speed, acceleration = stream_speed(robot, site, base, j)
         start, end = home.copy(), home.copy()
         start[j - 1], end[j - 1] = lo, hi
+        if poses[-1][0] == "stream" and not _clear(cell, np.asarray(poses[-1][2]), start):
+            poses.append(("home", 0, tuple(home), "fit", None, None))  # the direct move would come too close
         poses.append(("free", 0, tuple(start), "fit", None, None))
         poses.append(("stream", j, tuple(end), "fit", tuple(start), (speed, acceleration)))
-        poses.append(("home", 0, tuple(home), "fit", None, None))
         notes.append(f"joint {j}: one continuous sweep at {_speed_text(speed, robot.joint_types[j - 1])} "
                      f"(acceleration {acceleration:.3g}), {motion_time(hi - lo, speed, acceleration):.1f} s")
+    if poses[-1][0] != "home":
+        poses.append(("home", 0, tuple(home), "fit", None, None))
     first_free = next((i for i, s in enumerate(base.steps) if s.kind == "free"), len(base.steps))
     for s in base.steps[first_free:]:
         poses.append((s.kind, s.joint, s.q, s.role, None, None))
