@@ -120,12 +120,12 @@ def test_newer_schema_refused(tmp_path: Path, plan: Plan) -> None:
     Session.create(path, plan, CONFIG, ROBOT, TRACKER).close()
     with sqlite3.connect(path) as db:
         db.execute("PRAGMA user_version = 7")
-    assert _one_line_error(path) == (f"{path} was written by schema 7; this version reads up to 2: upgrade dh-calib")
+    assert _one_line_error(path) == (f"{path} was written by schema 7; this version reads up to 3: upgrade dh-calib")
     # the meta row alone says newer too
     with sqlite3.connect(path) as db:
         db.execute("PRAGMA user_version = 1")
-        db.execute("UPDATE meta SET value = '3' WHERE key = 'schema'")
-    assert _one_line_error(path) == f"{path} was written by schema 3; this version reads up to 2: upgrade dh-calib"
+        db.execute("UPDATE meta SET value = '4' WHERE key = 'schema'")
+    assert _one_line_error(path) == f"{path} was written by schema 4; this version reads up to 3: upgrade dh-calib"
 
 
 def _truncated(path: Path, data: bytes) -> None:
