@@ -12,7 +12,7 @@ import pytest
 from acquire.cell import cell_from_config
 from acquire.cli import main
 from acquire.collision import moves_samples
-from acquire.orchestrator import Orchestrator, Timeouts
+from acquire.orchestrator import Orchestrator, StopRequest, Timeouts
 from acquire.plan import Plan, build_plan, check_plan, plan_clearance, tp_model
 from acquire.plan_continuous import STREAM_SPEED_CAP, build_continuous_plan, deflection_limits, stream_speed
 from acquire.session import Session
@@ -273,3 +273,24 @@ def test_cli_dry_run_compares_the_modes_and_bad_combinations_are_one_line(tmp_pa
     with pytest.raises(SystemExit) as info:
         main(["--robot", "mock:ur5e", "--mode", "sideways"])
     assert info.value.code == 2
+
+
+def test_ctrl_c_mid_sweep_stops_the_motion_and_the_run_is_aborted(tmp_path: Path) -> None:
+    session, arm, sensor, rig = _session(tmp_path, "mock:ur5e", "mock")
+    stop = StopRequest()
+    read = sensor.read_stream
+
+    def pressed() -> object:
+        move = arm.rig._path
+        if move is not None and not stop.requested and rig.clock.now() > move.t0 + 2.0:
+            stop.request()  # what the SIGINT handler does
+        return read()
+
+    sensor.read_stream = pressed
+    with session:
+        result = Orchestrator(arm, sensor, session, rig.clock, Timeouts(60.0, 10.0, 10.0), stop=stop).run()
+        assert result.outcome == "aborted"
+        assert session.recorded_indices() == {0, 1}  # home and the range start; the sweep is not recorded
+    move = rig._path
+    assert not rig._moving and move.t_stop < move.t0 + move.duration  # stopped short of the range end
+    assert [s[3] for s in _streams(tmp_path / "c.session")] == ["interrupted"]
