@@ -67,6 +67,9 @@ from drivers.errors import (
 from drivers.motion import joint_durations as _durations
 from drivers.motion import move_duration as move_duration  # re-exported: the simulated robot's timing
 from drivers.motion import profile_fraction as _fraction
+from drivers.sim_pairing import _points_settings, _unpaired
+from drivers.sim_pairing import check_pairing as check_pairing  # re-exported: acquire's CLIs check specs with it
+from drivers.sim_pairing import is_simulated_camera as is_simulated_camera
 from drivers.sim_stream import JointStreaming, StreamSettings
 from drivers.sim_tracker import SimulatedTracker as SimulatedTracker  # re-exported: the mock backend's tracker
 from drivers.sim_tracker import open_tracker as open_tracker
@@ -481,40 +484,6 @@ class SimulatedRobot(JointStreaming):
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
         return target, v, a
-
-
-def is_simulated_camera(spec: TrackerSpec) -> bool:
-    """True for ``aruco:sim?...``: real detection on images rendered from the rig (drivers/camera_sim.py)."""
-    return spec.backend == "aruco" and spec.target == "sim"
-
-
-def check_pairing(robot: RobotSpec, tracker: TrackerSpec) -> None:
-    """SpecError unless the two devices are both simulated or both real: a simulated tracker cannot see a real
-    arm, nor a real tracker a simulated one (one simulated world, :class:`SimulatedRig`)."""
-    simulated = (robot.is_mock, tracker.is_mock or is_simulated_camera(tracker))
-    if simulated[0] != simulated[1]:
-        raise _unpaired(robot, tracker)
-
-
-def _points_settings(robot: RobotSpec, tracker: TrackerSpec | None, r: dict[str, Any],
-                     t: dict[str, Any]) -> dict[str, Any]:
-    """The rig's ``points`` and ``occlusion``: given on the robot spec (the reflectors on its flange) or on the
-    tracker spec (what it sees), the robot's default otherwise; SpecError when the two specs disagree."""
-    out = {}
-    for key in ("points", "occlusion"):
-        value = r[key]
-        if t[key] is not None:
-            if key in robot.options and t[key] != r[key]:
-                raise SpecError(f"{key}= is {r[key]:g} in {str(robot)!r} but {t[key]:g} in {str(tracker)!r}; give "
-                                "it once (either spec) or the same on both")
-            value = t[key]
-        out[key] = value
-    return out
-
-
-def _unpaired(robot: RobotSpec, tracker: TrackerSpec | None) -> SpecError:
-    return SpecError(f"a simulated rig needs mock devices on both sides (mock:MODEL with mock or aruco:sim), got "
-                     f"{str(robot)!r} and {str(tracker)!r}")
 
 
 def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock: Clock | None = None,
