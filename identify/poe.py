@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, unit
+from identify.geometry import cross, perpendicular_basis, rotation_about_axis, unit
 from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.linalg import project_out
 from identify.sync import Retiming
@@ -279,14 +279,16 @@ class LineProblem:
                     jac[streamed, :, self.n_terms:] += column[streamed, :, None] * dq[:, i, None, :]
             if t == "R":
                 # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
-                # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i)
-                turn = left @ (rot @ skew(u) - skew(w))
-                shift = left - left @ rot
+                # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i),
+                # evaluated as matrix-vector products per row
                 c = lines.points[i]
-                for j in range(2):  # tilting the direction turns the line about its point c
+                for j in range(2):  # tilting the direction turns the line about its point c: eps_v = c x eps_w
                     eps_w = cross(lines.directions[i], tangents[i][j])
-                    jac[:, :, k + j] = turn @ eps_w - shift @ cross(eps_w, c)
-                    jac[:, :, k + 2 + j] = shift @ self.bases[i][j]
+                    ce = cross(eps_w, c)
+                    inner = np.einsum("kij,kj->ki", rot, cross(u, eps_w) + ce) - cross(w, eps_w) - ce
+                    jac[:, :, k + j] = np.einsum("kij,kj->ki", left, inner)
+                    b = self.bases[i][j]
+                    jac[:, :, k + 2 + j] = np.einsum("kij,kj->ki", left, b - rot @ b)
                 k += 4
             else:
                 jac[:, :, k:k + 2] = (left @ tangents[i].T) * delta[:, None, None]
