@@ -15,7 +15,8 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from identify.kinematics import DHModel, frames_from_joints
+from identify.geometry import left_jacobian, skew
+from identify.kinematics import DHModel, flange_frames, frames_from_joints
 from identify.outliers import leverages, outlier_free
 from identify.poe import AxisLines, JointTerms, LeastSquares, LineProblem, fit_lines, lines_from_model
 from identify.refine import NOISE_FLOOR
@@ -54,20 +55,19 @@ def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[n
     tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index
     count = int(tp_index.max()) + 1 if len(tp_index) else 1
     first = tp_index == 0
-    all_frames = frames_from_joints(replace(nominal, base=np.eye(4)), q)[:, -1]
-    frames, points_first = all_frames[first], points[first]
-    all_points = points
+    flange_rot, flange_origin = flange_frames(replace(nominal, base=np.eye(4)), q)  # frame n in frame 0
+    rots, origins, points_first = flange_rot[first], flange_origin[first], points[first]
     tool = np.zeros(3)
     base = np.eye(4)
     for _ in range(PLACE_ITERATIONS):
-        local = np.einsum("kij,j->ki", frames[:, :3, :3], tool) + frames[:, :3, 3]  # TP in frame 0
+        local = np.einsum("kij,j->ki", rots, tool) + origins  # TP in frame 0
         centre_l, centre_p = local.mean(axis=0), points_first.mean(axis=0)
         rot, _ = Rotation.align_vectors(points_first - centre_p, local - centre_l)
         base[:3, :3] = rot.as_matrix()
         base[:3, 3] = centre_p - base[:3, :3] @ centre_l
         # TP: points = R_b (R_k t + o_k) + t_b  ->  linear least squares in t
-        a = np.einsum("ij,kjl->kil", base[:3, :3], frames[:, :3, :3]).reshape(-1, 3)
-        rhs = (points_first - (frames[:, :3, 3] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
+        a = np.einsum("ij,kjl->kil", base[:3, :3], rots).reshape(-1, 3)
+        rhs = (points_first - (origins @ base[:3, :3].T + base[:3, 3])).reshape(-1)
         new_tool = np.linalg.lstsq(a, rhs, rcond=None)[0]
         if np.linalg.norm(new_tool - tool) < 1e-12:
             tool = new_tool
@@ -78,18 +78,31 @@ def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[n
     tools = np.tile(tool, (count, 1))
     for p in range(1, count):
         rows = tp_index == p
-        a = np.einsum("ij,kjl->kil", base[:3, :3], all_frames[rows, :3, :3]).reshape(-1, 3)
-        rhs = (all_points[rows] - (all_frames[rows, :3, 3] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
+        a = np.einsum("ij,kjl->kil", base[:3, :3], flange_rot[rows]).reshape(-1, 3)
+        rhs = (points[rows] - (flange_origin[rows] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
         tools[p] = np.linalg.lstsq(a, rhs, rcond=None)[0]
 
-    def residuals(x: Array) -> Array:  # the alternation can stall on short arcs: finish jointly
-        rot = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
-        local = np.einsum("kij,ki->kj", all_frames[:, :3, :3].transpose(0, 2, 1),
-                          x[6:].reshape(-1, 3)[tp_index]) + all_frames[:, :3, 3]
-        return (local @ rot.T + x[3:6] - all_points).ravel()
+    def placed(x: Array) -> tuple[Array, Array]:  # TP in frame 0 and the base rotation at x
+        local = np.einsum("kij,kj->ki", flange_rot, x[6:].reshape(-1, 3)[tp_index]) + flange_origin
+        return local, Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
 
-    x = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), method="lm",
-                      xtol=1e-12, ftol=1e-12).x
+    def residuals(x: Array) -> Array:  # the alternation can stall on short arcs: finish jointly
+        local, rot = placed(x)
+        return (local @ rot.T + x[3:6] - points).ravel()
+
+    def jacobian(x: Array) -> Array:
+        local, rot = placed(x)
+        jac = np.zeros((len(q), 3, 6 + 3 * count))
+        jac[:, :, 0:3] = -skew(local @ rot.T) @ left_jacobian(x[:3])
+        jac[:, :, 3:6] = np.eye(3)
+        turned = np.einsum("ij,kjl->kil", rot, flange_rot)
+        for p in range(count):
+            rows = tp_index == p
+            jac[rows, :, 6 + 3 * p:9 + 3 * p] = turned[rows]
+        return jac.reshape(-1, jac.shape[2])
+
+    x = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), jac=jacobian,
+                      method="lm", xtol=1e-12, ftol=1e-12).x
     base[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
     base[:3, 3] = x[3:6]
     tools = x[6:].reshape(-1, 3)

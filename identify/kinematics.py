@@ -148,6 +148,12 @@ def running_frames(model: DHModel, q: ArrayLike) -> Iterator[tuple[Array, Array,
         yield x, y, z, o
 
 
+def flange_frames(model: DHModel, q: ArrayLike) -> tuple[Array, Array]:
+    """Frame n in the tracker frame for each sample: rotation (m, 3, 3) and origin (m, 3), metres."""
+    *_, (x, y, z, o) = running_frames(model, q)
+    return np.stack([x, y, z], axis=2), o
+
+
 def points_from_joints(model: DHModel, q: ArrayLike) -> Array:
     """Predicted TP in the tracker frame, metres, shape (m, 3)."""
     *_, (x, y, z, o) = running_frames(model, q)

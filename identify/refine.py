@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
-from identify.geometry import cross, skew
+from identify.geometry import cross, left_jacobian, skew
 from identify.kinematics import DH_NAMES, DHModel, points_from_joints, running_frames
 from identify.linalg import triangle
 
@@ -47,14 +47,6 @@ def dh_index(joint: int, name: str) -> int:
     return 9 + 4 * (joint - 1) + DH_NAMES.index(name)
 
 
-def _left_jacobian(omega: Array) -> Array:
-    angle = float(np.linalg.norm(omega))
-    k = skew(omega)
-    if angle < 1e-8:
-        return np.eye(3) + 0.5 * k
-    return np.eye(3) + (1 - np.cos(angle)) / angle**2 * k + (angle - np.sin(angle)) / angle**3 * (k @ k)
-
-
 def model_from_vector(start: DHModel, vector: Array) -> DHModel:
     """The model at full parameter ``vector`` (base rotation relative to ``start.base``)."""
     base = np.eye(4)
@@ -75,7 +67,7 @@ def full_jacobian(model: DHModel, q: Array, omega: Array | None = None) -> tuple
     p = points_from_joints(model, q)
     jac = np.zeros((m, 3, 9 + 4 * n))
     rel_base = p - model.base[:3, 3]
-    jl = np.eye(3) if omega is None else _left_jacobian(omega)
+    jl = np.eye(3) if omega is None else left_jacobian(omega)
     jac[:, :, 0:3] = -skew(rel_base) @ jl
     jac[:, :, 3:6] = np.eye(3)
     frames = running_frames(model, q)
