@@ -9,12 +9,12 @@ in controller seconds. A package whose timestamp changed while its joints were r
 after ``getActualQ`` differ) is read again at the next poll; if that loses it, the step is a gap too.
 
 The buffer holds at most ``max_samples`` samples; beyond that the oldest unread ones are dropped and the drop is a
-gap as well.
+gap as well. :meth:`Recorder.take` hands out at most ``limit`` samples per call (so no reply to the driver
+grows without bound) together with the gaps that end at or before the last sample handed out.
 
 The package interval polled for is the nominal period (1 / frequency), or the interval at which packages
 actually arrive on the host clock when that is shorter (an emulated controller whose clock runs faster than
-the wall clock: the nominal period is in controller seconds). :meth:`Recorder.take` hands out at most ``limit`` samples per call (so no reply to the driver
-grows without bound) together with the gaps that end at or before the last sample handed out.
+the wall clock: the nominal period is in controller seconds).
 
 Standard library only (the worker imports nothing else).
 """

@@ -15,7 +15,8 @@
   target and still; raises ProtectiveStop / EmergencyStop / RobotFault from the controller's state, RobotFault
   when the move was stopped (``stop()``) or ended short of its target, DeviceTimeout (the arm is stopped) after
   the ``start_move`` timeout, ConnectionFailed when the link is lost for good. A move cut by a lost link is
-  commanded again to the same target from the fresh worker. Ctrl-C in ``motion_done`` stops the arm.
+  commanded again to the same target from the fresh worker. A KeyboardInterrupt (Ctrl-C) inside
+  ``motion_done`` or ``read_joint_stream`` while a move runs stops the arm.
 """
 
 from __future__ import annotations
@@ -102,7 +103,13 @@ class JointStreaming:
     def read_joint_stream(self) -> JointStreamBatch:
         """Every sample recorded since the last read (empty arrays when nothing new, or no stream runs)."""
         if self._streaming:
-            self._linked(self._fetch)
+            try:
+                self._linked(self._fetch)
+            except KeyboardInterrupt:
+                if self._motion is not None:
+                    self._motion = None
+                    self.stop()
+                raise
         return self._hand_out()
 
     def stop_joint_stream(self, timeout: float) -> JointStreamBatch:
