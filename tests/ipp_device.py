@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import re
 import socket
+import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -36,11 +39,17 @@ class IppServer(_Served):
     ``tools``: names of the targets it follows (reflector k of the rig, ``rig.true_points()[k]``, is tool k);
     ``SetTool("NAME")`` makes one active (an unknown name: error 0510, severity 3) and Get answers its point;
     a tool in ``hidden`` answers Get with error 0511 (severity 2, "Target not visible").
+
+    ``move_reports``: the server supports ``OnMoveReportE(Time(s), X(), Y(), Z())`` sent with an event tag
+    ``Ennnn`` (a plain tag: error 0502; a second daemon: error 0515): after ``Ennnn &`` a daemon thread sends
+    ``Ennnn # X(..), Y(..), Z(..)`` (mm) every ``s`` s; while the active tool is hidden it sends ``Ennnn !
+    Error(2, 0511, OnMoveReportE, "Target not visible")`` instead, once per report. ``StopDaemon(Ennnn)`` or
+    ``StopAllDaemons()`` ends it (``Ennnn %``). ``reports`` counts the reports sent.
     """
 
     def __init__(self, rig: SimulatedRig | None = None, *, noise: float = 2e-5, seed: int = 0,
                  events: bool = False, averaging: str | None = None, max_average: int = 64,
-                 enum_props: bool = True, tools: tuple[str, ...] = ()) -> None:
+                 enum_props: bool = True, tools: tuple[str, ...] = (), move_reports: bool = False) -> None:
         super().__init__()
         self.rig = rig if rig is not None else SimulatedRig("ur5e", seed=seed)
         self.noise, self.events = noise, events
@@ -57,6 +66,9 @@ class IppServer(_Served):
             self.properties[averaging] = 1.0
         self.commands: list[str] = []
         self.gets = 0  # Get(X(),Y(),Z()) commands answered with a point
+        self.move_reports, self.reports = move_reports, 0
+        self._daemon: tuple[str, threading.Event] | None = None  # (event tag, stop flag) of OnMoveReportE
+        self._send_lock = threading.Lock()  # the daemon thread and the command handler share the socket
         self._start()
 
     def inject(self, fault: str, count: int = 1) -> None:
@@ -84,6 +96,7 @@ class IppServer(_Served):
             *lines, buffer = buffer.split(b"\r\n")
             if any(not self._handle(conn, raw.decode("ascii", "replace")) for raw in lines if raw):
                 break
+        self._stop_daemon()  # a daemon ends with its connection
 
     def _handle(self, conn: socket.socket, line: str) -> bool:
         """Answer one command; False to drop the connection."""
@@ -99,7 +112,8 @@ class IppServer(_Served):
             return True
 
         def send(text: str) -> None:
-            conn.sendall(f"{tag} {text}\r\n".encode())
+            with self._send_lock:
+                conn.sendall(f"{tag} {text}\r\n".encode())
 
         def error(severity: int, code: str, text: str) -> bool:
             send(f'! Error({severity}, {code}, {name}, "{text}")')
@@ -130,6 +144,14 @@ class IppServer(_Served):
             if self.active in self.hidden:
                 return error(2, "0511", "Target not visible")
             return self._get(conn, send, error, fault)
+        elif name == "OnMoveReportE" and self.move_reports:
+            return self._start_daemon(conn, tag, command, send, error)
+        elif name in ("StopDaemon", "StopAllDaemons") and self.move_reports:
+            daemon = self._daemon
+            wanted = command[len("StopDaemon("):-1].strip() if name == "StopDaemon" else None
+            if daemon is None or (wanted is not None and wanted != daemon[0]):
+                return error(2, "0513", "No such daemon")
+            self._stop_daemon()
         elif name == "SetTool" and self.tools:
             wanted = command[len("SetTool("):-1].strip().strip('"')
             if wanted not in self.tools:
@@ -144,6 +166,45 @@ class IppServer(_Served):
             return error(3, "0501", "Unsupported command")
         send("%")
         return True
+
+    def _start_daemon(self, conn: socket.socket, tag: str, command: str, send: Any, error: Any) -> bool:
+        if not tag.startswith("E"):
+            return error(3, "0502", "OnMoveReportE needs an event tag")
+        if self._daemon is not None:
+            return error(2, "0515", "A daemon is already running")
+        match = re.search(r"Time\(\s*([-+0-9.eE]+)\s*\)", command)
+        interval = float(match.group(1)) if match else 0.0
+        if not interval > 0:
+            return error(3, "0509", "Bad argument")
+        stop = threading.Event()
+        self._daemon = (tag, stop)
+        threading.Thread(target=self._report_loop, args=(conn, tag, interval, stop, send), daemon=True).start()
+        return True
+
+    def _report_loop(self, conn: socket.socket, tag: str, interval: float, stop: threading.Event, send: Any) -> None:
+        next_time = time.monotonic()
+        while not stop.is_set() and not self._stop.is_set():
+            next_time += interval
+            stop.wait(max(0.0, next_time - time.monotonic()))
+            if stop.is_set():
+                break
+            try:
+                if self.active in self.hidden:
+                    send('! Error(2, 0511, OnMoveReportE, "Target not visible")')
+                    continue
+                true = self.rig.true_points()[self.tools.index(self.active)] if self.tools else self.rig.true_point()
+                x, y, z = (np.asarray(true) + self.rng.normal(0.0, self.noise, 3)) * 1000.0
+                send(f"# X({x:.6f}), Y({y:.6f}), Z({z:.6f})")
+                self.reports += 1
+            except OSError:
+                return
+        with contextlib.suppress(OSError):
+            send("%")
+
+    def _stop_daemon(self) -> None:
+        daemon, self._daemon = self._daemon, None
+        if daemon is not None:
+            daemon[1].set()
 
     def _get(self, conn: socket.socket, send: Any, error: Any, fault: str | None) -> bool:
         if fault == "error":
