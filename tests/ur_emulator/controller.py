@@ -98,6 +98,7 @@ class UREmulator(ControllerServers):
         self.robot.connect(1.0)
         self.remote_control, self.rate, self.stall, self.kinematics = remote_control, rate, stall, kinematics
         self.native_rate = native_rate
+        self.late_packages = 0  # native rate: packages sent over half a period after their tick (all connections)
         self._dropped: tuple[float, float] = (0.0, 0.0)  # [start, end) controller s: RTDE packages not sent
         self.log = _Log()
         self._lock = threading.RLock()

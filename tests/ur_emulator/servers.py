@@ -55,6 +55,7 @@ class ControllerServers:
     kinematics: bool
     rate: float
     native_rate: bool
+    late_packages: int
     robot_mode: int
     safety_mode: int
     rig: Any
@@ -213,6 +214,8 @@ class ControllerServers:
                 with self._lock:
                     state = self._frozen or self._state(tick * period)
                     dropped = self._dropped_at(tick * period)
+                    if clock.now() - tick * period > period / 2:  # sent late: it may reach the client in a burst
+                        self.late_packages += 1
                 tick += 1
                 if not dropped and not send_state(state):
                     return
