@@ -62,6 +62,7 @@ class JointStreaming:
 
     _worker: Any
     host: str
+    joint_types: str
     still_speed: float
     rtde_frequency: float
     _stops: int
@@ -145,7 +146,7 @@ class JointStreaming:
     def _hand_out(self) -> JointStreamBatch:
         ts, qs, gaps = self._acc
         self._acc = ([], [], [])
-        n = len(self.joint_types) if hasattr(self, "joint_types") else 6
+        n = len(self.joint_types)
         t = np.asarray(ts, dtype=float)
         q = np.asarray(qs, dtype=float).reshape(len(ts), n)
         if len(t):
