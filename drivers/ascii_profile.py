@@ -14,10 +14,13 @@ A profile holds (keys of :data:`KEYS`; see the bundled files for commented examp
     trigger: "MEAS?"                # polled only
     start: "STREAM ON"              # streaming only, optional: sent after init
     stop: "STREAM OFF"              # streaming only, optional: sent before close
+    period: 0.002                   # streaming only, optional: s between streamed lines on the device's clock
     response:                       # either a regular expression with named groups x, y, z and optional
       pattern: '^(?P<x>\\S+) (?P<y>\\S+) (?P<z>\\S+)$'   # status, sigma, checksum, payload, tp ...
-      # ... or a delimiter (null: white space) and the field order (x, y, z, status, sigma, checksum, tp, or
-      # null for a field to skip):   delimiter: ",",  fields: [null, x, y, z, status, checksum]
+      # ... or a delimiter (null: white space) and the field order (x, y, z, status, sigma, checksum, tp, t, seq,
+      # or null for a field to skip):   delimiter: ",",  fields: [null, x, y, z, status, checksum]
+      # t: the device's time of the reading (s, its own clock); seq: the line's sequence number (integer): a
+      # streaming profile with t can stream with device timestamps (drivers/serial_stream.py)
     points: 3                       # optional (default 1), polled only: the trigger is answered by this many
                                     # lines, one per tracked point in id order; the response needs a ``tp``
                                     # field (the line's id, checked); a point out of sight answers with a
@@ -52,10 +55,10 @@ from drivers.errors import BadReading, MeasurementError, TargetLost
 SCHEMA_VERSION = 1
 TRACKERS_DIR = Path(__file__).resolve().parent.parent / "config" / "trackers"
 KEYS = ("schema", "name", "description", "serial", "line_ending", "init", "identify", "mode", "trigger", "start",
-        "stop", "response", "points", "units", "max_abs", "sigma", "checksum", "status", "errors", "reset",
+        "stop", "period", "response", "points", "units", "max_abs", "sigma", "checksum", "status", "errors", "reset",
         "simulation")
 UNITS = {"mm": 1e-3, "m": 1.0, "inch": 0.0254}
-FIELDS = ("x", "y", "z", "status", "sigma", "checksum", "tp")
+FIELDS = ("x", "y", "z", "status", "sigma", "checksum", "tp", "t", "seq")
 SERIAL_KEYS = ("baud", "parity", "bytesize", "stopbits")
 MAX_LINE = 512  # characters; a longer run without a line ending is garbage
 _PRINTABLE = bytes(range(32, 127)) + b"\t"
@@ -111,6 +114,11 @@ class Profile:
     reset: re.Pattern[str] | None
     simulation: dict[str, Any] = field(default_factory=dict)
     points: int = 1
+    period: float | None = None  # s between streamed lines (device clock), when the profile states it
+
+    def has_field(self, name: str) -> bool:
+        """True if replies carry field ``name`` (a ``fields`` entry or a named group of the pattern)."""
+        return name in self.fields or (self.pattern is not None and name in self.pattern.groupindex)
 
     @property
     def has_status(self) -> bool:
@@ -120,12 +128,15 @@ class Profile:
 @dataclass(frozen=True)
 class ParsedLine:
     """One parsed reading: ``position`` (x, y, z) in metres, ``status`` word, ``sigma`` metres or None, ``tp`` the
-    tracked point's id when the reply has a ``tp`` field (else None)."""
+    tracked point's id when the reply has a ``tp`` field (else None), ``t`` the device's time of the reading (s
+    on its own clock) and ``seq`` the line's sequence number when the reply has them (else None)."""
 
     position: tuple[float, float, float]
     status: str = "ok"
     sigma: float | None = None
     tp: int | None = None
+    t: float | None = None
+    seq: int | None = None
 
 
 def profile_names() -> list[str]:
@@ -292,6 +303,10 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
             raise ConfigError(src, f"errors[{i}].kind", "error or target_lost", _got(kind))
         errors.append((_regex(src, f"errors[{i}].pattern", item["pattern"]), kind))
     reset = None if data.get("reset") is None else _regex(src, "reset", data["reset"])
+    period = data.get("period")
+    if period is not None and (isinstance(period, bool) or not isinstance(period, int | float) or not period > 0
+                               or mode != "streaming"):
+        raise ConfigError(src, "period", "a number > 0 (s between streamed lines; mode streaming only)", _got(period))
     simulation = data.get("simulation") or {}
     if not isinstance(simulation, dict):
         raise ConfigError(src, "simulation", "a mapping (how the simulated device formats replies)", _got(simulation))
@@ -303,7 +318,7 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
         max_abs=float(max_abs), sigma=None if sigma is None else float(sigma), checksum=checksum,
         checksum_covers=covers, status_ok=_strings(src, "status.ok", status.get("ok")),
         status_lost=_strings(src, "status.target_lost", status.get("target_lost")), errors=tuple(errors),
-        reset=reset, simulation=dict(simulation), points=points)
+        reset=reset, simulation=dict(simulation), points=points, period=None if period is None else float(period))
 
 
 def checksum_of(text: str, algorithm: str) -> str:
@@ -437,4 +452,10 @@ def parse_line(profile: Profile, line: str) -> ParsedLine:
         sigma = _number(profile, line, "sigma", values["sigma"]) * profile.scale
         if sigma < 0:
             raise BadReading(f"{profile.name}: negative sigma in reply {_short(line)}")
-    return ParsedLine((xyz[0], xyz[1], xyz[2]), status, sigma, tp)
+    t = None if values.get("t") is None else _number(profile, line, "t", values["t"])
+    seq = None
+    if values.get("seq") is not None:
+        if not values["seq"].strip().isdigit():
+            raise BadReading(f"{profile.name}: bad sequence number {values['seq']!r} in reply {_short(line)}")
+        seq = int(values["seq"])
+    return ParsedLine((xyz[0], xyz[1], xyz[2]), status, sigma, tp, t, seq)

@@ -46,6 +46,9 @@ Each reading is, per tool, ``SetTool("A")`` (the standard's command that makes a
 change) then the point as above (averaging found and set up per tool at connect). A tool whose reading still
 fails after its retries (e.g. a target out of sight) has no reading; only when every tool fails does the reading
 fail.
+
+Streaming (``start_stream``/``read_stream``/``stop_stream``): ``OnMoveReportE`` event reports, stamped with the
+host's receive time (drivers/ipp_stream.py).
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ import numpy as np
 from drivers.averaging import robust_mean
 from drivers.base import DeviceIdentity, TrackerReading
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, SpecError
+from drivers.ipp_stream import EventStreaming
 from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 
@@ -123,8 +127,9 @@ def _error_fields(body: str) -> tuple[int, str, str, str]:
             match.group("text").strip(unquote))
 
 
-class IppTracker:
-    """An I++ DME server as a tracker (implements :class:`drivers.base.Tracker`).
+class IppTracker(EventStreaming):
+    """An I++ DME server as a tracker (implements :class:`drivers.base.Tracker` and, with a server that has
+    ``OnMoveReportE``, :class:`drivers.base.StreamingTracker`).
 
     ``average``: raw points per reading; ``averaging``: "auto", "client" or a property path (module doc).
     After :meth:`connect`, ``server_average`` is the server's averaging property (None: the client averages)
@@ -157,6 +162,8 @@ class IppTracker:
         self.events: list[str] = []
         self.warnings: list[IppNotice] = []
         self.reconnects = 0
+        self._stopped_tags: set[str] = set()  # event tags of ended OnMoveReportE daemons
+        self._init_stream()
 
     @property
     def points(self) -> int:
@@ -200,6 +207,7 @@ class IppTracker:
             self._find_averaging(deadline)
 
     def close(self) -> None:
+        self.stop_stream(min(self.reply_timeout, 1.0))
         if self._sock is not None:
             with contextlib.suppress(Exception):  # closing a dead link must not raise
                 self.command("EndSession()", time.monotonic() + min(self.reply_timeout, 1.0))
@@ -224,6 +232,8 @@ class IppTracker:
             raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
         if self._sock is None:
             raise ConnectionFailed(f"I++ tracker {self.where} is not connected (call connect())")
+        if self.streaming:
+            raise RuntimeError(f"I++ tracker {self.where} is streaming: call stop_stream() before measure()")
         deadline = time.monotonic() + timeout
         if not self.tools:
             return [self._one_reading(deadline) for _ in range(int(count))]
@@ -368,18 +378,19 @@ class IppTracker:
 
     # --- protocol -----------------------------------------------------------------------------------------
 
-    def command(self, text: str, deadline: float) -> list[str]:
-        """Send ``text`` with a fresh tag and return its ``#`` data lines once ``%`` arrives. Errors of
-        severity 0/1 are recorded in ``warnings`` and the command goes on; from severity 2 on the client sends
-        ClearAllErrors() and raises IppError. Also raises DeviceTimeout, ConnectionFailed."""
-        tag = self._send(text)
+    def command(self, text: str, deadline: float, tag: str | None = None, until: str = "%") -> list[str]:
+        """Send ``text`` with a fresh tag (or the event tag ``tag``) and return its ``#`` data lines once ``%``
+        (or ``until``, e.g. ``&``) arrives. Errors of severity 0/1 are recorded in ``warnings`` and the command
+        goes on; from severity 2 on the client sends ClearAllErrors() and raises IppError. Also raises
+        DeviceTimeout, ConnectionFailed."""
+        tag = self._send(text, tag)
         data: list[str] = []
         while True:
             kind, body = self._reply(tag, deadline, text)
+            if kind == until:
+                return data
             if kind == "#":
                 data.append(body)
-            elif kind == "%":
-                return data
             elif kind == "!":
                 severity, code, method, message = _error_fields(body)
                 if severity < 2:
@@ -397,11 +408,12 @@ class IppTracker:
         log.log(logging.WARNING if notice.severity < 2 else logging.ERROR, "%s: %s",
                 self.where, notice)
 
-    def _send(self, text: str) -> str:
+    def _send(self, text: str, tag: str | None = None) -> str:
         if self._sock is None:
             raise ConnectionFailed(f"I++ tracker {self.where} is not connected")
-        self._tag = self._tag % 99999 + 1
-        tag = f"{self._tag:05d}"
+        if tag is None:
+            self._tag = self._tag % 99999 + 1
+            tag = f"{self._tag:05d}"
         data = f"{tag} {text}\r\n".encode("ascii")
         self._trace.data(">", data)
         try:
@@ -418,6 +430,10 @@ class IppTracker:
             match = _REPLY.match(line)
             if match is None:
                 self._trace.event(f"skipped malformed line {line!r}")
+                continue
+            if match.group("tag") == tag:  # an event-tagged command (OnMoveReportE): its own replies
+                return match.group("kind"), match.group("body").strip()
+            if match.group("tag") in self._stopped_tags:  # a late report of a stopped daemon
                 continue
             if match.group("tag").startswith("E"):
                 self.events.append(line)

@@ -22,6 +22,9 @@ abandoned trigger, is a bad reading and the trigger is retried); a line with the
 is a point out of sight (it has no reading); only when every point is out of sight is the reading TargetLost
 (and retried).
 
+Streaming with the device's timestamps (``start_stream``/``read_stream``/``stop_stream``, profiles with a time
+field ``t`` such as ``stream-csv``): drivers/serial_stream.py.
+
 Faults: a missing or busy port raises ConnectionFailed; a lost link ConnectionFailed; no reply within the
 reply timeout (after ``retries`` re-sent triggers) DeviceTimeout; bad lines are retried, then BadReading;
 target lost TargetLost; the device's reset banner makes the driver initialise it again and carry on.
@@ -48,6 +51,7 @@ from drivers.errors import (
     SpecError,
     TargetLost,
 )
+from drivers.serial_stream import LineStreaming
 from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 
@@ -97,8 +101,9 @@ def _settings(spec: TrackerSpec, site: Any) -> dict[str, Any]:
     return out
 
 
-class SerialTracker:
-    """A profile-driven ASCII tracker (implements :class:`drivers.base.Tracker`)."""
+class SerialTracker(LineStreaming):
+    """A profile-driven ASCII tracker (implements :class:`drivers.base.Tracker`, and
+    :class:`drivers.base.StreamingTracker` with a streaming profile that has a time field)."""
 
     def __init__(self, url: str, profile: Profile, *, baud: int | None = None, parity: str | None = None,
                  bytesize: int | None = None, stopbits: float | None = None, eol: str | None = None,
@@ -119,6 +124,7 @@ class SerialTracker:
         self._last_sent = ""
         self._discard_first = False
         self.resets = 0  # device resets seen (and recovered from)
+        self._init_stream()
 
     @property
     def points(self) -> int:
@@ -157,6 +163,7 @@ class SerialTracker:
         self._initialise(time.monotonic() + timeout, identify=True)
 
     def close(self) -> None:
+        self.stop_stream(1.0)
         port, self._port = self._port, None
         if port is not None:
             try:
@@ -185,6 +192,8 @@ class SerialTracker:
             raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
         if self._port is None:
             raise ConnectionFailed(f"serial tracker {self.url} is not connected (call connect())")
+        if self.streaming:
+            raise RuntimeError(f"serial tracker {self.url} is streaming: call stop_stream() before measure()")
         deadline = time.monotonic() + timeout
         self._flush()
         return [reading for _ in range(int(count)) for reading in self._one_reading(deadline)]

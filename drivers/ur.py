@@ -9,8 +9,9 @@ lost link, per operation), ``still_speed`` (rad/s, default 2e-3: joints slower t
 ``max_speed`` (rad/s, default 1.0: the highest joint speed a move may ask for, at most the model's maximum),
 ``max_acceleration`` (rad/s², default 2.0), ``remote_check`` (``on``/``off``, default on: refuse a controller
 not in remote control), ``stream_timeout`` (s, default 1.0: a state stream whose timestamp stands still this
-long is a lost link). The port cannot be chosen: the controller's ports are fixed (30004 RTDE, 29999
-dashboard, 30003 script, 30001 primary interface).
+long is a lost link), ``rtde_frequency`` (Hz, default the controller's native rate: 500 on e-Series, 125 on
+CB3; the rate of the state stream and of the recorded joint stream). The port cannot be chosen: the
+controller's ports are fixed (30004 RTDE, 29999 dashboard, 30003 script, 30001 primary interface).
 
 How it drives the arm:
 
@@ -32,6 +33,9 @@ How it drives the arm:
 - a lost link (the worker died or hung, ur_rtde lost the connection, or the stream's timestamp stood still
   for ``stream_timeout`` s) is retried with a fresh worker ``reconnects`` times, then ConnectionFailed. A move
   cut by a lost link is commanded again to the same target after the reconnection.
+
+- continuous motion (``start_move``, ``motion_done``, the joint stream recorded in the worker at the native rate
+  with the controller's timestamps): drivers/ur_stream.py.
 
 The ur_rtde import check happens in :func:`open_robot` (BackendUnavailable with the pip command without it).
 """
@@ -61,6 +65,7 @@ from drivers.errors import (
 )
 from drivers.spec import ROBOT_FORMS, RobotSpec
 from drivers.ur_info import DASHBOARD_PORT, Dashboard, dashboard_model, polyscope_major, read_factory_calibration
+from drivers.ur_stream import JointStreaming
 from drivers.ur_worker import CALL_TIMEOUT, LinkLost, Snapshot, Worker, WorkerError
 
 CALIBRATION_TIMEOUT = 1.5  # s, at most, to read the kinematics info on the primary interface
@@ -80,7 +85,9 @@ OPTIONS: dict[str, tuple[object, str]] = {
     "max_acceleration": (2.0, "highest joint acceleration a move may ask for, rad/s^2"),
     "remote_check": ("on", "refuse a controller that is not in remote control (on/off)"),
     "stream_timeout": (1.0, "seconds a standing state-stream timestamp may last before the link counts as lost"),
+    "rtde_frequency": (None, "the RTDE rate in Hz, at most 500 (default: 500 on e-Series, 125 on CB3)"),
 }
+NATIVE_RATE = {True: 500.0, False: 125.0}  # Hz, e-Series / CB3
 
 # RTDE robot_mode and safety_mode values (UR's RTDE guide)
 ROBOT_MODES = {-1: "NO_CONTROLLER", 0: "DISCONNECTED", 1: "CONFIRM_SAFETY", 2: "BOOTING", 3: "POWER_OFF",
@@ -133,7 +140,7 @@ def _options(spec: RobotSpec) -> dict[str, Any]:
                 out[key] = value
             else:
                 number = float(value)
-                if not (math.isfinite(number) and number > 0):
+                if not (math.isfinite(number) and number > 0) or (key == "rtde_frequency" and number > 500):
                     raise ValueError
                 out[key] = number
         except ValueError:
@@ -167,10 +174,11 @@ def open_robot(spec: RobotSpec | str, rig: object = None, site: Any = None) -> U
 
 
 
-class URRobot:
-    """A UR arm through ur_rtde in a worker process (implements :class:`drivers.base.Robot`); see the module
-    docstring. ``factory_calibration``: the controller's DH values read at connect (dict of UR's theta, a, d,
-    alpha per joint, rad and m), or None when it could not be read."""
+class URRobot(JointStreaming):
+    """A UR arm through ur_rtde in a worker process (implements :class:`drivers.base.Robot` and
+    :class:`drivers.base.StreamingRobot`); see the module docstring. ``factory_calibration``: the controller's
+    DH values read at connect (dict of UR's theta, a, d, alpha per joint, rad and m), or None when it could not
+    be read."""
 
     def __init__(self, model: RobotModel, host: str, options: dict[str, Any]) -> None:
         self.model, self.host, self.options = model, host, options
@@ -186,6 +194,9 @@ class URRobot:
         self.call_timeout = CALL_TIMEOUT  # s, for one request to the worker (a hung worker is killed after it)
         self.reconnections = 0  # fresh workers started after a lost link, since connect()
         self._stamp: tuple[float, float] = (math.nan, 0.0)  # last stream timestamp, when it was first seen
+        e_series = model.name.lower().endswith("e") or dashboard_model(model.name) in ("UR20", "UR30")
+        self.rtde_frequency = float(options.get("rtde_frequency") or NATIVE_RATE[e_series])  # Hz
+        self._init_stream()
 
     # --- connection -------------------------------------------------------------------------------------------
 
@@ -212,7 +223,7 @@ class URRobot:
     def _start_worker(self, timeout: float) -> None:
         """A fresh worker whose state stream is seen advancing; LinkLost if not."""
         self._drop_worker(graceful=False)
-        self._worker = Worker(self.host, timeout)
+        self._worker = Worker(self.host, timeout, frequency=self.rtde_frequency)
         self._stamp = (math.nan, time.monotonic())
         deadline = time.monotonic() + self.stream_timeout + timeout
         first = self._snapshot()[1]
@@ -269,7 +280,8 @@ class URRobot:
                                    f"spec says {self.model.name}; give the right model (e.g. {suggestion}@{self.host})")
 
     def close(self) -> None:
-        """Stop ur_rtde's control script and end the worker; never raises."""
+        """Stop ur_rtde's control script and end the worker (and a joint stream); never raises."""
+        self._streaming, self._stream_worker, self._motion = False, None, None
         with contextlib.suppress(Exception):
             self._drop_worker()
 
@@ -384,6 +396,22 @@ class URRobot:
 
     def _move(self, target: Array, v: float, a: float, deadline: float, timeout: float, stops: int) -> None:
         """Command the move and watch it to the end (run again after a reconnection: same target)."""
+        self._command_move(target, v, a, stops)
+        while True:
+            _, _, _, _, actual, qd, _ = self._checked_snapshot()
+            self._raise_if_stopped(stops)
+            if (np.max(np.abs(np.asarray(actual) - target)) < POSITION_TOLERANCE
+                    and max(map(abs, qd)) < self.still_speed):
+                return
+            if time.monotonic() >= deadline:
+                self.stop()
+                raise DeviceTimeout(f"the UR robot at {self.host} did not reach its target within {timeout:g} s; "
+                                    "it was stopped (stopJ)")
+            time.sleep(self.poll_period)
+
+    def _command_move(self, target: Array, v: float, a: float, stops: int) -> None:
+        """Send the asynchronous moveJ (the control script started first if it is not running); RobotFault when
+        the controller refuses it twice."""
         for attempt in (1, 2):
             if not self._checked_snapshot()[6]:  # ur_rtde's control script is not running, e.g. after a
                 with contextlib.suppress(WorkerError):  # cleared protective stop or another script
@@ -403,17 +431,6 @@ class URRobot:
                 raise RobotFault(f"the UR controller at {self.host} refused the move twice ({why}); check the "
                                  "teach pendant for a message")
             # the arm is still: once more, the script may have been replaced mid-command (a client reconnecting)
-        while True:
-            _, _, _, _, actual, qd, _ = self._checked_snapshot()
-            self._raise_if_stopped(stops)
-            if (np.max(np.abs(np.asarray(actual) - target)) < POSITION_TOLERANCE
-                    and max(map(abs, qd)) < self.still_speed):
-                return
-            if time.monotonic() >= deadline:
-                self.stop()
-                raise DeviceTimeout(f"the UR robot at {self.host} did not reach its target within {timeout:g} s; "
-                                    "it was stopped (stopJ)")
-            time.sleep(self.poll_period)
 
     def _raise_if_stopped(self, stops: int) -> None:
         if self._stops != stops:

@@ -19,7 +19,11 @@ ConnectionFailed. The driver process survives either way.
 
 Requests (``Worker.call(name, *args)``): ``snapshot`` → :data:`Snapshot` tuple, ``move`` (q, speed rad/s,
 acceleration rad/s²; asynchronous moveJ) → bool, ``stop`` (deceleration rad/s²; stopJ, waits for it) → None,
-``reupload`` → bool (reupload ur_rtde's control script), ``close`` (stopScript, then the worker exits).
+``reupload`` → bool (reupload ur_rtde's control script), ``progress`` → int (``getAsyncOperationProgress``:
+< 0 when no asynchronous move runs), ``close`` (stopScript, then the worker exits). The joint stream
+(drivers/ur_recorder.py: a thread of the worker records every RTDE package with its controller timestamp):
+``stream_start`` (frequency Hz; restarts a running one) → None, ``stream_read`` (at most N samples) →
+:data:`drivers.ur_recorder.Batch`, ``stream_stop`` → the recorder's counters (dict), or None if none ran.
 
 This module imports only the standard library; the child imports ``rtde_control`` and ``rtde_receive``.
 """
@@ -64,9 +68,24 @@ def _snapshot(receive: Any, control: Any) -> Snapshot:
             list(receive.getActualQ()), list(receive.getActualQd()), bool(control.isProgramRunning()))
 
 
-def _handle(receive: Any, control: Any, name: str, args: tuple[Any, ...]) -> Any:
+def _handle(receive: Any, control: Any, name: str, args: tuple[Any, ...], streams: dict[str, Any]) -> Any:
     if name == "snapshot":
         return _snapshot(receive, control)
+    if name == "stream_read":
+        recorder = streams.get("recorder")
+        return ([], [], [], 0) if recorder is None else recorder.take(int(args[0]))
+    if name == "progress":
+        return int(control.getAsyncOperationProgress())
+    if name in ("stream_start", "stream_stop"):
+        from drivers.ur_recorder import Recorder
+
+        old = streams.pop("recorder", None)
+        if old is not None:
+            old.stop()
+        if name == "stream_start":
+            streams["recorder"] = Recorder(receive, float(args[0]))
+            return None
+        return None if old is None else old.stats()
     if name == "move":
         q, speed, acceleration = args
         return bool(control.moveJ(list(q), float(speed), float(acceleration), True))
@@ -98,6 +117,7 @@ def serve(conn: Any, host: str, frequency: float, quiet: bool = True) -> None:
         conn.send((0, "error", " ".join(str(exc).split()) or type(exc).__name__))
         return
     conn.send((0, "ok", None))
+    streams: dict[str, Any] = {}  # the joint-stream recorder, when one runs
     while True:
         try:
             number, name, args = conn.recv()
@@ -110,7 +130,7 @@ def serve(conn: Any, host: str, frequency: float, quiet: bool = True) -> None:
                 conn.send((number, "ok", None))
             break
         try:
-            reply = (number, "ok", _handle(receive, control, name, args))
+            reply = (number, "ok", _handle(receive, control, name, args, streams))
         except Exception as exc:  # becomes WorkerError in the driver
             reply = (number, "error", f"{type(exc).__name__}: {' '.join(str(exc).split())}")
         try:

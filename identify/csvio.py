@@ -97,6 +97,17 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
     tp = np.ones(m, dtype=np.int64)
     t = np.full(m, np.nan) if "t" in columns else None
     line_numbers = np.array([number for number, _ in numbered[1:]], dtype=np.int64)
+    fast = _parse_fast(rows, header, columns, n)
+    if fast is not None:  # every field well formed: vectorised (the loop below names the first bad field)
+        sweep, joint, q, points, fast_sigma, fast_tp, fast_t = fast
+        points = points * scale
+        sigma = None if fast_sigma is None else fast_sigma * scale
+        tp = np.ones(m, dtype=np.int64) if fast_tp is None else fast_tp
+        t = fast_t
+        if "role" in columns:
+            roles = np.char.lower(np.char.strip(np.array([r[columns["role"]] for r in rows], dtype=str)))
+            check = roles == "check"
+        rows = []  # nothing left for the checking loop
     for k, fields in enumerate(rows):
         line = int(line_numbers[k])
         if len(fields) != len(header):
@@ -129,6 +140,45 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
     meas = Measurements(types, q, points, sweep, joint, sigma, check, line_numbers, has_role="role" in columns,
                         tp=tp, coupling=coupling, t=t, streamed=streamed, clock_offset=offset)
     return CsvContent(meas, metadata, notes)
+
+
+def _parse_fast(rows: list[list[str]], header: list[str], columns: dict[str, int], n: int) -> tuple | None:
+    """The numeric columns of ``rows`` parsed at once, or None when any field would need a message (a
+    missing or malformed value, an empty reading, a bad role or tp): then the per-row loop reports it."""
+    if any(len(fields) != len(header) for fields in rows):
+        return None
+
+    def floats(name: str) -> np.ndarray:
+        index = columns[name]
+        values = np.array([fields[index] for fields in rows], dtype=float)
+        if not np.all(np.isfinite(values)):
+            raise ValueError(name)
+        return values
+
+    def integers(name: str) -> np.ndarray:
+        index = columns[name]
+        return np.array([int(fields[index]) for fields in rows], dtype=np.int64)
+
+    try:
+        sweep, joint = integers("sweep"), integers("joint")
+        q = np.column_stack([floats(f"q{j}") for j in range(1, n + 1)])
+        points = np.column_stack([floats(axis) for axis in "xyz"])
+        sigma = floats("sigma") if "sigma" in columns else None
+        tp = integers("tp") if "tp" in columns else None
+        t = None
+        if "t" in columns:  # a row without a time (a stop-and-go step of an old session) is NaN
+            t = np.array([fields[columns["t"]].strip() or "nan" for fields in rows], dtype=float)
+            if np.any(np.isinf(t)):
+                return None
+    except ValueError:
+        return None
+    if tp is not None and np.any(tp < 1):
+        return None
+    if "role" in columns:
+        roles = {fields[columns["role"]].strip().lower() for fields in rows}
+        if not roles <= {"fit", "check"}:
+            return None
+    return sweep, joint, q, points, sigma, tp, t
 
 
 def _streams(metadata: dict[str, str], sweep: np.ndarray, t: np.ndarray | None) -> tuple[np.ndarray, float]:

@@ -15,10 +15,12 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from identify.kinematics import DHModel, frames_from_joints
+from identify.geometry import left_jacobian, skew
+from identify.kinematics import DHModel, flange_frames, frames_from_joints
 from identify.outliers import leverages, outlier_free
-from identify.poe import AxisLines, JointTerms, LineProblem, fit_lines, lines_from_model
+from identify.poe import AxisLines, JointTerms, LeastSquares, LineProblem, fit_lines, lines_from_model
 from identify.refine import NOISE_FLOOR
+from identify.sync import Retiming
 
 Array = NDArray[np.float64]
 
@@ -31,7 +33,8 @@ ROBUST_PASSES = 2
 class LinesFit:
     """A fitted lines model. ``q`` (m, n): joint values with joint errors applied and the unread values
     solved; ``inliers`` (m,); ``residuals`` (m, 3) measured minus predicted, metres; ``robust_cost``
-    compares starts; ``terms`` the joint errors fitted with the lines."""
+    compares starts; ``terms`` the joint errors fitted with the lines; ``timing`` the streamed rows' clock
+    correction (None without streamed rows)."""
 
     lines: AxisLines
     q: Array
@@ -40,6 +43,7 @@ class LinesFit:
     robust_cost: float
     start: str
     terms: JointTerms
+    timing: Retiming | None = None
 
 
 def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[np.int64] | None = None
@@ -51,20 +55,19 @@ def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[n
     tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index
     count = int(tp_index.max()) + 1 if len(tp_index) else 1
     first = tp_index == 0
-    all_frames = frames_from_joints(replace(nominal, base=np.eye(4)), q)[:, -1]
-    frames, points_first = all_frames[first], points[first]
-    all_points = points
+    flange_rot, flange_origin = flange_frames(replace(nominal, base=np.eye(4)), q)  # frame n in frame 0
+    rots, origins, points_first = flange_rot[first], flange_origin[first], points[first]
     tool = np.zeros(3)
     base = np.eye(4)
     for _ in range(PLACE_ITERATIONS):
-        local = np.einsum("kij,j->ki", frames[:, :3, :3], tool) + frames[:, :3, 3]  # TP in frame 0
+        local = np.einsum("kij,j->ki", rots, tool) + origins  # TP in frame 0
         centre_l, centre_p = local.mean(axis=0), points_first.mean(axis=0)
         rot, _ = Rotation.align_vectors(points_first - centre_p, local - centre_l)
         base[:3, :3] = rot.as_matrix()
         base[:3, 3] = centre_p - base[:3, :3] @ centre_l
         # TP: points = R_b (R_k t + o_k) + t_b  ->  linear least squares in t
-        a = np.einsum("ij,kjl->kil", base[:3, :3], frames[:, :3, :3]).reshape(-1, 3)
-        rhs = (points_first - (frames[:, :3, 3] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
+        a = np.einsum("ij,kjl->kil", base[:3, :3], rots).reshape(-1, 3)
+        rhs = (points_first - (origins @ base[:3, :3].T + base[:3, 3])).reshape(-1)
         new_tool = np.linalg.lstsq(a, rhs, rcond=None)[0]
         if np.linalg.norm(new_tool - tool) < 1e-12:
             tool = new_tool
@@ -75,18 +78,31 @@ def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[n
     tools = np.tile(tool, (count, 1))
     for p in range(1, count):
         rows = tp_index == p
-        a = np.einsum("ij,kjl->kil", base[:3, :3], all_frames[rows, :3, :3]).reshape(-1, 3)
-        rhs = (all_points[rows] - (all_frames[rows, :3, 3] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
+        a = np.einsum("ij,kjl->kil", base[:3, :3], flange_rot[rows]).reshape(-1, 3)
+        rhs = (points[rows] - (flange_origin[rows] @ base[:3, :3].T + base[:3, 3])).reshape(-1)
         tools[p] = np.linalg.lstsq(a, rhs, rcond=None)[0]
 
-    def residuals(x: Array) -> Array:  # the alternation can stall on short arcs: finish jointly
-        rot = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
-        local = np.einsum("kij,ki->kj", all_frames[:, :3, :3].transpose(0, 2, 1),
-                          x[6:].reshape(-1, 3)[tp_index]) + all_frames[:, :3, 3]
-        return (local @ rot.T + x[3:6] - all_points).ravel()
+    def placed(x: Array) -> tuple[Array, Array]:  # TP in frame 0 and the base rotation at x
+        local = np.einsum("kij,kj->ki", flange_rot, x[6:].reshape(-1, 3)[tp_index]) + flange_origin
+        return local, Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
 
-    x = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), method="lm",
-                      xtol=1e-12, ftol=1e-12).x
+    def residuals(x: Array) -> Array:  # the alternation can stall on short arcs: finish jointly
+        local, rot = placed(x)
+        return (local @ rot.T + x[3:6] - points).ravel()
+
+    def jacobian(x: Array) -> Array:
+        local, rot = placed(x)
+        jac = np.zeros((len(q), 3, 6 + 3 * count))
+        jac[:, :, 0:3] = -skew(local @ rot.T) @ left_jacobian(x[:3])
+        jac[:, :, 3:6] = np.eye(3)
+        turned = np.einsum("ij,kjl->kil", rot, flange_rot)
+        for p in range(count):
+            rows = tp_index == p
+            jac[rows, :, 6 + 3 * p:9 + 3 * p] = turned[rows]
+        return jac.reshape(-1, jac.shape[2])
+
+    x = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), jac=jacobian,
+                      method="lm", xtol=1e-12, ftol=1e-12).x
     base[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
     base[:3, 3] = x[3:6]
     tools = x[6:].reshape(-1, 3)
@@ -120,7 +136,8 @@ class FitData:
     """The rows a fit sees: readings ``q`` (m, n), TP ``points`` (m, 3) in the tracker frame (m), ``weights``
     (m,) = 1/sigma, ``unknown`` (m,) 0-based unread joint or -1, ``tp_index`` (m,) 0-based tracked point,
     ``group`` (m,) the row's sweep and tracked point (>= 1; 0 for free poses) and ``joint`` (m,) the joint
-    its sweep moves, for the neighbour test."""
+    its sweep moves, for the neighbour test; ``timing`` the clock correction of streamed rows (fitted from
+    its current ``tau``; None without streamed rows)."""
 
     q: Array
     points: Array
@@ -129,36 +146,47 @@ class FitData:
     tp_index: NDArray[np.int64]
     group: NDArray[np.int64]
     joint: NDArray[np.int64]
+    timing: Retiming | None = None
 
     def subset(self, rows: NDArray[np.bool_]) -> FitData:
         return FitData(self.q[rows], self.points[rows], self.weights[rows], self.unknown[rows], self.tp_index[rows],
-                       self.group[rows], self.joint[rows])
+                       self.group[rows], self.joint[rows], None if self.timing is None else self.timing.subset(rows))
+
+    def timed(self, timing: Retiming | None) -> FitData:
+        """The same rows with the clock correction ``timing`` (its rows must be these)."""
+        return replace(self, timing=timing)
 
     def problem(self, lines: AxisLines, terms: JointTerms | None = None) -> LineProblem:
-        return LineProblem(lines, self.q, self.points, self.weights, self.unknown, self.tp_index, terms)
+        return LineProblem(lines, self.q, self.points, self.weights, self.unknown, self.tp_index, terms, self.timing)
 
-    def fit(self, start: AxisLines, terms: JointTerms | None = None, loss: str = "linear", scale: float = 1.0):
-        return fit_lines(start, self.q, self.points, self.weights, self.unknown, loss, scale, self.tp_index, terms)
+    def fit(self, start: AxisLines, terms: JointTerms | None = None, loss: str = "linear",
+            scale: float = 1.0) -> LeastSquares:
+        return fit_lines(start, self.q, self.points, self.weights, self.unknown, loss, scale, self.tp_index, terms,
+                         self.timing)
 
 
 def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointTerms | None = None) -> LinesFit:
     """Least squares from ``start`` (with the joint errors ``terms``); if any sample fails the outlier
     test, a soft-L1 fit, the test again on its residuals, and a final least-squares fit on the samples
     kept."""
-    lines, q_s, res, terms = data.fit(start, terms)
+    lines, q_s, res, terms, timing = data.fit(start, terms)
+    data = data.timed(timing)
     inliers = np.ones(len(data.q), dtype=bool)
     if robust:
-        zero = np.zeros(lines.n_parameters + len(terms))
+        zero = np.zeros(data.problem(lines, terms).size)
         lev = leverages(data.problem(lines, terms).jacobian_blocks(zero), data.unknown)
         inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown)
         if not np.all(inliers):
             for _ in range(ROBUST_PASSES):  # the scale of a fit pulled by outliers is too wide: shrink it
                 scale = max(robust_scale(res, lev), NOISE_FLOOR * float(np.median(data.weights)))
-                lines, q_s, res, terms = data.fit(lines, terms, "soft_l1", ROBUST_WIDTH * scale)
+                lines, q_s, res, terms, timing = data.fit(lines, terms, "soft_l1", ROBUST_WIDTH * scale)
+                data = data.timed(timing)
             inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown)
             for _ in range(2):  # least squares on the samples kept; re-admit those it then explains
                 kept_fit = data.subset(inliers).fit(lines, terms.subset(inliers))
                 lines, terms = kept_fit.lines, replace(terms, coefs=kept_fit.terms.coefs)
+                if timing is not None:
+                    data = data.timed(replace(timing, tau=kept_fit.timing.tau))
                 problem = data.problem(lines, terms)
                 q_s = problem.joints(lines)
                 res = problem.residuals(zero).reshape(-1, 3)
@@ -170,7 +198,7 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
     scale = max(robust_scale(res[inliers], np.zeros(int(inliers.sum()))), NOISE_FLOOR)
     r2 = np.sum(res**2, axis=1) / (ROBUST_WIDTH * scale) ** 2
     cost = float(np.sum(2.0 * (np.sqrt(1.0 + r2) - 1.0)))
-    return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms)
+    return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms, data.timing)
 
 
 def along_arc(q: Array, joint: NDArray[np.int64]) -> Array:

@@ -274,3 +274,13 @@ def common_normal(
     s = ((w @ u1) - b * (w @ u2)) / denom
     t = (b * (w @ u1) - (w @ u2)) / denom
     return CommonNormal(p1 + s * u1, p2 + t * u2, False)
+
+
+def left_jacobian(omega: Array) -> Array:
+    """The left Jacobian (3, 3) of SO(3) at rotation vector ``omega`` (rad): d(exp(omega) v) / d omega =
+    -[exp(omega) v]x · left_jacobian(omega)."""
+    angle = float(np.linalg.norm(omega))
+    k = skew(omega)
+    if angle < 1e-8:
+        return np.eye(3) + 0.5 * k
+    return np.eye(3) + (1 - np.cos(angle)) / angle**2 * k + (angle - np.sin(angle)) / angle**3 * (k @ k)

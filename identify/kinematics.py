@@ -9,6 +9,7 @@ Everything here is vectorised over samples: ``q`` has shape (m, n).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -127,8 +128,33 @@ def frames_from_joints(model: DHModel, q: ArrayLike) -> Array:
     return frames
 
 
+def running_frames(model: DHModel, q: ArrayLike) -> Iterator[tuple[Array, Array, Array, Array]]:
+    """DH frames 0..n in the tracker frame, one at a time, as their axes and origin (x, y, z, o), each
+    (m, 3): what :func:`frames_from_joints` holds, without storing (m, n+1, 4, 4) (a few vector operations
+    per joint, from A_i's sparsity)."""
+    q = _as_joints(model, q)
+    rev = model.revolute
+    theta = model.theta + np.where(rev, q, 0.0)
+    d = model.d + np.where(rev, 0.0, q)
+    ct, st = np.cos(theta), np.sin(theta)
+    ca, sa = np.cos(model.alpha), np.sin(model.alpha)
+    x, y, z, o = (np.broadcast_to(model.base[:3, k], (len(q), 3)) for k in range(4))
+    yield x, y, z, o
+    for i in range(model.n_joints):
+        c, s = ct[:, i, None], st[:, i, None]
+        x, y_turned = x * c + y * s, y * c - x * s  # rotated about z by theta
+        o = o + x * model.a[i] + z * d[:, i, None]
+        y, z = y_turned * ca[i] + z * sa[i], z * ca[i] - y_turned * sa[i]  # twisted about the new x by alpha
+        yield x, y, z, o
+
+
+def flange_frames(model: DHModel, q: ArrayLike) -> tuple[Array, Array]:
+    """Frame n in the tracker frame for each sample: rotation (m, 3, 3) and origin (m, 3), metres."""
+    *_, (x, y, z, o) = running_frames(model, q)
+    return np.stack([x, y, z], axis=2), o
+
+
 def points_from_joints(model: DHModel, q: ArrayLike) -> Array:
     """Predicted TP in the tracker frame, metres, shape (m, 3)."""
-    frames = frames_from_joints(model, q)
-    last = frames[:, -1]
-    return last[:, :3, :3] @ model.tool + last[:, :3, 3]
+    *_, (x, y, z, o) = running_frames(model, q)
+    return o + x * model.tool[0] + y * model.tool[1] + z * model.tool[2]

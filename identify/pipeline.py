@@ -26,10 +26,11 @@ from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.linalg import project_out, scaled_inverse
 from identify.measurements import InputError, Measurements, in_dh_joints, prepared_joints, validate
 from identify.outliers import sweep_neighbours
-from identify.poe import AxisLines, points_from_lines
+from identify.poe import AxisLines, LineProblem, points_from_lines
 from identify.predict import Predictor
 from identify.refine import DEFAULT_MAX_OFFSET, Refinement, full_jacobian, parameter_names, refine
 from identify.starts import starts
+from identify.sync import Retiming, retiming
 
 Array = NDArray[np.float64]
 
@@ -71,6 +72,21 @@ class Validation:
 
 
 @dataclass(frozen=True)
+class ClockFit:
+    """The tracker-to-robot clock relation of streamed rows, fitted with the kinematics: robot time =
+    tracker time + ``offset`` + ``drift`` · (tracker time − ``t_ref``). ``offset`` (s) is the recording's
+    coarse offset plus the fitted correction; ``*_std`` their standard uncertainties (``drift`` None when not
+    fitted: streams shorter than :data:`identify.sync.DRIFT_SPAN`); ``rows`` the streamed rows fitted."""
+
+    offset: float
+    offset_std: float
+    drift: float | None
+    drift_std: float | None
+    t_ref: float
+    rows: int
+
+
+@dataclass(frozen=True)
 class Identification:
     """Identified model (``model``, standard DH), standard uncertainties in the layout of
     :func:`identify.refine.parameter_names` (``std``), the axis lines it was fitted as (``lines``, with
@@ -95,6 +111,7 @@ class Identification:
     tools: Array
     decisions: list[Decision] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    clock: ClockFit | None = None
 
     @property
     def coupling(self) -> Coupling | None:
@@ -241,7 +258,8 @@ def identify(
     sweep_group = np.array([numbers.get(int(s), 0) if j > 0 else 0 for s, j in zip(fitm.sweep, fitm.joint,
                                                                                      strict=True)])
     group = np.where(sweep_group > 0, sweep_group * len(tp_ids) + tp_index, 0)  # neighbours: same sweep and point
-    data = FitData(q, fitm.points, weights, unknown, tp_index, group, fitm.joint)
+    timing = None if fitm.t is None else retiming(fitm.t, fitm.streamed, fitm.sweep, q)
+    data = FitData(q, fitm.points, weights, unknown, tp_index, group, fitm.joint, timing)
     geo, found_starts = starts(fitm, q, unknown, tp_index, home, nominal, conventional, parallel_tol, warnings)
     fits = [fit(start, data, robust, label) for label, start in found_starts]
     best: LinesFit = min(fits, key=lambda f: f.robust_cost)
@@ -259,10 +277,12 @@ def identify(
             check_all.q, check_all.points, np.ones(len(check_all)) if check_all.sigma is None else 1 / check_all.sigma,
             np.searchsorted(tp_ids, check_all.tp))
         variance = max(adequacy.noise, declared or 0.0) ** 2 / unit**2
-        terms, _, decisions = select_terms(best, data, empty, pool, variance, held)
+        held_clock = data.timed(None if best.timing is None else best.timing.held())
+        terms, _, decisions = select_terms(best, held_clock, empty, pool, variance, held)
         if terms.candidates:
-            best = fit(best.lines, data, robust, best.start, terms.terms(q, None, best.q))
+            best = fit(best.lines, data.timed(best.timing), robust, best.start, terms.terms(q, None, best.q))
             adequacy = _adequacy(best, data, unit, declared)
+    data = data.timed(best.timing)
     lines, inl = best.lines, best.inliers
     problem = data.subset(inl).problem(lines, best.terms.subset(inl))
     x0 = np.zeros(problem.size)
@@ -313,7 +333,10 @@ def identify(
             warnings.append(f"sweep {sw.sweep}: {sw.rejected} sample(s) rejected as outliers")
     ident_rms = float(np.sqrt(np.mean(np.sum(residuals[inl] ** 2, axis=1))))
     check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
-    predictor = Predictor(lines, covariance, terms, best.terms.coefs, None, tuple(tp_ids))
+    kinematic = slice(0, problem.n_terms)  # the clock correction's parameters come last
+    predictor = Predictor(lines, covariance[kinematic, kinematic], terms, best.terms.coefs, None, tuple(tp_ids))
+    clock = None if best.timing is None else _clock(best.timing, covariance[problem.n_terms:, problem.n_terms:],
+                                                     meas.clock_offset)
     fitted_tp = np.asarray(tp_ids)[tp_index[inl]]
     expected = _expected_accuracy(predictor, best.q[inl], fitted_tp, adequacy)
     gap_rms, gap_statistic = gap
@@ -325,6 +348,8 @@ def identify(
         checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
         dh_check,
     ]
+    if clock is not None:
+        found.append(checks.timing(clock.offset_std, _tp_speed(jac_blocks, problem, weights[inl]), adequacy.noise))
     if validation is not None:
         found.append(checks.holdout(validation.samples, validation.rms, validation.expected))
     if nominal is not None and np.sum(unknown < 0) >= 3:
@@ -355,7 +380,23 @@ def identify(
         tools=_tools(model, lines),
         decisions=decisions,
         warnings=warnings,
+        clock=clock,
     )
+
+
+def _tp_speed(jac_blocks: Array, problem: LineProblem, weights: Array) -> float:
+    """RMS speed (m/s) of the tracked point over the streamed rows: the Jacobian column of the clock offset."""
+    rows = problem.timing.rows
+    velocity = jac_blocks[rows, :, problem.n_terms] / weights[rows, None]
+    return float(np.sqrt(np.mean(np.sum(velocity**2, axis=1))))
+
+
+def _clock(timing: Retiming, covariance: Array, offset: float) -> ClockFit:
+    """The fitted clock relation (``covariance`` of ``timing.tau``; ``offset`` s the recording's coarse one)."""
+    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    drift = len(timing.tau) > 1
+    return ClockFit(offset + float(timing.tau[0]), float(std[0]), float(timing.tau[1]) if drift else None,
+                    float(std[1]) if drift else None, timing.t_ref, int(np.sum(timing.rows)))
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
@@ -399,7 +440,7 @@ def _expected_accuracy(predictor: Predictor, q: Array, tp: NDArray[np.int64], ad
 def _adequacy(best: LinesFit, data: FitData, unit: float, declared: float | None) -> Adequacy:
     """Adequacy of ``best`` on its inliers (see :mod:`identify.adequacy`)."""
     inl = best.inliers
-    rows = data.subset(inl)
+    rows = data.timed(best.timing).subset(inl)
     problem = rows.problem(best.lines, best.terms.subset(inl))
     zero = np.zeros(problem.size)
     runs = sweep_neighbours(rows.group, along_arc(best.q[inl], rows.joint))

@@ -20,16 +20,17 @@ complement for the covariance.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, unit
+from identify.geometry import cross, perpendicular_basis, rotation_about_axis, unit
 from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.linalg import project_out
+from identify.sync import Retiming
 
 Array = NDArray[np.float64]
 
@@ -178,13 +179,14 @@ class LineProblem:
 
     ``unknown`` (m,): 0-based index of each row's unread joint, -1 where every reading is known;
     ``tp_index`` (m,): each row's tracked point (0-based row of ``start.tps``); ``terms``: joint errors
-    fitted with the lines. Parameters are increments on ``start`` (and on ``terms.coefs``), zero at the start:
-    lines, then 3 per tracked point, then one per joint-error coefficient.
+    fitted with the lines; ``timing``: the clock correction of streamed rows (:mod:`identify.sync`).
+    Parameters are increments on ``start`` (and on ``terms.coefs``, ``timing.tau``), zero at the start:
+    lines, then 3 per tracked point, then one per joint-error coefficient, then the timing's (when free).
     """
 
     def __init__(self, start: AxisLines, q: Array, points: Array, weights: Array,
                  unknown: NDArray[np.int64] | None = None, tp_index: NDArray[np.int64] | None = None,
-                 terms: JointTerms | None = None):
+                 terms: JointTerms | None = None, timing: Retiming | None = None):
         self.start, self.q, self.points, self.weights = start, q, points, weights
         self.unknown = np.full(len(q), -1) if unknown is None else np.asarray(unknown)
         self.has_unknown = bool(np.any(self.unknown >= 0))
@@ -193,7 +195,9 @@ class LineProblem:
         self.types = start.joint_types
         self.bases = [np.array(perpendicular_basis(d)) for d in start.directions]
         self.n_lines = start.n_parameters
-        self.size = self.n_lines + len(self.terms)
+        self.timing = timing
+        self.n_terms = self.n_lines + len(self.terms)  # index of the first timing parameter
+        self.size = self.n_terms + (0 if timing is None else timing.size)
 
     def lines(self, x: Array) -> tuple[AxisLines, list[Array]]:
         pts, dirs, tangents, k = [], [], [], 0
@@ -216,16 +220,24 @@ class LineProblem:
 
     def coefs(self, x: Array) -> Array:
         """Joint-error coefficients at ``x``."""
-        return self.terms.coefs + x[self.n_lines:]
+        return self.terms.coefs + x[self.n_lines:self.n_terms]
 
-    def joints(self, lines: AxisLines, coefs: Array | None = None) -> Array:
-        """Joint values with the joint errors applied and every unknown value at its best estimate."""
-        q = self.terms.corrected(self.q, coefs)
+    def tau(self, x: Array) -> Array | None:
+        """The timing correction at ``x`` (None without streamed rows)."""
+        if self.timing is None:
+            return None
+        return self.timing.tau + x[self.n_terms:] if self.timing.free else self.timing.tau
+
+    def joints(self, lines: AxisLines, coefs: Array | None = None, tau: Array | None = None) -> Array:
+        """Joint values at corrected times (streamed rows), with the joint errors applied and every unknown
+        value at its best estimate."""
+        q = self.q if self.timing is None else self.timing.joints(self.q, tau)
+        q = self.terms.corrected(q, coefs)
         return solve_unknown(lines, q, self.points, self.unknown, self.tp_index) if self.has_unknown else q
 
     def residuals(self, x: Array) -> Array:
         lines, _ = self.lines(x)
-        predicted = points_from_lines(lines, self.joints(lines, self.coefs(x)), self.tp_index)
+        predicted = points_from_lines(lines, self.joints(lines, self.coefs(x), self.tau(x)), self.tp_index)
         return ((predicted - self.points) * self.weights[:, None]).ravel()
 
     def jacobian_blocks(self, x: Array, q: Array | None = None, tp_index: NDArray[np.int64] | None = None,
@@ -234,10 +246,16 @@ class LineProblem:
         tracked points and regressors), (m, 3, size), after the projection of the nuisance parameters."""
         lines, tangents = self.lines(x)
         data = q is None
+        timed = data and self.timing is not None and self.timing.free
         if data:
-            q, tp_index, regressors = self.joints(lines, self.coefs(x)), self.tp_index, self.terms.regressors
+            q, tp_index = self.joints(lines, self.coefs(x), self.tau(x)), self.tp_index
+            regressors = self.terms.regressors
         elif regressors is None:
             regressors = np.zeros((len(q), len(self.terms)))
+        if timed:
+            streamed = self.timing.rows
+            dq = self.timing.derivatives(self.tau(x))  # (r, n, K)
+            timing_moves = np.any(dq != 0.0, axis=(0, 2))
         _, steps = _chain(lines, q, tp_index)
         m = len(q)
         jac = np.zeros((m, 3, self.size))
@@ -247,7 +265,8 @@ class LineProblem:
         for i, t in enumerate(self.types):
             u, w, rot, delta = steps[i]
             acting = np.flatnonzero(self.terms.joints == i)
-            if (data and self.has_unknown) or len(acting):
+            moves = timed and timing_moves[i]
+            if (data and self.has_unknown) or len(acting) or moves:
                 if t == "R":  # dp/dq_i
                     column = np.einsum("kij,kj->ki", left, cross(lines.directions[i], w - lines.points[i]))
                 else:
@@ -256,16 +275,20 @@ class LineProblem:
                 nuisance[rows] = column[rows]
                 for c in acting:
                     jac[:, :, self.n_lines + c] = column * regressors[:, c, None]
+                if moves:
+                    jac[streamed, :, self.n_terms:] += column[streamed, :, None] * dq[:, i, None, :]
             if t == "R":
                 # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
-                # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i)
-                turn = left @ (rot @ skew(u) - skew(w))
-                shift = left - left @ rot
+                # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i),
+                # evaluated as matrix-vector products per row
                 c = lines.points[i]
-                for j in range(2):  # tilting the direction turns the line about its point c
+                for j in range(2):  # tilting the direction turns the line about its point c: eps_v = c x eps_w
                     eps_w = cross(lines.directions[i], tangents[i][j])
-                    jac[:, :, k + j] = turn @ eps_w - shift @ cross(eps_w, c)
-                    jac[:, :, k + 2 + j] = shift @ self.bases[i][j]
+                    ce = cross(eps_w, c)
+                    inner = np.einsum("kij,kj->ki", rot, cross(u, eps_w) + ce) - cross(w, eps_w) - ce
+                    jac[:, :, k + j] = np.einsum("kij,kj->ki", left, inner)
+                    b = self.bases[i][j]
+                    jac[:, :, k + 2 + j] = np.einsum("kij,kj->ki", left, b - rot @ b)
                 k += 4
             else:
                 jac[:, :, k:k + 2] = (left @ tangents[i].T) * delta[:, None, None]
@@ -290,26 +313,29 @@ class LineProblem:
 
 class LeastSquares(NamedTuple):
     """A least-squares fit: ``lines``, joint values ``q`` (m, n) with joint errors applied and unknown
-    values solved, weighted ``residuals`` (m, 3) predicted minus measured, and the joint ``terms`` fitted."""
+    values solved, weighted ``residuals`` (m, 3) predicted minus measured, the joint ``terms`` fitted and the
+    streamed rows' ``timing`` (None without)."""
 
     lines: AxisLines
     q: Array
     residuals: Array
     terms: JointTerms
+    timing: Retiming | None = None
 
 
 def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None = None,
               unknown: NDArray[np.int64] | None = None, loss: str = "linear",
               scale: float = 1.0, tp_index: NDArray[np.int64] | None = None,
-              terms: JointTerms | None = None) -> LeastSquares:
+              terms: JointTerms | None = None, timing: Retiming | None = None) -> LeastSquares:
     """Least-squares axis lines and TP for readings ``q`` (m, n) and TP ``points`` (m, 3).
 
     ``weights`` (m,) = 1/sigma per sample; ``unknown`` marks rows whose one joint was not read, ``tp_index``
-    each row's tracked point and ``terms`` the joint errors to fit (see :class:`LineProblem`);
+    each row's tracked point, ``terms`` the joint errors and ``timing`` the clock correction to fit (see
+    :class:`LineProblem`);
     ``loss``/``scale`` select a robust loss of scipy's ``least_squares`` (scale in weighted units).
     """
     weights = np.ones(len(q)) if weights is None else weights
-    problem = LineProblem(start, q, points, weights, unknown, tp_index, terms)
+    problem = LineProblem(start, q, points, weights, unknown, tp_index, terms, timing)
     n_nuisance = int(np.sum(problem.unknown >= 0))
     linear = loss == "linear"
     method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
@@ -319,10 +345,11 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
                         max_nfev=200 if linear else 60)
     lines, _ = problem.lines(fit.x)
     lines = _canonical(lines)
-    coefs = problem.coefs(fit.x)
-    q_solved = problem.joints(lines, coefs)
+    coefs, tau = problem.coefs(fit.x), problem.tau(fit.x)
+    q_solved = problem.joints(lines, coefs, tau)
     residuals = (points_from_lines(lines, q_solved, problem.tp_index) - points) * weights[:, None]
-    return LeastSquares(lines, q_solved, residuals, JointTerms(problem.terms.regressors, problem.terms.joints, coefs))
+    return LeastSquares(lines, q_solved, residuals, JointTerms(problem.terms.regressors, problem.terms.joints, coefs),
+                        None if timing is None else replace(timing, tau=tau))
 
 
 def _canonical(lines: AxisLines) -> AxisLines:

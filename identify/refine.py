@@ -20,8 +20,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
-from identify.geometry import cross, skew
-from identify.kinematics import DH_NAMES, DHModel, frames_from_joints
+from identify.geometry import cross, left_jacobian, skew
+from identify.kinematics import DH_NAMES, DHModel, points_from_joints, running_frames
 from identify.linalg import triangle
 
 Array = NDArray[np.float64]
@@ -47,14 +47,6 @@ def dh_index(joint: int, name: str) -> int:
     return 9 + 4 * (joint - 1) + DH_NAMES.index(name)
 
 
-def _left_jacobian(omega: Array) -> Array:
-    angle = float(np.linalg.norm(omega))
-    k = skew(omega)
-    if angle < 1e-8:
-        return np.eye(3) + 0.5 * k
-    return np.eye(3) + (1 - np.cos(angle)) / angle**2 * k + (angle - np.sin(angle)) / angle**3 * (k @ k)
-
-
 def model_from_vector(start: DHModel, vector: Array) -> DHModel:
     """The model at full parameter ``vector`` (base rotation relative to ``start.base``)."""
     base = np.eye(4)
@@ -71,24 +63,24 @@ def vector_from_model(model: DHModel) -> Array:
 
 def full_jacobian(model: DHModel, q: Array, omega: Array | None = None) -> tuple[Array, Array]:
     """Predicted TP (m, 3) and its Jacobian (m, 3, 9 + 4n) with respect to the full vector."""
-    frames = frames_from_joints(model, q)
     m, n = len(q), model.n_joints
-    last = frames[:, -1]
-    p = last[:, :3, :3] @ model.tool + last[:, :3, 3]
+    p = points_from_joints(model, q)
     jac = np.zeros((m, 3, 9 + 4 * n))
     rel_base = p - model.base[:3, 3]
-    jl = np.eye(3) if omega is None else _left_jacobian(omega)
+    jl = np.eye(3) if omega is None else left_jacobian(omega)
     jac[:, :, 0:3] = -skew(rel_base) @ jl
     jac[:, :, 3:6] = np.eye(3)
-    jac[:, :, 6:9] = last[:, :3, :3]
-    for i in range(n):
-        z_prev, o_prev = frames[:, i, :3, 2], frames[:, i, :3, 3]
-        x_cur, o_cur = frames[:, i + 1, :3, 0], frames[:, i + 1, :3, 3]
+    frames = running_frames(model, q)
+    _, _, z_prev, o_prev = next(frames)
+    for i, frame in enumerate(frames):
+        x_cur, _, z_cur, o_cur = frame
         col = 9 + 4 * i
         jac[:, :, col] = cross(z_prev, p - o_prev)
         jac[:, :, col + 1] = z_prev
         jac[:, :, col + 2] = x_cur
         jac[:, :, col + 3] = cross(x_cur, p - o_cur)
+        z_prev, o_prev = z_cur, o_cur
+    jac[:, :, 6:9] = np.stack(frame[:3], axis=2)  # the last frame's rotation
     return p, jac
 
 
@@ -184,7 +176,7 @@ class _Problem:
 
     def residuals(self, x: Array) -> Array:
         model = model_from_vector(self.start, self.full(x))
-        _, frames_p = full_jacobian_points(model, self.q)
+        frames_p = points_from_joints(model, self.q)
         return ((frames_p - self.points) * self.weights[:, None]).ravel()
 
     def jacobian(self, x: Array) -> Array:
@@ -192,13 +184,6 @@ class _Problem:
         _, jac = full_jacobian(model_from_vector(self.start, v), self.q, omega=v[:3])
         jac = jac * self.weights[:, None, None]
         return jac.reshape(-1, jac.shape[2])[:, self.free]
-
-
-def full_jacobian_points(model: DHModel, q: Array) -> tuple[Array, Array]:
-    """Frames (m, n+1, 4, 4) and predicted TP (m, 3); cheaper than the Jacobian for residual calls."""
-    frames = frames_from_joints(model, q)
-    last = frames[:, -1]
-    return frames, last[:, :3, :3] @ model.tool + last[:, :3, 3]
 
 
 def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
@@ -281,7 +266,7 @@ def refine(
     covariance = cov * (scale2 if sigma is None else 1.0)
     col_norm = np.linalg.norm(jac, axis=0)
     s_scaled = np.linalg.svd(jac / col_norm, compute_uv=False)
-    _, predicted = full_jacobian_points(model, q)
+    predicted = points_from_joints(model, q)
     residuals = points - predicted
     noise = float(np.sqrt(np.sum((residuals[inliers]) ** 2) / dof))
     if sigma is not None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from identify.kinematics import DHModel
-from identify.pipeline import Identification
+from identify.pipeline import ClockFit, Identification
 
 _SCALE = {"theta": np.degrees(1.0), "d": 1e3, "a": 1e3, "alpha": np.degrees(1.0)}
 _UNIT = {"theta": "deg", "d": "mm", "a": "mm", "alpha": "deg"}
@@ -55,6 +55,8 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
                             for g in ident.coupling.coupled_groups())
         lines.append(f"coupled readings (q_dh = C . readings + offset): {coupled}")
     lines += format_extensions(ident)
+    if ident.clock is not None:
+        lines.append(format_clock(ident.clock))
     if ident.parallel:
         lines.append(f"parallel axes (within tolerance) at links {ident.parallel}: their d is conventional")
     lines.append(f"fixed (undetermined by the data): {', '.join(f.name for f in ident.fixed) or 'none'}")
@@ -86,6 +88,13 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
 
 _EXT_SCALE = {"scale": (1e6, "ppm"), "ecc_sin": (np.degrees(1.0) * 3600, "arcsec"),
               "ecc_cos": (np.degrees(1.0) * 3600, "arcsec"), "compliance": (np.degrees(1.0) * 3600, "arcsec/(N m)")}
+
+
+def format_clock(clock: ClockFit) -> str:
+    """One line: the fitted clock relation of the streamed rows."""
+    drift = "" if clock.drift is None else f", drift {clock.drift * 1e6:+.1f} ± {clock.drift_std * 1e6:.1f} ppm"
+    return (f"clock of {clock.rows} streamed rows: robot time = tracker time {clock.offset * 1e3:+.3f} "
+            f"± {clock.offset_std * 1e3:.3f} ms{drift}")
 
 
 def format_extensions(ident: Identification) -> list[str]:

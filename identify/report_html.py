@@ -30,6 +30,7 @@ from identify.extensions import UNITS
 from identify.kinematics import DH_NAMES, DHModel
 from identify.measurements import Measurements
 from identify.pipeline import Identification
+from identify.report import format_clock
 from identify.report_figures import figure_frames, figure_joint
 from identify.report_figures import focus_on_inliers as _focus_on_inliers
 from identify.report_headline import accuracy_summary, headline_html
@@ -226,6 +227,9 @@ def _beyond_dh_section(ident: Identification, fit: Measurements) -> str:
         parts.append("<p>Readings are coupled: <code>q_dh = C · readings + offset</code>, C = "
                      f"<code>{_e(coupling.matrix.tolist())}</code>, offset = <code>{_e(coupling.offset.tolist())}"
                      "</code>. Joint values in this report are DH values.</p>")
+    if ident.clock is not None:
+        parts.append(f"<p>{_e(format_clock(ident.clock))} (fitted with the kinematics; the result YAML's "
+                     "<code>clock</code>).</p>")
     if ident.extensions:
         terms = [[_e(name), f"{value:.4g}", f"{std:.2g}", _e(UNITS[name.rsplit('_', 1)[0]])]
                  for name, value, std in ident.extensions]

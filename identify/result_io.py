@@ -61,6 +61,12 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         doc["coupling"] = {**ident.coupling.as_dict(), "note": "the joint values of this model are DH values; "
                            "the controller's readings give them by this equation"}
     doc["extensions"] = extensions_to_dict(ident)
+    if ident.clock is not None:
+        c = ident.clock
+        doc["clock"] = {"offset_s": c.offset, "offset_std_s": c.offset_std, "drift": c.drift, "drift_std": c.drift_std,
+                        "t_ref_s": c.t_ref, "streamed_rows": c.rows,
+                        "note": "streamed rows: robot time = tracker time + offset_s + drift * (tracker time - "
+                                "t_ref_s), fitted with the kinematics"}
     lines = ident.lines
     doc["axis_lines"] = {
         "note": "the identified model as joint axes at the home readings (tracker frame, m): exact even where "

@@ -128,6 +128,18 @@ def nominal(name: str, rms: float) -> Check:
                  f"nominal {name} placed on the data misses them by {mm(rms)} RMS: {text}")
 
 
+def timing(offset_std: float, speed: float, noise: float) -> Check:
+    """The streamed rows' clock fit: the offset's uncertainty (s) times the RMS speed of the tracked point
+    (m/s) is the position error the timing leaves; it warns when that reaches the tracker noise (m)."""
+    effect = offset_std * speed
+    status = "warn" if effect > noise else "pass"
+    text = ("the timing is barely determined: add stop-and-go poses or sweeps with ramps" if status == "warn"
+            else "the timing is determined")
+    return Check("timing", status, effect, noise,
+                 f"clock offset known to {offset_std * 1e3:.3g} ms at {speed * 1e3:.3g} mm/s RMS TP speed: "
+                 f"{mm(effect)} of position ({text})")
+
+
 def dh_limit(links: int) -> float:
     """Chi-square limit of the cost a parallel-axis convention may add before it counts as measurable."""
     return float(chi2.isf(HOLDOUT_ALARM, max(links, 1)))

@@ -13,6 +13,12 @@ streaming device). Faults, each for the next ``count`` replies (``device.inject(
 - ``reset``: the device prints its banner, forgets its initialisation (answers not_ready until
   initialised again) and drops the request; ``silence``: no answer.
 
+Streaming (a profile with ``mode: streaming``): a line every ``period`` s (wall clock), numbered (``seq``, every
+line counts, lost ones too) and stamped with the device's own clock ``t`` = ``clock_offset`` + (1 + ``drift``) ×
+host time (s; ``time.time()``), the point being the rig's true TP at that moment; each line leaves ``latency`` s
+after its time. ``lose_target(seconds)`` makes the streamed lines of the next ``seconds`` the ``lost`` reply (the
+target out of the beam), ``skip_lines(n)``: the next n lines are never sent (lost on the wire).
+
 ``echo=True`` echoes every command line back first. ``mixed_endings=True`` ends each line with a random one
 of CRLF, LF and CR. A profile with ``points: N`` answers each trigger with N lines (reflector k at
 ``rig.true_points()[k-1]``, written in one piece); ids in ``device.hidden`` answer the ``lost`` reply (out of
@@ -30,56 +36,15 @@ import socket
 import threading
 import time
 import tty
-from typing import Any
 
 import numpy as np
 
 from drivers.ascii_profile import Profile, checksum_of, load_profile
 from drivers.sim import SimulatedRig
+from tests._served import _Served
 
 ASCII_FAULTS = ("target_lost", "garbage", "noise", "partial", "truncated", "bad_checksum", "out_of_range", "reset",
                 "silence")
-
-
-class _Served:
-    """A thread serving a byte stream on file descriptor ``fd`` until ``stop()``."""
-
-    fd: int
-
-    def __init__(self) -> None:
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self.received = bytearray()
-
-    def _start(self) -> None:
-        self._thread = threading.Thread(target=self._serve, daemon=True)
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(2.0)
-
-    def __enter__(self) -> Any:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-    def _serve(self) -> None:
-        raise NotImplementedError
-
-    def _accept_each(self, server: socket.socket, serve: Any) -> None:
-        """Accept loopback connections on ``server`` until stopped, ``serve(conn)`` each, then close it."""
-        server.settimeout(0.05)
-        while not self._stop.is_set():
-            try:
-                conn, _ = server.accept()
-            except TimeoutError:
-                continue
-            with conn:
-                serve(conn)
-        server.close()
 
 
 class AsciiDevice(_Served):
@@ -88,12 +53,19 @@ class AsciiDevice(_Served):
 
     def __init__(self, profile: str | Profile, rig: SimulatedRig | None = None, *, noise: float = 2e-5,
                  seed: int = 0, transport: str = "pty", mixed_endings: bool = False, latency: float = 0.0,
-                 echo: bool = False) -> None:
+                 echo: bool = False, clock_offset: float = 0.0, drift: float = 0.0,
+                 period: float | None = None) -> None:
         super().__init__()
         self.profile = profile if isinstance(profile, Profile) else load_profile(profile)
         self.sim = self.profile.simulation
         self.rig = rig if rig is not None else SimulatedRig("ur5e", seed=seed)
         self.noise, self.latency, self.mixed, self.echo = noise, latency, mixed_endings, echo
+        self.clock_offset, self.drift = clock_offset, drift
+        self.period = float(self.sim.get("period", 0.0)) if period is None else float(period)
+        self.seq = 0  # streamed lines so far (sent or not)
+        self.lost_until = 0.0  # host time (time.time()) until which streamed lines say target lost
+        self.skip = 0  # streamed lines still to leave out
+        self._due: list[tuple[float, bytes]] = []  # streamed lines waiting for their latency to pass
         self.rng = np.random.default_rng(seed)
         self._random = random.Random(seed)
         self.faults: list[str] = []
@@ -122,6 +94,19 @@ class AsciiDevice(_Served):
         with self._lock:
             self.faults.extend([fault] * count)
 
+    def device_time(self, host: float | None = None) -> float:
+        """The device's clock (s) at host time ``host`` (``time.time()``, default now)."""
+        return self.clock_offset + (1.0 + self.drift) * (time.time() if host is None else host)
+
+    def lose_target(self, seconds: float) -> tuple[float, float]:
+        """Streamed lines of the next ``seconds`` say target lost; returns that span on the device's clock."""
+        now = time.time()
+        self.lost_until = now + seconds
+        return self.device_time(now), self.device_time(self.lost_until)
+
+    def skip_lines(self, count: int) -> None:
+        self.skip += int(count)
+
     def reset(self) -> None:
         """Reboot now (unprompted): banner, initialisation lost, streaming stopped."""
         self._write_line(self.sim.get("banner", "RESET"))
@@ -145,7 +130,7 @@ class AsciiDevice(_Served):
         self._loop()
 
     def _loop(self) -> None:
-        period = float(self.sim.get("period", 0.0)) if self.profile.mode == "streaming" else 0.0
+        period = self.period if self.profile.mode == "streaming" else 0.0
         next_emit = time.monotonic()
         while not self._stop.is_set():
             wait = 0.01 if not (period and self.streaming) else max(0.0, min(0.01, next_emit - time.monotonic()))
@@ -167,8 +152,28 @@ class AsciiDevice(_Served):
                     if raw.strip():
                         self._command(raw.decode("ascii", "replace").strip())
             if period and self.streaming and time.monotonic() >= next_emit:
-                self._reply()
+                self._stream_line()
                 next_emit = max(next_emit + period, time.monotonic() - period)
+            while self._due and self._due[0][0] <= time.time():
+                self._write(self._due.pop(0)[1])
+
+    def _stream_line(self) -> None:
+        """One streamed line (module docstring); a pending fault spoils it as a polled reply's."""
+        self.seq += 1
+        if self.faults or not self.initialised:
+            self._reply()
+            return
+        if self.skip:
+            self.skip -= 1
+            return
+        now = time.time()
+        self.replies += 1
+        line = self._format(lost=now < self.lost_until, t=self.device_time(now))
+        data = line.encode() + self._eol()
+        if self.latency:
+            self._due.append((now + self.latency, data))
+        else:
+            self._write(data)
 
     def _command(self, text: str) -> None:
         self.commands.append(text)
@@ -230,7 +235,7 @@ class AsciiDevice(_Served):
         else:
             self._write(line.encode() + eol)
 
-    def _format(self, lost: bool = False, far: bool = False, tp: int = 1) -> str:
+    def _format(self, lost: bool = False, far: bool = False, tp: int = 1, t: float | None = None) -> str:
         sim = self.sim
         lost = lost or (self.profile.points > 1 and tp in self.hidden)
         if lost and "lost" in sim:
@@ -241,7 +246,8 @@ class AsciiDevice(_Served):
             point = np.full(3, 1e6)
         x, y, z = point / self.profile.scale
         status = sim.get("lost_status", "TL") if lost else sim.get("ok", "OK")
-        values = {"x": x, "y": y, "z": z, "status": status, "tp": tp}
+        values = {"x": x, "y": y, "z": z, "status": status, "tp": tp, "seq": self.seq,
+                  "t": self.device_time() if t is None else t}
         if "payload" in sim:
             payload = str(sim["payload"]).format(**values)
             algorithm = self.profile.checksum or "xor"
@@ -261,196 +267,8 @@ class AsciiDevice(_Served):
             os.write(self.fd, data)
 
 
-# --- I++ DME ----------------------------------------------------------------------------------------------
+# the I++ DME server lives in tests/ipp_device.py (kept importable from here)
+from tests.ipp_device import IPP_FAULTS, IPP_TOOL_PROPERTIES, IppServer, free_port, open_ipp  # noqa: E402
 
-IPP_FAULTS = ("error", "fatal", "warning", "info", "event_warning", "outlier", "silence", "drop", "no_ack")
-IPP_TOOL_PROPERTIES = ("PtMeasPar.Speed", "PtMeasPar.Accel", "PtMeasPar.Approach", "PtMeasPar.Search",
-                       "PtMeasPar.Retract", "GoToPar.Speed", "GoToPar.Accel")
-
-
-class IppServer(_Served):
-    """A minimal I++ DME server on loopback (``host``, ``port``) that answers from the rig's TP (mm, noise
-    ``noise`` m per axis): StartSession, EndSession, GetDMEVersion, ClearAllErrors, GetErrStatusE,
-    Get(X(),Y(),Z()), EnumAllProp(Tool()), GetProp/SetProp of tool properties; anything else is error 0501.
-
-    ``averaging``: the name (below ``Tool.``) of a vendor property that sets how many points each Get
-    averages (1..``max_average``; more is clamped with warning 0504), or None for a server without one;
-    ``enum_props=False``: a server that refuses EnumAllProp (error 0501). Errors of severity >= 2 put the
-    server in its error state (every command but ClearAllErrors/GetErrStatusE answers 0514) until
-    ClearAllErrors(); each error is followed by ``%`` as in the standard's examples.
-
-    Faults (``inject``), each on the next Get: ``error`` (0511, severity 2), ``fatal`` (0503, severity 9),
-    ``warning`` (1009 re-classified as severity 1, the point follows), ``info`` (0000, severity 0, the
-    point follows), ``event_warning`` (an unsolicited E0000 warning, then the point), ``outlier`` (the point
-    5 mm off), ``silence`` (no answer), ``drop`` (the server resets: connection closed, session ended),
-    ``no_ack`` (data without the ``&``).
-
-    ``tools``: names of the targets it follows (reflector k of the rig, ``rig.true_points()[k]``, is tool k);
-    ``SetTool("NAME")`` makes one active (an unknown name: error 0510, severity 3) and Get answers its point;
-    a tool in ``hidden`` answers Get with error 0511 (severity 2, "Target not visible").
-    """
-
-    def __init__(self, rig: SimulatedRig | None = None, *, noise: float = 2e-5, seed: int = 0,
-                 events: bool = False, averaging: str | None = None, max_average: int = 64,
-                 enum_props: bool = True, tools: tuple[str, ...] = ()) -> None:
-        super().__init__()
-        self.rig = rig if rig is not None else SimulatedRig("ur5e", seed=seed)
-        self.noise, self.events = noise, events
-        self.averaging, self.max_average, self.enum_props = averaging, max_average, enum_props
-        self.rng = np.random.default_rng(seed)
-        self._server = socket.create_server(("127.0.0.1", 0))
-        self.host, self.port = "127.0.0.1", self._server.getsockname()[1]
-        self.faults: list[str] = []
-        self.in_error = False
-        self.session = False
-        self.tools, self.active, self.hidden = tuple(tools), (tools[0] if tools else None), set[str]()
-        self.properties: dict[str, float] = dict.fromkeys(IPP_TOOL_PROPERTIES, 10.0)
-        if averaging is not None:
-            self.properties[averaging] = 1.0
-        self.commands: list[str] = []
-        self.gets = 0  # Get(X(),Y(),Z()) commands answered with a point
-        self._start()
-
-    def inject(self, fault: str, count: int = 1) -> None:
-        if fault not in IPP_FAULTS:
-            raise ValueError(f"unknown fault {fault!r} (known: {', '.join(IPP_FAULTS)})")
-        self.faults.extend([fault] * count)
-
-    def _serve(self) -> None:
-        self._accept_each(self._server, self._serve_connection)
-
-    def _serve_connection(self, conn: socket.socket) -> None:
-        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        conn.settimeout(0.05)
-        buffer = b""
-        while not self._stop.is_set():
-            try:
-                data = conn.recv(4096)
-            except TimeoutError:
-                continue
-            except OSError:
-                break
-            if not data:
-                break
-            buffer += data
-            *lines, buffer = buffer.split(b"\r\n")
-            if any(not self._handle(conn, raw.decode("ascii", "replace")) for raw in lines if raw):
-                break
-
-    def _handle(self, conn: socket.socket, line: str) -> bool:
-        """Answer one command; False to drop the connection."""
-        self.commands.append(line)
-        tag, _, command = line.partition(" ")
-        command = command.strip()
-        name = command.partition("(")[0]
-        fault = self.faults.pop(0) if self.faults and name == "Get" else None
-        if fault == "drop":
-            self.session = False  # the server restarted: the client must start a new session
-            return False
-        if fault == "silence":
-            return True
-
-        def send(text: str) -> None:
-            conn.sendall(f"{tag} {text}\r\n".encode())
-
-        def error(severity: int, code: str, text: str) -> bool:
-            send(f'! Error({severity}, {code}, {name}, "{text}")')
-            send("%")
-            self.in_error = self.in_error or severity >= 2
-            return True
-
-        if fault != "no_ack":
-            send("&")
-        if self.events:
-            conn.sendall(b"E0000 # GoTo(X(0), Y(0), Z(0))\r\n")
-        if name not in ("StartSession", "EndSession", "ClearAllErrors", "GetErrStatusE"):
-            if not self.session:
-                return error(3, "0008", "Protocol error")
-            if self.in_error:
-                return error(2, "0514", "Use ClearAllErrors to continue")
-        if command == "StartSession()":
-            self.session = True
-        elif command == "EndSession()":
-            self.session = False
-        elif command == "GetDMEVersion()":
-            send('# DMEVersion("1.4.2")')
-        elif command == "ClearAllErrors()":
-            self.in_error = False
-        elif command == "GetErrStatusE()":
-            send(f"# ErrStatus({1 if self.in_error else 0})")
-        elif command.replace(" ", "") == "Get(X(),Y(),Z())":
-            if self.active in self.hidden:
-                return error(2, "0511", "Target not visible")
-            return self._get(conn, send, error, fault)
-        elif name == "SetTool" and self.tools:
-            wanted = command[len("SetTool("):-1].strip().strip('"')
-            if wanted not in self.tools:
-                return error(3, "0510", "Bad tool")
-            self.active = wanted
-        elif command == "EnumAllProp(Tool())" and self.enum_props:
-            for prop in self.properties:
-                send(f'# "{prop}", "Number"')
-        elif name in ("GetProp", "SetProp"):
-            return self._property(name, command, send, error)
-        else:
-            return error(3, "0501", "Unsupported command")
-        send("%")
-        return True
-
-    def _get(self, conn: socket.socket, send: Any, error: Any, fault: str | None) -> bool:
-        if fault == "error":
-            return error(2, "0511", "Error processing method")
-        if fault == "fatal":
-            return error(9, "0503", "Controller communications failure")
-        if fault == "warning":
-            send('! Error(1, 1009, Get, "Air pressure out of range")')
-        elif fault == "info":
-            send('! Error(0, 0000, Get, "Buffer full")')
-        elif fault == "event_warning":
-            conn.sendall(b'E0000 ! Error(1, 8001, Thermometer, "Air temperature changed by 1.2 K")\r\n')
-        n = int(self.properties.get(self.averaging, 1)) if self.averaging else 1
-        true = self.rig.true_points()[self.tools.index(self.active)] if self.tools else self.rig.true_point()
-        point = np.asarray(true) + self.rng.normal(0.0, self.noise, (n, 3)).mean(axis=0)
-        if fault == "outlier":
-            point = point + 5e-3
-        x, y, z = point * 1000.0
-        self.gets += 1
-        send(f"# X({x:.6f}), Y({y:.6f}), Z({z:.6f})")
-        send("%")
-        return True
-
-    def _property(self, name: str, command: str, send: Any, error: Any) -> bool:
-        """GetProp(Tool.P(), ...) answers ``Tool.P(v)``; SetProp(Tool.P(v)) sets it (the averaging count is
-        clamped to 1..max_average with warning 0504)."""
-        args = re.findall(r"Tool\.([A-Za-z][A-Za-z0-9.]*)\(\s*([-+0-9.eE]*)\s*\)", command)
-        if not args or any(prop not in self.properties for prop, _ in args):
-            return error(3, "0510", "Bad property")
-        if name == "GetProp":
-            send("# " + ", ".join(f"Tool.{prop}({self.properties[prop]:g})" for prop, _ in args))
-        else:
-            for prop, value in args:
-                wanted = float(value or "nan")
-                if prop == self.averaging:
-                    if not 1 <= wanted <= self.max_average:
-                        send('! Error(1, 0504, SetProp, "Argument out of range")')
-                    wanted = float(min(max(round(wanted), 1), self.max_average))
-                self.properties[prop] = wanted
-        send("%")
-        return True
-
-
-def free_port() -> int:
-    """A loopback TCP port nobody listens on (bound, then released)."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return int(probe.getsockname()[1])
-
-
-def open_ipp(server: IppServer, **options: str) -> Any:
-    """The I++ tracker driver connected to ``server`` (options as in the spec; reply timeout 0.5 s by default)."""
-    from drivers.registry import open_tracker
-
-    query = "&".join(f"{k}={v}" for k, v in {"timeout": "0.5", **options}.items())
-    tracker = open_tracker(f"ipp://{server.host}:{server.port}?{query}")
-    tracker.connect(2.0)
-    return tracker
+__all__ = ["ASCII_FAULTS", "IPP_FAULTS", "IPP_TOOL_PROPERTIES", "AsciiDevice", "IppServer", "_Served", "free_port",
+           "open_ipp"]

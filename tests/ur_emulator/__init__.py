@@ -28,6 +28,14 @@ second while the RTDE stream keeps its wall-clock rate); a moveJ is the rig's sy
 (``SimulatedRobot.move_joints`` with the commanded speed / acceleration on every joint), and the streamed
 ``actual_q`` follows that profile during the move, then the rig's resting / ringing arm.
 
+Native rate (``native_rate=True``): every RTDE stream sends one package per period (1 / ``rate``) of EMULATED
+time, stamped with that tick's controller time and carrying the state at it, as a controller does on its own
+clock; at ``time_scale`` k that is k × ``rate`` packages per wall second (keep k × rate at 1 kHz or so). The
+default sends ``rate`` packages per WALL second stamped with the emulated time of sending (the steps of the
+timestamp are then k / rate: fine for stop-and-go, not for recording a stream at its native rate).
+:meth:`UREmulator.drop_packets` (native rate) loses the next packages on every connection (a dropped RTDE
+package for the stream recorder to find).
+
 Faults: :meth:`UREmulator.protective_stop`, :meth:`emergency_stop`, :meth:`clear_stop`, :meth:`drop_connections`,
 :meth:`freeze_stream` (the stream repeats one state: the timestamp stands still), ``remote_control=False``,
 ``stall=True`` (a moveJ that never finishes), ``kinematics=False`` (the primary interface sends robot state

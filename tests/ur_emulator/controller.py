@@ -90,13 +90,16 @@ class UREmulator(ControllerServers):
     def __init__(self, host: str = "127.0.0.1", model: str = "ur5e", *, rig: SimulatedRig | None = None,
                  version: tuple[int, int, int, int] = (5, 11, 1, 108318), serial: str = "20205500001",
                  remote_control: bool = True, rate: float = 125.0, stall: bool = False,
-                 kinematics: bool = True, time_scale: float = 1.0) -> None:
+                 kinematics: bool = True, time_scale: float = 1.0, native_rate: bool = False) -> None:
         self.host, self.model, self.version, self.serial = host, model, version, serial
         clock = ScaledClock(time_scale)
         self.rig = rig if rig is not None else SimulatedRig(model, clock=clock, ring=1e-5, ring_tau=0.05)
         self.robot = SimulatedRobot(self.rig)
         self.robot.connect(1.0)
         self.remote_control, self.rate, self.stall, self.kinematics = remote_control, rate, stall, kinematics
+        self.native_rate = native_rate
+        self.late_packages = 0  # native rate: packages sent over half a period after their tick (all connections)
+        self._dropped: tuple[float, float] = (0.0, 0.0)  # [start, end) controller s: RTDE packages not sent
         self.log = _Log()
         self._lock = threading.RLock()
         self._inputs: dict[str, Any] = {}  # input registers, shared by all RTDE clients as on a controller
@@ -188,6 +191,22 @@ class UREmulator(ControllerServers):
         with self._lock:
             self._frozen = self._state() if frozen else None
 
+    def drop_packets(self, count: int = 1) -> float:
+        """Native rate only: the next ``count`` RTDE packages (ticks) are not sent on any connection, as a network
+        that loses them would; returns the controller time (s) of the first one lost."""
+        if not self.native_rate:
+            raise RuntimeError("drop_packets needs native_rate=True (packages on the emulated clock's ticks)")
+        period = 1.0 / self.rate
+        with self._lock:
+            first = (int(self.rig.clock.now() / period) + 2) * period
+            self._dropped = (first - period / 2, first + (int(count) - 0.5) * period)
+        return first
+
+    def _dropped_at(self, t: float) -> bool:
+        """True if the package of controller time ``t`` is lost (drop_packets)."""
+        start, end = self._dropped
+        return start <= t < end
+
     def truth(self) -> Any:
         """The emulated arm's true DHModel (base, tool: the simulated tracker's view); also its factory calibration."""
         return self.rig.truth
@@ -243,8 +262,8 @@ class UREmulator(ControllerServers):
             return motion.start + share * (motion.target - motion.start)
         return self.rig.actual_joints(now)
 
-    def _state(self) -> dict[str, Any]:
-        now = self.rig.clock.now()
+    def _state(self, t: float | None = None) -> dict[str, Any]:
+        now = self.rig.clock.now() if t is None else t
         q = self.actual_q(now)
         qd = (self.actual_q(now + 1e-3) - q) / 1e-3
         motion = self._motion

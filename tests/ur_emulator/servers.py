@@ -54,6 +54,8 @@ class ControllerServers:
     remote_control: bool
     kinematics: bool
     rate: float
+    native_rate: bool
+    late_packages: int
     robot_mode: int
     safety_mode: int
     rig: Any
@@ -193,21 +195,42 @@ class ControllerServers:
 
         def stream() -> None:
             period = 1.0 / min(frequency, self.rate)
+            if self.native_rate:  # one package per period of emulated time, stamped with its tick
+                return stream_native(period)
             next_time = time.monotonic()
             while self._running and streaming.is_set():
                 with self._lock:
                     state = self._frozen or self._state()
-                payload = bytearray(b"\x01")
-                for name, kind in outputs:
-                    value = state.get(name, _ZERO.get(kind, 0))
-                    fmt = ">" + _FORMATS[kind]
-                    payload += struct.pack(fmt, *value) if isinstance(value, tuple) else struct.pack(fmt, value)
-                try:
-                    send(U, bytes(payload))
-                except OSError:
+                if not send_state(state):
                     return
                 next_time += period
                 time.sleep(max(0.0, next_time - time.monotonic()))
+
+        def stream_native(period: float) -> None:
+            clock = self.rig.clock
+            tick = int(clock.now() / period) + 1
+            while self._running and streaming.is_set():
+                clock.sleep(tick * period - clock.now())
+                with self._lock:
+                    state = self._frozen or self._state(tick * period)
+                    dropped = self._dropped_at(tick * period)
+                    if clock.now() - tick * period > period / 2:  # sent late: it may reach the client in a burst
+                        self.late_packages += 1
+                tick += 1
+                if not dropped and not send_state(state):
+                    return
+
+        def send_state(state: dict[str, Any]) -> bool:
+            payload = bytearray(b"\x01")
+            for name, kind in outputs:
+                value = state.get(name, _ZERO.get(kind, 0))
+                fmt = ">" + _FORMATS[kind]
+                payload += struct.pack(fmt, *value) if isinstance(value, tuple) else struct.pack(fmt, value)
+            try:
+                send(U, bytes(payload))
+            except OSError:
+                return False
+            return True
 
         while self._running:
             size, kind = struct.unpack(">HB", _recv_exact(conn, 3))

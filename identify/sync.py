@@ -1,0 +1,150 @@
+"""Clock synchronisation of streamed rows, fitted jointly with the kinematics.
+
+In continuous motion the tracker and the robot sample on their own clocks. A streamed row's joint values
+were interpolated from the robot's joint stream at robot time ``t + clock_offset`` (``t``: the row's tracker
+time, s); the true mapping differs from that by a small correction
+
+    shift(t) = tau_0 + tau_1 · (t − t_ref)        (s; tau_1: the relative clock drift, dimensionless)
+
+and the row's joint values are the trajectory at ``t + shift(t)``. The trajectory of a sweep is the
+piecewise-linear curve through its own streamed rows (time, joint values); it is cut wherever the rows
+leave a gap (a lost target, dropped joint packets: more than ``GAP_FACTOR`` median sample intervals), and
+a shifted time beyond a segment's end is extrapolated along its last interval, never across a gap.
+
+:class:`Retiming` carries that model through the fit: :class:`identify.poe.LineProblem` adds ``tau`` to
+its parameters (after the lines, tracked points and joint errors), so the offset comes with its
+uncertainty from the same covariance as the kinematics.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+GAP_FACTOR = 5.0  # a step in time over this many median intervals cuts a sweep's trajectory
+DRIFT_SPAN = 10.0  # s: streamed rows spanning longer than this also fit the clock drift
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One uninterrupted piece of a sweep's trajectory: ``t`` (k,) increasing tracker times (s), ``q`` (k, n)
+    joint values at them."""
+
+    t: Array
+    q: Array
+
+
+@dataclass(frozen=True)
+class Retiming:
+    """The clock correction of the streamed rows of a fit. Per row (m,): ``t`` tracker time (s, NaN for
+    rows not streamed) and ``segment`` (index into ``segments``, -1 for rows not streamed). ``tau`` (K,):
+    offset (s) and, with K = 2, drift; ``t_ref`` (s) the time the offset refers to; ``free``: fitted (else
+    held at ``tau``)."""
+
+    t: Array
+    segment: NDArray[np.int64]
+    segments: tuple[Segment, ...]
+    t_ref: float
+    tau: Array
+    free: bool = True
+
+    @property
+    def size(self) -> int:
+        """Number of fitted parameters (0 when held)."""
+        return len(self.tau) if self.free else 0
+
+    @property
+    def rows(self) -> NDArray[np.bool_]:
+        return self.segment >= 0
+
+    def subset(self, rows: NDArray[np.bool_] | NDArray[np.int64]) -> Retiming:
+        return replace(self, t=self.t[rows], segment=self.segment[rows])
+
+    def held(self, tau: Array | None = None) -> Retiming:
+        """The same correction, not fitted (at ``tau``, default the current one)."""
+        return replace(self, tau=self.tau if tau is None else np.asarray(tau, dtype=float), free=False)
+
+    def shift(self, tau: Array | None = None) -> Array:
+        """Time correction (s) of every streamed row, (r,) in row order of ``rows``."""
+        tau = self.tau if tau is None else tau
+        t = self.t[self.rows]
+        out = np.full(len(t), tau[0])
+        if len(tau) > 1:
+            out += tau[1] * (t - self.t_ref)
+        return out
+
+    def joints(self, q: Array, tau: Array | None = None) -> Array:
+        """``q`` (m, n) with the streamed rows' joint values taken at their corrected times."""
+        if not np.any(self.rows):
+            return q
+        out = q.copy()
+        values, _ = self._at(self.shift(tau))
+        out[self.rows] = values
+        return out
+
+    def derivatives(self, tau: Array | None = None) -> Array:
+        """d(joint values)/d(tau) of the streamed rows, (r, n, K): the trajectory's speed (rad/s or m/s)
+        times d(shift)/d(tau)."""
+        _, speed = self._at(self.shift(tau))
+        basis = [np.ones(len(speed))]
+        if len(self.tau) > 1:
+            basis.append(self.t[self.rows] - self.t_ref)
+        return speed[:, :, None] * np.stack(basis, axis=1)[:, None, :]
+
+    def _at(self, shift: Array) -> tuple[Array, Array]:
+        """Joint values and speeds of the streamed rows at their times plus ``shift``."""
+        seg_of = self.segment[self.rows]
+        times = self.t[self.rows] + shift
+        n = self.segments[0].q.shape[1]
+        values = np.empty((len(times), n))
+        speed = np.empty((len(times), n))
+        for s in np.unique(seg_of):
+            here = seg_of == s
+            values[here], speed[here] = _interpolate(self.segments[s], times[here])
+        return values, speed
+
+
+def _interpolate(segment: Segment, times: Array) -> tuple[Array, Array]:
+    """Piecewise-linear values and slopes of ``segment`` at ``times``, extrapolated along the end intervals."""
+    t, q = segment.t, segment.q
+    k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
+    slope = (q[k + 1] - q[k]) / (t[k + 1] - t[k])[:, None]
+    return q[k] + slope * (times - t[k])[:, None], slope
+
+
+def retiming(t: Array, streamed: NDArray[np.bool_], sweep: NDArray[np.int64], q: Array) -> Retiming | None:
+    """The clock correction model of a fit's rows (tracker times ``t`` (m,), ``streamed`` flags, ``sweep``
+    ids, joint values ``q`` (m, n) as interpolated at recording), or None without streamed rows. The offset
+    refers to the middle of the streamed rows' time span; the drift is fitted when they span over
+    ``DRIFT_SPAN`` s."""
+    usable = streamed & np.all(np.isfinite(q), axis=1) & np.isfinite(t)
+    if not np.any(usable):
+        return None
+    segment = np.full(len(t), -1, dtype=np.int64)
+    segments: list[Segment] = []
+    for s in np.unique(sweep[usable]):
+        rows = np.flatnonzero(usable & (sweep == s))
+        times, first = np.unique(t[rows], return_index=True)  # several tracked points share a time
+        if len(times) < 2:
+            continue
+        values = q[rows[first]]
+        steps = np.diff(times)
+        cuts = np.flatnonzero(steps > GAP_FACTOR * np.median(steps)) + 1
+        bounds = [0, *cuts.tolist(), len(times)]
+        for a, b in itertools.pairwise(bounds):
+            if b - a < 2:
+                continue
+            inside = (t[rows] >= times[a]) & (t[rows] <= times[b - 1])
+            segment[rows[inside]] = len(segments)
+            segments.append(Segment(times[a:b], values[a:b]))
+    if not segments:
+        return None
+    span = t[segment >= 0]
+    t_ref = 0.5 * float(span.min() + span.max())
+    k = 2 if float(span.max() - span.min()) > DRIFT_SPAN else 1
+    return Retiming(np.where(segment >= 0, t, np.nan), segment, tuple(segments), t_ref, np.zeros(k))
