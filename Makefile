@@ -42,6 +42,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.safety || status=1; \
 	$(BIN)/python -m bench.robustness || status=1; \
 	$(BIN)/python -m bench.compensation || status=1; \
+	$(BIN)/python -m bench.continuous || status=1; \
 	exit $$status
 
 clean:
