@@ -31,10 +31,9 @@ import threading
 import time
 from typing import Any
 
-import numpy as np
-
 from drivers.base import TrackerStreamBatch
 from drivers.errors import ConnectionFailed, DeviceTimeout
+from drivers.stream_buffer import BufferedStreaming
 from drivers.trace import one_line
 
 GAP_FACTOR = 1.5  # a step above this many intervals (plus JITTER) between reports is a gap
@@ -42,7 +41,7 @@ JITTER = 0.02  # s: host receive times of reports jitter by the network and the 
 _AXIS = re.compile(r"\b(?P<axis>[XYZ])\(\s*(?P<value>[-+0-9.eE]+)\s*\)")
 
 
-class EventStreaming:
+class EventStreaming(BufferedStreaming):
     """The streaming half of IppTracker (see the module docstring)."""
 
     where: str
@@ -54,20 +53,11 @@ class EventStreaming:
     _stopped_tags: set[str]
 
     def _init_stream(self) -> None:
-        self._reader: threading.Thread | None = None
-        self._halt = threading.Event()
-        self._stream_lock = threading.Lock()
-        self._rows: list[tuple[float, float, float, float]] = []
-        self._gaps: list[tuple[float, float]] = []
-        self._failure: Exception | None = None
+        self._init_buffer()
         self._daemon_tag: str | None = None
         self._event_tag = 0
         self._interval = 0.0
         self.stream_counts = {"reports": 0, "errors": 0, "gaps": 0}
-
-    @property
-    def streaming(self) -> bool:
-        return self._reader is not None
 
     def start_stream(self, rate: float, timeout: float) -> float:
         """Start the OnMoveReportE daemon at ``rate`` Hz (interval 1 / rate s); returns ``rate`` once the first
@@ -105,25 +95,9 @@ class EventStreaming:
         """Send ``text`` with event tag ``tag`` and wait for its ``&`` (an error raises as in ``command``)."""
         self.command(text, deadline, tag=tag, until="&")
 
-    def read_stream(self) -> TrackerStreamBatch:
-        """Every report since the last read (host receive times); ConnectionFailed if the reader lost the link."""
-        with self._stream_lock:
-            rows, gaps, failure = self._rows, self._gaps, self._failure
-            self._rows, self._gaps, self._failure = [], [], None
-        if failure is not None:
-            self._rows, self._gaps = rows, gaps
-            raise failure
-        return _batch(rows, gaps)
-
     def stop_stream(self, timeout: float) -> TrackerStreamBatch:
         """Stop the reader, then the daemon (``StopDaemon``); returns the reports since the last read."""
-        reader, self._reader = getattr(self, "_reader", None), None
-        if reader is not None:
-            self._halt.set()
-            reader.join(max(timeout, 0.1))
-        with self._stream_lock:
-            rows, gaps = self._rows, self._gaps
-            self._rows, self._gaps = [], []
+        unread = self._stop_reader(timeout)
         tag, self._daemon_tag = getattr(self, "_daemon_tag", None), None
         if tag is not None:
             self._stopped_tags.add(tag)  # its late reports are skipped, not kept as events
@@ -132,7 +106,7 @@ class EventStreaming:
                 self.command(f"StopDaemon({tag})", time.monotonic() + max(timeout, 0.1))
             except Exception as exc:  # the reports are in; a failed stop is logged, the next command tells
                 self._trace.event(f"StopDaemon({tag}) failed: {one_line(exc)}")
-        return _batch(rows, gaps)
+        return unread
 
     def _read_loop(self, tag: str) -> None:
         last: float | None = None
@@ -172,7 +146,8 @@ class EventStreaming:
                         self._gaps.append((last, received))
                         self.stream_counts["gaps"] += 1
                 with self._stream_lock:
-                    self._rows.append((received, values["X"] * 1e-3, values["Y"] * 1e-3, values["Z"] * 1e-3))
+                    self._rows.append((received, values["X"] * 1e-3, values["Y"] * 1e-3, values["Z"] * 1e-3,
+                                       math.nan))
                     self.stream_counts["reports"] += 1
                 last, broken = received, False
             elif line.startswith((f"{tag} !", "E0000 !")):
@@ -190,9 +165,3 @@ class EventStreaming:
             elif line:
                 self._trace.event(f"stream: skipped {line!r}")
 
-
-def _batch(rows: list[tuple[float, float, float, float]], gaps: list[tuple[float, float]]) -> TrackerStreamBatch:
-    data = np.asarray(rows, dtype=float).reshape(len(rows), 4)
-    n = len(rows)
-    return TrackerStreamBatch(data[:, 0].copy(), data[:, 1:4].copy(), np.ones(n, dtype=np.int64),
-                              np.full(n, np.nan), tuple(gaps))

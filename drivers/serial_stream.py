@@ -31,6 +31,7 @@ import numpy as np
 from drivers.ascii_profile import DeviceReset, parse_line
 from drivers.base import TrackerStreamBatch
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, TargetLost
+from drivers.stream_buffer import BufferedStreaming
 from drivers.trace import one_line
 
 GAP_FACTOR = 1.5  # a device-time step above this many periods is a gap (without sequence numbers)
@@ -38,7 +39,7 @@ RATE_SAMPLES = 10  # readings whose device times give the rate when the profile 
 MAX_BUFFER = 2_000_000  # readings held unread before the oldest are dropped (as a gap)
 
 
-class LineStreaming:
+class LineStreaming(BufferedStreaming):
     """The streaming half of SerialTracker (see the module docstring)."""
 
     url: str
@@ -51,18 +52,9 @@ class LineStreaming:
     _flush: Any
 
     def _init_stream(self) -> None:
-        self._reader: threading.Thread | None = None
-        self._halt = threading.Event()
-        self._stream_lock = threading.Lock()
-        self._rows: list[tuple[float, float, float, float, float]] = []  # t, x, y, z, sigma
-        self._gaps: list[tuple[float, float]] = []
+        self._init_buffer()
         self._period: float | None = None
-        self._failure: Exception | None = None
         self.stream_counts = {"readings": 0, "lost_lines": 0, "bad_lines": 0, "gaps": 0, "resets": 0}
-
-    @property
-    def streaming(self) -> bool:
-        return self._reader is not None
 
     def start_stream(self, rate: float, timeout: float) -> float:
         """Start the reader; returns the device's rate (Hz) once its first reading is in (DeviceTimeout if none
@@ -104,28 +96,10 @@ class LineStreaming:
                 raise BadReading(f"{self.url}: the device times of the first readings do not advance")
         return 1.0 / self._period
 
-    def read_stream(self) -> TrackerStreamBatch:
-        """Every reading since the last read; ConnectionFailed if the reader lost the port (what it had read is
-        returned by the next call after that)."""
-        with self._stream_lock:
-            rows, gaps, failure = self._rows, self._gaps, self._failure
-            self._rows, self._gaps, self._failure = [], [], None
-        if failure is not None:
-            self._rows, self._gaps = rows, gaps  # keep them for the next read
-            raise failure
-        return _batch(rows, gaps)
-
     def stop_stream(self, timeout: float) -> TrackerStreamBatch:
         """Stop the reader (the device keeps streaming: ``measure`` reads its lines); returns the readings since
         the last read."""
-        reader, self._reader = getattr(self, "_reader", None), None
-        if reader is not None:
-            self._halt.set()
-            reader.join(max(timeout, 0.1))
-        with self._stream_lock:
-            rows, gaps = self._rows, self._gaps
-            self._rows, self._gaps = [], []
-        return _batch(rows, gaps)
+        return self._stop_reader(timeout)
 
     # --- the reader thread ------------------------------------------------------------------------------
 
@@ -200,8 +174,3 @@ class LineStreaming:
                                                  f"again: {exc}")
             self._halt.set()
 
-
-def _batch(rows: list[tuple[float, float, float, float, float]], gaps: list[tuple[float, float]]) -> TrackerStreamBatch:
-    data = np.asarray(rows, dtype=float).reshape(len(rows), 5)
-    return TrackerStreamBatch(data[:, 0].copy(), data[:, 1:4].copy(), np.ones(len(rows), dtype=np.int64),
-                              data[:, 4].copy(), tuple(gaps))
