@@ -99,14 +99,11 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
     line_numbers = np.array([number for number, _ in numbered[1:]], dtype=np.int64)
     fast = _parse_fast(rows, header, columns, n)
     if fast is not None:  # every field well formed: vectorised (the loop below names the first bad field)
-        sweep, joint, q, points, fast_sigma, fast_tp, fast_t = fast
+        sweep, joint, q, points, fast_sigma, fast_tp, t, fast_check = fast
         points = points * scale
         sigma = None if fast_sigma is None else fast_sigma * scale
         tp = np.ones(m, dtype=np.int64) if fast_tp is None else fast_tp
-        t = fast_t
-        if "role" in columns:
-            roles = np.char.lower(np.char.strip(np.array([r[columns["role"]] for r in rows], dtype=str)))
-            check = roles == "check"
+        check = np.zeros(m, dtype=bool) if fast_check is None else fast_check
         rows = []  # nothing left for the checking loop
     for k, fields in enumerate(rows):
         line = int(line_numbers[k])
@@ -167,18 +164,22 @@ def _parse_fast(rows: list[list[str]], header: list[str], columns: dict[str, int
         tp = integers("tp") if "tp" in columns else None
         t = None
         if "t" in columns:  # a row without a time (a stop-and-go step of an old session) is NaN
-            t = np.array([fields[columns["t"]].strip() or "nan" for fields in rows], dtype=float)
-            if np.any(np.isinf(t)):
+            texts = [fields[columns["t"]].strip() for fields in rows]
+            given = np.array([bool(text) for text in texts])
+            t = np.array([text or "nan" for text in texts], dtype=float)
+            if not np.all(np.isfinite(t[given])):  # a written "nan" or "inf" is refused, as by the loop
                 return None
     except ValueError:
         return None
     if tp is not None and np.any(tp < 1):
         return None
+    check = None
     if "role" in columns:
-        roles = {fields[columns["role"]].strip().lower() for fields in rows}
-        if not roles <= {"fit", "check"}:
+        roles = np.array([fields[columns["role"]].strip().lower() for fields in rows])
+        if not set(roles.tolist()) <= {"fit", "check"}:
             return None
-    return sweep, joint, q, points, sigma, tp, t
+        check = roles == "check"
+    return sweep, joint, q, points, sigma, tp, t, check
 
 
 def _streams(metadata: dict[str, str], sweep: np.ndarray, t: np.ndarray | None) -> tuple[np.ndarray, float]:
