@@ -26,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.aruco_target import Target, charuco_board, dictionary_id, grid_board, single_marker
-from drivers.camera_model import CameraIntrinsics, write_intrinsics
+from common.outputs import check_outputs, commit_file, write_output
+from drivers.camera.intrinsics import CameraIntrinsics, write_intrinsics
+from drivers.camera.targets import Target, charuco_board, dictionary_id, grid_board, single_marker
 from drivers.errors import DriverError
-from identify.outputs import check_outputs, commit_file, write_output
 
 DROP_FACTOR = 3.0  # a view whose RMS exceeds this multiple of the median is dropped
 
@@ -103,7 +103,7 @@ def calibrate(images: list[np.ndarray], target: Target, min_corners: int = 8) ->
     """Intrinsics from ChArUco views (8-bit images of one size); CameraToolError if too few views are usable."""
     import cv2
 
-    from drivers.aruco_target import Detector
+    from drivers.camera.targets import Detector
 
     if not images:
         raise CameraToolError("no images to calibrate from")
@@ -152,7 +152,7 @@ def _charuco(args: argparse.Namespace) -> Target:
 
 
 def _folder_images(pattern: str) -> list[np.ndarray]:
-    from drivers.camera_sources import ImageReplay
+    from drivers.camera.sources import ImageReplay
 
     source = ImageReplay(pattern)
     source.open(1.0)
@@ -160,7 +160,7 @@ def _folder_images(pattern: str) -> list[np.ndarray]:
 
 
 def _live_images(camera: str, views: int) -> list[np.ndarray]:
-    from drivers.camera_sources import LiveCamera
+    from drivers.camera.sources import LiveCamera
 
     source = LiveCamera(int(camera) if camera.isdigit() else camera)
     source.open(5.0)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.kinematics import DHModel, frames_from_joints
+from kinematics.dh import DHModel, frames_from_joints
 
 Array = NDArray[np.float64]
 

@@ -35,19 +35,20 @@ from acquire.plan import Plan, build_plan, check_plan, estimate_duration, plan_c
 from acquire.plan_continuous import build_continuous_plan, estimate_continuous_duration, format_modes
 from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.resume import ResumeRefused, resume_settings
-from acquire.session import Session, SessionError, factory_calibration
 from acquire.session_backup import backup_session
+from common.outputs import OutputError, check_outputs, check_target, same_file, write_output
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
 from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.factory import factory_reference
+from identify.io.result_io import result_to_dict
 from identify.measurements import InputError
-from identify.outputs import OutputError, check_outputs, check_target, same_file, write_output
 from identify.pipeline import identify
-from identify.report import format_reference, format_report
-from identify.result_io import result_to_dict
+from identify.report.terminal import format_reference, format_report
+from session.schema import SessionError
+from session.store import Session, factory_calibration
 
 log = logging.getLogger("acquire")
 
@@ -110,7 +111,7 @@ def _export(argv: list[str]) -> int:
     with Session.open(args.session) as session:
         rows = session.export_csv(args.csv, force=args.force)
         if session.plan.continuous:
-            from acquire.session_streams import stream_summary
+            from session.streams import stream_summary
 
             summary = stream_summary(session)
             if summary is not None:
@@ -184,7 +185,7 @@ def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bo
     clock = WallClock() if realtime or robot_spec.backend != "mock" else VirtualClock()
     rig = None
     if robot_spec.backend == "mock" or tracker_spec.backend == "mock":
-        from drivers.sim import SimulatedRig
+        from drivers.sim.rig import SimulatedRig
 
         rig = SimulatedRig.from_spec(robot_spec, tracker_spec, clock)
     robot = open_robot(robot_spec, rig=rig, site=site)
@@ -253,7 +254,7 @@ def _identify_session(session: Session, session_path: Path, robot: RobotModel) -
     write_output(out, yaml.safe_dump(doc, sort_keys=False, width=120), force=True)
     print(f"result written to {out}")
     try:
-        from identify.report_html import report_html
+        from identify.report.html import report_html
     except ImportError:
         print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
         return doc
@@ -333,7 +334,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")
     rehearsal = tracker_spec is None
     if not args.dry_run and not rehearsal:
-        from drivers.sim import check_pairing
+        from drivers.sim.pairing import check_pairing
 
         check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
     robot_model = load_robot(robot_spec.model)
@@ -473,7 +474,7 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
              f"steps at {site.speed_fraction:g} x the default speed, measuring nothing? Type 'yes' to start: ")
     rig = None
     if robot_spec.backend == "mock":
-        from drivers.sim import SimulatedRig
+        from drivers.sim.rig import SimulatedRig
 
         rig = SimulatedRig.from_spec(robot_spec, None, WallClock() if args.realtime else VirtualClock())
     robot = open_robot(robot_spec, rig=rig, site=site)

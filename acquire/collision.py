@@ -2,7 +2,7 @@
 
 Every body is a capsule: a segment (ends ``a``, ``b``, m) and a radius (m); a sphere is a capsule whose
 ends coincide. The robot's capsules are fixed in its DH frames (``frame`` 0 = the base, i = the frame
-after joint i, as :func:`identify.kinematics.frames_from_joints` numbers them), the tool's in the flange
+after joint i, as :func:`kinematics.dh.frames_from_joints` numbers them), the tool's in the flange
 (last DH) frame. The cell is given in the robot's base frame (DH frame 0):
 
 - the mounting surface, the plane ``normal · p = offset`` (``normal`` a unit vector pointing away from
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.kinematics import DHModel, frames_from_joints
+from kinematics.dh import DHModel, frames_from_joints
 
 Array = NDArray[np.float64]
 

@@ -1,7 +1,7 @@
 """The ``acquire`` command's entry point: refuses a second writer of a session before the heavy imports.
 
 ``acquire --resume SESSION`` while another process writes SESSION is refused by the session's write lock
-(acquire/session_lock.py). That refusal should come at once, but importing the acquisition and identification
+(session/lock.py). That refusal should come at once, but importing the acquisition and identification
 code takes most of a second; so this module, which imports only the lock, takes the lock of the session named
 by ``--resume`` first: if another process holds it, it prints the same one line as the full command and exits 2;
 otherwise the lock stays held and :func:`acquire.cli.main` claims it when it opens the session (so of two
@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from acquire.session_lock import Locked, busy_message, drop_held, hold
+from session.lock import Locked, busy_message, drop_held, hold
 
 
 def resume_target(argv: list[str]) -> Path | None:

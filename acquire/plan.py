@@ -29,9 +29,9 @@ from acquire.collision import STEP, Cell, approach, moves_samples
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
-from identify.kinematics import DHModel, frames_from_joints
 from identify.refine import full_jacobian
 from identify.simulate import axis_distances, random_poses
+from kinematics.dh import DHModel, frames_from_joints
 
 STEP_KINDS = ("sweep", "free", "home", "verify", "stream")  # verify: acquire/verify.py; stream: plan_continuous.py
 # the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"

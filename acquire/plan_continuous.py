@@ -52,8 +52,8 @@ from acquire.plan import (
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
-from identify.kinematics import DHModel, frames_from_joints
 from identify.simulate import random_poses
+from kinematics.dh import DHModel, frames_from_joints
 
 DEFLECTION_SHARE = 0.2  # the dynamic deflection stays below this share of the tracker noise
 JOINT_COMPLIANCE = 1e-5  # rad/(N·m): a joint's assumed compliance (a UR-size harmonic drive, conservatively)

@@ -30,8 +30,8 @@ from acquire.plan import (
 )
 from config.robots import RobotModel
 from config.site import SiteConfig
-from identify.kinematics import DHModel
 from identify.simulate import random_poses
+from kinematics.dh import DHModel
 
 
 def _partial_sweeps(plan: Plan, robot: RobotModel) -> Array:

@@ -26,7 +26,7 @@ def probe(args: argparse.Namespace) -> int:
     rig = None
     if tracker_spec.backend == "mock" or str(tracker_spec).startswith("aruco:sim"):  # a simulated tracker
         # looks at a simulated robot standing at home
-        from drivers.sim import SimulatedRig
+        from drivers.sim.rig import SimulatedRig
 
         robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
         robot_spec = robot_spec if robot_spec.backend == "mock" else RobotSpec.parse(f"mock:{robot_spec.model}")

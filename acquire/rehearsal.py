@@ -17,7 +17,7 @@ from acquire.orchestrator import RunResult, StopRequest
 from acquire.plan import Plan, Step
 from drivers.base import Robot, RobotState
 from drivers.errors import ConnectionFailed, DeviceTimeout, RobotFault
-from identify.joint_errors import Coupling
+from kinematics.joint_errors import Coupling
 
 
 def rehearse(robot: Robot, plan: Plan, move_timeout: float, stop: StopRequest,

@@ -2,7 +2,7 @@
 joint through its range at constant speed while reading both streams, stop the streams, record.
 
 Sequencing only: the devices stream (drivers/base.py: StreamingRobot, StreamingTracker), the session stores
-(acquire/session_streams.py). Batches are committed at least every :data:`COMMIT_PERIOD` s of the clock (the
+(session/streams.py). Batches are committed at least every :data:`COMMIT_PERIOD` s of the clock (the
 virtual clock in mock mode), so a crash loses at most that much. Every wait has a timeout: the move's own
 duration plus the site's move timeout. Faults: the tracker's gaps (target lost) and the robot's (lost packets)
 are recorded with the samples and the sweep goes on; a robot fault, a lost connection or a timeout stops the
@@ -16,13 +16,13 @@ import contextlib
 from collections.abc import Callable
 
 from acquire.plan import Plan, Step
-from acquire.records import StepRecord
-from acquire.session import Session
-from acquire.session_streams import StreamRecorder
 from drivers.base import JointStreamBatch, RobotState, TrackerStreamBatch
 from drivers.clock import Clock
 from drivers.errors import ConnectionFailed, DeviceTimeout, DriverError, RobotFault
 from drivers.motion import motion_time
+from session.records import StepRecord
+from session.store import Session
+from session.streams import StreamRecorder
 
 COMMIT_PERIOD = 0.5  # s between commits of the streamed samples (at most 1 s of data is ever at risk)
 POLL_PERIOD = 0.02  # s between reads of the streams while the joint moves

@@ -39,12 +39,13 @@ from acquire.cli import (
 from acquire.plan import estimate_duration, plan_clearance
 from acquire.plan_report import format_clearance
 from acquire.resume import resume_settings
-from acquire.session import Session, SessionError
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
+from common.outputs import check_outputs, check_target, write_output
 from config.robots import RobotModel, load_robot
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name
-from identify.outputs import check_outputs, check_target, write_output
+from session.schema import SessionError
+from session.store import Session
 
 MM = 1e3
 
@@ -143,7 +144,7 @@ def _finish(session: Session, path: Path, robot: RobotModel) -> tuple[Outcome, d
     write_output(yaml_path, yaml.safe_dump(summary, sort_keys=False, width=120), force=True)
     print(f"verification written to {yaml_path}")
     try:
-        from identify.verify_report import verification_html
+        from identify.report.verify_html import verification_html
     except ImportError:
         print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
         return outcome, summary
@@ -173,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
                       args.force)
         check_target(args.session, option="--session")
     if not args.dry_run:
-        from drivers.sim import check_pairing
+        from drivers.sim.pairing import check_pairing
 
         check_pairing(robot_spec, tracker_spec)
 

@@ -32,10 +32,10 @@ import numpy as np
 
 from config.robots import load_robot
 from identify.bounds import prediction_rms_bound
-from identify.kinematics import DHModel, points_from_joints
 from identify.pipeline import identify
 from identify.refine import full_jacobian
 from identify.simulate import random_poses, random_truth, simulate
+from kinematics.dh import DHModel, points_from_joints
 
 FAMILIES = ("ur5e", "scara", "iiwa7", "track_ur5e", "gantry")
 NOISES = (1e-5, 5e-5, 5e-4)  # m per axis

@@ -6,7 +6,7 @@ Speed: frames per second of detection + pose (one thread of work per frame, as t
 pre-rendered 1280x720 frames with sensor noise (2 grey levels) and blur (0.5 px). Accuracy: mean 3D error
 (mm) of the target centre against the rendered truth, over random poses (tilt up to 30 deg, any roll),
 for each distance, target (single marker 50 / 100 mm, grid board 100 mm) and corner refinement (OpenCV's
-four and ``edges``, drivers/aruco_refine.py): on clean renders (no noise, no blur, 6 poses) at 0.5, 1.0
+four and ``edges``, drivers/camera/refinement.py): on clean renders (no noise, no blur, 6 poses) at 0.5, 1.0
 and 1.5 m, and at 1 m with noise 2 and blur 0.5 (12 poses). Camera: 1280x720, 60 deg horizontal field of
 view, no distortion. The machine's load average is printed with the speeds.
 """
@@ -20,10 +20,10 @@ import time
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from drivers.aruco_pose import estimate_pose
-from drivers.aruco_target import Detector, dictionary_id, grid_board, single_marker
-from drivers.camera_model import CameraIntrinsics
-from drivers.camera_sim import Optics, Renderer
+from drivers.camera.intrinsics import CameraIntrinsics
+from drivers.camera.pose import estimate_pose
+from drivers.camera.renderer import Optics, Renderer
+from drivers.camera.targets import Detector, dictionary_id, grid_board, single_marker
 
 CAMERA = CameraIntrinsics.from_fov(1280, 720, 60)
 D4 = dictionary_id("4X4_50")

@@ -43,9 +43,9 @@ from config.robots import load_robot
 from identify.calibrated import CalibratedModel
 from identify.compare import compare
 from identify.compensate import compensate
-from identify.kinematics import points_from_joints
 from identify.pipeline import identify
 from identify.simulate import random_poses, random_truth, simulate
+from kinematics.dh import points_from_joints
 
 ROBOT = load_robot("ur5e")
 SPEED_TARGET = 5.0
@@ -117,8 +117,8 @@ def accuracy(draws: int) -> tuple[list[str], list[str]]:
 
 def verification() -> tuple[list[str], list[str]]:
     from acquire.cli import main as acquire
-    from acquire.session import Session
-    from drivers.sim import SimulatedRig
+    from drivers.sim.rig import SimulatedRig
+    from session.store import Session
 
     noise, cycles, samples = 5e-5, 10, 5
     with tempfile.TemporaryDirectory() as folder:

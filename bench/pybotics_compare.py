@@ -24,9 +24,9 @@ import numpy as np
 
 from config.robots import load_robot
 from identify.bounds import prediction_rms_bound
-from identify.kinematics import DHModel, points_from_joints
 from identify.pipeline import identify
 from identify.simulate import random_poses, random_truth, simulate
+from kinematics.dh import DHModel, points_from_joints
 
 SEED = 20240604
 NOISE = 5e-5
@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     conversion = rms(same["predicted"], p_check)
     print(f"pybotics {version} vs this project on simulated UR5e data: full sweeps (36 samples per joint), "
           f"noise {NOISE * 1e3:g} mm, 200 held-out poses, seed {SEED}")
-    print(f"forward-model conversion check (truth through pybotics vs identify.kinematics): RMS {conversion:.2e} m")
+    print(f"forward-model conversion check (truth through pybotics vs kinematics.dh): RMS {conversion:.2e} m")
     print()
     header = (f"{'draw':>4} {'bound mm':>9} {'ours mm':>9} {'geo mm':>9} {'pybotics mm':>11} {'ours ms':>8} "
               f"{'pybotics ms':>11} {'nfev':>5} {'fit ours mm':>11} {'fit pyb mm':>10}")

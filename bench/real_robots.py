@@ -40,11 +40,11 @@ from numpy.typing import NDArray
 from config.robots import load_robot
 from identify.estimate import with_tools
 from identify.extensions import TermSet, candidates
-from identify.joint_errors import JointErrors, gravity_torques
 from identify.pipeline import identify
 from identify.poe import AxisLines, lines_from_model, points_from_lines
 from identify.simulate import line_parameter_count, moved_lines, random_poses, random_truth
 from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
+from kinematics.joint_errors import JointErrors, gravity_torques
 
 Array = NDArray[np.float64]
 

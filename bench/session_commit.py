@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-import acquire.session as session_module
-from acquire.session import Session
+import session.store as session_module
+from session.store import Session
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 
 MODES = ("wal", "wal+checkpoint", "delete")

@@ -24,9 +24,9 @@ import time
 import warnings
 from typing import Any
 
-from drivers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
-from drivers.ipp import IppTracker
 from drivers.registry import open_tracker
+from drivers.trackers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
+from drivers.trackers.ipp import IppTracker
 from tests.rfc2217_bridge import Rfc2217Bridge
 from tests.tracker_devices import AsciiDevice, IppServer
 

@@ -21,8 +21,8 @@ import numpy as np
 import yaml
 
 from config.geometry import RobotGeometry, geometry_from_dict
-from identify.joint_errors import Coupling, LinkMasses
-from identify.kinematics import Array, DHModel, check_joint_types
+from kinematics.dh import Array, DHModel, check_joint_types
+from kinematics.joint_errors import Coupling, LinkMasses
 
 SCHEMA_VERSION = 1
 KEYS = ("schema", "name", "vendor", "description", "source", "joints", "dh", "limits", "home", "max_speed",

@@ -47,15 +47,15 @@ if TYPE_CHECKING:
 
 #: Robot backend -> "module:factory".
 ROBOT_BACKENDS: dict[str, str] = {
-    "ur": "drivers.ur:open_robot",
-    "mock": "drivers.sim:open_robot",
+    "ur": "drivers.ur.driver:open_robot",
+    "mock": "drivers.sim.rig:open_robot",
 }
 #: Tracker backend -> "module:factory".
 TRACKER_BACKENDS: dict[str, str] = {
-    "serial": "drivers.serial_tracker:open_tracker",
-    "ipp": "drivers.ipp:open_tracker",
-    "aruco": "drivers.aruco:open_tracker",
-    "mock": "drivers.sim:open_tracker",
+    "serial": "drivers.trackers.serial_tracker:open_tracker",
+    "ipp": "drivers.trackers.ipp:open_tracker",
+    "aruco": "drivers.camera.tracker:open_tracker",
+    "mock": "drivers.sim.tracker:open_tracker",
 }
 #: Top-level third-party module -> the pyproject.toml extra that installs it.
 EXTRAS: dict[str, str] = {

@@ -4,7 +4,7 @@ Robot specs::
 
     ur5e                      a real UR robot; its host comes from the site configuration
     ur5e@192.168.1.10[:PORT]  a real UR robot at that host (IPv6 in brackets: ur5e@[fe80::1])
-    mock:ur5e                 the simulated robot of that model (drivers/sim.py)
+    mock:ur5e                 the simulated robot of that model (drivers/sim/rig.py)
     ...?key=value&key=value   options; ``ur:ur5e`` is accepted as the explicit form of ``ur5e``
 
 Tracker specs::
@@ -13,7 +13,7 @@ Tracker specs::
                               e.g. serial:/dev/ttyUSB0?baud=115200&protocol=NAME
     ipp://HOST[:PORT][?opts]  an I++ DME server (port as given; the backend picks its default, 1294)
     aruco:SOURCE[?opts]       camera index, video/image path or glob; e.g. aruco:0?marker=7&size=0.05
-    mock[?opts]               the simulated tracker (drivers/sim.py)
+    mock[?opts]               the simulated tracker (drivers/sim/rig.py)
 
 Option values are raw text (no percent-decoding): they must not contain ``& = ? #`` or white space; their
 order is kept so that ``str(spec)`` gives back the string that was parsed. Options of the mock backends are
@@ -42,7 +42,7 @@ ROBOT_FORMS = "MODEL, MODEL@HOST[:PORT] or mock:MODEL (e.g. ur5e, ur5e@192.168.1
               "optional ?key=value&..."
 TRACKER_FORMS = "serial:PORT[?opts], ipp://HOST[:PORT], aruco:SOURCE[?opts] or mock[?opts]"
 
-#: Faults of the simulated robot: at move N (see drivers/sim.py for what each does).
+#: Faults of the simulated robot: at move N (see drivers/sim/rig.py for what each does).
 ROBOT_FAULTS = ("protective_stop", "emergency_stop", "disconnect", "slow", "unsettled")
 #: Faults of the simulated tracker: at measurement N (one ``measure`` call).
 TRACKER_FAULTS = ("target_lost", "bad_reading", "disconnect", "slow")
@@ -68,7 +68,7 @@ MOCK_ROBOT_OPTIONS: dict[str, tuple[str, object, str]] = {
                    "model's dynamics"),
     "points": ("points", 1, _POINTS),
     "occlusion": ("probability", 0.0, _OCCLUSION),
-    "rate": ("rate", 500.0, "joint stream rate, Hz (continuous motion; drivers/sim_stream.py)"),
+    "rate": ("rate", 500.0, "joint stream rate, Hz (continuous motion; drivers/sim/stream.py)"),
     "drop": ("probability", 0.0, "probability that a joint-stream packet is lost (a gap in the stream)"),
 }
 #: Options of ``mock``: name -> (kind, default, meaning).
@@ -80,7 +80,7 @@ MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
     "fault": ("faults", (), "simulated faults, " + "|".join(TRACKER_FAULTS) + "[@MEASUREMENT][xCOUNT],..."),
     "points": ("points", None, _POINTS + " (default: the robot spec's, 1)"),
     "occlusion": ("probability", None, _OCCLUSION + " (default: the robot spec's, 0)"),
-    "rate": ("rate", 250.0, "stream rate, Hz (continuous motion; drivers/sim_stream.py)"),
+    "rate": ("rate", 250.0, "stream rate, Hz (continuous motion; drivers/sim/stream.py)"),
     "clock_offset": ("signed", 0.0, "the tracker clock's offset from the robot's, s"),
     "drift": ("drift", 0.0, "the tracker clock's rate error, a fraction in [-0.01, 0.01] (1e-3: 0.1 %)"),
     "stamp_jitter": ("float", 0.0, "standard deviation of a streamed sample's timestamp, s"),

@@ -22,15 +22,15 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
+from common.outputs import write_output
 from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compare import CompareError, Comparison, check_same_robot
 from identify.compare import compare as _compare
 from identify.compensate import Compensation, controller_poses, ur_pose
 from identify.compensate import compensate as _compensate
+from identify.io.result_io import result_to_dict
 from identify.measurements import InputError, Measurements
-from identify.outputs import write_output
 from identify.pipeline import Identification, identify, split_holdout
-from identify.result_io import result_to_dict
 
 Array = NDArray[np.float64]
 
@@ -70,9 +70,9 @@ class Result:
 def load_measurements(path: str | Path, joints: str | None = None, units: str | None = None) -> Measurements:
     """The measurements of a CSV (the contract of DESIGN.md; ``joints``/``units`` as ``identify --joints/--units``)
     or of an acquisition session."""
-    from acquire.session_file import is_session_file
     from identify.cli import _read_session
-    from identify.csvio import read_measurements
+    from identify.io.csvio import read_measurements
+    from session.schema import is_session_file
 
     if is_session_file(Path(path)):
         return _read_session(Path(path))[0].measurements

@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.kinematics import DHModel
 from identify.refine import full_jacobian
+from kinematics.dh import DHModel
 
 Array = NDArray[np.float64]
 

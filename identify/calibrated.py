@@ -20,11 +20,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from identify.geometry import rotation_about_axis
-from identify.kinematics import DHModel, frames_from_joints
 from identify.measurements import InputError
 from identify.poe import AxisLines
 from identify.predict import Predictor
 from identify.refine import full_jacobian, parameter_names
+from kinematics.dh import DHModel, frames_from_joints
 
 Array = NDArray[np.float64]
 
@@ -58,7 +58,7 @@ class CalibratedModel:
     @classmethod
     def from_document(cls, doc: dict[str, Any], name: str = "identified") -> CalibratedModel:
         """The model of a result document (identify --out); ResultError (one line) if it cannot be used."""
-        from identify.result_io import model_from_dict
+        from identify.io.result_io import model_from_dict
 
         if not isinstance(doc, dict):
             raise ResultError("not a result document (expected a YAML mapping with joints, base, tool)")
@@ -248,7 +248,7 @@ def predictor_from_document(doc: dict[str, Any], model: DHModel, tp_ids: list[in
     """The identification's predictor rebuilt from its result document: axis lines, coupling, joint-error terms
     (``extensions``; compliance needs the nominal robot's link masses) and ``covariance.predictor``."""
     from identify.extensions import Candidate, TermSet
-    from identify.joint_errors import Coupling, gravity_torques
+    from kinematics.joint_errors import Coupling, gravity_torques
 
     al = doc["axis_lines"]
     tps = np.array(al.get("tps") or [al["tp_home"]], dtype=float).reshape(-1, 3)

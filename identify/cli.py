@@ -17,19 +17,19 @@ from typing import Any
 import numpy as np
 import yaml
 
-from acquire.session_file import is_session_file
+from common.outputs import check_outputs, write_output
 from config.robots import RobotModel
 from identify import __version__
 from identify.calibrated import robot_model
 from identify.cpa import DEFAULT_PARALLEL_TOL
-from identify.csvio import UNITS, CsvContent, format_measurements, read_measurements
-from identify.joint_errors import Coupling
+from identify.io.csvio import UNITS, CsvContent, format_measurements, read_measurements
+from identify.io.result_io import result_to_dict
 from identify.measurements import InputError, Measurements
-from identify.outputs import check_outputs, write_output
 from identify.pipeline import Identification, identify, split_holdout
 from identify.refine import DEFAULT_MAX_OFFSET
-from identify.report import format_reference, format_report
-from identify.result_io import result_to_dict
+from identify.report.terminal import format_reference, format_report
+from kinematics.joint_errors import Coupling
+from session.schema import is_session_file
 
 
 class _Parser(argparse.ArgumentParser):
@@ -93,7 +93,7 @@ def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
     if args.report:
         _verification(args.verification)
         try:
-            import identify.report_html  # noqa: F401
+            import identify.report.html  # noqa: F401
         except ImportError:
             raise InputError("--report needs matplotlib: pip install 'dh-calib[report]'") from None
 
@@ -105,12 +105,12 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
     limits = robot.limits if robot else None
     comment = "\n".join([f"identified from {args.input} by dh-calib {__version__}", *export_notes(ident)])
     if args.urdf:
-        from identify.export_urdf import urdf_from_model
+        from identify.exports.urdf import urdf_from_model
 
         velocities = robot.max_speed if robot else None
         _write_atomic(Path(args.urdf), urdf_from_model(ident.model, name, limits, velocities, comment=comment))
     if args.ur_calibration:
-        from identify.export_ur_calibration import calibration_from_model, format_calibration
+        from identify.exports.ur_calibration import calibration_from_model, format_calibration
 
         try:
             text = format_calibration(calibration_from_model(ident.model), comment=comment)
@@ -118,18 +118,18 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
             raise InputError(f"--ur-calibration: {exc}") from None
         _write_atomic(Path(args.ur_calibration), text)
     if args.rtb:
-        from identify.export_rtb import rtb_snippet
+        from identify.exports.rtb import rtb_snippet
 
         head = "".join(f"# {line}\n" for line in comment.splitlines())
         _write_atomic(Path(args.rtb), head + rtb_snippet(ident.model, name, limits))
     if args.json_out:
-        from identify.export_rtb import result_json
+        from identify.exports.rtb import result_json
 
         _write_atomic(Path(args.json_out), result_json(doc))
     if args.csv:
         _write_atomic(Path(args.csv), format_measurements(meas, {"source": str(args.input)}))
     if args.report:
-        from identify.report_html import report_html
+        from identify.report.html import report_html
 
         session = _open_session(Path(args.input)) if is_session_file(Path(args.input)) else None
         try:
@@ -176,7 +176,8 @@ def export_notes(ident: Identification) -> list[str]:
 
 def _open_session(path: Path):
     """An acquisition session (the session format belongs to ``acquire``); InputError if it is not one."""
-    from acquire.session import Session, SessionError
+    from session.schema import SessionError
+    from session.store import Session
 
     try:
         return Session.open(path)
@@ -196,15 +197,15 @@ def _read_session(path: Path) -> tuple[CsvContent, dict[str, Any]]:
 
 def _factory_reference(header: dict[str, Any], joint_types: str) -> tuple[tuple[str, Any] | None, str]:
     """The session robot's factory calibration as a comparison model, or None and why not."""
-    from acquire.session import factory_calibration
     from identify.factory import factory_reference
+    from session.store import factory_calibration
 
     calibration, note = factory_calibration(header)
     return factory_reference(calibration, note, joint_types)
 
 
 def _write_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` whole or not at all (identify/outputs.py); :func:`_check_outputs` has refused,
+    """Write ``text`` to ``path`` whole or not at all (common/outputs.py); :func:`_check_outputs` has refused,
     before any work, an output that is an input or exists without ``--force``."""
     write_output(path, text, force=True)
 

@@ -26,9 +26,9 @@ from numpy.typing import NDArray
 from scipy.stats import chi2, norm
 
 from identify.calibrated import CalibratedModel
-from identify.kinematics import DH_NAMES
 from identify.refine import parameter_names
 from identify.simulate import random_poses
+from kinematics.dh import DH_NAMES
 
 Array = NDArray[np.float64]
 

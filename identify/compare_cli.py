@@ -17,11 +17,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from acquire.session_file import is_session_file
+from common.outputs import check_outputs, write_output
 from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name, robot_model
 from identify.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
 from identify.measurements import InputError
-from identify.outputs import check_outputs, write_output
+from session.schema import is_session_file
 
 
 class _Parser(argparse.ArgumentParser):
@@ -57,9 +57,10 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
         if (doc.get("verdict") or {}).get("status") == "fail":
             raise InputError(f"{path} fails its verdict: its model cannot be compared")
         return model, nominal_name(doc), None, p.stat().st_mtime
-    from acquire.session import Session, SessionError
     from config.robots import ConfigError, load_robot
     from identify.pipeline import identify
+    from session.schema import SessionError
+    from session.store import Session
 
     try:
         with Session.open(p) as session:
@@ -106,7 +107,7 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
         raise InputError(str(exc)) from None
     times = [t for *_, t in loaded]
     if args.html:
-        from identify.compare_html import compare_html
+        from identify.report.compare_html import compare_html
 
         write_output(args.html, compare_html(result, models, times), force=args.force)
     return result, as_dict(result)

@@ -28,8 +28,8 @@ from identify.geometry import (
     rotation_about_axis,
     unit,
 )
-from identify.kinematics import DHModel, transform_from_dh
 from identify.measurements import InputError, Measurements
+from kinematics.dh import DHModel, transform_from_dh
 
 Array = NDArray[np.float64]
 

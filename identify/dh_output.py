@@ -18,8 +18,8 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from identify.cpa import dh_from_axes
-from identify.kinematics import DHModel
 from identify.poe import AxisLines, LineProblem
+from kinematics.dh import DHModel
 
 Array = NDArray[np.float64]
 

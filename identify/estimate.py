@@ -16,11 +16,11 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from identify.geometry import left_jacobian, skew
-from identify.kinematics import DHModel, flange_frames, frames_from_joints
 from identify.outliers import leverages, outlier_free
 from identify.poe import AxisLines, JointTerms, LeastSquares, LineProblem, fit_lines, lines_from_model
 from identify.refine import NOISE_FLOOR
 from identify.sync import Retiming
+from kinematics.dh import DHModel, flange_frames, frames_from_joints
 
 Array = NDArray[np.float64]
 

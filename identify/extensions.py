@@ -1,6 +1,6 @@
 """Which joint errors beyond the DH table the data support (DESIGN.md note 8), and their regressors.
 
-Candidates, per joint the data move (:mod:`identify.joint_errors` for the equations): reading scale,
+Candidates, per joint the data move (:mod:`kinematics.joint_errors` for the equations): reading scale,
 once-per-turn error (revolute joints; sin and cos together) and, when the robot model gives link masses,
 compliance under gravity (joints whose gravity torque varies). Each acts on the joint value as
 ``Δq_i = Σ coefficient · (f(q) - f(home))``; the constant ``f(home)`` is a zero offset the lines absorb.

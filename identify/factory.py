@@ -1,7 +1,7 @@
-"""A robot controller's own factory calibration as a :class:`~identify.kinematics.DHModel`, for comparison.
+"""A robot controller's own factory calibration as a :class:`~kinematics.dh.DHModel`, for comparison.
 
 Universal Robots controllers store calibrated standard-DH values per robot and send them as the kinematics
-info of the primary client interface (read by drivers/ur_info.py, kept in the session header): ``theta``
+info of the primary client interface (read by drivers/ur/info.py, kept in the session header): ``theta``
 (rad, the joint zero offset added to the joint reading), ``a`` and ``d`` (m), ``alpha`` (rad), one per joint.
 UR's forward model is ``Rz(theta_i + q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)`` with the same signs as the nominal
 values UR publishes (e.g. the UR5e's ``a_2 = -0.425 m``), which is the forward model of DESIGN.md and of
@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from identify.kinematics import DHModel
+from kinematics.dh import DHModel
 
 KEYS = ("theta", "d", "a", "alpha")
 #: Largest |value| accepted: lengths (m) and angles (rad) beyond this are not a robot's DH table.

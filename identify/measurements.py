@@ -15,8 +15,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.joint_errors import Coupling
-from identify.kinematics import check_joint_types
+from kinematics.dh import check_joint_types
+from kinematics.joint_errors import Coupling
 
 Array = NDArray[np.float64]
 

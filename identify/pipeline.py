@@ -21,8 +21,6 @@ from identify.dh_output import DHOutput, dh_output, near_parallel
 from identify.estimate import FitData, LinesFit, along_arc, fit, place_nominal
 from identify.extend import HeldOut, select_terms
 from identify.extensions import Decision, TermSet, candidates
-from identify.joint_errors import Coupling, LinkMasses, gravity_torques
-from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.linalg import project_out, scaled_inverse
 from identify.measurements import InputError, Measurements, in_dh_joints, prepared_joints, validate
 from identify.outliers import sweep_neighbours
@@ -31,6 +29,8 @@ from identify.predict import Predictor
 from identify.refine import DEFAULT_MAX_OFFSET, Refinement, full_jacobian, parameter_names, refine
 from identify.starts import starts
 from identify.sync import Retiming, retiming
+from kinematics.dh import DHModel, frames_from_joints, points_from_joints
+from kinematics.joint_errors import Coupling, LinkMasses, gravity_torques
 
 Array = NDArray[np.float64]
 

@@ -8,7 +8,7 @@ Parameters: per revolute joint, 2 tilts of the direction and 2 shifts of the poi
 tilts; then the TP at home (3). That is exactly what position-only data determine (4R + 2P + 3).
 
 Several tracked points (reflectors) share the lines; each has its own position at home (``tps``). Joint
-errors beyond the lines (:mod:`identify.joint_errors`) enter as ``q + R · c``: per-row regressors ``R``
+errors beyond the lines (:mod:`kinematics.joint_errors`) enter as ``q + R · c``: per-row regressors ``R``
 (m, T), each acting on one joint, with coefficients ``c`` fitted with the lines.
 
 A row whose moved joint was not read (a sweep jogged by hand, or positions-only data) carries that
@@ -28,9 +28,9 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from identify.geometry import cross, perpendicular_basis, rotation_about_axis, unit
-from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.linalg import project_out
 from identify.sync import Retiming
+from kinematics.dh import DHModel, frames_from_joints, points_from_joints
 
 Array = NDArray[np.float64]
 

@@ -13,8 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from identify.extensions import TermSet
-from identify.joint_errors import Coupling
 from identify.poe import AxisLines, JointTerms, LineProblem, points_from_lines
+from kinematics.joint_errors import Coupling
 
 Array = NDArray[np.float64]
 

@@ -21,8 +21,8 @@ from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
 from identify.geometry import cross, left_jacobian, skew
-from identify.kinematics import DH_NAMES, DHModel, points_from_joints, running_frames
 from identify.linalg import triangle
+from kinematics.dh import DH_NAMES, DHModel, points_from_joints, running_frames
 
 Array = NDArray[np.float64]
 

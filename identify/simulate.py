@@ -15,9 +15,9 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from identify.geometry import perpendicular_basis, rotation_about_axis, unit
-from identify.kinematics import DHModel, frames_from_joints, points_from_joints
 from identify.measurements import Measurements
 from identify.poe import AxisLines, points_from_lines
+from kinematics.dh import DHModel, frames_from_joints, points_from_joints
 
 Array = NDArray[np.float64]
 

@@ -10,10 +10,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.joint_errors import Coupling, JointErrors, LinkMasses, gravity_torques
-from identify.kinematics import DHModel, points_from_joints
 from identify.measurements import Measurements
 from identify.simulate import random_poses, sweep_readings
+from kinematics.dh import DHModel, points_from_joints
+from kinematics.joint_errors import Coupling, JointErrors, LinkMasses, gravity_torques
 
 Array = NDArray[np.float64]
 

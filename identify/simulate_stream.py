@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.kinematics import DHModel, points_from_joints
 from identify.measurements import Measurements
+from kinematics.dh import DHModel, points_from_joints
 
 Array = NDArray[np.float64]
 

@@ -12,9 +12,9 @@ from numpy.typing import NDArray
 
 from identify.cpa import GeometricResult, geometric_step
 from identify.estimate import nominal_start
-from identify.kinematics import DHModel
 from identify.measurements import InputError, Measurements
 from identify.poe import AxisLines, points_from_lines
+from kinematics.dh import DHModel
 
 Array = NDArray[np.float64]
 

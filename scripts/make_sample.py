@@ -14,8 +14,8 @@ import numpy as np
 import yaml
 
 from config.robots import load_robot
-from identify.csvio import format_measurements
-from identify.result_io import model_to_dict
+from identify.io.csvio import format_measurements
+from identify.io.result_io import model_to_dict
 from identify.simulate import random_truth, simulate
 
 

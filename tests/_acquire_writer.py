@@ -1,6 +1,6 @@
 """Helper process for the crash-copy and two-writer tests: runs the real ``acquire`` command in forked children.
 
-    python tests/_acquire_writer.py        then, per line on stdin, a JSON list of ``acquire`` arguments
+    python -m tests._acquire_writer        then, per line on stdin, a JSON list of ``acquire`` arguments
 
 It imports ``acquire.cli`` once (a fresh interpreter costs most of a second of imports), then for each line
 forks a child that runs ``acquire.cli.main(ARGS)`` and prints, unbuffered:

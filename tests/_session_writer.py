@@ -1,7 +1,7 @@
-"""Helper process for the session crash test (tests/test_session.py): records a small deterministic plan.
+"""Helper process for the session crash test (tests/session/test_session.py): records a small deterministic plan.
 
-    python tests/_session_writer.py write SESSION [SLEEP]   create or reopen SESSION and record every step left
-    python tests/_session_writer.py serve SESSION [SLEEP]   imports once, then per line "go" on stdin forks a
+    python -m tests._session_writer write SESSION [SLEEP]   create or reopen SESSION and record every step left
+    python -m tests._session_writer serve SESSION [SLEEP]   imports once, then per line "go" on stdin forks a
                                                             child that does "write" and prints "pid N"; the test
                                                             kills children with SIGKILL (a fresh interpreter
                                                             costs ~1 s of imports per kill)
@@ -22,9 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from acquire.plan import Plan, Step
-from acquire.records import StepRecord
-from acquire.session import Session
 from drivers.base import DeviceIdentity, TrackerReading
+from session.records import StepRecord
+from session.store import Session
 
 JOINT_TYPES = "RRR"
 STEPS_PER_SWEEP = 10

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.sim import SimulatedRig
+from drivers.sim.rig import SimulatedRig
 from tests._served import _Served
 
 IPP_FAULTS = ("error", "fatal", "warning", "info", "event_warning", "outlier", "silence", "drop", "no_ack")

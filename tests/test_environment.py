@@ -11,7 +11,7 @@ import importlib.util
 
 import pytest
 
-#: import name -> the distribution that provides it (ur_rtde's pinned version: tests/test_ur_driver.py).
+#: import name -> the distribution that provides it (ur_rtde's pinned version: tests/drivers/ur/test_driver.py).
 REQUIRED = {
     "serial": "pyserial",
     "rtde_control": "ur-rtde",

@@ -39,8 +39,8 @@ import tty
 
 import numpy as np
 
-from drivers.ascii_profile import Profile, checksum_of, load_profile
-from drivers.sim import SimulatedRig
+from drivers.sim.rig import SimulatedRig
+from drivers.trackers.ascii_profile import Profile, checksum_of, load_profile
 from tests._served import _Served
 
 ASCII_FAULTS = ("target_lost", "garbage", "noise", "partial", "truncated", "bad_checksum", "out_of_range", "reset",

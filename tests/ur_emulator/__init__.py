@@ -22,7 +22,7 @@ is the async progress: 0 while an async move runs, then -1 / -2 alternately. Oth
 (done) without effect. The client also reads ``robot_status_bits`` (bit 1: program running),
 ``safety_status_bits`` (bit 2: protective stop, bit 7: emergency stop) and ``runtime_state`` (2 playing).
 
-Motion: the arm is a :class:`drivers.sim.SimulatedRig` on a :class:`ScaledClock` (``time_scale``: emulated
+Motion: the arm is a :class:`drivers.sim.rig.SimulatedRig` on a :class:`ScaledClock` (``time_scale``: emulated
 seconds per wall second, default 1; the tests run at 10 to 100, so a move of seconds takes a fraction of a
 second while the RTDE stream keeps its wall-clock rate); a moveJ is the rig's synchronised trapezoidal move
 (``SimulatedRobot.move_joints`` with the commanded speed / acceleration on every joint), and the streamed

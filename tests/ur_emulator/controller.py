@@ -12,7 +12,9 @@ from typing import Any
 import numpy as np
 
 from drivers.errors import ConnectionFailed, EmergencyStop, ProtectiveStop, RobotFault
-from drivers.sim import SimulatedRig, SimulatedRobot, _durations, _fraction
+from drivers.motion import joint_durations as _durations
+from drivers.motion import profile_fraction as _fraction
+from drivers.sim.rig import SimulatedRig, SimulatedRobot
 from tests.ur_emulator.protocol import (
     CMD_MOVEJ,
     CMD_NONE,

@@ -1,0 +1,130 @@
+"""Target pose from one frame's points, and the tracked point's position with its covariance.
+
+:func:`estimate_pose` solves the perspective-n-point problem with OpenCV: ``SOLVEPNP_IPPE_SQUARE`` for one
+square marker, ``SOLVEPNP_IPPE`` for several coplanar points (a board, markers on one plane), ``SQPNP``
+otherwise; every candidate is refined by Levenberg-Marquardt (``solvePnPRefineLM``: the maximum-likelihood
+pose under Gaussian corner noise). A planar target has two poses that explain the points (the IPPE
+ambiguity: the target tilted one way or the mirror way). When the second explains them almost as well as
+the first (reprojection RMS within ``AMBIGUITY_RATIO`` × and ``AMBIGUITY_FLOOR_PX``), the one closer in
+rotation to ``reference`` (the previous pose) is kept, so a sequence of frames stays on one branch.
+
+The TP's covariance propagates the pose covariance ``s² (JᵀJ)⁻¹`` (J: the Jacobian of the projections by
+rotation vector and translation, from ``cv2.projectPoints``; s: the corner noise, pixels) through
+``p = R·tp + t``. Frames: the camera frame is the tracker frame; metres; pixels in OpenCV's convention.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.camera.targets import Observation
+
+Array = NDArray[np.float64]
+
+AMBIGUITY_RATIO = 1.5  # second-best RMS below this multiple of the best: the frame is ambiguous ...
+AMBIGUITY_FLOOR_PX = 0.05  # ... or both RMS within this many pixels of each other
+_LM = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-12)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """One frame's target pose: ``rotation`` (3, 3) and ``translation`` (3,) m, camera frame <- target frame;
+    ``rms`` reprojection RMS (pixels, per coordinate) over ``points`` points; ``jacobian`` (2N, 6) of the
+    projections by (rotation vector, translation); ``ambiguous`` True when the IPPE alternative was close
+    and a reference chose; ``image_covariance`` (2N, 2N) pixels² of the points, when the detection gave
+    one (else the points are taken as independent with a common noise)."""
+
+    rotation: Array
+    translation: Array
+    rms: float
+    points: int
+    jacobian: Array
+    ambiguous: bool = False
+    image_covariance: Array | None = None
+
+    @property
+    def expected_rss(self) -> float | None:
+        """Expected sum of squared reprojection residuals (pixels²) under :attr:`image_covariance`:
+        ``tr((I - J N⁻¹ Jᵀ) Σ)``; None without one. Compare with ``2 N rms²``, the observed sum."""
+        if self.image_covariance is None:
+            return None
+        hat = self.jacobian @ np.linalg.pinv(self.jacobian.T @ self.jacobian) @ self.jacobian.T
+        return float(np.trace(self.image_covariance) - np.trace(hat @ self.image_covariance))
+
+    @property
+    def dof(self) -> int:
+        """Degrees of freedom of the residuals (2N - 6)."""
+        return 2 * self.points - 6
+
+    def point(self, tp: Array) -> Array:
+        """``tp`` (3,) m in the target frame -> camera frame."""
+        return self.rotation @ np.asarray(tp, dtype=float) + self.translation
+
+    def point_covariance(self, tp: Array, sigma_px: float) -> Array:
+        """Covariance (3, 3) m² of :meth:`point`: from :attr:`image_covariance` when there is one (the
+        least-squares pose's sandwich ``N⁻¹ Jᵀ Σ J N⁻¹``, N = JᵀJ), else for independent corner noise
+        ``sigma_px`` pixels per coordinate (``sigma_px² N⁻¹``)."""
+        inverse = np.linalg.pinv(self.jacobian.T @ self.jacobian)
+        if self.image_covariance is not None:
+            gain = inverse @ self.jacobian.T
+            pose_cov = gain @ self.image_covariance @ gain.T
+        else:
+            pose_cov = sigma_px**2 * inverse
+        rvec = cv2.Rodrigues(self.rotation)[0]
+        _, d_r = cv2.Rodrigues(rvec)  # (3, 9): d vec(R) (row-major) / d rvec
+        tp = np.asarray(tp, dtype=float)
+        d_rot = np.stack([d_r[k].reshape(3, 3) @ tp for k in range(3)], axis=1)  # (3, 3): dp / d rvec
+        jp = np.hstack([d_rot, np.eye(3)])
+        return jp @ pose_cov @ jp.T
+
+
+def estimate_pose(obs: Observation, matrix: Array, distortion: Array, square: bool = False,
+                  reference: Array | None = None) -> Pose | None:
+    """The target pose from ``obs`` (None with fewer than 4 points or no solution). ``square``: the points
+    are one marker's corners in IPPE_SQUARE order; ``reference`` (3, 3): rotation that picks between two
+    nearly equal IPPE solutions."""
+    obj = np.ascontiguousarray(obs.object_points, dtype=np.float64).reshape(-1, 1, 3)
+    img = np.ascontiguousarray(obs.image_points, dtype=np.float64).reshape(-1, 1, 2)
+    n = len(obj)
+    if n < 4:
+        return None
+    planar = np.ptp(obs.object_points[:, 2]) < 1e-9
+    flag = cv2.SOLVEPNP_IPPE_SQUARE if square and n == 4 else cv2.SOLVEPNP_IPPE if planar else cv2.SOLVEPNP_SQPNP
+    try:
+        count, rvecs, tvecs, _ = cv2.solvePnPGeneric(obj, img, matrix, distortion, flags=flag)
+    except cv2.error:
+        return None
+    candidates = []
+    for rvec, tvec in zip(rvecs[:count], tvecs[:count], strict=True):
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, matrix, distortion, rvec.copy(), tvec.copy(), _LM)
+        if tvec[2, 0] <= 0:
+            continue  # behind the camera
+        projected, jac = cv2.projectPoints(obj, rvec, tvec, matrix, distortion)
+        residual = (projected - img).reshape(-1)
+        rms = float(np.sqrt(np.mean(residual**2)))
+        candidates.append((rms, rvec, tvec, jac[:, :6]))
+    if not candidates:
+        return None
+    candidates.sort(key=lambda c: c[0])
+    best, ambiguous = candidates[0], False
+    if len(candidates) > 1:
+        second = candidates[1]
+        close = second[0] < AMBIGUITY_RATIO * best[0] or second[0] - best[0] < AMBIGUITY_FLOOR_PX
+        distinct = _angle(cv2.Rodrigues(best[1])[0], cv2.Rodrigues(second[1])[0]) > 1e-3
+        if close and distinct:
+            ambiguous = True
+            if reference is not None:
+                best = min(candidates[:2], key=lambda c: _angle(cv2.Rodrigues(c[1])[0], reference))
+    rms, rvec, tvec, jac = best
+    return Pose(cv2.Rodrigues(rvec)[0], tvec.reshape(3), rms, n, np.asarray(jac, dtype=float), ambiguous,
+                obs.covariance)
+
+
+def _angle(a: Array, b: Array) -> float:
+    """Rotation angle (rad) between two rotation matrices."""
+    c = (np.trace(a.T @ b) - 1.0) / 2.0
+    return float(np.arccos(np.clip(c, -1.0, 1.0)))

@@ -1,0 +1,210 @@
+"""Rendered camera images: a printed target seen through a pinhole camera with distortion, blur and noise.
+
+Only the pixels are simulated; the detection that reads them is OpenCV's. :func:`render` draws a target
+(its :meth:`~drivers.camera.targets.Target.texture`) at a pose in the camera frame: every output pixel is
+supersampled, its ray undistorted with the camera's own model (``cv2.undistortPoints``, iterated to 1e-10), intersected
+with the target plane, and the texture sampled there; the supersamples are averaged (area filter), then
+the image is blurred (Gaussian, and motion along a line) and Gaussian sensor noise is added. Pixel
+convention: OpenCV's (the centre of the top-left pixel is (0, 0)).
+
+:class:`SimulatedCamera` is a frame source (see drivers/camera/sources.py) that renders the target mounted
+on the simulated robot's flange (``rig.flange_pose()``) at each frame's time on the rig's clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from drivers.camera.intrinsics import CameraIntrinsics
+from drivers.camera.targets import Target
+from drivers.errors import ConnectionFailed, DeviceTimeout
+
+Array = NDArray[np.float64]
+BLACK, WHITE, BACKGROUND = 30.0, 220.0, 110.0  # grey levels of the print and of what lies behind it
+
+
+@dataclass(frozen=True)
+class Optics:
+    """Image degradations: ``noise`` grey levels (of 255) of Gaussian sensor noise, ``blur`` pixels (sigma of
+    a Gaussian defocus), ``motion`` pixels (length of a horizontal motion streak), ``supersample`` rays per
+    pixel side."""
+
+    noise: float = 0.0
+    blur: float = 0.0
+    motion: float = 0.0
+    supersample: int = 3
+
+
+class _Rays:
+    """Undistorted normalised rays (x/z, y/z) of every supersample of a camera's image, computed once."""
+
+    def __init__(self, camera: CameraIntrinsics, supersample: int) -> None:
+        s = supersample
+        w, h = camera.width * s, camera.height * s
+        u = (np.arange(w, dtype=np.float64) + 0.5) / s - 0.5
+        v = (np.arange(h, dtype=np.float64) + 0.5) / s - 0.5
+        uu, vv = np.meshgrid(u, v)
+        pixels = np.stack([uu.ravel(), vv.ravel()], axis=1).reshape(-1, 1, 2)
+        if np.any(camera.distortion):
+            criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-10)
+            rays = cv2.undistortPoints(pixels, camera.matrix, camera.distortion, None, None, None, criteria)
+            rays = rays.reshape(h, w, 2)
+        else:
+            k = camera.matrix
+            y = (vv - k[1, 2]) / k[1, 1]
+            rays = np.stack([(uu - k[0, 2] - k[0, 1] * y) / k[0, 0], y], axis=2)
+        self.x = rays[..., 0].astype(np.float32)
+        self.y = rays[..., 1].astype(np.float32)
+        self.shape, self.supersample = (h, w), s
+
+
+def texture_scale(target: Target, approximate: float) -> float:
+    """Texels per metre near ``approximate`` (and not below it) that put every edge of the printed target on
+    a texel boundary: a whole number of texels per module (marker bit), per gap of a grid board, per square
+    and per square-to-marker margin of a ChArUco board. Otherwise ``generateImage`` rounds each marker's
+    position to a texel, which moved the corners of a 3x3 grid board by up to 0.35 texel (0.14 px at
+    0.5 m). Falls back to ``approximate`` when no scale within a factor 2 fits (a layout, odd sizes)."""
+    modules = cv2.aruco.getPredefinedDictionary(target.dictionary).markerSize + 2
+    side = float(np.linalg.norm(np.diff(next(iter(target.corners.values()))[:2], axis=0)))
+    lengths = [side / modules]
+    board = target.board
+    if isinstance(board, cv2.aruco.CharucoBoard):
+        lengths += [board.getSquareLength(), (board.getSquareLength() - board.getMarkerLength()) / 2]
+    elif isinstance(board, cv2.aruco.GridBoard):
+        lengths.append(board.getMarkerSeparation())
+    lengths += list(target.extent)
+    base = lengths[0]
+    for per_module in range(max(int(np.ceil(approximate * base - 1e-9)), 1), int(2 * approximate * base) + 2):
+        ppm = per_module / base
+        if all(abs(q * ppm - round(q * ppm)) < 1e-3 for q in lengths):  # OpenCV keeps float32 lengths
+            return ppm
+    return approximate
+
+
+class Renderer:
+    """Renders one target through one camera (the rays and the texture are prepared once)."""
+
+    def __init__(self, target: Target, camera: CameraIntrinsics, optics: Optics | None = None,
+                 pixels_per_metre: float | None = None) -> None:
+        self.target, self.camera, self.optics = target, camera, optics or Optics()
+        self._rays = _Rays(camera, self.optics.supersample)
+        ppm = texture_scale(target, pixels_per_metre or 40.0 / (min(target.extent) / 10))
+        margin = max(int(0.15 * min(target.extent) * ppm), 2)  # the white quiet zone around the print
+        texture, self._affine = target.texture(ppm, margin)
+        self._texture = (BLACK + (WHITE - BLACK) * (texture.astype(np.float32) / 255.0)).astype(np.float32)
+        # a little blur keeps the print's edges from aliasing on the supersample grid (it does not move them)
+        self._pyramid = [cv2.GaussianBlur(self._texture, (0, 0), 0.5)]
+        while min(self._pyramid[-1].shape) > 64:
+            self._pyramid.append(cv2.pyrDown(self._pyramid[-1]))
+        self._texels_per_metre = abs(self._affine[0, 0])
+
+    def render(self, poses: list[Array], rng: np.random.Generator | None = None) -> NDArray[np.uint8]:
+        """An 8-bit grey image with the target at each pose in ``poses`` (4x4, camera frame <- target frame,
+        metres; several poses draw several copies); ``rng`` draws the sensor noise."""
+        h, w = self._rays.shape
+        acc = np.full((h, w), BACKGROUND, dtype=np.float32)
+        depth = np.full((h, w), np.inf, dtype=np.float32)
+        for pose in poses:
+            self._draw(np.asarray(pose, dtype=float), acc, depth)
+        s = self._rays.supersample
+        image = cv2.resize(acc, (w // s, h // s), interpolation=cv2.INTER_AREA) if s > 1 else acc
+        o = self.optics
+        if o.blur > 0:
+            image = cv2.GaussianBlur(image, (0, 0), o.blur)
+        if o.motion > 0:
+            length = max(round(o.motion), 1)
+            kernel = np.full((1, length), 1.0 / length, dtype=np.float32)
+            image = cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REFLECT)
+        if o.noise > 0:
+            rng = rng or np.random.default_rng()
+            image = image + rng.normal(0.0, o.noise, image.shape).astype(np.float32)
+        return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+    def _draw(self, pose: Array, acc: NDArray[np.float32], depth: NDArray[np.float32]) -> None:
+        r, t = pose[:3, :3], pose[:3, 3]
+        plane = np.column_stack([r[:, 0], r[:, 1], t])  # target (x, y, 1) -> camera ray scaled by depth
+        try:
+            to_plane = np.linalg.inv(plane)
+        except np.linalg.LinAlgError:
+            return  # seen edge-on
+        level = self._level(pose)
+        scale = np.diag([0.5**level, 0.5**level, 1.0])  # pyrDown keeps texel j of level L at 2^L·j of level 0
+        m = (scale @ self._affine @ to_plane).astype(np.float32)
+        x, y = self._rays.x, self._rays.y
+        q2 = to_plane[2, 0] * x + to_plane[2, 1] * y + to_plane[2, 2]  # 1 / depth along the ray
+        with np.errstate(divide="ignore", invalid="ignore"):
+            wz = m[2, 0] * x + m[2, 1] * y + m[2, 2]
+            map_x = (m[0, 0] * x + m[0, 1] * y + m[0, 2]) / wz
+            map_y = (m[1, 0] * x + m[1, 1] * y + m[1, 2]) / wz
+            z = 1.0 / q2
+        texture = self._pyramid[level]
+        th, tw = texture.shape
+        inside = (q2 > 0) & (map_x > -0.5) & (map_x < tw - 0.5) & (map_y > -0.5) & (map_y < th - 0.5) & (z < depth)
+        if not inside.any():
+            return
+        sampled = cv2.remap(texture, np.where(inside, map_x, -10).astype(np.float32),
+                            np.where(inside, map_y, -10).astype(np.float32), cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_REPLICATE)
+        acc[inside] = sampled[inside]
+        depth[inside] = z[inside]
+
+    def _level(self, pose: Array) -> int:
+        """Pyramid level whose texels are at least one supersample wide at the target's distance."""
+        f = float(self.camera.matrix[0, 0]) * self._rays.supersample
+        samples_per_metre = f / max(float(pose[2, 3]), 1e-6)
+        ratio = self._texels_per_metre / samples_per_metre
+        return int(np.clip(np.ceil(np.log2(max(ratio, 1.0))), 0, len(self._pyramid) - 1))
+
+
+class SimulatedCamera:
+    """A frame source rendering ``target`` mounted on the simulated robot's flange.
+
+    ``mount``: 4x4, flange frame <- target frame (m). One frame every ``1/fps`` s on the rig's clock, drawn
+    at the arm's actual pose at that time. The rig's tracker faults act per measurement
+    (:meth:`start_measurement`): ``target_lost`` hides the target, ``bad_reading`` puts a second copy of it in
+    view (duplicate ids), ``slow`` delivers no frames, ``disconnect`` loses the camera until ``open()``.
+    """
+
+    def __init__(self, rig: object, target: Target, camera: CameraIntrinsics, mount: Array,
+                 optics: Optics | None = None, fps: float = 30.0) -> None:
+        self.rig, self.camera, self.mount, self.fps = rig, camera, np.asarray(mount, dtype=float), fps
+        self.renderer = Renderer(target, camera, optics)
+        self._rng = np.random.default_rng([getattr(rig, "tracker_seed", 0), 7])
+        self._fault: str | None = None
+        self.description = f"simulated camera {camera.width}x{camera.height}"
+
+    def open(self, timeout: float) -> None:
+        self.rig.tracker_connected = True  # type: ignore[attr-defined]
+
+    def close(self) -> None:
+        self.rig.tracker_connected = False  # type: ignore[attr-defined]
+
+    def start_measurement(self) -> None:
+        """A new measurement begins: count it on the rig and take its scheduled fault, if any."""
+        rig = self.rig
+        number = rig.measurements = rig.measurements + 1  # type: ignore[attr-defined]
+        self._fault = rig._take("tracker", number)  # type: ignore[attr-defined]
+        if self._fault == "disconnect":
+            rig.tracker_connected = False  # type: ignore[attr-defined]
+
+    def grab(self, timeout: float) -> tuple[NDArray[np.uint8], float]:
+        """The next frame and its time (s, rig clock); DeviceTimeout / ConnectionFailed for the faults."""
+        rig = self.rig
+        if not rig.tracker_connected:  # type: ignore[attr-defined]
+            raise ConnectionFailed("the simulated camera is not connected (lost link: connect again)")
+        if self._fault == "slow":
+            rig.clock.sleep(timeout)  # type: ignore[attr-defined]
+            raise DeviceTimeout(f"the simulated camera delivered no frame within {timeout:g} s")
+        rig.clock.sleep(1.0 / self.fps)  # type: ignore[attr-defined]
+        t = rig.clock.now()  # type: ignore[attr-defined]
+        pose = rig.flange_pose(t) @ self.mount  # type: ignore[attr-defined]
+        poses = [] if self._fault == "target_lost" else [pose]
+        if self._fault == "bad_reading":
+            twin = pose.copy()
+            twin[:3, 3] += pose[:3, 0] * 1.6 * max(self.renderer.target.extent)  # beside the real one
+            poses.append(twin)
+        return self.renderer.render(poses, self._rng), t

@@ -1,0 +1,399 @@
+"""A camera watching an ArUco marker, a board, or markers on a rigid body on the flange (OpenCV).
+
+URL form (``--tracker``)::
+
+    aruco:SOURCE?camera=FILE[&marker=ID&size=M | &board=grid&cols=N&rows=N&size=M&gap=M
+                 | &board=charuco&cols=N&rows=N&square=M&size=M | &layout=FILE][&dict=NAME][&first=ID]
+                 [&tp=X,Y,Z][&refine=edges|apriltag|subpix|contour|none][&frames=N][&max_rms=PX]
+                 [&timeout=S][&retries=N]
+
+``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a video file, an image folder or a
+glob (``run/*.png``; replay of a recorded run, ``frames`` images per reading), or ``sim`` (images rendered
+from the simulated robot, mock mode only: ``--robot mock:MODEL``).
+
+Target (units: metres):
+  ``marker``  id of a single marker (default 0 when no board or layout is given); ``size`` its side (the
+              black square; default 0.05)
+  ``board``   ``grid``: ``cols`` x ``rows`` markers of side ``size``, ``gap`` apart (default size/5);
+              ``charuco``: ``cols`` x ``rows`` squares of side ``square``, markers of side ``size``
+  ``first``   id of a board's first marker (default 0)
+  ``layout``  a YAML file of markers on a rigid body (drivers/camera/targets.py)
+  ``dict``    the ArUco dictionary (default ``4X4_50``; e.g. ``5X5_100``, ``ARUCO_ORIGINAL``, ``APRILTAG_36h11``)
+  ``tp``      the tracked point in the target frame (origin at the marker / board centre, x right, y up,
+              z out of the printed face), ``X,Y,Z`` in metres (default ``0,0,0``: the centre)
+Camera and measurement:
+  ``camera``  the intrinsics file (OpenCV FileStorage: camera_matrix, distortion_coefficients,
+              image_width, image_height); required except for ``sim``
+  ``refine``  marker corner refinement (default ``edges``: lines fitted to the marker's outer edges,
+              drivers/camera/refinement.py, the most accurate and fast; OpenCV's ``apriltag``, ``subpix``,
+              ``contour``, ``none`` compared in docs/benchmarks.md); ChArUco chessboard corners are always
+              refined by ``cornerSubPix``
+  ``frames``  frames averaged into one reading (default 5); ``max_rms`` pixels: a frame whose reprojection
+              RMS exceeds it is rejected (motion blur, a bent print; default 1.0)
+  ``timeout`` s to wait for one frame (default 2); ``retries`` failed frames tolerated per reading beyond
+              ``frames`` (default 5), then the reading fails with one line
+Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), ``fov`` horizontal degrees
+(60), ``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of
+motion streak (0), ``fps`` (30), ``distance`` m from the camera to the TP at home (1.0), ``tilt`` and
+``roll`` degrees of the flange at home (20, 10), ``seed`` (the robot's), ``fault`` as the mock tracker's
+(``target_lost`` hides the target, ``bad_reading`` shows a second copy, ``slow`` stops the frames,
+``disconnect`` loses the camera). Any other option is rejected with one line.
+
+A reading: the TP of every frame (pose by drivers/camera/pose.py), frames farther than 5 robust sigmas
+from the median rejected, the rest averaged. Its ``sigma`` is the standard uncertainty per axis (m), one
+number as the measurement contract has it: ``sqrt(trace(C) / 3)`` of the mean's covariance C. C is the
+pose covariance propagated to the TP, divided by the frames kept. With ``refine=edges`` the corners'
+covariance comes from the edge-line fits (drivers/camera/refinement.py: corners of one side are correlated),
+scaled up when the reprojection residuals are larger than it predicts; otherwise the corners are taken as
+independent with the noise of the pooled reprojection residuals (never below ``SIGMA_PX_FLOOR``). If
+the frames scatter significantly more than C says (F-test), their spread is used instead. A camera's
+error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
+the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights
+(1 / sigma² per sample): the sum of squared weighted residuals has the expectation it would have for
+isotropic noise of that sigma (reduced chi-square ~1), the relative weights of the samples are right
+(an oblique or distant view weighs less), but the fit cannot down-weight depth against lateral errors
+(unbiased, not minimum variance), and identify's outlier test must allow anisotropic residuals
+(identify/refine.py ``inlier_mask``).
+
+Faults: no frame within ``timeout`` -> the camera is reopened once, then DeviceTimeout; target not seen
+-> TargetLost; an id seen twice -> BadReading (DuplicateMarker); too few points, no pose, or a reprojection
+error above ``max_rms`` -> BadReading; each after ``retries`` failed frames, naming the count.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from scipy.stats import f as f_dist
+
+from drivers.base import Array, DeviceIdentity, TrackerReading
+from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
+from drivers.camera.pose import Pose, estimate_pose
+from drivers.camera.targets import (
+    REFINEMENTS,
+    DuplicateMarker,
+    Target,
+    charuco_board,
+    dictionary_id,
+    grid_board,
+    load_layout,
+    single_marker,
+)
+from drivers.errors import BadReading, DeviceTimeout, MeasurementError, SpecError, TargetLost
+from drivers.spec import TrackerSpec, parse_faults
+
+FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
+        "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
+OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
+           "refine", "frames", "max_rms", "timeout", "retries")
+SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "distance", "tilt", "roll", "seed",
+               "fault")
+SIGMA_PX_FLOOR = 0.01  # pixels: corner noise assumed at least this (clean renders reach 0.005-0.01 px)
+SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
+OUTLIER_SIGMAS = 5.0
+CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Typed options of an ``aruco:`` spec (module docstring)."""
+
+    target: Target
+    tp: Array
+    refine: str
+    frames: int
+    max_rms: float
+    timeout: float
+    retries: int
+    camera_file: Path | None
+    sim: dict[str, Any]
+
+
+def _fail(spec: TrackerSpec, why: str) -> SpecError:
+    return SpecError(f"tracker spec {str(spec)!r}: {why}; expected {FORM}")
+
+
+def _number(spec: TrackerSpec, raw: dict[str, Any], key: str, default: float, kind: type = float,
+            low: float = 0.0, strict: bool = True) -> Any:
+    if key not in raw:
+        return default
+    try:
+        value = kind(raw[key])
+    except (TypeError, ValueError):
+        raise _fail(spec, f"option {key}={raw[key]} must be {'an integer' if kind is int else 'a number'}") from None
+    if not math.isfinite(value) or value < low or (strict and value == low):
+        raise _fail(spec, f"option {key}={raw[key]} must be {'>' if strict else '>='} {low:g}")
+    return value
+
+
+def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
+    """The options of ``spec`` (site ``tracker_settings`` below them), typed and checked; SpecError."""
+    raw: dict[str, Any] = {}
+    raw.update({k: v for k, v in dict(getattr(site, "tracker_settings", None) or {}).items() if v is not None})
+    raw.update(spec.options)
+    simulated = spec.target == "sim"
+    known = OPTIONS + (SIM_OPTIONS if simulated else ())
+    for key in raw:
+        if key not in known:
+            extra = " (only for aruco:sim)" if key in SIM_OPTIONS else ""
+            raise _fail(spec, f"unknown option {key!r}{extra} (known: {', '.join(known)})")
+    try:
+        dictionary = dictionary_id(str(raw.get("dict", "4X4_50")))
+    except ValueError as exc:
+        raise _fail(spec, str(exc)) from None
+    target = _target(spec, raw, dictionary)
+    try:
+        tp = np.array([float(v) for v in str(raw.get("tp", "0,0,0")).split(",")])
+    except ValueError:
+        tp = np.zeros(0)
+    if tp.shape != (3,) or not np.all(np.isfinite(tp)):
+        raise _fail(spec, f"option tp={raw.get('tp')} must be X,Y,Z in metres")
+    refine = str(raw.get("refine", "edges"))
+    if refine not in REFINEMENTS:
+        raise _fail(spec, f"option refine={refine} must be one of {', '.join(REFINEMENTS)}")
+    camera = raw.get("camera")
+    if camera is None and not simulated:
+        raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera")
+    sim = _sim_settings(spec, raw) if simulated else {}
+    return Settings(target, tp, refine, _number(spec, raw, "frames", 5, int, 1, strict=False),
+                    _number(spec, raw, "max_rms", 1.0), _number(spec, raw, "timeout", 2.0),
+                    _number(spec, raw, "retries", 5, int, 0, strict=False),
+                    None if camera is None else Path(str(camera)), sim)
+
+
+def _target(spec: TrackerSpec, raw: dict[str, Any], dictionary: int) -> Target:
+    board, layout = raw.get("board"), raw.get("layout")
+    if sum(x is not None for x in (board, layout, raw.get("marker"))) > 1:
+        raise _fail(spec, "give one of marker=, board= and layout=")
+    given = [k for k in ("cols", "rows", "gap", "square") if k in raw]
+    try:
+        if layout is not None:
+            if given or "size" in raw:
+                raise _fail(spec, f"layout= takes its geometry from the file, not {(given or ['size'])[0]}=")
+            return load_layout(str(layout), dictionary if "dict" in raw else None)
+        if board is None:
+            if given:
+                raise _fail(spec, f"option {given[0]}= belongs to a board (board=grid or board=charuco)")
+            return single_marker(_number(spec, raw, "marker", 0, int, 0, strict=False),
+                                 _number(spec, raw, "size", 0.05), dictionary)
+        cols, rows = _number(spec, raw, "cols", 0, int), _number(spec, raw, "rows", 0, int)
+        if not cols or not rows:
+            raise _fail(spec, f"board={board} needs cols= and rows=")
+        size, first = _number(spec, raw, "size", 0.0), _number(spec, raw, "first", 0, int, 0, strict=False)
+        if not size:
+            raise _fail(spec, f"board={board} needs size= (the marker side, m)")
+        if board == "grid":
+            if "square" in raw:
+                raise _fail(spec, "square= belongs to board=charuco")
+            return grid_board(cols, rows, size, _number(spec, raw, "gap", size / 5), dictionary, first)
+        if board == "charuco":
+            if "gap" in raw or "square" not in raw:
+                raise _fail(spec, "board=charuco needs square= (the chessboard square, m) and takes no gap=")
+            return charuco_board(cols, rows, _number(spec, raw, "square", 0.0), size, dictionary, first)
+        raise _fail(spec, f"option board={board} must be grid or charuco")
+    except ValueError as exc:
+        if isinstance(exc, SpecError):
+            raise
+        raise _fail(spec, str(exc)) from None
+
+
+def _sim_settings(spec: TrackerSpec, raw: dict[str, Any]) -> dict[str, Any]:
+    out = {"width": _number(spec, raw, "width", 640, int), "height": _number(spec, raw, "height", 480, int),
+           "fov": _number(spec, raw, "fov", 60.0), "noise": _number(spec, raw, "noise", 2.0, low=0, strict=False),
+           "blur": _number(spec, raw, "blur", 0.5, low=0, strict=False),
+           "motion": _number(spec, raw, "motion", 0.0, low=0, strict=False), "fps": _number(spec, raw, "fps", 30.0),
+           "distance": _number(spec, raw, "distance", 1.0), "tilt": _number(spec, raw, "tilt", 20.0, low=-90),
+           "roll": _number(spec, raw, "roll", 10.0, low=-360),
+           "seed": None if "seed" not in raw else _number(spec, raw, "seed", 0, int, 0, strict=False)}
+    try:
+        out["k1"] = float(raw.get("k1", 0.0))
+        out["fault"] = parse_faults(str(raw["fault"]), "tracker") if "fault" in raw else ()
+    except ValueError as exc:
+        raise _fail(spec, str(exc).replace("could not convert string to float", "option k1 must be a number")) from None
+    if not out["fov"] < 170:
+        raise _fail(spec, "option fov must be below 170 degrees")
+    return out
+
+
+def rig_settings(spec: TrackerSpec) -> tuple[tuple[Any, ...], int | None, tuple[float, float, float]]:
+    """What the simulated rig takes from ``aruco:sim?...``: its faults, its seed, and the camera's view
+    (distance m, tilt rad, roll rad) for :meth:`drivers.sim.rig.SimulatedRig.face_tracker`."""
+    sim = parse_settings(spec).sim
+    return sim["fault"], sim["seed"], (sim["distance"], math.radians(sim["tilt"]), math.radians(sim["roll"]))
+
+
+class ArucoTracker:
+    """The camera tracker (implements :class:`drivers.base.Tracker`). ``source``: a frame source
+    (drivers/camera/sources.py or the simulated camera); ``camera``: its intrinsics."""
+
+    def __init__(self, spec: TrackerSpec, settings: Settings, source: Any, camera: CameraIntrinsics) -> None:
+        from drivers.camera.targets import Detector
+
+        self.spec, self.settings, self.source, self.camera = spec, settings, source, camera
+        self.detector = Detector(settings.target, settings.refine, camera)
+        self.reference: Array | None = None  # rotation of the last pose: keeps IPPE solutions on one branch
+        self.frames_used = self.frames_failed = 0
+
+    def connect(self, timeout: float) -> None:
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
+        self.source.open(timeout)
+
+    def close(self) -> None:
+        self.source.close()
+
+    def identity(self) -> DeviceIdentity:
+        s, k = self.settings, self.camera.matrix
+        target = s.target
+        details = {"source": self.source.description, "target": target.kind, "markers": str(len(target.corners)),
+                   "refine": s.refine, "frames": str(s.frames), "image": f"{self.camera.width}x{self.camera.height}",
+                   "tp": ",".join(f"{v!r}" for v in s.tp),
+                   # the intrinsics used, at full precision, so that a recorded session can be replayed
+                   "camera_matrix": json.dumps(k.tolist()),
+                   "distortion_coefficients": json.dumps(self.camera.distortion.tolist()),
+                   "camera_file": "" if s.camera_file is None else str(s.camera_file)}
+        return DeviceIdentity("tracker", "ArUco camera (OpenCV)", serial=str(self.spec.target),
+                              firmware=f"opencv {cv2.__version__}", details=details)
+
+    def measure(self, count: int, timeout: float) -> list[TrackerReading]:
+        """``count`` readings of the TP (m, camera frame), each the average of ``frames`` frames with its
+        own sigma. Raises TargetLost, BadReading, DeviceTimeout, ConnectionFailed (one line each)."""
+        if int(count) != count or count < 1 or not timeout > 0:
+            raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
+        self.source.start_measurement()
+        return [self._reading() for _ in range(count)]
+
+    def _reading(self) -> TrackerReading:
+        s = self.settings
+        poses: list[tuple[Pose, float]] = []
+        failures: list[MeasurementError] = []
+        while len(poses) < s.frames:
+            image, stamp = self._grab()
+            try:
+                poses.append((self._pose(image), stamp))
+            except MeasurementError as exc:
+                failures.append(exc)
+                self.frames_failed += 1
+                if len(failures) > s.retries:
+                    raise _summary(failures, len(poses) + len(failures)) from None
+        self.frames_used += len(poses)
+        return self._average(poses)
+
+    def _grab(self) -> tuple[Any, float]:
+        timeout = self.settings.timeout
+        try:
+            image, stamp = self.source.grab(timeout)
+        except DeviceTimeout:
+            self.source.close()  # a stalled camera: reopen once
+            self.source.open(timeout)
+            try:
+                image, stamp = self.source.grab(timeout)
+            except DeviceTimeout as exc:
+                raise DeviceTimeout(f"{self.source.description} stopped delivering frames (none within "
+                                    f"{timeout:g} s, also after reopening it)") from exc
+        shape = image.shape[:2]
+        if shape != (self.camera.height, self.camera.width):
+            raise BadReading(f"frame size {shape[1]}x{shape[0]} differs from the calibration's "
+                             f"{self.camera.width}x{self.camera.height} (camera= file)")
+        return image, stamp
+
+    def _pose(self, image: Any) -> Pose:
+        obs = self.detector.detect(image)
+        if not obs.ids:
+            raise TargetLost("the target is not visible")
+        square = self.settings.target.kind == "marker"
+        pose = estimate_pose(obs, self.camera.matrix, self.camera.distortion, square, self.reference)
+        if pose is None:
+            raise BadReading(f"no pose from {len(obs.image_points)} points (markers {list(obs.ids)})")
+        if pose.rms > self.settings.max_rms:
+            raise BadReading(f"reprojection error {pose.rms:.2f} px above max_rms={self.settings.max_rms:g} "
+                             "(motion blur or a bent target?)")
+        self.reference = pose.rotation
+        return pose
+
+    def _average(self, poses: list[tuple[Pose, float]]) -> TrackerReading:
+        tp = self.settings.tp
+        pts = np.array([p.point(tp) for p, _ in poses])
+        dof = sum(max(p.dof, 0) for p, _ in poses)
+        rss = sum(p.rms**2 * 2 * p.points for p, _ in poses)
+        expected = [p.expected_rss for p, _ in poses]
+        if all(e is not None for e in expected):  # corner covariances from the edge-line fits
+            scale = max(rss / max(sum(expected), 1e-30), 1.0)  # corners scatter more than their edges say
+            covs = np.array([p.point_covariance(tp, 0.0) * scale for p, _ in poses])
+        else:
+            sigma_px = max(math.sqrt(rss / dof) if dof else 0.0, SIGMA_PX_FLOOR)
+            covs = np.array([p.point_covariance(tp, sigma_px) for p, _ in poses])
+        model = math.sqrt(float(np.trace(covs.mean(axis=0))) / 3)  # per-axis RMS, one frame
+        median = np.median(pts, axis=0)
+        dist = np.linalg.norm(pts - median, axis=1)
+        robust = max(float(np.median(dist)) / CHI3_MEDIAN, model)
+        kept = dist <= OUTLIER_SIGMAS * robust if len(pts) >= 3 else np.ones(len(pts), dtype=bool)
+        n = int(kept.sum())
+        sigma = _frame_sigma(model, pts[kept], dof) / math.sqrt(n)
+        stamp = float(np.mean([t for (_, t), k in zip(poses, kept, strict=True) if k]))
+        status = "ok" if n == len(pts) else f"ok ({len(pts) - n} of {len(pts)} frames rejected)"
+        return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=sigma, status=status)
+
+
+def _frame_sigma(model: float, pts: Array, dof: int) -> float:
+    """One frame's per-axis standard uncertainty (m): the propagated ``model`` (``dof`` residual degrees of
+    freedom behind it), unless the kept frames ``pts`` (n, 3) scatter significantly more than it (an
+    F-test at SPREAD_SIGNIFICANCE: vibration, flicker, a target still moving), then their spread."""
+    n = len(pts)
+    if n < 2 or dof < 1 or model <= 0:
+        return model
+    spread2 = float(np.mean(np.var(pts, axis=0, ddof=1)))
+    # one axis (depth) dominates the spread: n - 1 degrees of freedom, not 3 (n - 1)
+    if spread2 > model**2 * f_dist.isf(SPREAD_SIGNIFICANCE, n - 1, dof):
+        return math.sqrt(spread2)
+    return model
+
+
+def _summary(failures: list[MeasurementError], tried: int) -> MeasurementError:
+    """One line for a reading that failed: the most frequent failure and the count."""
+    kinds = [type(f) for f in failures]
+    worst = max(set(kinds), key=kinds.count)
+    last = next(f for f in reversed(failures) if type(f) is worst)
+    error = worst if worst in (TargetLost, DuplicateMarker) else BadReading
+    return error(f"{last} ({len(failures)} of {tried} frames failed)")
+
+
+def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) -> ArucoTracker:
+    """The camera tracker of ``aruco:SOURCE?...`` (unconnected). ``aruco:sim`` needs ``rig`` (the simulated
+    rig made from this spec); a real source refuses one."""
+    spec = spec if isinstance(spec, TrackerSpec) else TrackerSpec.parse(spec)
+    if spec.backend != "aruco":
+        raise SpecError(f"drivers.camera.tracker opens aruco: trackers only, got {str(spec)!r}")
+    settings = parse_settings(spec, site)
+    camera = None
+    if settings.camera_file is not None:
+        try:
+            camera = read_intrinsics(settings.camera_file)
+        except IntrinsicsError as exc:
+            raise SpecError(f"tracker spec {str(spec)!r}: {exc}") from None
+    if spec.target != "sim":
+        if rig is not None:
+            raise ValueError("a real camera cannot see a simulated robot: use aruco:sim with a mock robot")
+        from drivers.camera.sources import source_for
+
+        assert camera is not None
+        return ArucoTracker(spec, settings, source_for(spec.target, camera.width, camera.height), camera)
+    if rig is None or getattr(rig, "tracker_spec", None) != spec:
+        raise ValueError("aruco:sim renders the simulated robot: pass rig=SimulatedRig.from_spec(robot_spec, "
+                         "tracker_spec, clock) made from this spec")
+    from drivers.camera.renderer import Optics, SimulatedCamera
+
+    sim = settings.sim
+    if camera is None:
+        camera = CameraIntrinsics.from_fov(sim["width"], sim["height"], sim["fov"], [sim["k1"], 0, 0, 0, 0])
+    mount = np.eye(4)
+    mount[:3, 3] = rig.truth.tool - settings.tp  # the target's centre, so that its TP is the rig's true TP
+    optics = Optics(noise=sim["noise"], blur=sim["blur"], motion=sim["motion"])
+    return ArucoTracker(spec, settings, SimulatedCamera(rig, settings.target, camera, mount, optics, sim["fps"]),
+                        camera)

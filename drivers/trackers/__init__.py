@@ -1,0 +1,3 @@
+"""Trackers that report 3D points: ``serial:PORT?protocol=NAME`` (line-oriented ASCII devices over pyserial, driven
+by a profile: ``serial_tracker``, ``ascii_profile``, ``serial_stream``) and ``ipp://HOST[:PORT]`` (I++ DME over TCP:
+``ipp``, ``ipp_protocol``, ``ipp_stream``). ``serial`` is imported only when a serial tracker is opened."""

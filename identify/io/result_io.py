@@ -1,0 +1,189 @@
+"""The result document of DESIGN.md (``joints``, ``base``, ``tool``) plus its evidence, as plain data.
+
+Units follow the contract: metres and radians. The dict is ready for ``yaml.safe_dump`` or ``json``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from identify import __version__
+from identify.extensions import EQUATIONS, UNITS
+from identify.pipeline import Identification
+from identify.refine import parameter_names
+from kinematics.dh import DH_NAMES, DHModel
+
+CONVENTION = (
+    "standard DH (DESIGN.md forward model). Frame 0: z0 on joint 1's axis, theta1 and d1 conventional, the "
+    "base absorbs the rest. Frame n: the last link's theta, d, a, alpha conventional, the tool carries the TP. "
+    "Consecutive axes parallel within parallel_tol: the common normal passes where d takes its conventional "
+    "value. Prismatic axes meet the next axis (a = 0). Conventional values: the nominal model's, or zero."
+)
+
+
+def _floats(values: Any) -> Any:
+    return np.asarray(values, dtype=float).tolist()
+
+
+def model_to_dict(model: DHModel) -> dict[str, Any]:
+    """The contract's three keys for ``model``."""
+    joints = [
+        {"type": t, "a": float(a), "alpha": float(al), "d": float(d), "theta": float(th)}
+        for t, th, d, a, al in zip(model.joint_types, model.theta, model.d, model.a, model.alpha, strict=True)
+    ]
+    return {"joints": joints, "base": _floats(model.base), "tool": _floats(model.tool)}
+
+
+def model_from_dict(doc: dict[str, Any]) -> DHModel:
+    """Inverse of :func:`model_to_dict`; raises ValueError (one line) on a malformed document."""
+    try:
+        joints = doc["joints"]
+        types = "".join(str(j["type"]) for j in joints)
+        table = np.array([[float(j[name]) for name in DH_NAMES] for j in joints])
+        return DHModel(types, table[:, 0], table[:, 1], table[:, 2], table[:, 3], doc["base"], doc["tool"])
+    except (KeyError, TypeError, IndexError) as exc:
+        raise ValueError(f"result document lacks or misshapes {exc}") from None
+
+
+def result_to_dict(ident: Identification, nominal: DHModel | None = None, nominal_name: str | None = None,
+                   source: str | None = None) -> dict[str, Any]:
+    """Everything the identification knows, contract keys first."""
+    ref = ident.refinement
+    n = ident.model.n_joints
+    std = ident.std
+    doc = model_to_dict(ident.model)
+    if len(ident.tp_ids) > 1:  # DESIGN.md: every tracked point's tool; ``tool`` is the smallest id's
+        doc["tools"] = {int(i): _floats(t) for i, t in zip(ident.tp_ids, ident.tools, strict=True)}
+    doc["verdict"] = ident.verdict.as_dict()
+    if ident.coupling is not None and not ident.coupling.is_identity:
+        doc["coupling"] = {**ident.coupling.as_dict(), "note": "the joint values of this model are DH values; "
+                           "the controller's readings give them by this equation"}
+    doc["extensions"] = extensions_to_dict(ident)
+    if ident.clock is not None:
+        c = ident.clock
+        doc["clock"] = {"offset_s": c.offset, "offset_std_s": c.offset_std, "drift": c.drift, "drift_std": c.drift_std,
+                        "t_ref_s": c.t_ref, "streamed_rows": c.rows,
+                        "note": "streamed rows: robot time = tracker time + offset_s + drift * (tracker time - "
+                                "t_ref_s), fitted with the kinematics"}
+    lines = ident.lines
+    doc["axis_lines"] = {
+        "note": "the identified model as joint axes at the home readings (tracker frame, m): exact even where "
+                "the DH table keeps a parallel-axis convention (see verdict check dh_table)",
+        "home": _floats(lines.home),
+        "points": _floats(lines.points),
+        "directions": _floats(lines.directions),
+        "tp_home": _floats(lines.tp_home),
+        **({"tps": _floats(lines.tps)} if len(lines.tps) > 1 else {}),
+    }
+    a = ident.adequacy
+    doc["noise"] = {
+        "tracker_per_axis": a.noise,
+        "declared_per_axis": a.declared,
+        "residual_per_axis": a.residual,
+        "difference_per_axis": a.difference,
+        "model_error_per_axis": a.model_error,
+        "covariance_inflation": a.inflation,
+    }
+    doc["uncertainty"] = {
+        "note": "standard uncertainty (1 sigma); 0 for fixed parameters",
+        "joints": [dict(zip(DH_NAMES, map(float, std[9 + 4 * i: 13 + 4 * i]), strict=True)) for i in range(n)],
+        "base_rotation": _floats(std[0:3]),
+        "base_translation": _floats(std[3:6]),
+        "tool": _floats(std[6:9]),
+    }
+    doc["fixed"] = [{"parameter": f.name, "value": f.value, "reason": f.reason} for f in ident.fixed]
+    doc["convention"] = {
+        "values_from": f"nominal model {nominal_name}" if nominal_name else ident.convention,
+        "parallel_links": ident.parallel,
+        "description": CONVENTION,
+    }
+    doc["residuals"] = {
+        "rms": ident.rms,
+        "noise_per_axis": ref.noise,
+        "model_error_per_axis": a.model_error,
+        "samples": int(ref.inliers.size),
+        "rejected_rows": ident.rejected_rows,
+        "per_sweep": [
+            {"sweep": s.sweep, "joint": s.joint, "samples": s.samples, "rejected": s.rejected, "rms": s.rms}
+            for s in ident.sweeps
+        ],
+    }
+    doc["condition_number"] = ref.condition
+    v = ident.validation
+    doc["validation"] = None if v is None else {
+        "samples": v.samples, "rms": v.rms, "max": v.max, "bound": v.bound, "expected_rms": v.expected,
+    }
+    geo = ident.geometric
+    doc["geometric_step"] = None if geo is None else {
+        "home": _floats(geo.home),
+        "axes": [
+            {"joint": ax.joint, "type": ax.kind, "point": _floats(ax.point), "direction": _floats(ax.direction),
+             "radius": None if np.isnan(ax.radius) else ax.radius, "rms": ax.rms, "travel": ax.travel,
+             "samples": ax.samples, "sweep": ax.sweep}
+            for ax in geo.axes
+        ],
+        "model": model_to_dict(geo.model),
+    }
+    doc["fit_start"] = ident.start
+    doc["covariance"] = covariance_to_dict(ident)
+    if nominal is not None:
+        delta = ident.model.dh_table() - nominal.dh_table()
+        delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
+        doc["nominal"] = {"name": nominal_name, "delta": [dict(zip(DH_NAMES, map(float, row), strict=True))
+                                                         for row in delta]}
+    doc["warnings"] = list(ident.warnings) + list(ref.notes)
+    doc["software"] = {"name": "dh-calib", "version": __version__}
+    if source:
+        doc["source"] = source
+    return finite(doc)
+
+
+def extensions_to_dict(ident: Identification) -> dict[str, Any]:
+    """The ``extensions`` section: joint errors selected (value, uncertainty, equation) and every decision."""
+    terms = [{"name": name, "value": value, "std": std, "unit": UNITS[name.rsplit("_", 1)[0]]}
+             for name, value, std in ident.extensions]
+    families = sorted({d.candidate.family for d in ident.decisions if d.selected})
+    return {
+        "note": "joint errors beyond the DH table: the joint stands at q + dq(q) (q: DH joint value, rad or m); "
+                "a reader that ignores this section gets the DH model without them",
+        "home": _floats(ident.predictor.terms.home),
+        "terms": terms,
+        "equations": {f: EQUATIONS[f] for f in families},
+        "selection": [
+            {"term": d.candidate.family, "joint": d.candidate.joint + 1, "statistic": d.score,
+             "likelihood_ratio": d.ratio, "limit": d.limit, "heldout_ratio": d.heldout, "selected": d.selected,
+             "reason": d.reason}
+            for d in ident.decisions
+        ],
+    }
+
+
+def covariance_to_dict(ident: Identification) -> dict[str, Any]:
+    """The parameters' covariance, for compensation, verification and comparison (identify/calibrated.py):
+    ``parameters`` (the free names of :func:`identify.refine.parameter_names`; base rotation a rotation vector
+    applied on the left of ``base``) and ``matrix`` (their covariance, m and rad squared: the DH table's), and
+    ``predictor``: the covariance of what predicts (the axis lines' minimal parameters, the tracked points', then
+    the joint-error coefficients: :class:`identify.predict.Predictor`)."""
+    names = parameter_names(ident.model.n_joints)
+    free = np.flatnonzero(ident.refinement.free)
+    return {
+        "note": "covariance of the free parameters (1 sigma squared; m, rad), noise and model error included",
+        "parameters": [names[k] for k in free],
+        "matrix": _floats(ident.refinement.covariance),
+        "predictor": _floats(ident.predictor.covariance),
+    }
+
+
+def finite(value: Any) -> Any:
+    """``value`` with every NaN or infinity replaced by None, so the document is valid JSON and YAML."""
+    if isinstance(value, dict):
+        return {k: finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [finite(v) for v in value]
+    if isinstance(value, float | np.floating):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value

@@ -1,0 +1,128 @@
+"""Human-readable summary of an identification for the terminal (millimetres and degrees)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from identify.pipeline import ClockFit, Identification
+from kinematics.dh import DHModel
+
+_SCALE = {"theta": np.degrees(1.0), "d": 1e3, "a": 1e3, "alpha": np.degrees(1.0)}
+_UNIT = {"theta": "deg", "d": "mm", "a": "mm", "alpha": "deg"}
+
+
+def _cell(value: float, std: float, fixed: bool, name: str) -> str:
+    scale = _SCALE[name]
+    if fixed:
+        return f"{value * scale:10.4f} fixed   "
+    return f"{value * scale:10.4f} ± {std * scale:<7.4f}"
+
+
+def format_report(ident: Identification, nominal: DHModel | None = None, nominal_name: str | None = None) -> str:
+    """Multi-line text: DH table ± uncertainty (and deltas vs nominal), base, tool, fit and validation."""
+    model, std, ref = ident.model, ident.std, ident.refinement
+    fixed = {f.name for f in ident.fixed}
+    names = ("theta", "d", "a", "alpha")
+    lines = [ident.verdict.summary()]
+    lines += [f"  {c.status:<4}  {c.name}: {c.message}" for c in ident.verdict.checks]
+    lines.append(f"Identified DH model, joints {model.joint_types} (standard DH; lengths mm, angles deg)")
+    head = "joint type " + "".join(f"{f'{n} [{_UNIT[n]}]':>20}" for n in names)
+    if nominal is not None:
+        head += f"   Δ vs {nominal_name or 'nominal'} (d, a mm; theta, alpha deg)"
+    lines.append(head)
+    for i in range(model.n_joints):
+        cells = []
+        for k, name in enumerate(names):
+            value = model.dh_table()[i, k]
+            cells.append(_cell(value, std[9 + 4 * i + k], f"{name}{i + 1}" in fixed, name))
+        row = f"{i + 1:>5}  {model.joint_types[i]}   " + " ".join(cells)
+        if nominal is not None:
+            delta = model.dh_table()[i] - nominal.dh_table()[i]
+            delta[0] = np.angle(np.exp(1j * delta[0]))
+            row += "   " + " ".join(f"{d * _SCALE[n]:+8.3f}" for d, n in zip(delta, names, strict=True))
+        lines.append(row)
+    t = model.base[:3, 3] * 1e3
+    lines.append(f"base origin in tracker frame [mm]: {t[0]:.3f}, {t[1]:.3f}, {t[2]:.3f}"
+                 f"  (± {', '.join(f'{s * 1e3:.3f}' for s in std[3:6])})")
+    tool = model.tool * 1e3
+    lines.append(f"tool (TP in frame {model.n_joints}) [mm]: {tool[0]:.3f}, {tool[1]:.3f}, {tool[2]:.3f}"
+                 f"  (± {', '.join(f'{s * 1e3:.3f}' for s in std[6:9])})")
+    for tp_id, t in zip(ident.tp_ids[1:], ident.tools[1:], strict=True):
+        lines.append(f"tool of tracked point {tp_id} (frame {model.n_joints}) [mm]: "
+                     + ", ".join(f"{x * 1e3:.3f}" for x in t))
+    if ident.coupling is not None and not ident.coupling.is_identity:
+        coupled = "; ".join(f"q{g[0] + 1} from readings {', '.join(str(r + 1) for r in g[1:])}"
+                            for g in ident.coupling.coupled_groups())
+        lines.append(f"coupled readings (q_dh = C . readings + offset): {coupled}")
+    lines += format_extensions(ident)
+    if ident.clock is not None:
+        lines.append(format_clock(ident.clock))
+    if ident.parallel:
+        lines.append(f"parallel axes (within tolerance) at links {ident.parallel}: their d is conventional")
+    lines.append(f"fixed (undetermined by the data): {', '.join(f.name for f in ident.fixed) or 'none'}")
+    lines.append(
+        f"fit: {int(ref.inliers.sum())} samples, residual RMS {ident.rms * 1e3:.4f} mm (3D), tracker noise "
+        f"{ref.noise * 1e3:.4f} mm per axis, model error {ident.adequacy.model_error * 1e3:.4f} mm per axis, "
+        f"condition number {ref.condition:.3g}"
+    )
+    worst = max(ident.sweeps, key=lambda s: s.rms if np.isfinite(s.rms) else -1.0)
+    lines.append("per sweep RMS [mm]: " + ", ".join(
+        f"{'free' if s.joint == 0 else f'J{s.joint}'} {s.rms * 1e3:.4f}" for s in ident.sweeps
+    ) + f"  (worst: sweep {worst.sweep})")
+    if ident.rejected_rows:
+        lines.append(f"rejected outliers (CSV lines): {ident.rejected_rows}")
+    if ident.geometric is not None:
+        lines.append(f"geometric step alone (the paper's method): residual RMS {ident.geometric_rms * 1e3:.4f} mm")
+    v = ident.validation
+    if v is None:
+        lines.append("validation: no held-out poses (add free poses, or rows with role=check)")
+    else:
+        lines.append(
+            f"validation on {v.samples} held-out poses: RMS {v.rms * 1e3:.4f} mm, max {v.max * 1e3:.4f} mm; "
+            f"expected RMS {v.expected * 1e3:.4f} mm (model bound {v.bound * 1e3:.4f} mm + tracker noise)"
+        )
+    for warning in ident.warnings + ref.notes:
+        lines.append(f"note: {warning}")
+    return "\n".join(lines)
+
+
+_EXT_SCALE = {"scale": (1e6, "ppm"), "ecc_sin": (np.degrees(1.0) * 3600, "arcsec"),
+              "ecc_cos": (np.degrees(1.0) * 3600, "arcsec"), "compliance": (np.degrees(1.0) * 3600, "arcsec/(N m)")}
+
+
+def format_clock(clock: ClockFit) -> str:
+    """One line: the fitted clock relation of the streamed rows."""
+    drift = "" if clock.drift is None else f", drift {clock.drift * 1e6:+.1f} ± {clock.drift_std * 1e6:.1f} ppm"
+    return (f"clock of {clock.rows} streamed rows: robot time = tracker time {clock.offset * 1e3:+.3f} "
+            f"± {clock.offset_std * 1e3:.3f} ms{drift}")
+
+
+def format_extensions(ident: Identification) -> list[str]:
+    """Joint errors selected beyond DH (with uncertainty) and why the others were not, one line each."""
+    if not ident.decisions:
+        return []
+    out = []
+    for name, value, std in ident.extensions:
+        family = name.rsplit("_", 1)[0]
+        scale, unit = _EXT_SCALE[family]
+        out.append(f"joint error {name}: {value * scale:+.3f} ± {std * scale:.3f} {unit}")
+    rejected = [d for d in ident.decisions if not d.selected and d.ratio is not None]
+    if not ident.extensions:
+        out.append(f"joint errors: none selected ({len(ident.decisions)} candidates tested; statistics below "
+                   "the information criterion)")
+    for d in rejected:
+        out.append(f"joint error {d.candidate.family} on joint {d.candidate.joint + 1} not selected: {d.reason}")
+    return out
+
+
+def format_reference(ident: Identification, label: str, reference: DHModel) -> str:
+    """Lines of the identified DH table's deltas against ``reference`` (e.g. the controller's factory
+    calibration): d, a in mm; theta, alpha in deg (theta wrapped to ±180)."""
+    names = ("theta", "d", "a", "alpha")
+    lines = [f"Δ identified vs {label} (d, a mm; theta, alpha deg):"]
+    for i in range(ident.model.n_joints):
+        delta = ident.model.dh_table()[i] - reference.dh_table()[i]
+        delta[0] = np.angle(np.exp(1j * delta[0]))
+        lines.append(f"{i + 1:>5}  " + " ".join(f"{name} {d * _SCALE[name]:+9.4f}"
+                                            for d, name in zip(delta, names, strict=True)))
+    return "\n".join(lines)

@@ -1,0 +1,103 @@
+"""The verification report (``acquire verify``): one self-contained HTML file with the headline (the verdict, AP and
+RP before and after compensation against what the result predicted), the per-pose table, a figure, and the run's
+record. Built from the ``.verify.yaml`` summary and the session; lengths in mm on the page.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from identify import __version__
+from identify.report.headline import headline_html
+from identify.report.html import _CSS, _acquisition_section, _e, _figure_html, _table, _when
+
+if TYPE_CHECKING:
+    from session.store import Session
+
+MM = 1e3
+MODES = ("before", "after")
+
+
+def figure_accuracy(summary: dict[str, Any]) -> Figure:
+    """AP and RP per pose (mm, log scale), before and after, with the result's predictions."""
+    runs = summary.get("runs") or {}
+    fig = Figure(figsize=(10, 3.6))
+    ax1, ax2 = fig.subplots(1, 2)
+    x = np.arange(1, 6)
+    for offset, mode, color in ((-0.2, "before", "C3"), (0.2, "after", "C2")):
+        poses = {int(p["pose"][1:]): p for p in (runs.get(mode) or {}).get("poses", [])}
+        ap = [poses[k]["ap"] * MM if k in poses else np.nan for k in x]
+        rp = [poses[k]["rp"] * MM if k in poses else np.nan for k in x]
+        ax1.bar(x + offset, ap, width=0.38, color=color, label=f"AP {mode}")
+        ax2.bar(x + offset, rp, width=0.38, color=color, label=f"RP {mode}")
+    predicted = summary.get("predicted") or {}
+    if predicted.get("before"):
+        ax1.plot(x - 0.2, np.array(predicted["before"]) * MM, "k_", ms=16, mew=2, label="predicted before")
+    if summary.get("expected"):
+        ax1.plot(x + 0.2, np.array(summary["expected"]) * MM, "kx", ms=8, label="uncertainty after (1 sigma, 3D)")
+    for ax, title in ((ax1, "pose accuracy AP"), (ax2, "pose repeatability RP")):
+        ax.set_yscale("log")
+        ax.set_xticks(x, [f"P{k}" for k in x])
+        ax.set_ylabel("[mm]")
+        ax.set_title(title)
+        ax.legend(fontsize=7)
+    return fig
+
+
+def _pose_rows(summary: dict[str, Any]) -> list[list[str]]:
+    runs = summary.get("runs") or {}
+    targets = np.array(summary["targets"]) * MM
+    by_mode = {m: {int(p["pose"][1:]): p for p in (runs.get(m) or {}).get("poses", [])} for m in MODES}
+    predicted = summary.get("predicted") or {}
+    rows = []
+    for k in range(1, 6):
+        b, a = by_mode["before"].get(k), by_mode["after"].get(k)
+
+        def cell(p: dict[str, Any] | None, key: str, std: str | None = None) -> str:
+            if p is None:
+                return "-"
+            return f"{p[key] * MM:.4f}" + (f" ± {p[std] * MM:.4f}" if std else "")
+
+        rows.append([f"P{k}", ", ".join(f"{v:.1f}" for v in targets[k - 1]),
+                     f"{predicted['before'][k - 1] * MM:.4f}" if predicted.get("before") else "-",
+                     cell(b, "ap", "ap_std"), f"0 ± {summary['expected'][k - 1] * MM:.4f}",
+                     cell(a, "ap", "ap_std"), cell(b, "rp"), cell(a, "rp"), str(a["n"] if a else 0)])
+    return rows
+
+
+def verification_html(summary: dict[str, Any], header: dict[str, Any], source: str,
+                      session: Session | None = None) -> str:
+    """The report as one HTML document: ``summary`` as written to ``.verify.yaml``, the session ``header``."""
+    info = (header.get("config") or {}).get("verification") or {}
+    robot = (header.get("robot") or {}).get("model", "robot")
+    title = f"Verification report: {robot}"
+    verdict = summary["verdict"]
+    checks = [("verification", verdict["status"], verdict["message"])]
+    body = [f"<h1>{_e(title)}</h1>",
+            f"<p>dh-calib {_e(__version__)}, generated {_e(_when(time.time()))}; session <code>{_e(source)}</code>; "
+            f"calibration <code>{_e(summary.get('result'))}</code> (its verdict: {_e(info.get('result_verdict'))})."
+            "</p>",
+            headline_html(verdict["status"], checks, None, summary, what="verification")]
+    body.append('<section id="poses"><h2>Per pose</h2>'
+                f"<p>ISO 9283-style: five poses on the diagonal plane of a cube of edge {summary['edge'] * MM:.0f} mm "
+                f"centred at {', '.join(f'{v * MM:.1f}' for v in summary['centre'])} mm (robot base frame), each "
+                f"visited {summary['cycles']} times in the order P1, P5, P4, P3, P2; first commanded with the "
+                "nominal model (before), then with the identified one (after). AP: distance of the barycentre of the "
+                "attained positions from the commanded one (± its standard uncertainty from their spread); RP: "
+                "l̄ + 3 S_l. Positions only (one tracked point): no orientation terms. Missing steps: "
+                f"{summary.get('missing_steps', 0)}.</p>"
+                + _table(["pose", "target x, y, z [mm]", "predicted AP before [mm]", "AP before [mm]",
+                          "predicted AP after [mm]", "AP after [mm]", "RP before [mm]", "RP after [mm]", "visits"],
+                         _pose_rows(summary))
+                + _figure_html(figure_accuracy(summary), "AP and RP per pose, before and after compensation")
+                + "".join(f"<p>note: {_e(n)}</p>" for n in info.get("notes", [])) + "</section>")
+    if session is not None:
+        text, fig = _acquisition_section(session)
+        body.append('<section id="acquisition"><h2>Run record</h2>' + text
+                    + ("" if fig is None else _figure_html(fig, "Home re-measurements over time")) + "</section>")
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{_e(title)}</title><style>{_CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n")
