@@ -30,8 +30,9 @@ from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
 from identify.refine import full_jacobian
-from identify.simulate import axis_distances, random_poses
+from identify.simulate import random_poses
 from kinematics.dh import DHModel, frames_from_joints
+from kinematics.truth import axis_distances
 
 STEP_KINDS = ("sweep", "free", "home", "verify", "stream")  # verify: acquire/verify.py; stream: plan_continuous.py
 # the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
@@ -146,7 +147,7 @@ def tp_model(robot: RobotModel, tp_guess: Any) -> DHModel:
 
 
 def axis_distances_many(model: DHModel, q: Array) -> Array:
-    """:func:`identify.simulate.axis_distances` for many poses at once: (m, n) m, inf for prismatic."""
+    """:func:`kinematics.truth.axis_distances` for many poses at once: (m, n) m, inf for prismatic."""
     frames = frames_from_joints(model, q)
     last = frames[:, -1]
     tp = last[:, :3, :3] @ model.tool + last[:, :3, 3]

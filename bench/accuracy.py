@@ -34,8 +34,9 @@ from config.robots import load_robot
 from identify.bounds import prediction_rms_bound
 from identify.pipeline import identify
 from identify.refine import full_jacobian
-from identify.simulate import random_poses, random_truth, simulate
+from identify.simulate import random_poses, simulate
 from kinematics.dh import DHModel, points_from_joints
+from kinematics.truth import random_truth
 
 FAMILIES = ("ur5e", "scara", "iiwa7", "track_ur5e", "gantry")
 NOISES = (1e-5, 5e-5, 5e-4)  # m per axis

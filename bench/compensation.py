@@ -44,8 +44,9 @@ from identify.calibrated import CalibratedModel
 from identify.compare import compare
 from identify.compensate import compensate
 from identify.pipeline import identify
-from identify.simulate import random_poses, random_truth, simulate
+from identify.simulate import random_poses, simulate
 from kinematics.dh import points_from_joints
+from kinematics.truth import random_truth
 
 ROBOT = load_robot("ur5e")
 SPEED_TARGET = 5.0

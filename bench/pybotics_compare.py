@@ -25,8 +25,9 @@ import numpy as np
 from config.robots import load_robot
 from identify.bounds import prediction_rms_bound
 from identify.pipeline import identify
-from identify.simulate import random_poses, random_truth, simulate
+from identify.simulate import random_poses, simulate
 from kinematics.dh import DHModel, points_from_joints
+from kinematics.truth import random_truth
 
 SEED = 20240604
 NOISE = 5e-5

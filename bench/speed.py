@@ -25,7 +25,8 @@ import scipy
 from config.robots import load_robot
 from identify.cpa import geometric_step
 from identify.pipeline import identify
-from identify.simulate import random_truth, simulate
+from identify.simulate import simulate
+from kinematics.truth import random_truth
 
 SEED = 20240602
 NOISE = 5e-5

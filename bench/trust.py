@@ -31,7 +31,8 @@ from scipy.spatial.transform import Rotation
 from config.robots import load_robot
 from identify.pipeline import identify
 from identify.refine import parameter_names, vector_from_model
-from identify.simulate import random_truth, simulate
+from identify.simulate import simulate
+from kinematics.truth import random_truth
 
 FAMILIES = ("ur5e", "scara")
 NOISE = 5e-5

@@ -75,8 +75,8 @@ from drivers.sim.tracker import SimulatedTracker as SimulatedTracker  # re-expor
 from drivers.sim.tracker import open_tracker as open_tracker
 from drivers.sim.world import errors_as_dict, has_errors, joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
-from identify.simulate import random_truth
 from kinematics.dh import frames_from_joints, points_from_joints
+from kinematics.truth import random_truth
 
 RING_FREQUENCY = 8.0  # Hz, of the oscillation after a move
 POLL_PERIOD = 0.01  # s between joint readings in wait_until_still

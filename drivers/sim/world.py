@@ -1,7 +1,7 @@
 """The simulated rig's world beyond its DH truth: reflectors on the flange and the joints' own errors.
 
-Pure functions on numpy arrays with seeded generators passed in; the kinematics are identify's (forward
-model, :mod:`kinematics.joint_errors`), never written again here. Units: metres, radians, newton-metres.
+Pure functions on numpy arrays with seeded generators passed in; the kinematics are the shared robot model's
+(kinematics/: forward model, :mod:`kinematics.joint_errors`), never written again here. Units: metres, radians, newton-metres.
 
 - **Reflectors** (:func:`reflector_tools`): the tracked points the tracker sees, as tool vectors in the flange
   (last DH) frame. The first is the truth's TP; the others lie on a plate through it, perpendicular to the
@@ -22,9 +22,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from config.robots import RobotModel
-from identify.simulate import axis_distances
 from kinematics.dh import DHModel
 from kinematics.joint_errors import Coupling, JointErrors, LinkMasses, gravity_torques
+from kinematics.truth import axis_distances
 
 Array = NDArray[np.float64]
 

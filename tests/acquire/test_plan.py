@@ -29,7 +29,8 @@ from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.motion import motion_time
 from identify.bounds import prediction_rms_bound
-from identify.simulate import axis_distances, random_poses
+from identify.simulate import random_poses
+from kinematics.truth import axis_distances
 
 ROBOTS = ["ur5e", "scara", "gantry", "track_ur5e"]
 SITE = SiteConfig.default()

@@ -18,7 +18,8 @@ from identify.cli import main
 from identify.compare import _holm, compare
 from identify.io.result_io import result_to_dict
 from identify.pipeline import identify
-from identify.simulate import random_truth, simulate
+from identify.simulate import simulate
+from kinematics.truth import random_truth
 from tests._single_thread import run_single_threaded
 
 NOISE = 2e-5

@@ -18,8 +18,9 @@ from identify.compensate import compensate, parse_ur_pose, pose_matrices, solve_
 from identify.io.result_io import result_to_dict
 from identify.pipeline import identify
 from identify.poe import lines_from_model
-from identify.simulate import random_poses, random_truth, simulate
+from identify.simulate import random_poses, simulate
 from kinematics.dh import points_from_joints
+from kinematics.truth import random_truth
 from tests._single_thread import run_single_threaded
 
 NOISE = 5e-5

@@ -16,8 +16,9 @@ from hypothesis import strategies as st
 from config.robots import load_robot
 from identify.cpa import DEFAULT_PARALLEL_TOL, MIN_CHORD, axis_from_sweep, dh_from_axes, geometric_step
 from identify.measurements import InputError, Measurements
-from identify.simulate import random_base, random_poses, random_truth, simulate
+from identify.simulate import random_poses, simulate
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
+from kinematics.truth import random_base, random_truth
 
 KINDS = ("skew", "intersecting", "parallel", "antiparallel", "coincident")
 seeds = st.integers(0, 2**32 - 1)

@@ -20,8 +20,9 @@ from identify.cli import main
 from identify.io.csvio import format_measurements, read_measurements
 from identify.io.result_io import model_from_dict, model_to_dict, result_to_dict
 from identify.pipeline import identify, split_holdout
-from identify.simulate import random_poses, random_truth, simulate
+from identify.simulate import random_poses, simulate
 from kinematics.dh import points_from_joints
+from kinematics.truth import random_truth
 
 FAMILIES = ["ur5e", "scara", "iiwa7", "track_ur5e", "gantry"]
 ACCURACY_FACTOR = 2.5

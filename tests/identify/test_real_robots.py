@@ -17,9 +17,10 @@ from identify.cli import main
 from identify.io.csvio import format_measurements, parse_measurements
 from identify.measurements import InputError
 from identify.pipeline import identify
-from identify.simulate import random_poses, random_truth
+from identify.simulate import random_poses
 from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 from kinematics.joint_errors import JointErrors
+from kinematics.truth import random_truth
 
 NOISE = 2e-5
 ERROR_FACTOR = 2.0  # RMS error vs reported accuracy over 200 poses: chi-square(600) stays far below 2x

@@ -19,13 +19,13 @@ from identify.simulate import (
     lines_from_model,
     make_scenario,
     random_poses,
-    random_truth,
     reading_error,
     sweep_readings,
     tilt_lines,
     tilted_truth,
 )
 from kinematics.dh import points_from_joints
+from kinematics.truth import random_truth
 
 UR5E = load_robot("ur5e")
 SCARA = load_robot("scara")

@@ -14,10 +14,11 @@ from identify.io.result_io import result_to_dict
 from identify.measurements import Measurements
 from identify.pipeline import identify
 from identify.report.terminal import format_report
-from identify.simulate import perturbed_model, random_base, random_poses
+from identify.simulate import random_poses
 from identify.simulate_stream import StreamSettings, joined, streamed_sweeps
 from identify.sync import retiming
 from kinematics.dh import points_from_joints
+from kinematics.truth import perturbed_model, random_base
 
 NOISE = 2e-5  # m per axis
 HOME = np.array([0.0, -1.2, 1.2, -1.5, -1.5, 0.3])

@@ -20,8 +20,9 @@ from identify.cli import main
 from identify.io.csvio import format_measurements
 from identify.measurements import InputError, Measurements
 from identify.pipeline import Identification, identify
-from identify.simulate import observe, random_poses, random_truth, simulate, sweep_readings
+from identify.simulate import observe, random_poses, simulate, sweep_readings
 from kinematics.dh import points_from_joints
+from kinematics.truth import random_truth
 
 ERROR_FACTOR = 3.0
 

@@ -25,8 +25,8 @@ from drivers.motion import move_duration
 from drivers.registry import open_robot, open_tracker
 from drivers.sim.rig import SimulatedRig, SimulatedRobot
 from drivers.sim.tracker import SimulatedTracker
-from identify.simulate import random_truth
 from kinematics.dh import points_from_joints
+from kinematics.truth import random_truth
 
 T0 = 1000.0  # start of the virtual clock, s
 UR5E = load_robot("ur5e")

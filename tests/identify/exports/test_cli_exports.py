@@ -38,7 +38,8 @@ def test_every_export_is_written_and_consistent(tmp_path, capsys):
 
 def test_ur_calibration_of_a_non_ur_robot_is_refused_before_identifying(tmp_path, capsys):
     from config.robots import load_robot
-    from identify.simulate import random_truth, simulate
+    from identify.simulate import simulate
+    from kinematics.truth import random_truth
 
     robot = load_robot("scara")
     rng = np.random.default_rng(1)

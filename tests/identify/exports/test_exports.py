@@ -31,8 +31,9 @@ from identify.exports.urdf import matrix_from_rpy, rpy_from_matrix, urdf_from_mo
 from identify.io.csvio import read_measurements
 from identify.io.result_io import result_to_dict
 from identify.pipeline import identify
-from identify.simulate import random_poses, random_truth, simulate
+from identify.simulate import random_poses, simulate
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints, transform_from_dh
+from kinematics.truth import random_truth
 
 FAMILIES = ["ur5e", "scara", "iiwa7", "track_ur5e", "gantry"]
 UR_MODELS = ["ur3", "ur5", "ur10", "ur3e", "ur5e", "ur10e", "ur16e", "ur20", "ur30"]

@@ -19,8 +19,9 @@ from config.robots import load_robot
 from identify.cli import main
 from identify.io.csvio import format_measurements
 from identify.measurements import Measurements
-from identify.simulate import random_truth, simulate
+from identify.simulate import simulate
 from kinematics.dh import DHModel, points_from_joints
+from kinematics.truth import random_truth
 
 NOISE = 5e-5  # m per axis
 STEPS = 12  # samples per sweep

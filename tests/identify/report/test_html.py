@@ -18,7 +18,8 @@ pytest.importorskip("matplotlib")
 from config.robots import load_robot
 from identify.pipeline import identify
 from identify.report.html import report_html, write_report
-from identify.simulate import random_truth, simulate
+from identify.simulate import simulate
+from kinematics.truth import random_truth
 from session.store import Session
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 
