@@ -36,6 +36,7 @@ from acquire.plan_continuous import build_continuous_plan, estimate_continuous_d
 from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.resume import ResumeRefused, resume_settings
 from acquire.session_backup import backup_session
+from common.errors import InputError
 from common.outputs import OutputError, check_outputs, check_target, same_file, write_output
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
@@ -44,7 +45,6 @@ from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.factory import factory_reference
 from identify.io.result_io import result_to_dict
-from identify.measurements import InputError
 from identify.pipeline import identify
 from identify.report.terminal import format_reference, format_report
 from session.schema import SessionError

@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from identify.measurements import InputError
+from common.errors import InputError
 
 
 class OutputError(InputError):

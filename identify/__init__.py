@@ -1,8 +1,7 @@
-"""Identification of DH parameters from tracked-point measurements (pure computation, no devices)."""
+"""Identification of DH parameters from tracked-point measurements (pure computation, no devices).
 
-from importlib.metadata import PackageNotFoundError, version
+The estimation is the flat modules here; files are read and written at the edge: ``io`` (measurement CSV, result
+YAML, a session's measurements), ``report`` (terminal and HTML) and ``exports`` (URDF, UR calibration, Robotics
+Toolbox). The commands: ``cli`` (``identify``), ``compare_cli``, ``compensate_cli``; the Python API: ``api``."""
 
-try:
-    __version__ = version("dh-calib")
-except PackageNotFoundError:  # running from a source tree that was not installed
-    __version__ = "0.0.0+source"
+from common import __version__ as __version__  # the software's version, as it always was here

@@ -9,7 +9,7 @@
 >>> api.compare([api.load_result("jan.yaml"), api.load_result("mar.yaml")]).verdict
 
 Units: metres and radians; frames: the tracker's unless a name says ``base`` (DH frame 0 of the robot). Errors in
-the inputs raise :class:`identify.measurements.InputError` (one-line messages, as the commands print them).
+the inputs raise :class:`common.errors.InputError` (one-line messages, as the commands print them).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
+from common.errors import InputError
 from common.outputs import write_output
 from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compare import CompareError, Comparison, check_same_robot
@@ -29,7 +30,7 @@ from identify.compare import compare as _compare
 from identify.compensate import Compensation, controller_poses, ur_pose
 from identify.compensate import compensate as _compensate
 from identify.io.result_io import result_to_dict
-from identify.measurements import InputError, Measurements
+from identify.measurements import Measurements
 from identify.pipeline import Identification, identify, split_holdout
 
 Array = NDArray[np.float64]

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from common.errors import InputError
 from identify.geometry import rotation_about_axis
-from identify.measurements import InputError
 from identify.poe import AxisLines
 from identify.predict import Predictor
 from identify.refine import full_jacobian, parameter_names
@@ -317,7 +317,7 @@ def nominal_name(doc: dict[str, Any]) -> str | None:
 
 def robot_model(name: str | None):
     """The robot model named ``name`` (bundled name or YAML path), None for None; a bad name or file is an
-    :class:`~identify.measurements.InputError` (one line)."""
+    :class:`~common.errors.InputError` (one line)."""
     if name is None:
         return None
     from config.robots import ConfigError, load_robot

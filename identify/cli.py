@@ -17,14 +17,15 @@ from typing import Any
 import numpy as np
 import yaml
 
+from common import __version__
+from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from config.robots import RobotModel
-from identify import __version__
 from identify.calibrated import robot_model
 from identify.cpa import DEFAULT_PARALLEL_TOL
 from identify.io.csvio import UNITS, CsvContent, format_measurements, read_measurements
 from identify.io.result_io import result_to_dict
-from identify.measurements import InputError, Measurements
+from identify.measurements import Measurements
 from identify.pipeline import Identification, identify, split_holdout
 from identify.refine import DEFAULT_MAX_OFFSET
 from identify.report.terminal import format_reference, format_report

@@ -17,10 +17,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name, robot_model
 from identify.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
-from identify.measurements import InputError
 from session.schema import is_session_file
 
 

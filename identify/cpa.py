@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from common.errors import InputError
 from identify.geometry import (
     Circle,
     angles_on_circle,
@@ -28,7 +29,7 @@ from identify.geometry import (
     rotation_about_axis,
     unit,
 )
-from identify.measurements import InputError, Measurements
+from identify.measurements import Measurements
 from kinematics.dh import DHModel, transform_from_dh
 
 Array = NDArray[np.float64]

@@ -15,6 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from common.errors import InputError
 from kinematics.dh import check_joint_types
 from kinematics.joint_errors import Coupling
 
@@ -22,10 +23,6 @@ Array = NDArray[np.float64]
 
 MIN_SWEEP_SAMPLES = 3
 FEW_SWEEP_SAMPLES = 8
-
-
-class InputError(ValueError):
-    """Measurements that cannot be identified; the message is one line meant for the operator."""
 
 
 @dataclass(frozen=True)

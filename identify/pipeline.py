@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from common.errors import InputError
 from identify import verdict as checks
 from identify.adequacy import Adequacy, assess
 from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, home_from_measurements
@@ -22,7 +23,7 @@ from identify.estimate import FitData, LinesFit, along_arc, fit, place_nominal
 from identify.extend import HeldOut, select_terms
 from identify.extensions import Decision, TermSet, candidates
 from identify.linalg import project_out, scaled_inverse
-from identify.measurements import InputError, Measurements, in_dh_joints, prepared_joints, validate
+from identify.measurements import Measurements, in_dh_joints, prepared_joints, validate
 from identify.outliers import sweep_neighbours
 from identify.poe import AxisLines, LineProblem, points_from_lines
 from identify.predict import Predictor

@@ -10,9 +10,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from common.errors import InputError
 from identify.cpa import GeometricResult, geometric_step
 from identify.estimate import nominal_start
-from identify.measurements import InputError, Measurements
+from identify.measurements import Measurements
 from identify.poe import AxisLines, points_from_lines
 from kinematics.dh import DHModel
 

@@ -38,9 +38,9 @@ from typing import Any
 import numpy as np
 
 from acquire.plan import Plan
+from common import __version__
 from common.outputs import OutputError, check_target, commit_file, same_file, write_output
 from drivers.base import DeviceIdentity
-from identify import __version__
 from identify.io.csvio import format_measurements
 from identify.measurements import Measurements
 from kinematics.joint_errors import Coupling

@@ -1,7 +1,8 @@
 """The simulated rig's world beyond its DH truth: reflectors on the flange and the joints' own errors.
 
 Pure functions on numpy arrays with seeded generators passed in; the kinematics are the shared robot model's
-(kinematics/: forward model, :mod:`kinematics.joint_errors`), never written again here. Units: metres, radians, newton-metres.
+(kinematics/: forward model, :mod:`kinematics.joint_errors`), never written again here. Units: metres, radians,
+newton-metres.
 
 - **Reflectors** (:func:`reflector_tools`): the tracked points the tracker sees, as tool vectors in the flange
   (last DH) frame. The first is the truth's TP; the others lie on a plate through it, perpendicular to the

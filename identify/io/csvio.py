@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from identify.measurements import InputError, Measurements, looks_like_millimetres
+from common.errors import InputError
+from identify.measurements import Measurements, looks_like_millimetres
 from kinematics.dh import check_joint_types
 from kinematics.joint_errors import Coupling
 

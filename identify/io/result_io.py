@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from identify import __version__
+from common import __version__
 from identify.extensions import EQUATIONS, UNITS
 from identify.pipeline import Identification
 from identify.refine import parameter_names

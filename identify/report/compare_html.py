@@ -11,7 +11,7 @@ import time
 import numpy as np
 from matplotlib.figure import Figure
 
-from identify import __version__
+from common import __version__
 from identify.calibrated import CalibratedModel
 from identify.compare import Comparison, dh_label, displacement
 from identify.refine import parameter_names

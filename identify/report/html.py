@@ -25,7 +25,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from identify import __version__
+from common import __version__
 from identify.extensions import UNITS
 from identify.measurements import Measurements
 from identify.pipeline import Identification

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from common.errors import InputError
 from identify import api
 from identify.compensate import parse_ur_pose
-from identify.measurements import InputError
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -13,9 +13,10 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
+from common.errors import InputError
 from config.robots import load_robot
 from identify.cpa import DEFAULT_PARALLEL_TOL, MIN_CHORD, axis_from_sweep, dh_from_axes, geometric_step
-from identify.measurements import InputError, Measurements
+from identify.measurements import Measurements
 from identify.simulate import random_poses, simulate
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
 from kinematics.truth import random_base, random_truth

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import yaml
 
+from common.errors import InputError
 from config.robots import load_robot
 from identify.cli import main
 from identify.io.csvio import format_measurements, parse_measurements
-from identify.measurements import InputError
 from identify.pipeline import identify
 from identify.simulate import random_poses
 from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses

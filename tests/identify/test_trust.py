@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from common.errors import InputError
 from config.robots import load_robot
 from identify.cli import main
 from identify.io.csvio import format_measurements
-from identify.measurements import InputError, Measurements
+from identify.measurements import Measurements
 from identify.pipeline import Identification, identify
 from identify.simulate import observe, random_poses, simulate, sweep_readings
 from kinematics.dh import points_from_joints

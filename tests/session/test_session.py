@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from acquire.plan import Plan
+from common import __version__
 from drivers.base import TrackerReading
-from identify import __version__
 from identify.io.csvio import read_measurements
 from session.records import StepRecord
 from session.schema import SCHEMA_VERSION, SessionError
