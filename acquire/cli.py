@@ -31,10 +31,11 @@ import yaml
 
 from acquire.cell import Clearance
 from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
-from acquire.plan import Plan, build_plan, check_plan, estimate_duration, plan_clearance
+from acquire.plan import build_plan, check_plan, estimate_duration, plan_clearance
 from acquire.plan_continuous import build_continuous_plan, estimate_continuous_duration, format_modes
 from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.resume import ResumeRefused, resume_settings
+from acquire.session import Session
 from acquire.session_backup import backup_session
 from common.errors import InputError
 from common.outputs import OutputError, check_outputs, check_target, same_file, write_output
@@ -47,8 +48,9 @@ from identify.factory import factory_reference
 from identify.io.result_io import result_to_dict
 from identify.pipeline import identify
 from identify.report.terminal import format_reference, format_report
+from session.plan import Plan
+from session.rows import factory_calibration
 from session.schema import SessionError
-from session.store import Session, factory_calibration
 
 log = logging.getLogger("acquire")
 
@@ -111,7 +113,7 @@ def _export(argv: list[str]) -> int:
     with Session.open(args.session) as session:
         rows = session.export_csv(args.csv, force=args.force)
         if session.plan.continuous:
-            from session.streams import stream_summary
+            from identify.io.session_measurements import stream_summary
 
             summary = stream_summary(session)
             if summary is not None:

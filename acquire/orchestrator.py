@@ -25,14 +25,14 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from acquire.plan import Plan, Step
+from acquire.session import Session
 from drivers.averaging import robust_mean
 from drivers.base import Robot, RobotState, Tracker, TrackerReading
 from drivers.clock import Clock
 from drivers.errors import ConnectionFailed, DeviceTimeout, MeasurementError, RobotFault
 from identify.geometry import circle_2d_algebraic, perpendicular_basis, plane_from_points
+from session.plan import Plan, Step
 from session.records import PointRecord, StepRecord
-from session.store import Session
 
 Array = NDArray[np.float64]
 

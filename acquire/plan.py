@@ -1,8 +1,9 @@
 """The acquisition plan: what to move where, decided before anything moves (pure, no devices).
 
-A plan is an ordered list of steps. Sweeps move one joint through increments with the others at home
-(last joint first, as in the paper); free poses move every joint (extra data for the fit and for
-validation); home checks return to the home pose every N steps to watch the tracker/robot drift.
+A plan (its data types, as a session stores them: session/plan.py) is an ordered list of steps. Sweeps move one
+joint through increments with the others at home (last joint first, as in the paper); free poses move every joint
+(extra data for the fit and for validation); home checks return to the home pose every N steps to watch the
+tracker/robot drift.
 Joint values: rad (revolute) / m (prismatic).
 
 Functions (all pure): :func:`build_plan` (robot model + site configuration -> plan, free poses by a
@@ -14,10 +15,9 @@ plan (accuracy, dry-run text, Plan JSON) is in :mod:`acquire.plan_report`.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -26,78 +26,14 @@ from numpy.typing import NDArray
 from acquire.camera_view import visible
 from acquire.cell import Clearance, Contact, cell_from_config, clearance_of, contact_at, first_contact, free_interval
 from acquire.collision import STEP, Cell, approach, moves_samples
+from acquire.design import greedy_design
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
-from identify.refine import full_jacobian
 from identify.simulate import random_poses
 from kinematics.dh import DHModel, frames_from_joints
 from kinematics.truth import axis_distances
-
-STEP_KINDS = ("sweep", "free", "home", "verify", "stream")  # verify: acquire/verify.py; stream: plan_continuous.py
-# the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
-JSON_KINDS = ("sweep", "free", "check", "home", "stream")
-
-
-@dataclass(frozen=True)
-class Step:
-    """One commanded pose. ``index`` is its 0-based place in the plan; ``sweep`` the CSV sweep id;
-    ``joint`` the 1-based joint a sweep moves (0 for free poses and home checks); ``q`` the commanded
-    joint values; ``role`` is "fit" or "check" (held out for validation). A ``stream`` step (continuous motion,
-    acquire/plan_continuous.py) moves ``joint`` from ``start`` to ``q`` at the constant ``speed`` (rad/s or m/s),
-    ramping at ``acceleration`` (rad/s², m/s²), while both devices stream; other steps have none of the three
-    (and their JSON none of the keys)."""
-
-    index: int
-    kind: str
-    sweep: int
-    joint: int
-    q: tuple[float, ...]
-    role: str = "fit"
-    start: tuple[float, ...] | None = None
-    speed: float | None = None
-    acceleration: float | None = None
-
-
-@dataclass(frozen=True)
-class Plan:
-    """Everything the orchestrator needs to run, and that the session stores to resume.
-
-    ``speed`` (rad/s or m/s) and ``acceleration`` per joint; ``settle_time`` s to wait still before
-    measuring; ``samples_per_step`` tracker readings averaged per step.
-    """
-
-    robot: str
-    joint_types: str
-    home: tuple[float, ...]
-    steps: tuple[Step, ...]
-    samples_per_step: int = 5
-    settle_time: float = 0.5
-    speed: tuple[float, ...] = ()
-    acceleration: tuple[float, ...] = ()
-    notes: tuple[str, ...] = field(default_factory=tuple)
-
-    def to_json(self) -> str:
-        data = asdict(self)
-        for step in data["steps"]:  # a stop-and-go plan reads as it always did
-            for key in ("start", "speed", "acceleration"):
-                if step[key] is None:
-                    del step[key]
-        return json.dumps(data)
-
-    @property
-    def continuous(self) -> bool:
-        """True when some steps are streamed (continuous motion)."""
-        return any(s.kind == "stream" for s in self.steps)
-
-    @classmethod
-    def from_json(cls, text: str) -> Plan:
-        data: dict[str, Any] = json.loads(text)
-        steps = tuple(Step(**{**s, "q": tuple(s["q"]), **({"start": tuple(s["start"])} if s.get("start") else {})})
-                      for s in data.pop("steps"))
-        tuples = {k: tuple(data[k]) for k in ("home", "speed", "acceleration", "notes")}
-        return cls(steps=steps, **{**data, **tuples})
-
+from session.plan import STEP_KINDS, Plan, Step
 
 # ------------------------------------------------------------------------------------------ building a plan
 
@@ -109,7 +45,6 @@ CANDIDATES = 1500  # size of the seeded pool free poses are chosen from
 EVAL_POSES = 200  # random held-out poses the design and the accuracy estimate average over
 PARTIAL_ARC = math.radians(20.0)  # half-width of the "±20° sweeps" of the comparison
 HOME_SWEEP = 0  # sweep id of the home checks (they are not a fitting sweep)
-SUBSPACE_TOL = 1e-7  # relative singular value below which a parameter combination counts as redundant
 
 
 class PlanError(ValueError):
@@ -424,80 +359,6 @@ def _nearest_order(poses: list[tuple[Array, str]], start: Array, speed: Array) -
         out.append(left.pop(k))
         here = out[-1][0]
     return out
-
-
-def _gram(g: Array, block: int = 48) -> Array:
-    """``sum_k g_kᵀ g_k`` over the poses of ``g`` (m, 3, r): the (r, r) information of those TPs.
-
-    Summed over stacked small blocks: a multithreaded BLAS on one tall product is many times slower
-    on a busy machine (here: 10-20 ms against 1-2 ms)."""
-    flat = g.reshape(-1, g.shape[2])
-    pad = (-len(flat)) % block
-    if pad:
-        flat = np.vstack([flat, np.zeros((pad, flat.shape[1]))])
-    blocks = flat.reshape(-1, block, flat.shape[1])
-    return (np.swapaxes(blocks, 1, 2) @ blocks).sum(axis=0)
-
-
-def _whitened(model: DHModel, *qs: Array) -> list[Array]:
-    """Jacobians (m_i, 3, r) of the TP at each pose set w.r.t. the parameter combinations they determine.
-
-    The columns of the full Jacobian (:func:`identify.refine.full_jacobian`) are scaled to unit norm over
-    all sets, then projected on the eigenvectors of the information of all sets whose singular value is
-    above ``SUBSPACE_TOL`` of the largest: redundant combinations (which change no prediction; on the
-    nominal models they sit below 1e-15, the others above 1e-3) drop out. A small Gram matrix and its
-    eigendecomposition rather than an SVD of the tall Jacobian: fast on a busy machine too.
-    """
-    jacs = [full_jacobian(model, q)[1] if len(q) else np.zeros((0, 3, 9 + 4 * model.n_joints)) for q in qs]
-    gram = sum(_gram(j) for j in jacs)
-    scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
-    values, vectors = np.linalg.eigh(gram / np.outer(scale, scale))
-    keep = values > SUBSPACE_TOL**2 * values[-1]
-    basis = vectors[:, keep] / scale[:, None]
-    return [j @ basis for j in jacs]
-
-
-def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array, count: int,
-                  accept: Callable[[int], bool] | None = None) -> NDArray[np.int64]:
-    """Indices of ``count`` rows of ``candidates`` chosen one at a time, each the pose that most reduces the
-    predicted held-out error given ``q_fit`` and those chosen before: the trace of the Cramér-Rao prediction
-    covariance summed over ``q_eval`` (DESIGN.md), ``sum_k tr(Jc_k Σ Jc_kᵀ)`` with ``Σ = (JᵀJ)⁻¹``.
-
-    Rank-one (rank-three: one TP) updates of Σ keep it O(count · candidates · r²) for r parameters.
-    Directions the fit leaves undetermined get a tiny ridge, so poses that determine them win first. With
-    ``accept``, a best candidate it rejects is set aside and the next best taken (fewer than ``count`` when
-    the candidates run out).
-    """
-    if count <= 0:
-        return np.zeros(0, dtype=np.int64)
-    g_fit, g_pool, g_eval = _whitened(model, q_fit, candidates, q_eval)
-    r = g_pool.shape[2]
-    info = _gram(g_fit)
-    ridge = 1e-9 * max(float(np.trace(info)) / r, 1.0)
-    cov = np.linalg.inv(info + ridge * np.eye(r))
-    target = _gram(g_eval)
-    chosen: list[int] = []
-    available = np.ones(len(candidates), dtype=bool)
-    eye = np.eye(3)
-    g_pool_t = np.swapaxes(g_pool, 1, 2)
-    while len(chosen) < count and available.any():
-        u = g_pool @ cov  # (K, 3, r): candidate rows weighted by the current covariance
-        s = eye + u @ g_pool_t  # (K, 3, 3)
-        w = (u @ target) @ np.swapaxes(u, 1, 2)  # (K, 3, 3)
-        gain = np.trace(np.linalg.solve(s, w), axis1=1, axis2=2)
-        gain[~available] = -np.inf
-        k = int(np.argmax(gain))
-        while accept is not None and not accept(k):
-            available[k] = False
-            gain[k] = -np.inf
-            if not available.any():
-                return np.array(chosen, dtype=np.int64)
-            k = int(np.argmax(gain))
-        cov = cov - u[k].T @ np.linalg.solve(s[k], u[k])
-        cov = 0.5 * (cov + cov.T)
-        chosen.append(k)
-        available[k] = False
-    return np.array(chosen, dtype=np.int64)
 
 
 # ------------------------------------------------------------------------------------- checking and telling

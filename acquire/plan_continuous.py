@@ -36,24 +36,14 @@ import numpy as np
 
 from acquire.cell import cell_from_config, first_contact
 from acquire.collision import Cell
-from acquire.plan import (
-    EVAL_POSES,
-    HOME_SWEEP,
-    SUBSPACE_TOL,
-    Array,
-    Plan,
-    Step,
-    _gram,
-    _whitened,
-    axis_distances_many,
-    build_plan,
-    tp_model,
-)
+from acquire.design import SUBSPACE_TOL, gram, whitened
+from acquire.plan import EVAL_POSES, HOME_SWEEP, Array, axis_distances_many, build_plan, tp_model
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
 from identify.simulate import random_poses
 from kinematics.dh import DHModel, frames_from_joints
+from session.plan import Plan, Step
 
 DEFLECTION_SHARE = 0.2  # the dynamic deflection stays below this share of the tracker noise
 JOINT_COMPLIANCE = 1e-5  # rad/(N·m): a joint's assumed compliance (a UR-size harmonic drive, conservatively)
@@ -238,12 +228,12 @@ def predicted_accuracy_continuous(plan: Plan, robot: RobotModel, tp_guess: objec
     def bound(with_steps: bool) -> float:
         if not len(q_stream):
             return math.inf
-        g_stream, g_steps, g_eval = _whitened(model, q_stream, q_steps if with_steps else q_steps[:0], q_eval)
-        info = _gram(g_stream * np.sqrt(weight)[:, None, None]) / noise**2 + _gram(g_steps) / step_noise**2
+        g_stream, g_steps, g_eval = whitened(model, q_stream, q_steps if with_steps else q_steps[:0], q_eval)
+        info = gram(g_stream * np.sqrt(weight)[:, None, None]) / noise**2 + gram(g_steps) / step_noise**2
         values = np.linalg.eigvalsh(info)
         if values[0] <= SUBSPACE_TOL**2 * values[-1]:
             return math.inf
-        return float(np.sqrt(np.trace(np.linalg.inv(info) @ _gram(g_eval)) / len(q_eval)))
+        return float(np.sqrt(np.trace(np.linalg.inv(info) @ gram(g_eval)) / len(q_eval)))
 
     return {"with_free": bound(True), "sweeps_only": bound(False), "samples": float(weight.sum()),
             "noise": float(noise)}

@@ -15,23 +15,13 @@ import numpy as np
 
 from acquire.cell import Clearance
 from acquire.collision import STEP
-from acquire.plan import (
-    EVAL_POSES,
-    PARTIAL_ARC,
-    STEP_KINDS,
-    SUBSPACE_TOL,
-    Array,
-    Plan,
-    Step,
-    _fmt,
-    _gram,
-    _whitened,
-    tp_model,
-)
+from acquire.design import SUBSPACE_TOL, gram, whitened
+from acquire.plan import EVAL_POSES, PARTIAL_ARC, Array, _fmt, tp_model
 from config.robots import RobotModel
 from config.site import SiteConfig
 from identify.simulate import random_poses
 from kinematics.dh import DHModel
+from session.plan import STEP_KINDS, Plan, Step
 
 
 def _partial_sweeps(plan: Plan, robot: RobotModel) -> Array:
@@ -54,13 +44,13 @@ def prediction_bound(model: DHModel, q_fit: Array, q_eval: Array, sigma: float) 
     """Cramér-Rao bound (m) on the RMS TP error at ``q_eval`` for data at ``q_fit`` with noise ``sigma``,
     as :func:`identify.bounds.prediction_rms_bound`, but inf when the data leave a combination of
     parameters that changes the predictions at ``q_eval`` undetermined."""
-    g_fit, g_eval = _whitened(model, q_fit, q_eval)
-    info = _gram(g_fit)
+    g_fit, g_eval = whitened(model, q_fit, q_eval)
+    info = gram(g_fit)
     values = np.linalg.eigvalsh(info)
     if not len(values) or values[0] <= SUBSPACE_TOL**2 * values[-1]:
         return math.inf
     cov = np.linalg.inv(info)
-    target = _gram(g_eval)
+    target = gram(g_eval)
     return float(sigma * np.sqrt(np.trace(cov @ target) / len(q_eval)))
 
 
@@ -148,6 +138,10 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
     if plan.notes:
         lines += ["", "notes:", *(f"  - {note}" for note in plan.notes)]
     return "\n".join(lines)
+
+
+# the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
+JSON_KINDS = ("sweep", "free", "check", "home", "stream")
 
 
 def plan_json(plan: Plan, clearance: Clearance | None) -> dict[str, Any]:

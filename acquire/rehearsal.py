@@ -14,10 +14,10 @@ from collections.abc import Callable
 import numpy as np
 
 from acquire.orchestrator import RunResult, StopRequest
-from acquire.plan import Plan, Step
 from drivers.base import Robot, RobotState
 from drivers.errors import ConnectionFailed, DeviceTimeout, RobotFault
 from kinematics.joint_errors import Coupling
+from session.plan import Plan, Step
 
 
 def rehearse(robot: Robot, plan: Plan, move_timeout: float, stop: StopRequest,

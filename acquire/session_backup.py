@@ -8,9 +8,9 @@ import sqlite3
 import tempfile
 from pathlib import Path
 
+from acquire.session import Session
 from common.outputs import check_outputs, commit_file
 from session.schema import SessionError
-from session.store import Session
 
 
 def backup_session(source: str | Path, dest: str | Path, force: bool = False) -> int:

@@ -15,13 +15,13 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable
 
-from acquire.plan import Plan, Step
+from acquire.session import Session
 from drivers.base import JointStreamBatch, RobotState, TrackerStreamBatch
 from drivers.clock import Clock
 from drivers.errors import ConnectionFailed, DeviceTimeout, DriverError, RobotFault
 from drivers.motion import motion_time
+from session.plan import Plan, Step
 from session.records import StepRecord
-from session.store import Session
 from session.streams import StreamRecorder
 
 COMMIT_PERIOD = 0.5  # s between commits of the streamed samples (at most 1 s of data is ever at risk)

@@ -7,7 +7,7 @@ nominal model (what the controller does today: "before"), then with the identifi
 orientation at home. The tracker measures each visit; positions are taken into the base frame through the
 identified base (tracker <- frame 0), and AP and RP follow per pose and run.
 
-The plan is an ordinary :class:`~acquire.plan.Plan` of steps of kind ``verify`` (``sweep`` = the pose number,
+The plan is an ordinary :class:`~session.plan.Plan` of steps of kind ``verify`` (``sweep`` = the pose number,
 role ``check``), so the orchestrator, the session file (durable, resumable) and the plan checks (limits, cell)
 are the acquisition's own. What a session needs to be analysed alone sits in its header under
 ``config.verification`` (:func:`header`): the targets, the commands, the base, the step labels, the prediction.
@@ -25,12 +25,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
-from acquire.plan import Plan, Step, _per_joint, check_plan, plan_clearance
+from acquire.plan import _per_joint, check_plan, plan_clearance
 from config.robots import RobotModel
 from config.site import SiteConfig
 from identify.calibrated import CalibratedModel
 from identify.compensate import solve_ik
 from identify.iso9283 import Accuracy, accuracy, cube_poses, visit_order
+from session.plan import Plan, Step
 
 Array = NDArray[np.float64]
 

@@ -39,13 +39,14 @@ from acquire.cli import (
 from acquire.plan import estimate_duration, plan_clearance
 from acquire.plan_report import format_clearance
 from acquire.resume import resume_settings
+from acquire.session import Session
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
 from common.outputs import check_outputs, check_target, write_output
 from config.robots import RobotModel, load_robot
 from drivers.spec import RobotSpec, TrackerSpec
-from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name
+from identify.calibrated import CalibratedModel, ResultError, nominal_name
+from identify.io.result_io import load_result
 from session.schema import SessionError
-from session.store import Session
 
 MM = 1e3
 

@@ -28,12 +28,12 @@ import numpy as np
 
 from acquire.orchestrator import Orchestrator
 from acquire.plan import build_plan
+from acquire.session import Session
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.clock import VirtualClock
 from drivers.sim.rig import SimulatedRig, SimulatedRobot
 from drivers.sim.tracker import SimulatedTracker
-from session.store import Session
 
 
 class _Timed:

@@ -118,8 +118,8 @@ def accuracy(draws: int) -> tuple[list[str], list[str]]:
 
 def verification() -> tuple[list[str], list[str]]:
     from acquire.cli import main as acquire
+    from acquire.session import Session
     from drivers.sim.rig import SimulatedRig
-    from session.store import Session
 
     noise, cycles, samples = 5e-5, 10, 5
     with tempfile.TemporaryDirectory() as folder:

@@ -71,12 +71,12 @@ class Result:
 def load_measurements(path: str | Path, joints: str | None = None, units: str | None = None) -> Measurements:
     """The measurements of a CSV (the contract of DESIGN.md; ``joints``/``units`` as ``identify --joints/--units``)
     or of an acquisition session."""
-    from identify.cli import _read_session
     from identify.io.csvio import read_measurements
+    from identify.io.session_measurements import read_session
     from session.schema import is_session_file
 
     if is_session_file(Path(path)):
-        return _read_session(Path(path))[0].measurements
+        return read_session(Path(path))[0].measurements
     return read_measurements(str(path), joints, units).measurements
 
 
@@ -93,7 +93,7 @@ def calibrate(meas: Measurements, robot: str | None = None, noise: float | None 
 
 def load_result(path: str | Path) -> Result:
     """A result YAML written by ``identify --out`` (or :meth:`Result.save`)."""
-    from identify.calibrated import load_result as _load
+    from identify.io.result_io import load_result as _load
 
     try:
         model, doc = _load(str(path))

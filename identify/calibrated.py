@@ -24,7 +24,7 @@ from identify.geometry import rotation_about_axis
 from identify.poe import AxisLines
 from identify.predict import Predictor
 from identify.refine import full_jacobian, parameter_names
-from kinematics.dh import DHModel, frames_from_joints
+from kinematics.dh import DHModel, frames_from_joints, model_from_dict
 
 Array = NDArray[np.float64]
 
@@ -58,8 +58,6 @@ class CalibratedModel:
     @classmethod
     def from_document(cls, doc: dict[str, Any], name: str = "identified") -> CalibratedModel:
         """The model of a result document (identify --out); ResultError (one line) if it cannot be used."""
-        from identify.io.result_io import model_from_dict
-
         if not isinstance(doc, dict):
             raise ResultError("not a result document (expected a YAML mapping with joints, base, tool)")
         try:
@@ -286,27 +284,6 @@ def predictor_from_document(doc: dict[str, Any], model: DHModel, tp_ids: list[in
     size = lines.n_parameters + len(coefs)
     covariance = np.array(doc["covariance"]["predictor"], dtype=float).reshape(size, size)
     return Predictor(lines, covariance, term_set, coefs, coupling, tuple(tp_ids))
-
-
-def load_result(path: str, name: str | None = None) -> tuple[CalibratedModel, dict[str, Any]]:
-    """The model of the result YAML at ``path`` and the document; ResultError (one line) when unusable."""
-    from pathlib import Path
-
-    import yaml
-
-    p = Path(path)
-    try:
-        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ResultError(f"{path}: no such result file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ResultError(f"{path}: cannot be read ({exc})") from None
-    except yaml.YAMLError as exc:
-        raise ResultError(f"{path}: not YAML ({' '.join(str(exc).split())[:120]})") from None
-    try:
-        return CalibratedModel.from_document(doc, name or p.name), doc
-    except ResultError as exc:
-        raise ResultError(f"{path}: {exc}") from None
 
 
 def nominal_name(doc: dict[str, Any]) -> str | None:

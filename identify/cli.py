@@ -23,8 +23,9 @@ from common.outputs import check_outputs, write_output
 from config.robots import RobotModel
 from identify.calibrated import robot_model
 from identify.cpa import DEFAULT_PARALLEL_TOL
-from identify.io.csvio import UNITS, CsvContent, format_measurements, read_measurements
+from identify.io.csvio import UNITS, format_measurements, read_measurements
 from identify.io.result_io import result_to_dict
+from identify.io.session_measurements import open_session, read_session
 from identify.measurements import Measurements
 from identify.pipeline import Identification, identify, split_holdout
 from identify.refine import DEFAULT_MAX_OFFSET
@@ -132,7 +133,7 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
     if args.report:
         from identify.report.html import report_html
 
-        session = _open_session(Path(args.input)) if is_session_file(Path(args.input)) else None
+        session = open_session(Path(args.input)) if is_session_file(Path(args.input)) else None
         try:
             page = report_html(ident, meas, robot.nominal if robot else None, robot.name if robot else None,
                                session=session, source=str(args.input), reference=reference,
@@ -175,31 +176,10 @@ def export_notes(ident: Identification) -> list[str]:
     return notes
 
 
-def _open_session(path: Path):
-    """An acquisition session (the session format belongs to ``acquire``); InputError if it is not one."""
-    from session.schema import SessionError
-    from session.store import Session
-
-    try:
-        return Session.open(path)
-    except SessionError as exc:
-        raise InputError(str(exc)) from None
-
-
-def _read_session(path: Path) -> tuple[CsvContent, dict[str, Any]]:
-    """The measurements of an acquisition session, and its header (with the plan's robot as ``robot_model``)."""
-    with _open_session(path) as session:
-        if "verification" in (session.header.get("config") or {}):
-            raise InputError(f"{path} is a verification session (acquire verify), not measurements to identify "
-                             "from; its results are in the .verify.yaml and report beside it")
-        header = {**session.header, "robot_model": session.plan.robot}
-        return CsvContent(session.to_measurements(), {"session": str(path)}, []), header
-
-
 def _factory_reference(header: dict[str, Any], joint_types: str) -> tuple[tuple[str, Any] | None, str]:
     """The session robot's factory calibration as a comparison model, or None and why not."""
     from identify.factory import factory_reference
-    from session.store import factory_calibration
+    from session.rows import factory_calibration
 
     calibration, note = factory_calibration(header)
     return factory_reference(calibration, note, joint_types)
@@ -229,7 +209,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     _check_outputs(args)
     header = None
     if is_session_file(Path(args.input)):
-        content, header = _read_session(Path(args.input))
+        content, header = read_session(Path(args.input))
     else:
         content = read_measurements(args.input, args.joints, args.units)
     meas = split_holdout(content.measurements, args.holdout, args.seed)

@@ -19,8 +19,9 @@ from typing import Any
 
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
-from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name, robot_model
+from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
+from identify.io.result_io import load_result
 from session.schema import is_session_file
 
 
@@ -58,16 +59,17 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
             raise InputError(f"{path} fails its verdict: its model cannot be compared")
         return model, nominal_name(doc), None, p.stat().st_mtime
     from config.robots import ConfigError, load_robot
+    from identify.io.session_measurements import session_measurements
     from identify.pipeline import identify
     from session.schema import SessionError
-    from session.store import Session
+    from session.store import SessionFile
 
     try:
-        with Session.open(p) as session:
+        with SessionFile.open(p) as session:
             header = session.header
             if "verification" in (header.get("config") or {}):
                 raise InputError(f"{path} is a verification session (acquire verify): compare calibrations")
-            meas, robot_name = session.to_measurements(), session.plan.robot
+            meas, robot_name = session_measurements(session), session.plan.robot
         robot = load_robot(robot_name)
     except (SessionError, ConfigError) as exc:
         raise InputError(str(exc)) from None

@@ -35,8 +35,9 @@ import numpy as np
 from common import __version__
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
-from identify.calibrated import CalibratedModel, ResultError, load_result, nominal_name, robot_model
+from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compensate import Compensation, compensate, controller_poses, pose_matrices, rotvecs, ur_pose
+from identify.io.result_io import load_result
 
 MAX_COORDINATE = 10.0  # m: a target farther than this from the origin is almost surely in millimetres
 

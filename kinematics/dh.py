@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -158,3 +159,24 @@ def points_from_joints(model: DHModel, q: ArrayLike) -> Array:
     """Predicted TP in the tracker frame, metres, shape (m, 3)."""
     *_, (x, y, z, o) = running_frames(model, q)
     return o + x * model.tool[0] + y * model.tool[1] + z * model.tool[2]
+
+
+def model_to_dict(model: DHModel) -> dict[str, Any]:
+    """The result contract's three keys (DESIGN.md: ``joints``, ``base``, ``tool``) for ``model``, as plain data."""
+    joints = [
+        {"type": t, "a": float(a), "alpha": float(al), "d": float(d), "theta": float(th)}
+        for t, th, d, a, al in zip(model.joint_types, model.theta, model.d, model.a, model.alpha, strict=True)
+    ]
+    return {"joints": joints, "base": np.asarray(model.base, dtype=float).tolist(),
+            "tool": np.asarray(model.tool, dtype=float).tolist()}
+
+
+def model_from_dict(doc: dict[str, Any]) -> DHModel:
+    """Inverse of :func:`model_to_dict`; raises ValueError (one line) on a malformed document."""
+    try:
+        joints = doc["joints"]
+        types = "".join(str(j["type"]) for j in joints)
+        table = np.array([[float(j[name]) for name in DH_NAMES] for j in joints])
+        return DHModel(types, table[:, 0], table[:, 1], table[:, 2], table[:, 3], doc["base"], doc["tool"])
+    except (KeyError, TypeError, IndexError) as exc:
+        raise ValueError(f"result document lacks or misshapes {exc}") from None

@@ -15,8 +15,8 @@ import yaml
 
 from config.robots import load_robot
 from identify.io.csvio import format_measurements
-from identify.io.result_io import model_to_dict
 from identify.simulate import simulate
+from kinematics.dh import model_to_dict
 from kinematics.truth import random_truth
 
 

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from acquire.plan import Step
 from drivers.base import TrackerReading
+from session.plan import Step
 
 STATUSES = ("ok", "missing")
 

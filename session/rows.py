@@ -1,4 +1,6 @@
-"""A session file's rows read back: step records, per-point averages, measurements and drift.
+"""A session file's rows: step records written and read back, per-point averages and drift; and the header
+fields that need reading (the coupling, the controller's factory calibration). The measurements made of these rows
+are identify's (identify/io/session_measurements.py).
 
 Works on an open ``sqlite3`` connection to a session file (session/schema.py), of any version this one
 reads: files without the ``tp`` column or the ``step_points`` table are read as if every reading saw tracked
@@ -7,16 +9,50 @@ point 1. Units: metres (positions, sigma), radians / metres (joint readings), se
 
 from __future__ import annotations
 
+import json
 import sqlite3
 from typing import Any
 
 import numpy as np
 
 from drivers.base import TrackerReading
-from identify.measurements import Measurements
 from kinematics.joint_errors import Coupling
-from session.records import PointRecord
-from session.schema import STEP_COLUMNS, columns, load_q, nan_of
+from session.records import PointRecord, StepRecord
+from session.schema import STEP_COLUMNS, columns, dump_q, load_q, nan_of
+
+
+def insert_step(db: sqlite3.Connection, record: StepRecord, readings: list[tuple[Any, ...]], run_id: int) -> None:
+    """Insert ``record``, the rows of its raw ``readings`` (``readings`` table columns) and its per-point averages,
+    recorded in run ``run_id`` (inside the caller's transaction)."""
+    i = record.plan_index
+    x, y, z = record.position if record.position is not None else (None, None, None)
+    db.execute(
+        "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
+        " rejected, status, reason, t_start, t_end, run_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,"
+        " ?, ?, ?, ?, ?)",
+        (i, record.kind, record.sweep, record.joint, record.role, dump_q(record.q_cmd),
+         dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
+         record.reason, record.t_start, record.t_end, run_id))
+    db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used, tp)"
+                   " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", readings)
+    db.executemany("INSERT INTO step_points (plan_index, tp, x, y, z, sigma, samples, rejected)"
+                   " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                   [(i, p.tp, *p.position, p.sigma, p.samples, p.rejected) for p in record.points])
+
+
+def retire_step(db: sqlite3.Connection, plan_index: int) -> None:
+    """Move step ``plan_index`` and its readings to ``retired_steps``/``retired_readings`` as its next attempt
+    (1, 2, ...), leaving its place free (inside the caller's transaction)."""
+    i = plan_index
+    names = ", ".join(STEP_COLUMNS)
+    attempt = 1 + db.execute("SELECT count(*) FROM retired_steps WHERE plan_index = ?", (i,)).fetchone()[0]
+    db.execute(f"INSERT INTO retired_steps (attempt, run_id, {names}) SELECT ?, run_id, {names}"
+               " FROM steps WHERE plan_index = ?", (attempt, i))
+    db.execute("INSERT INTO retired_readings (plan_index, attempt, x, y, z, sigma, t, status, used, tp)"
+               " SELECT plan_index, ?, x, y, z, sigma, t, status, used, tp FROM readings"
+               " WHERE plan_index = ? ORDER BY id", (attempt, i))
+    db.execute("DELETE FROM readings WHERE plan_index = ?", (i,))
+    db.execute("DELETE FROM steps WHERE plan_index = ?", (i,))
 
 
 def coupling_of(header: dict[str, Any]) -> Coupling | None:
@@ -63,32 +99,13 @@ def point_rows(db: sqlite3.Connection) -> dict[int, list[PointRecord]]:
     return out
 
 
-def _seen(row: dict[str, Any], points: dict[int, list[PointRecord]]) -> list[tuple[int, tuple[float, ...],
-                                                                                    float | None]]:
+def points_seen(row: dict[str, Any],
+                points: dict[int, list[PointRecord]]) -> list[tuple[int, tuple[float, ...], float | None]]:
     """(tp, position, sigma) of every point an ok step saw."""
     several = points.get(row["plan_index"])
     if several:
         return [(p.tp, p.position, p.sigma) for p in several]
     return [(1, row["position"], row["sigma"])]
-
-
-def measurements_from(rows: list[dict[str, Any]], points: dict[int, list[PointRecord]], joint_types: str,
-                      coupling: Coupling | None) -> Measurements:
-    """The measurement-CSV rows of ok step ``rows`` (plan order): one row per tracked point seen, q = the actual
-    readings, ``coupling`` as recorded. Home re-measurements become held-out free poses (joint 0, role check);
-    ``sigma`` only when every row has one; ``tp`` the point's id."""
-    entries = [(r, *seen) for r in rows for seen in _seen(r, points)]
-    n, m = len(joint_types), len(entries)
-    q = np.array([r["q_act"] for r, *_ in entries], dtype=float).reshape(m, n)
-    xyz = np.array([p for _, _, p, _ in entries], dtype=float).reshape(m, 3)
-    home = np.array([r["kind"] == "home" for r, *_ in entries], dtype=bool)
-    joint = np.where(home, 0, np.array([r["joint"] for r, *_ in entries], dtype=np.int64)).astype(np.int64)
-    sweep = np.array([r["sweep"] for r, *_ in entries], dtype=np.int64)
-    check = home | np.array([r["role"] == "check" for r, *_ in entries], dtype=bool)
-    sigmas = [s for *_, s in entries]
-    sigma = np.array(sigmas, dtype=float) if entries and None not in sigmas else None
-    tp = np.array([t for _, t, _, _ in entries], dtype=np.int64)
-    return Measurements(joint_types, q, xyz, sweep, joint, sigma, check, has_role=True, tp=tp, coupling=coupling)
 
 
 def drift_from(homes: list[dict[str, Any]], points: dict[int, list[PointRecord]]) -> list[tuple[float, float]]:
@@ -97,10 +114,27 @@ def drift_from(homes: list[dict[str, Any]], points: dict[int, list[PointRecord]]
     first: dict[int, Any] = {}
     out = []
     for row in homes:
-        seen = _seen(row, points)
+        seen = points_seen(row, points)
         gaps = [float(np.linalg.norm(np.array(p) - first[tp])) for tp, p, _ in seen if tp in first]
         for tp, p, _ in seen:
             first.setdefault(tp, np.array(p))
         if gaps or not out:
             out.append((row["t_end"], float(np.mean(gaps)) if gaps else 0.0))
     return out
+
+
+def factory_calibration(header: dict[str, Any]) -> tuple[dict[str, Any] | None, str]:
+    """The robot controller's factory calibration recorded in a session ``header`` (the robot identity's
+    ``details.factory_calibration``: JSON of UR's DH values, or ``unavailable (reason)``), and a note saying
+    why there is none. Robots that have none to report (simulated ones, other makes) and sessions older than
+    this field give (None, "")."""
+    text = ((header.get("robot") or {}).get("details") or {}).get("factory_calibration")
+    if text is None:
+        return None, ""
+    try:
+        value = json.loads(text)
+    except (TypeError, ValueError):
+        return None, f"the factory calibration could not be read from the controller: {text}"
+    if not isinstance(value, dict):
+        return None, f"the recorded factory calibration is not a table: {text[:80]}"
+    return value, ""

@@ -5,7 +5,7 @@ The file (stdlib ``sqlite3``, rollback journal ``DELETE``, ``synchronous=EXTRA``
 - ``meta(key, value)``: the header, each value JSON: ``schema`` (int), ``created`` (s since the epoch),
   ``software`` (``identify.__version__``), ``config`` (the resolved configuration, an object), ``robot`` and
   ``tracker`` (``DeviceIdentity.as_dict()``; a UR robot's ``details.factory_calibration`` holds the
-  controller's DH values, see :func:`session.store.factory_calibration`), ``plan`` (``Plan.to_json()``). ``PRAGMA
+  controller's DH values, see :func:`session.rows.factory_calibration`), ``plan`` (``Plan.to_json()``). ``PRAGMA
   user_version`` holds the schema too; a file of a newer schema is refused, never modified.
 - ``runs(id, started, ended, outcome, reason)``: one row per run (start or resume); ``outcome`` is
   ``running``, ``complete``, ``aborted`` (by the operator) or ``failed`` (with the reason). A run left
@@ -154,6 +154,34 @@ def migrate(conn: sqlite3.Connection) -> None:
             conn.execute(f"ALTER TABLE {table} ADD COLUMN tp INTEGER NOT NULL DEFAULT 1")
 
 
+def initialise(conn: sqlite3.Connection, meta: list[tuple[str, str]], version: int) -> None:
+    """Create the tables of a new file in one transaction, with its header ``meta`` rows (key, JSON value) and
+    ``PRAGMA user_version`` = ``version``."""
+    configure(conn)
+    conn.execute("BEGIN IMMEDIATE")
+    for statement in SCHEMA.split(";"):
+        if statement.strip():
+            conn.execute(statement)
+    migrate(conn)
+    conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", meta)
+    conn.execute(f"PRAGMA user_version = {version}")
+    conn.execute("COMMIT")
+
+
+def read_meta(conn: sqlite3.Connection, path: Path) -> dict[str, str]:
+    """The header rows (key -> JSON text) of the open file ``path``, after checking that this version reads it: a
+    newer schema, a file that fails SQLite's quick check or lacks the tables of schema 1 raise SessionError."""
+    version = conn.execute("PRAGMA user_version").fetchone()[0]
+    if version > NEWEST_SCHEMA:
+        raise newer(path, version)
+    if conn.execute("PRAGMA quick_check").fetchone()[0] != "ok":
+        raise not_a_session(path)
+    tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if version < 1 or not {"meta", "runs", "steps", "readings", "events"} <= tables:
+        raise not_a_session(path)
+    return dict(conn.execute("SELECT key, value FROM meta").fetchall())
+
+
 def is_session_file(path: Path) -> bool:
     """True when ``path`` is a readable SQLite file (a session), not a CSV; False when it cannot be read."""
     try:
@@ -175,7 +203,11 @@ def check_magic(path: Path) -> None:
     except OSError as exc:
         raise SessionError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     if magic != MAGIC:
-        raise SessionError(f"{path} is not a session file (corrupt or not SQLite)")
+        raise not_a_session(path)
+
+
+def not_a_session(path: Path) -> SessionError:
+    return SessionError(f"{path} is not a session file (corrupt or not SQLite)")
 
 
 def newer(path: Path, version: int) -> SessionError:

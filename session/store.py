@@ -1,20 +1,21 @@
-"""A session: one SQLite file holding everything an acquisition recorded, durable and resumable.
+"""A session: one SQLite file holding everything an acquisition recorded, durable and resumable. ``acquire`` writes
+it (acquire/session.py adds the measurements); identify's edge reads it (identify/io/session_measurements.py).
 
-The file's tables and settings: session/schema.py.
+The file's tables and settings: session/schema.py; a step's rows: session/rows.py.
 
-Drift is not a table: home re-measurements are steps of kind ``home``, and :meth:`Session.drift`
+Drift is not a table: home re-measurements are steps of kind ``home``, and :meth:`SessionFile.drift`
 computes their displacement from the first one on read (one source of truth, nothing to keep in sync).
 
 Durability: a step and all its readings are written in one transaction, committed (fsync'd) before
-:meth:`Session.record_step` returns; a ``kill -9`` at any moment leaves the whole step or none of it.
+:meth:`SessionFile.record_step` returns; a ``kill -9`` at any moment leaves the whole step or none of it.
 With the rollback journal the session file itself holds every committed step after each commit: copying the
 ``.session`` file alone between steps copies them all, and a closed (finished, stopped or killed between
 steps) session is one file with no ``-wal``/``-shm``/``-journal`` beside it. Only while SQLite writes a
 step's pages (microseconds) is the file alone in flux; ``acquire backup`` copies a live session safely.
 Creation is atomic too: the file is built under a temporary name and linked into place complete.
 
-One writer: opening for writing (:meth:`Session.create`, ``Session.open(path, write=True)``) takes an
-exclusive ``flock`` on the file, held until :meth:`Session.close`; a second writer is refused at once with a
+One writer: opening for writing (:meth:`SessionFile.create`, ``SessionFile.open(path, write=True)``) takes an
+exclusive ``flock`` on the file, held until :meth:`SessionFile.close`; a second writer is refused at once with a
 :class:`SessionBusy` naming the holder's PID (session/lock.py). Readers take no lock and work while
 a session is written. :func:`acquire.session_backup.backup_session` copies a live session.
 
@@ -30,40 +31,39 @@ import socket
 import sqlite3
 import sys
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
-from acquire.plan import Plan
 from common import __version__
-from common.outputs import OutputError, check_target, commit_file, same_file, write_output
+from common.outputs import OutputError, check_target, commit_file
 from drivers.base import DeviceIdentity
-from identify.io.csvio import format_measurements
-from identify.measurements import Measurements
 from kinematics.joint_errors import Coupling
 from session.lock import Locked, busy_message, write_lock
 from session.lock import unlock as _unlock
-from session.records import StepRecord
-from session.rows import coupling_of, drift_from, measurements_from, point_rows, reading_rows, step_rows
-from session.schema import (  # the errors and SCHEMA_VERSION are part of this module's interface too
+from session.plan import Plan
+from session.records import PointRecord, StepRecord
+from session.rows import coupling_of, drift_from, insert_step, point_rows, reading_rows, retire_step, step_rows
+from session.schema import (
     NEWEST_SCHEMA,
     POINTS_SCHEMA,
-    SCHEMA,
     SCHEMA_VERSION,
-    STEP_COLUMNS,
     STREAMS_SCHEMA,
     SessionBusy,
     SessionError,
     check_magic,
     configure,
-    dump_q,
     fsync_path,
+    initialise,
     migrate,
     newer,
+    not_a_session,
+    read_meta,
 )
+from session.streams import StreamData, current_streams
 
 OUTCOMES = ("running", "complete", "aborted", "failed")
 
@@ -79,8 +79,11 @@ class RunInfo:
     reason: str
 
 
-class Session:
-    """An open session file. Create with :meth:`create`, reopen with :meth:`open`; use as a context manager."""
+class SessionFile:
+    """An open session file. Create with :meth:`create`, reopen with :meth:`open`; use as a context manager.
+
+    The file's contents, written and read back; ``acquire.session.Session`` adds its measurements (the rows as the
+    measurement CSV, identify/io/session_measurements.py)."""
 
     def __init__(self, path: Path, conn: sqlite3.Connection, header: dict[str, Any], plan: Plan,
                  lock_fd: int | None = None) -> None:
@@ -96,7 +99,7 @@ class Session:
 
     @classmethod
     def create(cls, path: str | Path, plan: Plan, config: dict[str, Any], robot: DeviceIdentity,
-               tracker: DeviceIdentity, coupling: Coupling | None = None) -> Session:
+               tracker: DeviceIdentity, coupling: Coupling | None = None) -> Self:
         """A new session file at ``path`` with its header, open for writing (locked); refuses to overwrite
         anything and to create folders (SessionError). ``coupling``: how the robot's readings give its DH joint
         values (the robot model's; None or the identity: they are the DH values); a coupled session is schema 2.
@@ -129,15 +132,7 @@ class Session:
             temp.unlink(missing_ok=True)
             conn = sqlite3.connect(temp, isolation_level=None)
             try:
-                configure(conn)
-                conn.execute("BEGIN IMMEDIATE")
-                for statement in SCHEMA.split(";"):
-                    if statement.strip():
-                        conn.execute(statement)
-                migrate(conn)
-                conn.executemany("INSERT INTO meta (key, value) VALUES (?, ?)", rows)
-                conn.execute(f"PRAGMA user_version = {header['schema']}")
-                conn.execute("COMMIT")
+                initialise(conn, rows, header["schema"])
             finally:
                 conn.close()
             fsync_path(temp)
@@ -158,7 +153,7 @@ class Session:
         return cls._open(path, lock_fd)
 
     @classmethod
-    def open(cls, path: str | Path, write: bool = False) -> Session:
+    def open(cls, path: str | Path, write: bool = False) -> Self:
         """Open an existing session: to read it (the default; no lock, works while another process writes it)
         or, with ``write``, to continue it (an exclusive lock, held until :meth:`close`; SessionBusy naming the
         holder if another process has it). SessionError (one line) for a missing, corrupt, non-SQLite or
@@ -169,8 +164,7 @@ class Session:
         return cls._open(path, lock_fd)
 
     @classmethod
-    def _open(cls, path: Path, lock_fd: int | None) -> Session:
-        not_session = SessionError(f"{path} is not a session file (corrupt or not SQLite)")
+    def _open(cls, path: Path, lock_fd: int | None) -> Self:
         # a reader opens read-write where it may, so that SQLite can roll back a step left half-written by a
         # killed writer (a reader never writes otherwise); read-only media are read read-only
         mode = "rw" if lock_fd is not None or os.access(path, os.W_OK) else "ro"
@@ -181,15 +175,7 @@ class Session:
             _unlock(lock_fd)
             raise SessionError(f"{path}: cannot be opened ({exc})") from None
         try:
-            version = conn.execute("PRAGMA user_version").fetchone()[0]
-            if version > NEWEST_SCHEMA:
-                raise newer(path, version)
-            if conn.execute("PRAGMA quick_check").fetchone()[0] != "ok":
-                raise not_session
-            tables = {row[0] for row in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-            if version < 1 or not {"meta", "runs", "steps", "readings", "events"} <= tables:
-                raise not_session
-            meta = dict(conn.execute("SELECT key, value FROM meta").fetchall())
+            meta = read_meta(conn, path)
             header = {key: json.loads(value) for key, value in meta.items()}
             if int(header.get("schema", 0)) > NEWEST_SCHEMA:
                 raise newer(path, int(header["schema"]))
@@ -215,7 +201,7 @@ class Session:
         except (sqlite3.Error, ValueError, KeyError, TypeError):
             conn.close()
             _unlock(lock_fd)
-            raise not_session from None
+            raise not_a_session(path) from None
         return cls(path, conn, header, plan, lock_fd)
 
     @property
@@ -237,7 +223,7 @@ class Session:
             _unlock(self._lock_fd)
             self._lock_fd = None
 
-    def __enter__(self) -> Session:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
@@ -368,7 +354,6 @@ class Session:
         for name, q in (("q_cmd", record.q_cmd), ("q_act", record.q_act)):
             if q is not None and len(q) != n:
                 raise SessionError(f"{self.path}: step {i}: {name} has {len(q)} values; the robot has {n} joints")
-        x, y, z = record.position if record.position is not None else (None, None, None)
         readings = []
         for reading, used in zip(record.readings, record.used, strict=True):
             p = np.asarray(reading.position, dtype=float).reshape(-1)
@@ -379,18 +364,7 @@ class Session:
                              int(reading.tp)))
         if record.points and self._db.execute("PRAGMA user_version").fetchone()[0] < POINTS_SCHEMA:
             self._mark_newest()
-        self._db.execute(
-            "INSERT INTO steps (plan_index, kind, sweep, joint, role, q_cmd, q_act, x, y, z, sigma, samples,"
-            " rejected, status, reason, t_start, t_end, run_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?,"
-            " ?, ?, ?, ?, ?)",
-            (i, record.kind, record.sweep, record.joint, record.role, dump_q(record.q_cmd),
-             dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
-             record.reason, record.t_start, record.t_end, self._run_id))
-        self._db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used, tp)"
-                             " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", readings)
-        self._db.executemany("INSERT INTO step_points (plan_index, tp, x, y, z, sigma, samples, rejected)"
-                             " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                             [(i, p.tp, *p.position, p.sigma, p.samples, p.rejected) for p in record.points])
+        insert_step(self._db, record, readings, self._run_id)
 
     def _mark_newest(self) -> None:
         """Mark the file schema 2 (inside the caller's transaction, so a rollback undoes it too): its steps now see
@@ -408,17 +382,8 @@ class Session:
         if row is None or row[0] != "missing":
             raise SessionError(f"{self.path}: step {i} is {'not recorded' if row is None else 'ok'}; only a missing "
                                "step is measured again")
-        columns = ", ".join(c for c in STEP_COLUMNS)
         with self._transaction(f"retire step {i}"):
-            attempt = 1 + self._db.execute("SELECT count(*) FROM retired_steps WHERE plan_index = ?",
-                                           (i,)).fetchone()[0]
-            self._db.execute(f"INSERT INTO retired_steps (attempt, run_id, {columns}) SELECT ?, run_id, {columns}"
-                             " FROM steps WHERE plan_index = ?", (attempt, i))
-            self._db.execute("INSERT INTO retired_readings (plan_index, attempt, x, y, z, sigma, t, status, used, tp)"
-                             " SELECT plan_index, ?, x, y, z, sigma, t, status, used, tp FROM readings"
-                             " WHERE plan_index = ? ORDER BY id", (attempt, i))
-            self._db.execute("DELETE FROM readings WHERE plan_index = ?", (i,))
-            self._db.execute("DELETE FROM steps WHERE plan_index = ?", (i,))
+            retire_step(self._db, i)
             self._insert_step(record)
 
     def missing_indices(self) -> list[int]:
@@ -458,40 +423,16 @@ class Session:
                 raise SessionError(f"{self.path}: inconsistent record ({exc})") from None
         return out
 
-    # --- export ---------------------------------------------------------------------------------------------
+    # --- reading back -------------------------------------------------------------------------------------
 
-    def to_measurements(self) -> Measurements:
-        """The ok steps as measurement-CSV rows, in plan order: q = ACTUAL joint readings, points = averaged TP,
-        one row per tracked point seen (``tp``: its id), ``coupling`` as the header records it.
+    def measured_rows(self) -> tuple[list[dict[str, Any]], dict[int, list[PointRecord]]]:
+        """What the stop-and-go measurements are made of: the ok steps other than streams as step rows (plan order,
+        :func:`session.rows.step_rows`) and the per-point averages of the steps that saw several tracked points."""
+        return step_rows(self._db, "WHERE status = 'ok' AND kind != 'stream'"), point_rows(self._db)
 
-        Sweeps and free poses keep the plan's sweep id, joint and role. Home re-measurements become free poses
-        (joint 0) with role "check": held out, they validate the model at home and never bias the fit. Missing
-        steps are skipped. ``sigma`` is given only when every exported row has one.
-        """
-        steps = measurements_from(step_rows(self._db, "WHERE status = 'ok' AND kind != 'stream'"),
-                                  point_rows(self._db), self._plan.joint_types, self.coupling)
-        if not self._plan.continuous:
-            return steps
-        from session.streams import with_streams  # continuous motion: streamed samples as rows
-
-        return with_streams(self._db, self._plan, steps)[0]
-
-    def export_csv(self, path: str | Path, force: bool = False) -> int:
-        """Write :meth:`to_measurements` as the measurement CSV (with session, robot and tracker metadata lines);
-        returns the number of rows. The file appears whole or not at all; an existing file is replaced only with
-        ``force``, the session itself never (OutputError)."""
-        path = Path(path)
-        if same_file(path, self.path):
-            raise OutputError(f"--csv {path} is the session {self.path}; an input is never overwritten")
-        meas = self.to_measurements()
-        if meas.coupling is not None and np.any(meas.coupling.offset):  # the CSV's coupling has no offset
-            shift = np.linalg.solve(meas.coupling.matrix, meas.coupling.offset)
-            meas = replace(meas, q=meas.q + shift, coupling=Coupling(meas.coupling.matrix, np.zeros(len(shift))))
-        metadata = {"session": str(self.path), "robot": _identity_line(self._header.get("robot", {})),
-                    "tracker": _identity_line(self._header.get("tracker", {})),
-                    "software": str(self._header.get("software", "")), "exported by": f"dh-calib {__version__}"}
-        write_output(path, format_measurements(meas, metadata), force)
-        return len(meas)
+    def streams(self) -> list[StreamData]:
+        """The complete, current attempt of every stream step recorded ok, in plan order (continuous motion)."""
+        return current_streams(self._db, self._plan)
 
     def backup_to(self, target: sqlite3.Connection) -> None:
         """Copy the whole file into the open database ``target`` with SQLite's online backup API (one step: a
@@ -540,29 +481,3 @@ def _lock(path: Path, shown: Path) -> int:
         raise SessionBusy(busy_message(shown, exc.holder)) from None
     except OSError as exc:
         raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None
-
-
-def factory_calibration(header: dict[str, Any]) -> tuple[dict[str, Any] | None, str]:
-    """The robot controller's factory calibration recorded in a session ``header`` (the robot identity's
-    ``details.factory_calibration``: JSON of UR's DH values, or ``unavailable (reason)``), and a note saying
-    why there is none. Robots that have none to report (simulated ones, other makes) and sessions older than
-    this field give (None, "")."""
-    text = ((header.get("robot") or {}).get("details") or {}).get("factory_calibration")
-    if text is None:
-        return None, ""
-    try:
-        value = json.loads(text)
-    except (TypeError, ValueError):
-        return None, f"the factory calibration could not be read from the controller: {text}"
-    if not isinstance(value, dict):
-        return None, f"the recorded factory calibration is not a table: {text[:80]}"
-    return value, ""
-
-
-def _identity_line(identity: dict[str, Any]) -> str:
-    parts = [str(identity.get("model", ""))]
-    if identity.get("serial"):
-        parts.append(f"serial {identity['serial']}")
-    if identity.get("firmware"):
-        parts.append(f"firmware {identity['firmware']}")
-    return " ".join(" ".join(parts).split())

@@ -1,5 +1,4 @@
-"""A session's streams (continuous motion): writing a stream step's samples in batches, and reading them back as
-measurement rows.
+"""A session's streams (continuous motion): writing a stream step's samples in batches, and reading them back.
 
 The tables are in session/schema.py. Writing (:class:`StreamRecorder`): an attempt of a stream step is a
 ``streams`` row (status ``recording``); its samples and gaps are committed in batches (the orchestrator's stream
@@ -7,37 +6,32 @@ loop commits at least every second, so a crash loses at most the last second); t
 ``complete`` or ``interrupted``. A new attempt of the same step supersedes the earlier ones: their samples stay
 in the file but are never read as measurements.
 
-Reading (:func:`with_streams`): every complete, current attempt whose stream step is recorded ok becomes rows:
-one per tracker sample (each tracked point), ``t`` its tracker time, ``q`` the joint stream interpolated
-(linearly) at robot time ``t + clock_offset``; ``clock_offset`` is the coarse estimate of
-:func:`identify.timing.coarse_clock_offset` over all the session's sweeps. Rows whose robot time lies outside
-the recorded joint stream or within one sample of a joint-stream gap are dropped (counted). Units: metres,
-radians / metres, seconds (each device's own clock for samples; the host's for batches).
+Reading (:func:`current_streams`): the complete, current attempt of every stream step recorded ok, as the samples
+and gaps of both devices (:class:`StreamData`); identify/io/session_measurements.py turns them into measurement
+rows. Units: metres, radians / metres, seconds (each device's own clock for samples; the host's for batches).
 """
 
 from __future__ import annotations
 
 import json
 import sqlite3
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from acquire.plan import Plan
 from drivers.base import JointStreamBatch, TrackerStreamBatch
-from identify.measurements import Measurements
-from identify.timing import SweepStreams, coarse_clock_offset, interpolate_joints
+from session.plan import Plan
 from session.schema import dump_q
 
 if TYPE_CHECKING:
-    from session.store import Session
+    from session.store import SessionFile
 
 
 class StreamRecorder:
     """Writes one attempt of the stream step ``plan_index`` of an open (writable) ``session`` with a run going."""
 
-    def __init__(self, session: Session, plan_index: int, started: float) -> None:
+    def __init__(self, session: SessionFile, plan_index: int, started: float) -> None:
         self.session = session
         step = session.plan.steps[plan_index]
         with session._transaction(f"start the stream of step {plan_index}"):
@@ -101,25 +95,6 @@ class StreamData:
     tracker_gaps: tuple[tuple[float, float], ...]
 
 
-@dataclass(frozen=True)
-class StreamSummary:
-    """What the export did with the streams: the clock offset (s, robot = tracker + offset) and each sweep's own
-    estimate, tracker rows kept and dropped (outside the joint stream or at a joint-stream gap), gaps seen."""
-
-    clock_offset: float
-    per_sweep: tuple[float, ...]
-    kept: int
-    dropped: int
-    gaps: int
-
-    def line(self) -> str:
-        spread = np.array(self.per_sweep, dtype=float)
-        spread = spread[np.isfinite(spread)]
-        span = f" (sweeps {1e3 * spread.min():.2f} .. {1e3 * spread.max():.2f} ms)" if spread.size > 1 else ""
-        return (f"streams: {self.kept} streamed rows, {self.dropped} dropped (outside the joint stream or at one of "
-                f"{self.gaps} gaps); coarse clock offset {1e3 * self.clock_offset:.2f} ms{span}")
-
-
 def current_streams(db: sqlite3.Connection, plan: Plan) -> list[StreamData]:
     """The complete, current attempt of every stream step recorded ok, in plan order."""
     tables = {r[0] for r in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
@@ -144,52 +119,3 @@ def current_streams(db: sqlite3.Connection, plan: Plan) -> list[StreamData]:
                               data[:, 4].astype(np.int64), data[:, 5],
                               tuple((a, b) for d, a, b in gaps if d == "tracker")))
     return out
-
-
-def with_streams(db: sqlite3.Connection, plan: Plan, steps: Measurements) -> tuple[Measurements, StreamSummary | None]:
-    """``steps`` (the stop-and-go rows) followed by the streamed rows of every current stream (module docstring),
-    with the session's coarse clock offset; the summary is None when there is no stream to read."""
-    streams = [s for s in current_streams(db, plan) if len(s.t) and len(s.t_joint) >= 2]
-    if not streams:
-        return steps, None
-    first = [s.tp == s.tp.min() for s in streams]
-    estimate = coarse_clock_offset([SweepStreams(s.t[k], s.points[k], s.t_joint, s.q_joint)
-                                    for s, k in zip(streams, first, strict=True)])
-    offset = estimate.offset
-    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("q", "points", "sweep", "joint", "sigma", "tp", "t")}
-    dropped = 0
-    for s in streams:
-        q, ok = interpolate_joints(s.t_joint, s.q_joint, s.t + offset, s.joint_gaps)
-        dropped += int((~ok).sum())
-        parts["q"].append(q[ok])
-        parts["points"].append(s.points[ok])
-        parts["sweep"].append(np.full(int(ok.sum()), s.sweep, dtype=np.int64))
-        parts["joint"].append(np.full(int(ok.sum()), s.joint, dtype=np.int64))
-        parts["sigma"].append(s.sigma[ok])
-        parts["tp"].append(s.tp[ok])
-        parts["t"].append(s.t[ok])
-    cat = {k: np.concatenate(v) for k, v in parts.items()}
-    m0, m1 = len(steps), len(cat["t"])
-    sigma = None
-    if steps.sigma is not None or m0 == 0:
-        joined = np.concatenate([steps.sigma if steps.sigma is not None else np.zeros(0), cat["sigma"]])
-        sigma = None if np.any(np.isnan(joined)) else joined
-    t_steps = steps.t if steps.t is not None else np.full(m0, np.nan)
-    meas = replace(steps, q=np.vstack([steps.q, cat["q"]]), points=np.vstack([steps.points, cat["points"]]),
-                   sweep=np.concatenate([steps.sweep, cat["sweep"]]), joint=np.concatenate([steps.joint, cat["joint"]]),
-                   sigma=sigma, check=np.concatenate([steps.check, np.zeros(m1, dtype=bool)]),
-                   row=np.arange(1, m0 + m1 + 1), tp=np.concatenate([steps.tp, cat["tp"]]),
-                   t=np.concatenate([t_steps, cat["t"]]),
-                   streamed=np.concatenate([np.zeros(m0, bool), np.ones(m1, bool)]),
-                   clock_offset=offset)
-    gaps = sum(len(s.joint_gaps) + len(s.tracker_gaps) for s in streams)
-    return meas, StreamSummary(offset, estimate.per_sweep, m1, dropped, gaps)
-
-
-def stream_summary(session: Session) -> StreamSummary | None:
-    """What :func:`with_streams` makes of ``session``'s streams (None without any)."""
-    from session.rows import measurements_from, point_rows, step_rows
-
-    steps = measurements_from(step_rows(session._db, "WHERE status = 'ok' AND kind != 'stream'"),
-                              point_rows(session._db), session.plan.joint_types, session.coupling)
-    return with_streams(session._db, session.plan, steps)[1]

@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from acquire.plan import Plan, Step
+from acquire.session import Session
 from drivers.base import DeviceIdentity, TrackerReading
+from session.plan import Plan, Step
 from session.records import StepRecord
-from session.store import Session
 
 JOINT_TYPES = "RRR"
 STEPS_PER_SWEEP = 10

@@ -1,19 +1,23 @@
-"""The result document of DESIGN.md (``joints``, ``base``, ``tool``) plus its evidence, as plain data.
+"""The result document of DESIGN.md (``joints``, ``base``, ``tool``) plus its evidence, as plain data, and the result
+YAML read back (:func:`load_result`).
 
 Units follow the contract: metres and radians. The dict is ready for ``yaml.safe_dump`` or ``json``.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
 from common import __version__
+from identify.calibrated import CalibratedModel, ResultError
 from identify.extensions import EQUATIONS, UNITS
 from identify.pipeline import Identification
 from identify.refine import parameter_names
-from kinematics.dh import DH_NAMES, DHModel
+from kinematics.dh import DH_NAMES, DHModel, model_to_dict
 
 CONVENTION = (
     "standard DH (DESIGN.md forward model). Frame 0: z0 on joint 1's axis, theta1 and d1 conventional, the "
@@ -25,26 +29,6 @@ CONVENTION = (
 
 def _floats(values: Any) -> Any:
     return np.asarray(values, dtype=float).tolist()
-
-
-def model_to_dict(model: DHModel) -> dict[str, Any]:
-    """The contract's three keys for ``model``."""
-    joints = [
-        {"type": t, "a": float(a), "alpha": float(al), "d": float(d), "theta": float(th)}
-        for t, th, d, a, al in zip(model.joint_types, model.theta, model.d, model.a, model.alpha, strict=True)
-    ]
-    return {"joints": joints, "base": _floats(model.base), "tool": _floats(model.tool)}
-
-
-def model_from_dict(doc: dict[str, Any]) -> DHModel:
-    """Inverse of :func:`model_to_dict`; raises ValueError (one line) on a malformed document."""
-    try:
-        joints = doc["joints"]
-        types = "".join(str(j["type"]) for j in joints)
-        table = np.array([[float(j[name]) for name in DH_NAMES] for j in joints])
-        return DHModel(types, table[:, 0], table[:, 1], table[:, 2], table[:, 3], doc["base"], doc["tool"])
-    except (KeyError, TypeError, IndexError) as exc:
-        raise ValueError(f"result document lacks or misshapes {exc}") from None
 
 
 def result_to_dict(ident: Identification, nominal: DHModel | None = None, nominal_name: str | None = None,
@@ -187,3 +171,20 @@ def finite(value: Any) -> Any:
     if isinstance(value, np.integer):
         return int(value)
     return value
+
+
+def load_result(path: str, name: str | None = None) -> tuple[CalibratedModel, dict[str, Any]]:
+    """The model of the result YAML at ``path`` and the document; ResultError (one line) when unusable."""
+    p = Path(path)
+    try:
+        doc = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ResultError(f"{path}: no such result file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ResultError(f"{path}: cannot be read ({exc})") from None
+    except yaml.YAMLError as exc:
+        raise ResultError(f"{path}: not YAML ({' '.join(str(exc).split())[:120]})") from None
+    try:
+        return CalibratedModel.from_document(doc, name or p.name), doc
+    except ResultError as exc:
+        raise ResultError(f"{path}: {exc}") from None

@@ -36,7 +36,7 @@ from identify.report.terminal import format_clock
 from kinematics.dh import DH_NAMES, DHModel
 
 if TYPE_CHECKING:
-    from session.store import Session
+    from session.store import SessionFile
 
 Array = NDArray[np.float64]
 
@@ -248,7 +248,7 @@ def _beyond_dh_section(ident: Identification, fit: Measurements) -> str:
     return "".join(parts) + "</section>"
 
 
-def _acquisition_section(session: Session) -> tuple[str, Figure | None]:
+def _acquisition_section(session: SessionFile) -> tuple[str, Figure | None]:
     header = session.header
     devices = []
     for key in ("robot", "tracker"):
@@ -312,7 +312,7 @@ def report_html(
     meas: Measurements,
     nominal: DHModel | None = None,
     nominal_name: str | None = None,
-    session: Session | None = None,
+    session: SessionFile | None = None,
     reference: tuple[str, DHModel] | None = None,
     title: str | None = None,
     source: str | None = None,

@@ -16,7 +16,7 @@ from identify.report.headline import headline_html
 from identify.report.html import _CSS, _acquisition_section, _e, _figure_html, _table, _when
 
 if TYPE_CHECKING:
-    from session.store import Session
+    from session.store import SessionFile
 
 MM = 1e3
 MODES = ("before", "after")
@@ -70,7 +70,7 @@ def _pose_rows(summary: dict[str, Any]) -> list[list[str]]:
 
 
 def verification_html(summary: dict[str, Any], header: dict[str, Any], source: str,
-                      session: Session | None = None) -> str:
+                      session: SessionFile | None = None) -> str:
     """The report as one HTML document: ``summary`` as written to ``.verify.yaml``, the session ``header``."""
     info = (header.get("config") or {}).get("verification") or {}
     robot = (header.get("robot") or {}).get("model", "robot")

@@ -16,15 +16,14 @@ import pytest
 import yaml
 
 from acquire.cli import main
+from acquire.session import Session
 from config.robots import load_robot
 from drivers.clock import VirtualClock
 from drivers.sim.rig import SimulatedRig
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.bounds import prediction_rms_bound
-from identify.io.result_io import model_from_dict
 from identify.simulate import random_poses
-from kinematics.dh import points_from_joints
-from session.store import Session
+from kinematics.dh import model_from_dict, points_from_joints
 
 ROBOT = "mock:ur5e?seed=3"
 SMALL = ["--steps", "12", "--samples", "3", "--free-poses", "6", "--quiet"]

@@ -13,8 +13,9 @@ from acquire.cell import cell_from_config
 from acquire.cli import main
 from acquire.collision import moves_samples
 from acquire.orchestrator import Orchestrator, StopRequest, Timeouts
-from acquire.plan import Plan, build_plan, check_plan, plan_clearance, tp_model
+from acquire.plan import build_plan, check_plan, plan_clearance, tp_model
 from acquire.plan_continuous import STREAM_SPEED_CAP, build_continuous_plan, deflection_limits, stream_speed
+from acquire.session import Session
 from acquire.stream_loop import COMMIT_PERIOD
 from config.robots import load_robot
 from config.site import SiteConfig
@@ -24,7 +25,7 @@ from drivers.sim.rig import SimulatedRig, open_robot
 from drivers.sim.tracker import open_tracker
 from identify.io.csvio import read_measurements
 from kinematics.dh import points_from_joints
-from session.store import Session
+from session.plan import Plan
 
 UR5E = load_robot("ur5e")
 #: a small continuous plan: two wrist sweeps, two check poses, no fitted free poses

@@ -11,16 +11,14 @@ import numpy as np
 import pytest
 
 from acquire import plan as plan_module
+from acquire.design import greedy_design
 from acquire.plan import (
     HOME_SWEEP,
-    Plan,
     PlanError,
-    Step,
     axis_distances_many,
     build_plan,
     check_plan,
     estimate_duration,
-    greedy_design,
     sweep_values,
     tp_model,
 )
@@ -31,6 +29,7 @@ from drivers.motion import motion_time
 from identify.bounds import prediction_rms_bound
 from identify.simulate import random_poses
 from kinematics.truth import axis_distances
+from session.plan import Plan, Step
 
 ROBOTS = ["ur5e", "scara", "gantry", "track_ur5e"]
 SITE = SiteConfig.default()

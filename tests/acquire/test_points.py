@@ -15,6 +15,7 @@ import pytest
 from acquire.cli import main
 from acquire.orchestrator import Orchestrator
 from acquire.plan import build_plan
+from acquire.session import Session
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.base import TrackerReading
@@ -26,7 +27,6 @@ from drivers.spec import RobotSpec
 from identify.io.csvio import read_measurements
 from kinematics.dh import points_from_joints
 from session.records import PointRecord, StepRecord
-from session.store import Session
 
 NOISE = 2e-5  # m per axis
 SAMPLES = 3

@@ -23,11 +23,12 @@ import pytest
 
 from acquire.cli import main as acquire
 from acquire.collision import STEP, segment_box_distances, segment_distances
-from acquire.plan import Plan, PlanError, build_plan, plan_clearance
+from acquire.plan import PlanError, build_plan, plan_clearance
 from config.geometry import TOOL
 from config.robots import RobotModel, load_robot, robot_names
 from config.site import SiteConfig
 from kinematics.dh import frames_from_joints, points_from_joints
+from session.plan import Plan
 
 H = 0.004  # m between sampled points along a capsule's axis
 SITE = SiteConfig.default()

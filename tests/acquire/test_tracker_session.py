@@ -19,6 +19,7 @@ pytest.importorskip("serial")
 
 from acquire.orchestrator import Orchestrator, Progress, Timeouts
 from acquire.plan import build_plan
+from acquire.session import Session
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.base import Tracker
@@ -29,7 +30,6 @@ from identify.bounds import prediction_covariances, prediction_rms_bound
 from identify.pipeline import identify
 from identify.simulate import random_poses
 from kinematics.dh import points_from_joints
-from session.store import Session
 from tests.tracker_devices import AsciiDevice, IppServer
 
 MODEL = "ur5e"

@@ -20,15 +20,15 @@ import yaml
 pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
 
 from acquire.cli import main as acquire
+from acquire.session import Session
 from config.robots import load_robot
 from drivers.sim.rig import SimulatedRig
 from drivers.spec import parse_faults
 from identify.bounds import prediction_rms_bound
 from identify.cli import main as identify
-from identify.io.result_io import model_from_dict
 from identify.simulate import random_poses
-from kinematics.dh import points_from_joints
-from session.store import Session, factory_calibration
+from kinematics.dh import model_from_dict, points_from_joints
+from session.rows import factory_calibration
 from tests.ur_emulator import CMD_MOVEJ, CMD_STOPJ, EmulatorProcess, ScaledClock
 
 SCALE = 100.0  # emulated seconds per wall second: a sweep move of a few seconds takes a few hundredths

@@ -13,6 +13,7 @@ import yaml
 from scipy.stats import chi2
 
 from acquire.cli import main as acquire
+from acquire.session import Session
 from config.robots import load_robot
 from drivers.sim.rig import SimulatedRig
 from identify.cli import main as identify_main
@@ -21,7 +22,6 @@ from identify.iso9283 import ISO_ORDER, accuracy, cube_poses, pose_result, visit
 from identify.pipeline import identify
 from identify.simulate import simulate
 from kinematics.dh import points_from_joints
-from session.store import Session
 
 NOISE, SAMPLES, CYCLES = 5e-5, 5, 5
 ROBOT = load_robot("ur5e")

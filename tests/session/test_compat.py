@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from acquire.cli import main
+from acquire.session import Session
 from session.schema import columns
-from session.store import Session
 
 DATA = Path(__file__).parents[1] / "data"
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from session.store import Session
+from acquire.session import Session
 
 ROOT = Path(__file__).resolve().parents[2]
 WRITER = "tests._acquire_writer"  # run with -m: tests/ holds packages named like the project's (tests/acquire/...)

@@ -20,10 +20,10 @@ import yaml
 
 from acquire.cli import main as acquire_main
 from acquire.resume import ResumeRefused, resume_settings
+from acquire.session import Session
 from acquire.session_backup import backup_session
 from identify.cli import main as identify_main
 from session.schema import SessionBusy, SessionError
-from session.store import Session
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquire.plan import Plan
+from acquire.session import Session
 from common import __version__
 from drivers.base import TrackerReading
 from identify.io.csvio import read_measurements
+from session.plan import Plan
 from session.records import StepRecord
 from session.schema import SCHEMA_VERSION, SessionError
-from session.store import Session
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan, write
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,7 +11,7 @@ import pytest
 from config.robots import load_robot
 from identify.factory import factory_model, factory_reference
 from kinematics.dh import points_from_joints
-from session.store import factory_calibration
+from session.rows import factory_calibration
 
 NOMINAL = load_robot("ur5e").nominal
 

@@ -10,7 +10,7 @@ import yaml
 
 from identify.cli import main
 from identify.io.csvio import format_measurements, read_measurements
-from identify.io.result_io import model_from_dict
+from kinematics.dh import model_from_dict
 
 ROOT = Path(__file__).resolve().parents[3]
 SAMPLE = ROOT / "identify" / "data" / "sample_ur5e.csv"

@@ -15,12 +15,12 @@ import pytest
 
 pytest.importorskip("matplotlib")
 
+from acquire.session import Session
 from config.robots import load_robot
 from identify.pipeline import identify
 from identify.report.html import report_html, write_report
 from identify.simulate import simulate
 from kinematics.truth import random_truth
-from session.store import Session
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
