@@ -13,6 +13,9 @@
 Exit codes: 0 complete, 1 the run failed (robot fault, lost connection; resumable), 2 bad input or a
 plan that breaks a limit or comes too close to the cell, 3 complete but its identification fails its
 verdict, 130 stopped by the operator (resumable).
+
+The run itself, its progress and what a complete session leaves beside it (result YAML, HTML report):
+acquire/runner.py.
 """
 
 from __future__ import annotations
@@ -25,31 +28,24 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
-
-import yaml
 
 from acquire.cell import Clearance
-from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
+from acquire.orchestrator import StopRequest
 from acquire.plan import build_plan, check_plan, estimate_duration, plan_clearance
 from acquire.plan_continuous import build_continuous_plan, estimate_continuous_duration, format_modes
 from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.resume import ResumeRefused, resume_settings
+from acquire.runner import finish, run_session
 from acquire.session import Session
 from acquire.session_backup import backup_session
 from common.errors import InputError
-from common.outputs import OutputError, check_outputs, check_target, same_file, write_output
+from common.outputs import OutputError, check_outputs, check_target, same_file
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
 from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
-from identify.factory import factory_reference
-from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
-from identify.report.terminal import format_reference, format_report
 from session.plan import Plan
-from session.rows import factory_calibration
 from session.schema import SessionError
 
 log = logging.getLogger("acquire")
@@ -197,77 +193,6 @@ def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bo
     return robot, tracker, clock
 
 
-def _progress_printer(quiet: bool):
-    """Progress to the log always, and to the terminal unless ``quiet``."""
-    tty = sys.stderr.isatty()
-
-    def show(p: Progress) -> None:
-        residual = f", sweep residual {p.residual * 1e3:.3f} mm" if p.residual is not None else ""
-        what = f"joint {p.step.joint} sweep" if p.step.kind == "sweep" else p.step.kind
-        line = (f"step {p.done}/{p.total} ({what}): {p.samples} samples, {p.status}; "
-                f"elapsed {_hms(p.elapsed)}, remaining {_hms(p.remaining)}{residual}")
-        log.info(line)
-        if quiet:
-            return
-        if tty:
-            sys.stderr.write("\r" + line[:150].ljust(150))
-            sys.stderr.flush()
-        elif p.done == p.total or p.done % 25 == 0:
-            print(line, file=sys.stderr)
-
-    return show
-
-
-def _hms(seconds: float) -> str:
-    seconds = max(0, round(seconds))
-    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
-
-
-def _cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:
-    """The mounting surface and the plan's swept envelope (DH frame 0) for the report's 3D view."""
-    import numpy as np
-
-    from acquire.cell import cell_from_config, envelope
-
-    try:
-        site = SiteConfig.from_dict(session.header["config"]["site"])
-    except (KeyError, TypeError, ConfigError):
-        return None
-    cell = cell_from_config(robot, site)
-    if cell is None:
-        return None
-    plan = session.plan
-    poses = np.array([plan.home, *(s.q for s in plan.steps)])
-    return {"normal": cell.normal, "offset": cell.offset, "envelope": envelope(cell, poses)}
-
-
-def _identify_session(session: Session, session_path: Path, robot: RobotModel) -> dict[str, Any]:
-    meas = session.to_measurements()
-    ident = identify(meas, robot.nominal, links=robot.links)
-    print(format_report(ident, robot.nominal, robot.name))
-    calibration, why = factory_calibration(session.header)  # the controller's own, for comparison
-    reference, note = factory_reference(calibration, why, robot.joint_types)
-    if reference is not None or note:
-        print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
-    doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path))
-    out = session_path.with_suffix(".result.yaml")
-    # the session's own outputs: checked before a new session started (refused if they existed, without --force),
-    # brought up to date by each run of the session that completes; written whole or not at all
-    write_output(out, yaml.safe_dump(doc, sort_keys=False, width=120), force=True)
-    print(f"result written to {out}")
-    try:
-        from identify.report.html import report_html
-    except ImportError:
-        print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
-        return doc
-    report = session_path.with_suffix(".report.html")
-    write_output(report, report_html(ident, meas, robot.nominal, robot.name, session=session, source=str(session_path),
-                                     reference=reference, reference_note=note or None,
-                                     cell=_cell_view(session, robot)), force=True)
-    print(f"report written to {report}")
-    return doc
-
-
 def run(args: argparse.Namespace) -> int:
     if args.probe:
         from acquire.probe import probe
@@ -387,7 +312,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         elif changes:
             session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))
         print(f"session: {path}")
-        return _finish(run_session(robot, tracker, session, clock, site, args.quiet), session, path, robot_model)
+        return finish(run_session(robot, tracker, session, clock, site, args.quiet), session, path, robot_model)
     finally:
         robot.close()
         tracker.close()
@@ -506,45 +431,6 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
               "reached", file=sys.stderr)
         return 130 if result.outcome == "aborted" else 1
     print(f"rehearsal complete: {result.recorded} steps reached, nothing measured or recorded")
-    return 0
-
-
-def run_session(robot, tracker, session: Session, clock, site: SiteConfig, quiet: bool) -> RunResult:
-    """Run ``session``'s remaining steps on the devices (Ctrl-C stops the motion; the site's timeouts and
-    retries), printing progress unless ``quiet``."""
-    stop = StopRequest()
-    orchestrator = Orchestrator(robot, tracker, session, clock,
-                                Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
-                                site.retries, _progress_printer(quiet), stop, site.stream_rate)
-    with stop.installed():
-        result = orchestrator.run()
-    if not quiet and sys.stderr.isatty():
-        sys.stderr.write("\n")
-    return result
-
-
-def _finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -> int:
-    log.info("run %s%s; %d step(s) recorded, %d missing", result.outcome,
-             f" ({result.reason})" if result.reason else "", result.recorded, result.missing)
-    if result.outcome != "complete":
-        print(f"acquire: run {result.outcome}: {result.reason}", file=sys.stderr)
-        print(f"acquire: {result.recorded} step(s) recorded this run; resume with: acquire --resume {path}",
-              file=sys.stderr)
-        return 130 if result.outcome == "aborted" else 1
-    if result.missing:
-        print(f"note: {result.missing} step(s) still missing after a second attempt (tracker failures); the "
-              f"identification uses the rest; acquire --resume {path} --remeasure-missing tries them again")
-    drift = session.drift()
-    if len(drift) > 1:
-        worst = max(d for _, d in drift)
-        minutes = (drift[-1][0] - drift[0][0]) / 60
-        print(f"home drift: {len(drift)} re-measurements over {minutes:.1f} min, largest {worst * 1e3:.4f} mm "
-              "from the first")
-    doc = _identify_session(session, path, robot)
-    if doc["verdict"]["status"] == "fail":
-        print("acquire: the identification FAILS its verdict: do not use this model (see the checks above)",
-              file=sys.stderr)
-        return 3
     return 0
 
 

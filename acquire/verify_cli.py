@@ -25,20 +25,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from acquire.cli import (
-    UsageError,
-    _check_start,
-    _confirm,
-    _hms,
-    _open_devices,
-    _Parser,
-    _site,
-    _without_faults,
-    run_session,
-)
+from acquire.cli import UsageError, _check_start, _confirm, _open_devices, _Parser, _site, _without_faults
 from acquire.plan import estimate_duration, plan_clearance
 from acquire.plan_report import format_clearance
 from acquire.resume import resume_settings
+from acquire.runner import hms, run_session
 from acquire.session import Session
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
 from common.outputs import check_outputs, check_target, write_output
@@ -117,7 +108,7 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
     lines.append(f"compensation changes the joints by up to {change * 1e3:.2f} mrad")
     lines += [f"note: {n}" for n in info["notes"]]
     lines.append(f"total: {len(plan.steps)} steps x {plan.samples_per_step} samples; estimated duration "
-                 f"{_hms(duration)}")
+                 f"{hms(duration)}")
     return "\n".join(lines)
 
 

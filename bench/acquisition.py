@@ -32,7 +32,8 @@ from acquire.session import Session
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.clock import VirtualClock
-from drivers.sim.rig import SimulatedRig, SimulatedRobot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import SimulatedRobot
 from drivers.sim.tracker import SimulatedTracker
 
 

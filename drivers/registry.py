@@ -10,7 +10,7 @@ clock), so their factories take it as ``rig=``::
 
     from drivers.clock import VirtualClock          # WallClock() for --realtime
     from drivers.registry import open_robot, open_tracker
-    from drivers.sim import SimulatedRig
+    from drivers.sim.rig import SimulatedRig
     from drivers.spec import RobotSpec, TrackerSpec
 
     robot_spec, tracker_spec = RobotSpec.parse("mock:ur5e?seed=3"), TrackerSpec.parse("mock?noise=5e-5")
@@ -48,7 +48,7 @@ if TYPE_CHECKING:
 #: Robot backend -> "module:factory".
 ROBOT_BACKENDS: dict[str, str] = {
     "ur": "drivers.ur.driver:open_robot",
-    "mock": "drivers.sim.rig:open_robot",
+    "mock": "drivers.sim.robot:open_robot",
 }
 #: Tracker backend -> "module:factory".
 TRACKER_BACKENDS: dict[str, str] = {

@@ -21,6 +21,7 @@ import os
 import sys
 
 import acquire.cli as cli
+import acquire.runner as runner
 import drivers.registry as registry
 
 
@@ -36,10 +37,11 @@ def _child(argv: list[str]) -> int:
         return open_robot(*args, **kwargs)
 
     registry.open_robot = opened
-    cli._identify_session = lambda *args, **kwargs: {"verdict": {"status": "pass"}}  # identification is not under test
+    # identification is not under test
+    runner.identify_session = lambda *args, **kwargs: {"verdict": {"status": "pass"}}
     cli.predicted_accuracy = lambda *args, **kwargs: None
     cli.format_plan = lambda *args, **kwargs: "(plan)"
-    cli._progress_printer = lambda quiet: (lambda p: _say(f"ack {p.step.index}"))
+    runner.progress_printer = lambda quiet: (lambda p: _say(f"ack {p.step.index}"))
     return cli.main(argv)
 
 

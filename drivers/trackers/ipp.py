@@ -9,13 +9,10 @@ attempts per reading after an error reply, a timeout or a dropped connection (de
 points averaged into each reading (default 1); ``averaging``: who averages (below); ``tools``: several tracked
 points (below); ``trace``: a file logging every byte both ways. Other options are rejected with one line.
 
-Protocol (I++ DME 1.4.3, section 6): the client sends ``TAG Command(args)\\r\\n`` with a five-digit tag
-(00001..99999, wrapping); the server answers ``TAG &`` (acknowledged), ``TAG # data`` (zero or more), then
-``TAG %`` (complete), and ``TAG ! Error(F1, F2, F3, Text)`` when something went wrong. Lines with an ``E``
-tag are events (``E0000``: unsolicited) and are only logged; lines of another tag (late replies of an
-abandoned command) are skipped. The session: ``StartSession()`` and ``GetDMEVersion()`` (the identity) at
-connect, ``Get(X(), Y(), Z())`` per raw point (millimetres, the server's current coordinate system),
-``EndSession()`` at close.
+Protocol (I++ DME 1.4.3, section 6): tagged commands and their ``&``, ``#``, ``%`` and ``!`` replies, events and
+error lines, as drivers/trackers/ipp_protocol.py describes and speaks them. The session: ``StartSession()`` and
+``GetDMEVersion()`` (the identity) at connect, ``Get(X(), Y(), Z())`` per raw point (millimetres, the server's
+current coordinate system), ``EndSession()`` at close.
 
 Errors by severity (F1, section 8.1): 0 info and 1 warning "do not interfere with pending commands": the
 client records them (:attr:`IppTracker.warnings`, the log, the byte trace, and the ``status`` of the reading
@@ -58,7 +55,7 @@ import logging
 import re
 import socket
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import IO, Any
 
@@ -69,6 +66,7 @@ from drivers.base import DeviceIdentity, TrackerReading
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, SpecError
 from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
+from drivers.trackers.ipp_protocol import IppError, IppNotice, IppProtocol
 from drivers.trackers.ipp_stream import EventStreaming
 
 DEFAULT_PORT = 1294
@@ -78,56 +76,15 @@ FORM = "ipp://HOST[:PORT][?timeout=S&retries=N&average=N&averaging=auto|client|P
 AVERAGE_NAMES = ("average", "averages", "averaging", "averagecount", "avgcount", "numaverages")
 MAX_AVERAGE = 100_000
 GET_POINT = "Get(X(), Y(), Z())"
-SEVERITY = {0: "info", 1: "warning", 2: "error", 3: "error (user action needed)", 9: "fatal server error"}
-_REPLY = re.compile(r"^(?P<tag>E?\d{4,5})\s+(?P<kind>[&#%!])\s*(?P<body>.*)$")
-_ERROR = re.compile(r"^Error\(\s*(?P<severity>\d+)\s*,\s*(?P<code>\d+)\s*,\s*(?P<method>\"[^\"]*\"|[^,\"]*?)\s*,"
-                    r"\s*(?P<text>.*?)\s*\)\s*$")
 _AXIS = re.compile(r"\b(?P<axis>[XYZ])\(\s*(?P<value>[-+0-9.eE]+)\s*\)")
 _PROPERTY = re.compile(r'^"(?P<name>[A-Za-z][A-Za-z0-9.]*)"\s*,\s*"(?P<type>[A-Za-z]+)"$')
 _PATH = re.compile(r"^[A-Za-z][A-Za-z0-9]*(\.[A-Za-z][A-Za-z0-9]*)*$")
 _TOOL = re.compile(r"^[A-Za-z0-9_.+-]+$")
-MAX_LINE = 65536  # the standard's longest line (section 6.2)
 
 log = logging.getLogger("drivers.trackers.ipp")
 
 
-class IppError(BadReading):
-    """The server answered ``!`` Error(...) of severity >= 2: ``severity``, ``code``, ``text`` as sent."""
-
-    def __init__(self, message: str, severity: int = 0, code: str = "", text: str = "") -> None:
-        super().__init__(message)
-        self.severity, self.code, self.text = severity, code, text
-
-
-@dataclass(frozen=True)
-class IppNotice:
-    """An I++ error line that did not stop anything: severity 0 (info) or 1 (warning) of a command, or any
-    unsolicited one (``E`` tag). ``command`` is the command it came with ("" if unsolicited)."""
-
-    timestamp: float
-    severity: int
-    code: str
-    method: str
-    text: str
-    command: str
-
-    def __str__(self) -> str:
-        kind = SEVERITY.get(self.severity, f"severity {self.severity}")
-        where = f" ({self.command})" if self.command else " (unsolicited)"
-        return f"{kind} {self.code}{where}: {self.text}"
-
-
-def _error_fields(body: str) -> tuple[int, str, str, str]:
-    """(severity, code, method, text) of an ``Error(F1, F2, F3, Text)`` body; severity 9 if it does not parse."""
-    match = _ERROR.match(body)
-    if match is None:
-        return 9, "?", "", body
-    unquote = "\"“”' "
-    return (int(match.group("severity")), match.group("code"), match.group("method").strip(unquote),
-            match.group("text").strip(unquote))
-
-
-class IppTracker(EventStreaming):
+class IppTracker(EventStreaming, IppProtocol):
     """An I++ DME server as a tracker (implements :class:`drivers.base.Tracker` and, with a server that has
     ``OnMoveReportE``, :class:`drivers.base.StreamingTracker`).
 
@@ -375,112 +332,6 @@ class IppTracker(EventStreaming):
         if match is None:
             raise BadReading(f"{self.where}: GetProp({path}()) answered {' | '.join(data)!r}, not a number")
         return float(match.group(1))
-
-    # --- protocol -----------------------------------------------------------------------------------------
-
-    def command(self, text: str, deadline: float, tag: str | None = None, until: str = "%") -> list[str]:
-        """Send ``text`` with a fresh tag (or the event tag ``tag``) and return its ``#`` data lines once ``%``
-        (or ``until``, e.g. ``&``) arrives. Errors of severity 0/1 are recorded in ``warnings`` and the command
-        goes on; from severity 2 on the client sends ClearAllErrors() and raises IppError. Also raises
-        DeviceTimeout, ConnectionFailed."""
-        tag = self._send(text, tag)
-        data: list[str] = []
-        while True:
-            kind, body = self._reply(tag, deadline, text)
-            if kind == until:
-                return data
-            if kind == "#":
-                data.append(body)
-            elif kind == "!":
-                severity, code, method, message = _error_fields(body)
-                if severity < 2:
-                    self._notice(IppNotice(time.time(), severity, code, method, message, text))
-                    continue
-                if text != "ClearAllErrors()":
-                    with contextlib.suppress(IppError, DeviceTimeout):
-                        self.command("ClearAllErrors()", deadline)
-                raise IppError(f"{self.where}: {text} failed: error {code} (severity {severity}, "
-                               f"{SEVERITY.get(severity, 'error')}): {message}", severity, code, message)
-
-    def _notice(self, notice: IppNotice) -> None:
-        self.warnings.append(notice)
-        self._trace.event(f"I++ {notice}")
-        log.log(logging.WARNING if notice.severity < 2 else logging.ERROR, "%s: %s",
-                self.where, notice)
-
-    def _send(self, text: str, tag: str | None = None) -> str:
-        if self._sock is None:
-            raise ConnectionFailed(f"I++ tracker {self.where} is not connected")
-        if tag is None:
-            self._tag = self._tag % 99999 + 1
-            tag = f"{self._tag:05d}"
-        data = f"{tag} {text}\r\n".encode("ascii")
-        self._trace.data(">", data)
-        try:
-            self._sock.sendall(data)
-        except OSError as exc:
-            self._drop()
-            raise ConnectionFailed(f"lost the connection to {self.where}: {one_line(exc)}") from exc
-        return tag
-
-    def _reply(self, tag: str, deadline: float, what: str) -> tuple[str, str]:
-        """The next (kind, body) of ``tag``; events (recorded) and other tags are skipped."""
-        while True:
-            line = self._line(deadline, what)
-            match = _REPLY.match(line)
-            if match is None:
-                self._trace.event(f"skipped malformed line {line!r}")
-                continue
-            if match.group("tag") == tag:  # an event-tagged command (OnMoveReportE): its own replies
-                return match.group("kind"), match.group("body").strip()
-            if match.group("tag") in self._stopped_tags:  # a late report of a stopped daemon
-                continue
-            if match.group("tag").startswith("E"):
-                self.events.append(line)
-                if match.group("kind") == "!":
-                    self._notice(IppNotice(time.time(), *_error_fields(match.group("body").strip()), ""))
-                continue
-            if match.group("tag") != tag:
-                self._trace.event(f"skipped reply of another tag: {line!r}")
-                continue
-            return match.group("kind"), match.group("body").strip()
-
-    def _line(self, deadline: float, what: str) -> str:
-        sock = self._sock
-        while True:
-            if sock is None:
-                raise ConnectionFailed(f"I++ tracker {self.where} is not connected")
-            head, sep, rest = self._buffer.partition(b"\n")
-            if sep:
-                self._buffer = rest
-                text = head.decode("ascii", "replace").strip()
-                if text:
-                    return text
-                continue
-            if len(self._buffer) > MAX_LINE:
-                self._buffer = b""
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise DeviceTimeout(f"{self.where}: no complete answer to {what} within the timeout")
-            try:
-                sock.settimeout(remaining)
-                chunk = sock.recv(65536)
-            except TimeoutError:
-                continue
-            except OSError as exc:
-                self._drop()
-                raise ConnectionFailed(f"lost the connection to {self.where}: {one_line(exc)}") from exc
-            if not chunk:
-                self._drop()
-                raise ConnectionFailed(f"the I++ server {self.where} closed the connection")
-            self._trace.data("<", chunk)
-            self._buffer += chunk
-
-    def _drop(self) -> None:
-        sock, self._sock = self._sock, None
-        if sock is not None:
-            sock.close()
-            self._trace.event("disconnected")
 
 
 

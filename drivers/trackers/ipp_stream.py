@@ -35,6 +35,7 @@ from drivers.base import TrackerStreamBatch
 from drivers.errors import ConnectionFailed, DeviceTimeout
 from drivers.stream_buffer import BufferedStreaming
 from drivers.trace import one_line
+from drivers.trackers.ipp_protocol import IppError, _error_fields
 
 GAP_FACTOR = 1.5  # a step above this many intervals (plus JITTER) between reports is a gap
 JITTER = 0.02  # s: host receive times of reports jitter by the network and the scheduler
@@ -152,8 +153,6 @@ class EventStreaming(BufferedStreaming):
                 last, broken = received, False
             elif line.startswith((f"{tag} !", "E0000 !")):
                 if last is None and line.startswith(tag):  # refused before any report: no such daemon here
-                    from drivers.trackers.ipp import IppError, _error_fields
-
                     severity, code, _, text = _error_fields(line.partition("!")[2].strip())
                     with self._stream_lock:
                         self._failure = IppError(f"{self.where}: OnMoveReportE failed: error {code} (severity "

@@ -21,7 +21,8 @@ from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.base import DeviceIdentity
 from drivers.clock import VirtualClock
-from drivers.sim.rig import SimulatedRig, open_robot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import open_robot
 from drivers.sim.tracker import open_tracker
 from identify.io.csvio import read_measurements
 from kinematics.dh import points_from_joints

@@ -21,7 +21,8 @@ from config.site import SiteConfig
 from drivers.base import TrackerReading
 from drivers.clock import VirtualClock
 from drivers.errors import SpecError
-from drivers.sim.rig import SimulatedRig, SimulatedRobot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import SimulatedRobot
 from drivers.sim.tracker import SimulatedTracker
 from drivers.spec import RobotSpec
 from identify.io.csvio import read_measurements

@@ -25,7 +25,8 @@ from config.site import SiteConfig
 from drivers.base import Tracker
 from drivers.clock import VirtualClock
 from drivers.registry import open_tracker
-from drivers.sim.rig import SimulatedRig, SimulatedRobot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import SimulatedRobot
 from identify.bounds import prediction_covariances, prediction_rms_bound
 from identify.pipeline import identify
 from identify.simulate import random_poses

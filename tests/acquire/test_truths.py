@@ -16,7 +16,8 @@ from acquire.cli import main
 from acquire.session import Session
 from config.robots import load_robot
 from drivers.clock import VirtualClock
-from drivers.sim.rig import SimulatedRig, SimulatedRobot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import SimulatedRobot
 from drivers.sim.tracker import SimulatedTracker
 from identify.io.csvio import read_measurements
 from kinematics.dh import frames_from_joints, points_from_joints

@@ -172,7 +172,7 @@ def test_mock_settings_are_typed_with_defaults() -> None:
 def test_registry_tables_match_the_spec_backends() -> None:
     assert tuple(registry.ROBOT_BACKENDS) == spec.ROBOT_BACKENDS
     assert tuple(registry.TRACKER_BACKENDS) == spec.TRACKER_BACKENDS
-    assert registry.ROBOT_BACKENDS["mock"] == "drivers.sim.rig:open_robot"
+    assert registry.ROBOT_BACKENDS["mock"] == "drivers.sim.robot:open_robot"
     assert registry.TRACKER_BACKENDS["mock"] == "drivers.sim.tracker:open_tracker"
 
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from drivers.motion import profile_fraction
-from drivers.sim.rig import SimulatedRig, open_robot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import open_robot
 from drivers.sim.tracker import open_tracker
 from identify.timing import SweepStreams, coarse_clock_offset, interpolate_joints
 

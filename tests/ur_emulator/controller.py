@@ -14,7 +14,8 @@ import numpy as np
 from drivers.errors import ConnectionFailed, EmergencyStop, ProtectiveStop, RobotFault
 from drivers.motion import joint_durations as _durations
 from drivers.motion import profile_fraction as _fraction
-from drivers.sim.rig import SimulatedRig, SimulatedRobot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import SimulatedRobot
 from tests.ur_emulator.protocol import (
     CMD_MOVEJ,
     CMD_NONE,

@@ -23,7 +23,8 @@ from drivers.errors import (
 )
 from drivers.motion import move_duration
 from drivers.registry import open_robot, open_tracker
-from drivers.sim.rig import SimulatedRig, SimulatedRobot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import SimulatedRobot
 from drivers.sim.tracker import SimulatedTracker
 from kinematics.dh import points_from_joints
 from kinematics.truth import random_truth

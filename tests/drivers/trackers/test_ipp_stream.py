@@ -10,7 +10,7 @@ import pytest
 
 from drivers.base import StreamingTracker
 from drivers.sim.rig import SimulatedRig
-from drivers.trackers.ipp import IppError
+from drivers.trackers.ipp_protocol import IppError
 from tests.ipp_device import IppServer, open_ipp
 
 RATE = 100.0  # Hz asked for: a report every 10 ms

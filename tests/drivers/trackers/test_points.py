@@ -14,7 +14,8 @@ from acquire.session import Session
 from config.robots import ConfigError
 from drivers.errors import BadReading, ConnectionFailed, SpecError, TargetLost
 from drivers.registry import open_tracker
-from drivers.sim.rig import SimulatedRig, SimulatedRobot
+from drivers.sim.rig import SimulatedRig
+from drivers.sim.robot import SimulatedRobot
 from drivers.trackers.ascii_profile import PointLost, load_profile, parse_line, profile_from_dict
 from session.plan import Plan, Step
 from tests.tracker_devices import AsciiDevice, IppServer, open_ipp
