@@ -1,1 +1,2 @@
-"""config package."""
+"""Configuration as data: robot models (``robots/*.yaml``), tracker profiles (``trackers/*.yaml``), the site file,
+and the code that loads and validates them (``robots``, ``site``, ``geometry``)."""

@@ -4,7 +4,7 @@ Robot specs::
 
     ur5e                      a real UR robot; its host comes from the site configuration
     ur5e@192.168.1.10[:PORT]  a real UR robot at that host (IPv6 in brackets: ur5e@[fe80::1])
-    mock:ur5e                 the simulated robot of that model (drivers/sim/rig.py)
+    mock:ur5e                 the simulated robot of that model (drivers/sim/)
     ...?key=value&key=value   options; ``ur:ur5e`` is accepted as the explicit form of ``ur5e``
 
 Tracker specs::
@@ -13,7 +13,7 @@ Tracker specs::
                               e.g. serial:/dev/ttyUSB0?baud=115200&protocol=NAME
     ipp://HOST[:PORT][?opts]  an I++ DME server (port as given; the backend picks its default, 1294)
     aruco:SOURCE[?opts]       camera index, video/image path or glob; e.g. aruco:0?marker=7&size=0.05
-    mock[?opts]               the simulated tracker (drivers/sim/rig.py)
+    mock[?opts]               the simulated tracker (drivers/sim/)
 
 Option values are raw text (no percent-decoding): they must not contain ``& = ? #`` or white space; their
 order is kept so that ``str(spec)`` gives back the string that was parsed. Options of the mock backends are

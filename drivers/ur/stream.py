@@ -33,7 +33,7 @@ from drivers.errors import DeviceTimeout, RobotFault
 
 BATCH = 5000  # samples per stream_read request (10 s at 500 Hz; about 300 kB pickled)
 MAX_REQUESTS = 20  # stream_read requests per read_joint_stream call
-POSITION_TOLERANCE = 1e-3  # rad, as drivers.ur: arrived when every joint is this close to its target
+POSITION_TOLERANCE = 1e-3  # rad, as drivers/ur/driver.py: arrived when every joint is this close to its target
 #: s a still arm short of its target with no async move running must last to count as a move that ended early
 #: (the progress comes from the control interface's RTDE connection, the joints from the receive one: either
 #: may be a package ahead of the other)

@@ -1,4 +1,4 @@
-"""The simulated rig (drivers/sim/rig.py): physics, timing, faults."""
+"""The simulated rig (drivers/sim/): physics, timing, faults."""
 
 from __future__ import annotations
 
