@@ -38,6 +38,8 @@ from acquire.plan_report import format_clearance, format_plan, plan_json, predic
 from acquire.resume import ResumeRefused, resume_settings
 from acquire.session import Session, SessionError, factory_calibration
 from acquire.session_backup import backup_session
+from acquire.session_streams import stream_summary
+from acquire.stream_loop import check_streams
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
@@ -112,12 +114,9 @@ def _export(argv: list[str]) -> int:
     check_outputs([args.session], [("--csv", args.csv)], args.force)
     with Session.open(args.session) as session:
         rows = session.export_csv(args.csv, force=args.force)
-        if session.plan.continuous:
-            from acquire.session_streams import stream_summary
-
-            summary = stream_summary(session)
-            if summary is not None:
-                print(summary.line())
+        summary = stream_summary(session) if session.plan.continuous else None
+        if summary is not None:
+            print(summary.line())
     print(f"wrote {args.csv} ({rows} rows)")
     return 0
 
@@ -377,6 +376,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         first = 0 if session is None else session.next_index()
         if first is not None:
             _check_start(robot, plan, robot_model, site, first, session)
+            check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before anything moves
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv)}

@@ -18,6 +18,7 @@ from acquire.plan import Plan, build_plan, check_plan, plan_clearance
 from acquire.plan_continuous import build_continuous_plan
 from acquire.plan_modes import build_both_plan, build_mode_plan, mode_site, plan_mode
 from acquire.session import Session
+from acquire.stream_loop import StreamingUnsupported, check_streams
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.sim import SimulatedRig
@@ -110,6 +111,28 @@ def test_dry_run_compares_the_three_modes(capsys) -> None:
     assert t_cont < 0.3 * t_step and t_cont < t_both
     # both holds the continuous plan's data and more: its bound can only be lower; the streams beat the steps
     assert a_both <= a_cont + 1e-4 and a_cont < a_step
+
+
+def test_a_plan_that_streams_is_refused_before_anything_moves_with_a_tracker_that_cannot() -> None:
+    from drivers.registry import open_tracker
+    from drivers.sim import open_robot
+    from drivers.sim_tracker import open_tracker as open_sim_tracker
+
+    rig = SimulatedRig.from_spec(ROBOT, "mock")
+    robot, sim_tracker = open_robot(ROBOT, rig=rig), open_sim_tracker("mock", rig=rig)
+    robot.connect(1.0)
+    sim_tracker.connect(1.0)
+    site = mode_site(SiteConfig.default(), "both", None)
+    both, step = build_both_plan(UR5E, site), build_plan(UR5E, site)
+    polled = open_tracker("serial:loop://?protocol=polled-xyz")  # answers when asked: no device timestamps
+    moves = rig.moves
+    with pytest.raises(StreamingUnsupported, match=r"cannot stream with device timestamps.*use --mode step"):
+        check_streams(robot, polled, both, 1.0, 250.0)
+    with pytest.raises(StreamingUnsupported, match="object does not"):
+        check_streams(robot, object(), both, 1.0, 250.0)
+    check_streams(robot, polled, step, 1.0, 250.0)  # a stop-and-go plan needs no stream
+    check_streams(robot, sim_tracker, both, 1.0, 250.0)  # the simulated devices stream
+    assert rig.moves == moves and not rig._moving  # nothing moved
 
 
 # --- a mixed session end to end ------------------------------------------------------------------------------
