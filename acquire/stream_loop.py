@@ -34,15 +34,36 @@ class StreamingUnsupported(DriverError):
     """A device of the run cannot stream (continuous mode needs both to)."""
 
 
+def _require_streams(robot, tracker) -> None:
+    for device, method in ((robot, "start_joint_stream"), (tracker, "start_stream")):
+        if not callable(getattr(device, method, None)):
+            raise StreamingUnsupported(f"continuous mode needs a robot and a tracker that stream; "
+                                       f"{type(device).__name__} does not (use --mode step)")
+
+
+def check_streams(robot, tracker, plan: Plan, timeout: float, rate: float) -> None:
+    """Before anything moves: when ``plan`` has stream steps, start and stop both devices' streams once (``rate``
+    Hz asked of the tracker, ``timeout`` s per call); StreamingUnsupported (one line) when either cannot stream,
+    e.g. a polled serial profile or an I++ server without event reports."""
+    if not plan.continuous:
+        return
+    _require_streams(robot, tracker)
+    for device, start, stop in ((robot, lambda: robot.start_joint_stream(timeout), robot.stop_joint_stream),
+                                (tracker, lambda: tracker.start_stream(rate, timeout), tracker.stop_stream)):
+        try:
+            start()
+            stop(timeout)
+        except (ValueError, DriverError) as exc:
+            raise StreamingUnsupported(f"this plan streams, and {type(device).__name__} cannot: {exc} (use --mode "
+                                       "step)") from None
+
+
 def run_stream(robot, tracker, session: Session, clock: Clock, step: Step, plan: Plan, timeouts,
                stop, command: Callable[[tuple[float, ...]], tuple[float, ...]], rate: float) -> StepRecord:
     """Record the stream step ``step`` (module docstring); ``command`` turns DH values into the readings to command,
     ``rate`` the tracker rate asked for (Hz), ``timeouts`` the orchestrator's. Returns the step's record (ok: the
     samples are in the session; missing: stopped by the operator, or no tracker sample at all)."""
-    for device, method in ((robot, "start_joint_stream"), (tracker, "start_stream")):
-        if not callable(getattr(device, method, None)):
-            raise StreamingUnsupported(f"continuous mode needs a robot and a tracker that stream; "
-                                       f"{type(device).__name__} does not (use --mode step)")
+    _require_streams(robot, tracker)
     assert step.start is not None and step.speed is not None and step.acceleration is not None
     t_start = clock.now()
     state = robot.state()

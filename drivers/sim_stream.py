@@ -263,5 +263,14 @@ class TrackerStreaming:
         return batch
 
 
+def robot_time_of_stamps(details: dict[str, str], t: Array) -> Array:
+    """The robot-clock times (s) at which a simulated tracker took the positions it stamped ``t`` (s, its clock),
+    without jitter: the inverse of :meth:`TrackerStreaming.tracker_time`, from the tracker identity's ``details``
+    (a session header's ``tracker.details``: latency, clock_offset, drift, clock_epoch). ``result - t`` is what a
+    session's clock fit should find as its offset (robot time = tracker time + offset)."""
+    latency, offset, drift, epoch = (float(details[k]) for k in ("latency", "clock_offset", "drift", "clock_epoch"))
+    return (np.asarray(t, dtype=float) - latency - offset + drift * epoch) / (1 + drift)
+
+
 def _empty_tracker_batch(gaps: tuple[tuple[float, float], ...] = ()) -> TrackerStreamBatch:
     return TrackerStreamBatch(np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.int64), np.zeros(0), gaps)

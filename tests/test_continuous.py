@@ -261,7 +261,7 @@ def test_cli_continuous_session_end_to_end_and_export(tmp_path: Path, capsys) ->
 def test_cli_dry_run_compares_the_modes_and_bad_combinations_are_one_line(tmp_path: Path, capsys) -> None:
     assert main(["--robot", "ur5e", "--tracker", "mock", "--dry-run", "--mode", "continuous"]) == 0
     out = capsys.readouterr().out
-    assert "modes (--mode step | continuous)" in out
+    assert "modes (--mode step | continuous | both)" in out
     step_line = next(line for line in out.splitlines() if line.strip().startswith("step "))
     cont_line = next(line for line in out.splitlines() if line.strip().startswith("continuous "))
     h, m, s = (int(v) for v in step_line.split()[1].split(":"))
