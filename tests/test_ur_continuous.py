@@ -12,6 +12,8 @@ the e-Series 500 Hz stream.
 
 from __future__ import annotations
 
+import sqlite3
+import threading
 import time
 from pathlib import Path
 
@@ -22,11 +24,16 @@ from scipy.stats import chi2
 
 pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
 
+from acquire.cli import main as acquire
+from acquire.session import Session
 from config.robots import load_robot
 from drivers.ascii_profile import TRACKERS_DIR
 from drivers.base import JointStreamBatch, TrackerStreamBatch
 from drivers.registry import open_tracker
+from identify.bounds import prediction_rms_bound
 from identify.kinematics import points_from_joints
+from identify.result_io import model_from_dict
+from identify.simulate import random_poses
 from tests.ur_emulator import EmulatorProcess, connected_robot
 
 SCALE, RATE = 4.0, 125.0  # emulated s per wall s; RTDE packages per emulated s
@@ -110,3 +117,111 @@ def test_the_emulated_tracker_measures_the_true_point_of_the_arm_in_motion(tmp_p
         off = points[ok] - points_from_joints(truth, q_off[ok])
         assert np.sqrt(np.mean(off**2)) > 2 * limit
 
+
+SITE = f"""schema: 1
+robot: {{speed_fraction: 2.0, acceleration_fraction: 2.0}}
+tracker: {{noise: {NOISE:.1e}}}
+plan: {{check_poses: 4, settle_time: 0.1}}
+timeouts: {{connect: 10.0, move: 30.0, settle: 10.0, measure: 5.0}}
+"""
+LOST = 0.3  # emulated s the tracker loses its target, mid-sweep
+DROPPED = 3  # RTDE packages lost on the network, mid-sweep
+
+
+class MidSweepFaults(threading.Thread):
+    """Watches the emulated arm; halfway through the joint 6 sweep (the first: from -180°, after the stop-and-go
+    move there) it loses 3 RTDE packages and blinds the tracker for LOST s. ``dropped``: the controller time of the
+    first package lost; ``lost``: the blind span on the tracker's clock."""
+
+    def __init__(self, emu: EmulatorProcess) -> None:
+        super().__init__(daemon=True)
+        self.emu, self.done = emu, threading.Event()
+        self.dropped: float | None = None
+        self.lost: tuple[float, float] | None = None
+
+    def run(self) -> None:
+        at_start = False
+        while not self.done.is_set():
+            q6 = float(self.emu.actual_q()[5])
+            at_start = at_start or q6 < -np.pi + 0.01
+            if at_start and q6 > -np.pi + 2.5:  # 2.5 of the sweep's 6.1 rad
+                self.dropped = self.emu.drop_packets(DROPPED)
+                self.lost = self.emu.lose_tracker_target(LOST)
+                return
+            time.sleep(0.005)
+
+
+def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_and_gaps(tmp_path: Path,
+                                                                                          capsys) -> None:
+    """``acquire --mode continuous`` with the UR driver and the streaming serial tracker, end to end: every sweep
+    streamed, a dropped RTDE package and a lost target mid-sweep recorded as gaps (nothing fitted across them), the
+    clock offset found at the tracker's latency within its uncertainty, the model as good as the noise allows."""
+    profile = stream_profile(tmp_path)
+    site = tmp_path / "site.yaml"
+    site.write_text(SITE)
+    path = tmp_path / "ur.session"
+    with EmulatorProcess(time_scale=SCALE, native_rate=True, rate=RATE) as emu:
+        url = emu.serve_tracker(str(profile), NOISE, 2, latency=LATENCY)
+        truth = emu.truth()
+        faults = MidSweepFaults(emu)
+        faults.start()
+        try:
+            code = acquire(["--robot", f"ur5e@{emu.host}?rtde_frequency={RATE:g}", "--tracker",
+                            f"serial:{url}?protocol={profile}", "--mode", "continuous", "--yes", "--config",
+                            str(site), "--session", str(path), "--quiet"])
+        finally:
+            faults.done.set()
+            faults.join(2.0)
+        out, err = capsys.readouterr()
+    assert code == 0, err
+    assert faults.dropped is not None and faults.lost is not None, "the faults were not injected mid-sweep"
+    assert "verdict: pass" in out and "robot time = tracker time" in out
+
+    with Session.open(path) as session:
+        assert session.outcome() == "complete" and session.plan.continuous
+        assert all(s.status == "ok" for s in session.steps())
+        meas = session.to_measurements()
+    with sqlite3.connect(path) as db:
+        streams = db.execute("SELECT id, sweep, status, superseded FROM streams").fetchall()
+        gaps = db.execute("SELECT stream, device, t_start, t_end FROM stream_gaps").fetchall()
+        joints = {s: np.array([t for (t,) in db.execute("SELECT t FROM joint_samples WHERE stream = ? ORDER BY t",
+                                                          (s,))]) for s, *_ in streams}
+        tracked = np.array([t for (t,) in db.execute("SELECT t FROM tracker_samples")])
+    assert len(streams) == 6 and all(s[2] == "complete" and s[3] == 0 for s in streams)  # one per joint
+    # every step of a joint stream's controller timestamps is one period, or a recorded gap (no silent drop)
+    for stream, t in joints.items():
+        mine = {(a, b) for s, device, a, b in gaps if s == stream and device == "robot"}
+        steps = np.diff(t)
+        assert np.all(steps > 0)
+        assert {(a, b) for a, b, d in zip(t[:-1], t[1:], steps, strict=True) if d > 1.5 / RATE} <= mine
+    # the packages dropped mid-sweep lie in a recorded robot gap; the target loss is one tracker gap around it
+    assert any(device == "robot" and a < faults.dropped < b for _, device, a, b in gaps)
+    tracker_gaps = [(a, b) for _, device, a, b in gaps if device == "tracker"]
+    lost_from, lost_to = faults.lost
+    assert len(tracker_gaps) == 1
+    a, b = tracker_gaps[0]
+    assert a < lost_from + PERIOD and b > lost_to - PERIOD and b - a < LOST + 4 * PERIOD
+    assert not np.any((tracked > a) & (tracked < b))  # no tracker sample inside it...
+    assert not np.any((meas.t > a) & (meas.t < b))  # ... and no measurement row
+    assert meas.streamed.sum() > 3000
+
+    doc = yaml.safe_load(path.with_suffix(".result.yaml").read_text())
+    assert doc["verdict"]["status"] == "pass"
+    # the clock: robot time = tracker time - latency (the device stamps a reading when it leaves, LATENCY after
+    # it was taken, on the controller's clock); within 5 of its reported sigmas, never looser than 0.5 ms
+    clock = doc["clock"]
+    tolerance = min(5 * clock["offset_std_s"], 5e-4)
+    assert abs(clock["offset_s"] + LATENCY) < tolerance, f"{clock['offset_s'] * 1e3:.4f} ms vs {-LATENCY * 1e3} ms"
+    assert abs(clock["drift"]) < 5 * clock["drift_std"] + 1e-9  # one clock: no drift
+    # held out: the check poses and home checks, as the result expects (chi-square over 3 N values)
+    validation = doc["validation"]
+    n = 3 * validation["samples"]
+    assert validation["samples"] >= 6
+    assert validation["rms"] < validation["expected_rms"] * np.sqrt(chi2.ppf(1 - FALSE_ALARM, n) / n)
+    # against the emulator's truth at 200 random poses: within 3x the Cramér-Rao bound of the data recorded
+    model = model_from_dict(doc)
+    q_check = random_poses(load_robot("ur5e").limits, 200, np.random.default_rng(0))
+    error = points_from_joints(model, q_check) - points_from_joints(truth, q_check)
+    rms = float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
+    bound = prediction_rms_bound(truth, meas.q[~meas.check], q_check, NOISE)
+    assert rms < 3 * bound, f"{rms * 1e3:.4f} mm vs bound {bound * 1e3:.4f} mm"
