@@ -12,7 +12,11 @@ the e-Series 500 Hz stream.
 
 from __future__ import annotations
 
+import os
+import signal
 import sqlite3
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -25,8 +29,10 @@ from scipy.stats import chi2
 pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
 
 from acquire.cli import main as acquire
+from acquire.plan_continuous import build_continuous_plan
 from acquire.session import Session
 from config.robots import load_robot
+from config.site import load_site
 from drivers.ascii_profile import TRACKERS_DIR
 from drivers.base import JointStreamBatch, TrackerStreamBatch
 from drivers.registry import open_tracker
@@ -34,7 +40,7 @@ from identify.bounds import prediction_rms_bound
 from identify.kinematics import points_from_joints
 from identify.result_io import model_from_dict
 from identify.simulate import random_poses
-from tests.ur_emulator import EmulatorProcess, connected_robot
+from tests.ur_emulator import CMD_STOPJ, EmulatorProcess, connected_robot
 
 SCALE, RATE = 4.0, 125.0  # emulated s per wall s; RTDE packages per emulated s
 PERIOD = 0.008  # emulated s between the tracker's streamed lines
@@ -42,6 +48,7 @@ NOISE = 5e-5  # m per axis: the stream-csv profile's stated sigma, which the sim
 LATENCY = 0.02  # s: each reading leaves the tracker this long after it was taken, stamped when it leaves
 FALSE_ALARM = 1e-4  # chance that a noise-derived check below fails on a correct system
 HOME = np.array(load_robot("ur5e").home, dtype=float)
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def stream_profile(folder: Path) -> Path:
@@ -128,25 +135,31 @@ LOST = 0.3  # emulated s the tracker loses its target, mid-sweep
 DROPPED = 3  # RTDE packages lost on the network, mid-sweep
 
 
-class MidSweepFaults(threading.Thread):
-    """Watches the emulated arm; halfway through the joint 6 sweep (the first: from -180°, after the stop-and-go
-    move there) it loses 3 RTDE packages and blinds the tracker for LOST s. ``dropped``: the controller time of the
-    first package lost; ``lost``: the blind span on the tracker's clock."""
+def joint6_sweep(site: Path) -> tuple[float, float]:
+    """(start, end) of the joint 6 continuous sweep (the plan's first), rad."""
+    plan = build_continuous_plan(load_robot("ur5e"), load_site(site))
+    step = next(s for s in plan.steps if s.kind == "stream")
+    assert step.joint == 6 and step.start is not None
+    return step.start[5], step.q[5]
 
-    def __init__(self, emu: EmulatorProcess) -> None:
+
+class MidSweep(threading.Thread):
+    """Watches the emulated arm; once joint 6 has come to its sweep's ``start`` (the stop-and-go move there) and
+    then swept ``into`` rad of it, calls ``action(emu)`` once (its result in ``result``)."""
+
+    def __init__(self, emu: EmulatorProcess, start: float, into: float, action) -> None:
         super().__init__(daemon=True)
-        self.emu, self.done = emu, threading.Event()
-        self.dropped: float | None = None
-        self.lost: tuple[float, float] | None = None
+        self.emu, self.start_q, self.into, self.action = emu, start, into, action
+        self.done = threading.Event()
+        self.result = None
 
     def run(self) -> None:
         at_start = False
         while not self.done.is_set():
             q6 = float(self.emu.actual_q()[5])
-            at_start = at_start or q6 < -np.pi + 0.01
-            if at_start and q6 > -np.pi + 2.5:  # 2.5 of the sweep's 6.1 rad
-                self.dropped = self.emu.drop_packets(DROPPED)
-                self.lost = self.emu.lose_tracker_target(LOST)
+            at_start = at_start or abs(q6 - self.start_q) < 0.01
+            if at_start and q6 > self.start_q + self.into:
+                self.result = self.action(self.emu)
                 return
             time.sleep(0.005)
 
@@ -160,10 +173,11 @@ def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_
     site = tmp_path / "site.yaml"
     site.write_text(SITE)
     path = tmp_path / "ur.session"
+    start, _ = joint6_sweep(site)
     with EmulatorProcess(time_scale=SCALE, native_rate=True, rate=RATE) as emu:
         url = emu.serve_tracker(str(profile), NOISE, 2, latency=LATENCY)
         truth = emu.truth()
-        faults = MidSweepFaults(emu)
+        faults = MidSweep(emu, start, 2.5, lambda e: (e.drop_packets(DROPPED), e.lose_tracker_target(LOST)))
         faults.start()
         try:
             code = acquire(["--robot", f"ur5e@{emu.host}?rtde_frequency={RATE:g}", "--tracker",
@@ -174,7 +188,8 @@ def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_
             faults.join(2.0)
         out, err = capsys.readouterr()
     assert code == 0, err
-    assert faults.dropped is not None and faults.lost is not None, "the faults were not injected mid-sweep"
+    assert faults.result is not None, "the faults were not injected mid-sweep"
+    dropped, (lost_from, lost_to) = faults.result
     assert "verdict: pass" in out and "robot time = tracker time" in out
 
     with Session.open(path) as session:
@@ -195,9 +210,8 @@ def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_
         assert np.all(steps > 0)
         assert {(a, b) for a, b, d in zip(t[:-1], t[1:], steps, strict=True) if d > 1.5 / RATE} <= mine
     # the packages dropped mid-sweep lie in a recorded robot gap; the target loss is one tracker gap around it
-    assert any(device == "robot" and a < faults.dropped < b for _, device, a, b in gaps)
+    assert any(device == "robot" and a < dropped < b for _, device, a, b in gaps)
     tracker_gaps = [(a, b) for _, device, a, b in gaps if device == "tracker"]
-    lost_from, lost_to = faults.lost
     assert len(tracker_gaps) == 1
     a, b = tracker_gaps[0]
     assert a < lost_from + PERIOD and b > lost_to - PERIOD and b - a < LOST + 4 * PERIOD
@@ -225,3 +239,44 @@ def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_
     rms = float(np.sqrt(np.mean(np.sum(error**2, axis=1))))
     bound = prediction_rms_bound(truth, meas.q[~meas.check], q_check, NOISE)
     assert rms < 3 * bound, f"{rms * 1e3:.4f} mm vs bound {bound * 1e3:.4f} mm"
+
+
+def test_ctrl_c_mid_sweep_stops_the_arm_and_the_run_ends_aborted(tmp_path: Path) -> None:
+    """Ctrl-C in the operator's terminal (SIGINT to the command's process group, ur_rtde's worker included) halfway
+    through a continuous sweep: stopJ, the arm stands short of the range end, exit 130, and the attempt is kept in
+    the session as interrupted, with what it had streamed (a resume redoes it)."""
+    profile = stream_profile(tmp_path)
+    site = tmp_path / "site.yaml"
+    site.write_text(SITE.replace("plan: {", "plan: {joints: [6], "))
+    path = tmp_path / "ur.session"
+    start, end = joint6_sweep(site)
+    with EmulatorProcess(time_scale=SCALE, native_rate=True, rate=RATE) as emu:
+        url = emu.serve_tracker(str(profile), NOISE, 3, latency=LATENCY)
+        command = [sys.executable, "-m", "acquire.cli", "--robot", f"ur5e@{emu.host}?rtde_frequency={RATE:g}",
+                   "--tracker", f"serial:{url}?protocol={profile}", "--mode", "continuous", "--yes", "--config",
+                   str(site), "--session", str(path), "--quiet"]
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        proc = subprocess.Popen(command, cwd=ROOT, env=env, start_new_session=True, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        press = MidSweep(emu, start, 2.5, lambda e: os.killpg(proc.pid, signal.SIGINT) or float(e.actual_q()[5]))
+        press.start()
+        try:
+            _, err = proc.communicate(timeout=90.0)
+        finally:
+            press.done.set()
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+        assert press.result is not None, f"the sweep never got halfway: {err}"
+        assert proc.returncode == 130, err
+        assert "stopped by the operator" in err
+        assert CMD_STOPJ in emu.get("log").commands
+        here = float(emu.actual_q()[5])
+        time.sleep(0.2)
+        assert float(emu.actual_q()[5]) == pytest.approx(here, abs=1e-4)  # standing still...
+        assert press.result < here < end - 1.0  # ...well short of the range end (stopJ at 2 rad/s²: 0.25 rad)
+    with Session.open(path) as session:
+        assert session.outcome() == "aborted"
+    with sqlite3.connect(path) as db:
+        streams = db.execute("SELECT id, status FROM streams").fetchall()
+        samples = db.execute("SELECT count(*) FROM tracker_samples").fetchone()[0]
+    assert [status for _, status in streams] == ["interrupted"] and samples > 100
