@@ -4,10 +4,11 @@ joint through its range at constant speed while reading both streams, stop the s
 Sequencing only: the devices stream (drivers/base.py: StreamingRobot, StreamingTracker), the session stores
 (acquire/session_streams.py). Batches are committed at least every :data:`COMMIT_PERIOD` s of the clock (the
 virtual clock in mock mode), so a crash loses at most that much. Every wait has a timeout: the move's own
-duration plus the site's move timeout. Faults: the tracker's gaps (target lost) and the robot's (lost packets)
-are recorded with the samples and the sweep goes on; a robot fault, a lost connection or a timeout stops the
-motion and the streams, marks the attempt interrupted and re-raises (the run ends resumable; a resume redoes the
-sweep from its start); Ctrl-C (``stop.requested``) stops the motion and returns a missing record.
+duration plus the site's move timeout (also the bound given to the robot's ``start_move``). Faults: the tracker's
+gaps (target lost) and the robot's (lost packets) are recorded with the samples and the sweep goes on; a robot
+fault, a lost connection or a timeout stops the motion and the streams, marks the attempt interrupted and
+re-raises (the run ends resumable; a resume redoes the sweep from its start); Ctrl-C (``stop.requested``) stops
+the motion and returns a missing record.
 """
 
 from __future__ import annotations
@@ -98,8 +99,9 @@ def run_stream(robot, tracker, session: Session, clock: Clock, step: Step, plan:
         recorder.set_rates(joint_rate, tracker_rate)
         _pump_for(clock, STREAM_SLACK, pump)
         span = step.q[step.joint - 1] - step.start[step.joint - 1]
-        deadline = clock.now() + float(motion_time(span, step.speed, step.acceleration)) + timeouts.move
-        robot.start_move(command(step.q), speed, acceleration, timeouts.move)
+        limit = float(motion_time(span, step.speed, step.acceleration)) + timeouts.move  # the sweep plus the slack
+        deadline = clock.now() + limit  # of a move: the robot's own bound and this loop's are the same
+        robot.start_move(command(step.q), speed, acceleration, limit)
         while not robot.motion_done():
             if stop.requested:
                 robot.stop()

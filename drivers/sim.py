@@ -70,7 +70,7 @@ from drivers.motion import profile_fraction as _fraction
 from drivers.sim_pairing import _points_settings, _unpaired
 from drivers.sim_pairing import check_pairing as check_pairing  # re-exported: acquire's CLIs check specs with it
 from drivers.sim_pairing import is_simulated_camera as is_simulated_camera
-from drivers.sim_stream import JointStreaming, StreamSettings
+from drivers.sim_stream import JointStreaming, StreamedMove, StreamSettings
 from drivers.sim_tracker import SimulatedTracker as SimulatedTracker  # re-exported: the mock backend's tracker
 from drivers.sim_tracker import open_tracker as open_tracker
 from drivers.sim_world import errors_as_dict, has_errors, joint_errors_for, reflector_tools, true_joints
@@ -216,7 +216,8 @@ class SimulatedRig:
             envelope = np.zeros_like(dt)
         wave = envelope * np.cos(2 * np.pi * RING_FREQUENCY * dt)
         out = self._rest + np.multiply.outer(wave, self._ring_amp)
-        return out if self._path is None else self._path.overlay(self.clock.now() if t is None else t, out)
+        path = self._path  # read once: a move's thread may end it meanwhile (the emulator's tracker reads here)
+        return out if path is None else path.overlay(self.clock.now() if t is None else t, out)
 
     def readings_of(self, q: Array) -> Array:
         """The controller's readings (n,) or (m, n) that give the DH joint values ``q`` (the same without a
@@ -277,12 +278,19 @@ class SimulatedRig:
 
     def _run(self, start: Array, target: Array, speed: Array, acceleration: Array, until: float) -> bool:
         """Move from ``start`` towards ``target`` for ``until`` s of the move's profile (clock advanced in
-        chunks so that ``stop()`` can cut in), then let the arm come to rest. Returns True if stopped early."""
+        chunks so that ``stop()`` can cut in), then let the arm come to rest. Returns True if stopped early.
+
+        While it runs, the arm follows the profile on the clock (a :class:`StreamedMove` overlaid on the rest
+        model, held where the move ends): what a tracker measuring in real time (the UR emulator's) sees."""
         durations = _durations(start, target, speed, acceleration)
         k = int(np.argmax(durations))
         duration, distance = float(durations[k]), abs(float(target[k] - start[k]))
         elapsed, remaining = 0.0, until
-        self._moving, self._stop_requested, self._path = True, False, None
+        t0 = self.clock.now()
+        path = StreamedMove(start, target, speed, acceleration, t0)
+        if until < path.duration:
+            path.t_stop = t0 + until
+        self._moving, self._stop_requested, self._path = True, False, path
         try:
             while remaining > 0 and not self._stop_requested:
                 step = min(MOTION_CHUNK, remaining)
@@ -290,6 +298,8 @@ class SimulatedRig:
                 elapsed, remaining = elapsed + step, remaining - step
         finally:  # also on KeyboardInterrupt: the arm stops where it is
             self._moving = False
+            if self._stop_requested:  # where the profile has got to on the clock (a real-time clock runs on
+                elapsed = min(until, max(elapsed, self.clock.now() - t0))  # while a chunk's sleep ends)
             share = _fraction(elapsed, duration, float(speed[k]), float(acceleration[k]), distance)
             if duration > 0:
                 n = len(start)
@@ -299,6 +309,7 @@ class SimulatedRig:
                 self._ring_amp = self.ring * self._robot_rng.uniform(0.5, 1.0, n) * signs
                 self._ring_start = self.clock.now()
                 self._ring_decays = True
+            self._path = None  # last: until now the move's profile holds the arm (no glitch for a reader)
         return self._stop_requested
 
     # --- faults ---------------------------------------------------------------------------------------------
