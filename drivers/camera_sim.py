@@ -25,6 +25,7 @@ from drivers.errors import ConnectionFailed, DeviceTimeout
 
 Array = NDArray[np.float64]
 BLACK, WHITE, BACKGROUND = 30.0, 220.0, 110.0  # grey levels of the print and of what lies behind it
+WINDOW_PAD = 2  # output pixels traced around the target's projected outline
 
 
 @dataclass(frozen=True)
@@ -102,16 +103,24 @@ class Renderer:
             self._pyramid.append(cv2.pyrDown(self._pyramid[-1]))
         self._texels_per_metre = abs(self._affine[0, 0])
 
-    def render(self, poses: list[Array], rng: np.random.Generator | None = None) -> NDArray[np.uint8]:
+    def render(self, poses: list[Array], rng: np.random.Generator | None = None,
+               crop: bool = True) -> NDArray[np.uint8]:
         """An 8-bit grey image with the target at each pose in ``poses`` (4x4, camera frame <- target frame,
-        metres; several poses draw several copies); ``rng`` draws the sensor noise."""
-        h, w = self._rays.shape
-        acc = np.full((h, w), BACKGROUND, dtype=np.float32)
-        depth = np.full((h, w), np.inf, dtype=np.float32)
-        for pose in poses:
-            self._draw(np.asarray(pose, dtype=float), acc, depth)
+        metres; several poses draw several copies); ``rng`` draws the sensor noise. Only the window of whole
+        pixels that holds the targets is traced (``crop=False``: every pixel; the image is the same)."""
         s = self._rays.supersample
-        image = cv2.resize(acc, (w // s, h // s), interpolation=cv2.INTER_AREA) if s > 1 else acc
+        height, width = self._rays.shape[0] // s, self._rays.shape[1] // s
+        poses = [np.asarray(pose, dtype=float) for pose in poses]
+        boxes = [self._window(pose) if crop else (0, height, 0, width) for pose in poses]
+        image = np.full((height, width), BACKGROUND, dtype=np.float32)
+        if boxes:
+            r0, r1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
+            c0, c1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
+            acc = np.full(((r1 - r0) * s, (c1 - c0) * s), BACKGROUND, dtype=np.float32)
+            depth = np.full(acc.shape, np.inf, dtype=np.float32)
+            for pose in poses:
+                self._draw(pose, acc, depth, (r0 * s, c0 * s))
+            image[r0:r1, c0:c1] = cv2.resize(acc, (c1 - c0, r1 - r0), interpolation=cv2.INTER_AREA) if s > 1 else acc
         o = self.optics
         if o.blur > 0:
             image = cv2.GaussianBlur(image, (0, 0), o.blur)
@@ -124,7 +133,31 @@ class Renderer:
             image = image + rng.normal(0.0, o.noise, image.shape).astype(np.float32)
         return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
-    def _draw(self, pose: Array, acc: NDArray[np.float32], depth: NDArray[np.float32]) -> None:
+    def _window(self, pose: Array) -> tuple[int, int, int, int]:
+        """Rows r0:r1 and columns c0:c1 (output pixels) that hold every pixel the printed target (its quiet zone
+        included) can touch at ``pose``: its outline projected (``cv2.projectPoints``, 32 points a side), widened
+        by :data:`WINDOW_PAD` pixels; the whole image when the outline leaves it or reaches behind the camera
+        (a distortion model is not to be trusted outside the image)."""
+        s = self._rays.supersample
+        height, width = self._rays.shape[0] // s, self._rays.shape[1] // s
+        th, tw = self._pyramid[0].shape
+        corners = np.linalg.solve(self._affine, np.array([[-0.5, -0.5, 1], [tw - 0.5, -0.5, 1], [tw - 0.5, th - 0.5, 1],
+                                                          [-0.5, th - 0.5, 1]]).T).T  # target (x, y, 1), m
+        steps = np.linspace(0.0, 1.0, 32, endpoint=False)[:, None]
+        outline = np.vstack([a + steps * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True)])
+        points = outline[:, :2] @ pose[:3, :2].T + pose[:3, 3]
+        if np.any(points[:, 2] <= 1e-6):
+            return 0, height, 0, width
+        uv = cv2.projectPoints(points, np.zeros(3), np.zeros(3), self.camera.matrix, self.camera.distortion)[0]
+        u, v = uv[:, 0, 0], uv[:, 0, 1]
+        if u.min() < -0.5 or v.min() < -0.5 or u.max() > width - 0.5 or v.max() > height - 0.5:
+            return 0, height, 0, width
+        return (max(int(np.floor(v.min())) - WINDOW_PAD, 0), min(int(np.ceil(v.max())) + WINDOW_PAD + 1, height),
+                max(int(np.floor(u.min())) - WINDOW_PAD, 0), min(int(np.ceil(u.max())) + WINDOW_PAD + 1, width))
+
+    def _draw(self, pose: Array, acc: NDArray[np.float32], depth: NDArray[np.float32], origin: tuple[int, int]) -> None:
+        """Draw the target at ``pose`` into the supersampled window ``acc`` (and its ``depth``) whose top-left
+        supersample is ``origin`` (row, column) of the whole supersampled image."""
         r, t = pose[:3, :3], pose[:3, 3]
         plane = np.column_stack([r[:, 0], r[:, 1], t])  # target (x, y, 1) -> camera ray scaled by depth
         try:
@@ -134,7 +167,9 @@ class Renderer:
         level = self._level(pose)
         scale = np.diag([0.5**level, 0.5**level, 1.0])  # pyrDown keeps texel j of level L at 2^L·j of level 0
         m = (scale @ self._affine @ to_plane).astype(np.float32)
-        x, y = self._rays.x, self._rays.y
+        rows = slice(origin[0], origin[0] + acc.shape[0])
+        cols = slice(origin[1], origin[1] + acc.shape[1])
+        x, y = self._rays.x[rows, cols], self._rays.y[rows, cols]
         q2 = to_plane[2, 0] * x + to_plane[2, 1] * y + to_plane[2, 2]  # 1 / depth along the ray
         with np.errstate(divide="ignore", invalid="ignore"):
             wz = m[2, 0] * x + m[2, 1] * y + m[2, 2]
