@@ -45,7 +45,7 @@ number as the measurement contract has it: ``sqrt(trace(C) / 3)`` of the mean's 
 pose covariance propagated to the TP, divided by the frames kept. With ``refine=edges`` the corners'
 covariance comes from the edge-line fits (drivers/aruco_refine.py: corners of one side are correlated),
 scaled up when the reprojection residuals are larger than it predicts; otherwise the corners are taken as
-independent with the noise of the pooled reprojection residuals (never below ``SIGMA_PX_FLOOR``). If
+independent with the noise of the pooled reprojection residuals (never below ``drivers.aruco_pose.SIGMA_PX_FLOOR``). If
 the frames scatter significantly more than C says (F-test), their spread is used instead. A camera's
 error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
 the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights
@@ -72,7 +72,7 @@ import cv2
 import numpy as np
 from scipy.stats import f as f_dist
 
-from drivers.aruco_pose import Pose, estimate_pose
+from drivers.aruco_pose import CornerNoise, Pose, estimate_pose
 from drivers.aruco_target import (
     REFINEMENTS,
     DuplicateMarker,
@@ -94,7 +94,6 @@ OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square",
            "refine", "frames", "max_rms", "timeout", "retries")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "distance", "tilt", "roll", "seed",
                "fault")
-SIGMA_PX_FLOOR = 0.01  # pixels: corner noise assumed at least this (clean renders reach 0.005-0.01 px)
 SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
 OUTLIER_SIGMAS = 5.0
 CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
@@ -253,7 +252,7 @@ class ArucoTracker:
         target = s.target
         details = {"source": self.source.description, "target": target.kind, "markers": str(len(target.corners)),
                    "refine": s.refine, "frames": str(s.frames), "image": f"{self.camera.width}x{self.camera.height}",
-                   "tp": ",".join(f"{v!r}" for v in s.tp),
+                   "tp": ",".join(repr(float(v)) for v in s.tp),
                    # the intrinsics used, at full precision, so that a recorded session can be replayed
                    "camera_matrix": json.dumps(k.tolist()),
                    "distortion_coefficients": json.dumps(self.camera.distortion.tolist()),
@@ -320,15 +319,11 @@ class ArucoTracker:
     def _average(self, poses: list[tuple[Pose, float]]) -> TrackerReading:
         tp = self.settings.tp
         pts = np.array([p.point(tp) for p, _ in poses])
-        dof = sum(max(p.dof, 0) for p, _ in poses)
-        rss = sum(p.rms**2 * 2 * p.points for p, _ in poses)
-        expected = [p.expected_rss for p, _ in poses]
-        if all(e is not None for e in expected):  # corner covariances from the edge-line fits
-            scale = max(rss / max(sum(expected), 1e-30), 1.0)  # corners scatter more than their edges say
-            covs = np.array([p.point_covariance(tp, 0.0) * scale for p, _ in poses])
-        else:
-            sigma_px = max(math.sqrt(rss / dof) if dof else 0.0, SIGMA_PX_FLOOR)
-            covs = np.array([p.point_covariance(tp, sigma_px) for p, _ in poses])
+        noise = CornerNoise()
+        for p, _ in poses:
+            noise.add(p)
+        covs = np.array([noise.covariance(p, tp) for p, _ in poses])
+        dof = noise.dof
         model = math.sqrt(float(np.trace(covs.mean(axis=0))) / 3)  # per-axis RMS, one frame
         median = np.median(pts, axis=0)
         dist = np.linalg.norm(pts - median, axis=1)
