@@ -100,7 +100,10 @@ class FrameStreaming(BufferedStreaming):
             self.source.stop_frames()
             queue.close()
             reader.join(max(timeout, 0.1))  # the worker measures what is queued, then ends
-        return self._stop_reader(timeout)  # ends it at once if it ran out of time (the rest becomes a gap)
+            self._halt.set()  # out of time: it ends after the frame in hand (the rest becomes a gap)
+            reader.join(max(timeout, 0.1))
+            self._reader = None
+        return self._stop_reader(timeout)
 
     # --- the worker thread -------------------------------------------------------------------------------
 

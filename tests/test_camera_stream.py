@@ -152,6 +152,28 @@ def test_measure_is_refused_while_streaming_and_stop_joins_the_worker():
     assert not worker.is_alive()
 
 
+def test_a_camera_lost_mid_stream_fails_the_read_and_keeps_what_was_measured():
+    from drivers.errors import ConnectionFailed
+
+    spec = TrackerSpec.parse(SIM)
+    rig = SimulatedRig.from_spec(RobotSpec.parse("mock:ur5e?seed=2"), spec, VirtualClock())
+    tracker = open_tracker(spec, rig=rig)
+    tracker.connect(1.0)
+    tracker.start_stream(250.0, 5.0)
+    worker = tracker._reader
+    rig.clock.sleep(0.2)
+    first = tracker.read_stream()
+    rig.tracker_connected = False  # the cable is pulled
+    rig.clock.sleep(0.2)
+    with pytest.raises(ConnectionFailed):
+        tracker.read_stream()
+    with pytest.raises(ConnectionFailed):
+        tracker.stop_stream(5.0)
+    assert not worker.is_alive() and not tracker.streaming
+    rest = tracker.stop_stream(5.0)  # what the worker measured before the link went
+    assert len(first.t) + len(rest.t) == 6 and np.all(np.diff(np.concatenate([first.t, rest.t])) > 0)
+
+
 def test_a_replay_cannot_stream_in_one_line(tmp_path):
     from drivers.camera_model import write_intrinsics
 
