@@ -44,6 +44,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.compensation || status=1; \
 	$(BIN)/python -m bench.continuous || status=1; \
 	$(BIN)/python -m bench.ur_continuous || status=1; \
+	$(BIN)/python -m bench.camera_stream || status=1; \
 	exit $$status
 
 clean:
