@@ -207,6 +207,11 @@ class SimulatedRig:
 
     def actual_joints(self, t: float | Array | None = None) -> Array:
         """The arm's actual joint values at clock time ``t`` (default now): (n,), or (m, n) for m times."""
+        path = self._path  # read once: a move's thread may end it meanwhile (the emulator's tracker reads here)
+        if path is not None and np.ndim(t) == 0:
+            held = path.at(self.clock.now() if t is None else float(np.asarray(t)))
+            if held is not None:
+                return held
         dt = np.maximum(np.asarray(self.clock.now() if t is None else t, dtype=float) - self._ring_start, 0.0)
         if not self._ring_decays:
             envelope = np.ones_like(dt)
@@ -216,7 +221,6 @@ class SimulatedRig:
             envelope = np.zeros_like(dt)
         wave = envelope * np.cos(2 * np.pi * RING_FREQUENCY * dt)
         out = self._rest + np.multiply.outer(wave, self._ring_amp)
-        path = self._path  # read once: a move's thread may end it meanwhile (the emulator's tracker reads here)
         return out if path is None else path.overlay(self.clock.now() if t is None else t, out)
 
     def readings_of(self, q: Array) -> Array:

@@ -94,6 +94,16 @@ class StreamedMove:
         share = np.array([profile_fraction(x, self.duration, v, a, d) if x > 0 else 0.0 for x in dt.reshape(-1)])
         return self.start + np.multiply.outer(share, self.target - self.start)
 
+    def at(self, t: float) -> Array | None:
+        """Readings (n,) at the one clock time ``t`` if the move holds the arm then (as :meth:`overlay`), else None;
+        the fast path of a real-time reader (the UR emulator's stream asks thousands of times a second)."""
+        if self.finished and t > self.t_end + _EPS:
+            return None
+        v, a, d = self._profile
+        dt = min(t, self.t_end) - self.t0
+        share = profile_fraction(dt, self.duration, v, a, d) if dt > 0 else 0.0
+        return self.start + share * (self.target - self.start)
+
     def overlay(self, t: Array, q: Array) -> Array:
         """``q`` (the rig's rest-and-ring model, (m, n) or (n,)) with the move's readings wherever ``t <= t_end``
         (everywhere until ``motion_done`` has seen the move end)."""
