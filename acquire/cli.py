@@ -322,7 +322,14 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
         site, plan, path, changes = settings.site, session.plan, args.resume, settings.changes
         if not args.dry_run and _nothing_to_do(session, args.remeasure_missing):
-            return 0
+            if session.outcome() != "running":
+                return 0
+            # every step is in the file but the process that recorded the last one died before it closed its run
+            # (and identified): close it here, nothing connects or moves
+            session.begin_run()
+            session.end_run("complete")
+            return _finish(RunResult("complete", "", 0, len(session.missing_indices())), session, args.resume,
+                           load_robot(robot_spec.model))
     else:
         site = mode_site(_site(args), args.mode, args.free_poses)  # streams carry the fit: no free poses unless asked
         robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
