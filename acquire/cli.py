@@ -30,14 +30,16 @@ from dataclasses import replace
 from pathlib import Path
 
 from acquire.cell import Clearance
-from acquire.orchestrator import StopRequest
-from acquire.plan import build_plan, check_plan, estimate_duration, plan_clearance
-from acquire.plan_continuous import build_continuous_plan, estimate_continuous_duration, format_modes
+from acquire.orchestrator import RunResult, StopRequest
+from acquire.plan import check_plan, estimate_duration, plan_clearance
+from acquire.plan_continuous import estimate_continuous_duration
+from acquire.plan_modes import build_mode_plan, format_modes, mode_site, plan_mode
 from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.resume import ResumeRefused, resume_settings
 from acquire.runner import finish, run_session
 from acquire.session import Session
 from acquire.session_backup import backup_session
+from acquire.stream_loop import check_streams
 from common.errors import InputError
 from common.outputs import OutputError, check_outputs, check_target, same_file
 from config.robots import ConfigError, RobotModel, load_robot
@@ -45,6 +47,7 @@ from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
 from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
+from identify.io.session_measurements import stream_summary
 from session.plan import Plan
 from session.schema import SessionError
 
@@ -91,9 +94,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--speed-fraction", type=float, metavar="F",
                    help="joint speeds and accelerations as this fraction of the model's defaults (site "
                         "robot.speed_fraction; 0.25 with --tracker none)")
-    p.add_argument("--mode", choices=("step", "continuous"), default=None,
+    p.add_argument("--mode", choices=("step", "continuous", "both"), default=None,
                    help="step: stop-and-go sweeps (the default); continuous: each sweep one constant-speed move while "
-                        "robot and tracker stream (both must stream); the dry run compares the two")
+                        "robot and tracker stream (both must stream); both: per joint the stop-and-go sweep and the "
+                        "continuous one (the stop-and-go sweeps need no clock: they anchor the streams' timing and can "
+                        "check it; --steps sets their size); the dry run compares the three")
     p.add_argument("--trace-io", type=Path, metavar="FILE",
                    help="log every byte to and from the tracker (serial and I++ trackers)")
     return p
@@ -108,12 +113,9 @@ def _export(argv: list[str]) -> int:
     check_outputs([args.session], [("--csv", args.csv)], args.force)
     with Session.open(args.session) as session:
         rows = session.export_csv(args.csv, force=args.force)
-        if session.plan.continuous:
-            from identify.io.session_measurements import stream_summary
-
-            summary = stream_summary(session)
-            if summary is not None:
-                print(summary.line())
+        summary = stream_summary(session) if session.plan.continuous else None
+        if summary is not None:
+            print(summary.line())
     print(f"wrote {args.csv} ({rows} rows)")
     return 0
 
@@ -248,11 +250,16 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
         site, plan, path, changes = settings.site, session.plan, args.resume, settings.changes
         if not args.dry_run and _nothing_to_do(session, args.remeasure_missing):
-            return 0
+            if session.outcome() != "running":
+                return 0
+            # every step is in the file but the process that recorded the last one died before it closed its run
+            # (and identified): close it here, nothing connects or moves
+            session.begin_run()
+            session.end_run("complete")
+            return finish(RunResult("complete", "", 0, len(session.missing_indices())), session, args.resume,
+                           load_robot(robot_spec.model))
     else:
-        site = _site(args)
-        if args.mode == "continuous" and args.free_poses is None:  # the streams carry the fit (plan_continuous.py)
-            site = site.with_overrides(free_poses=0)
+        site = mode_site(_site(args), args.mode, args.free_poses)  # streams carry the fit: no free poses unless asked
         robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
         tracker_arg = args.tracker or "mock"
         tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)
@@ -266,10 +273,9 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
     robot_model = load_robot(robot_spec.model)
     if plan is None:
-        plan = build_continuous_plan(robot_model, site) if args.mode == "continuous" else build_plan(robot_model, site)
-    elif args.mode is not None and (args.mode == "continuous") != plan.continuous:
-        raise UsageError(f"--mode {args.mode}: the session's plan is {'continuous' if plan.continuous else 'step'}; "
-                         "a resume cannot change the plan")
+        plan = build_mode_plan(args.mode, robot_model, site)
+    elif args.mode is not None and args.mode != plan_mode(plan):
+        raise UsageError(f"--mode {args.mode}: the session's plan is {plan_mode(plan)}; a resume keeps its plan")
     if plan.continuous and rehearsal:
         raise UsageError("--tracker none rehearses stop-and-go plans; use --mode step")
     problems = check_plan(plan, robot_model)
@@ -291,7 +297,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     print(format_plan(plan, robot_model, duration, accuracy))
     print(format_clearance(clearance, plan, site))
     if args.dry_run and not rehearsal and session is None:
-        print(format_modes(robot_model, site, plan))
+        print(format_modes(robot_model, _site(args), plan, args.free_poses))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
@@ -305,6 +311,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         first = 0 if session is None else session.next_index()
         if first is not None:
             _check_start(robot, plan, robot_model, site, first, session)
+            check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before anything moves
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv)}

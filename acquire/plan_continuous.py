@@ -216,13 +216,15 @@ def predicted_accuracy_continuous(plan: Plan, robot: RobotModel, tp_guess: objec
                                   rng_seed: int = 1, eval_poses: int = EVAL_POSES) -> dict[str, float]:
     """Cramér-Rao bound (m) of the RMS TP error at random held-out poses (as
     :func:`acquire.plan_report.predicted_accuracy`) for a continuous plan: every streamed sample with the tracker
-    ``noise`` (m per axis), the stop-and-go poses (range starts and fitted free poses) with noise / √samples. Keys
-    ``with_free``, ``sweeps_only`` (the streams alone), ``samples`` (streamed samples expected), ``noise``. The
-    timing error of the streams is not in the bound (the identification estimates the clock offset)."""
+    ``noise`` (m per axis), the stop-and-go poses (range starts, fitted free poses and, in a plan of both modes, the
+    stop-and-go sweeps) with noise / √samples. Keys ``with_free``, ``sweeps_only`` (the streams alone), ``samples``
+    (streamed samples expected), ``noise``. The timing error of the streams is not in the bound (the identification
+    estimates the clock offset)."""
     model = tp_model(robot, tp_guess)
     q_eval = random_poses(robot.limits, eval_poses, np.random.default_rng(rng_seed))
     q_stream, weight = stream_poses(plan, rate)
-    q_steps = np.array([s.q for s in plan.steps if s.kind == "free" and s.role == "fit"]).reshape(-1, robot.n_joints)
+    q_steps = np.array([s.q for s in plan.steps if s.kind in ("free", "sweep") and s.role == "fit"]).reshape(
+        -1, robot.n_joints)
     step_noise = noise / math.sqrt(max(plan.samples_per_step, 1))
 
     def bound(with_steps: bool) -> float:
@@ -237,32 +239,3 @@ def predicted_accuracy_continuous(plan: Plan, robot: RobotModel, tp_guess: objec
 
     return {"with_free": bound(True), "sweeps_only": bound(False), "samples": float(weight.sum()),
             "noise": float(noise)}
-
-
-def format_modes(robot: RobotModel, site: SiteConfig, shown: Plan) -> str:
-    """The dry run's comparison of the two modes for ``robot`` under ``site``: robot time (the duration estimate),
-    samples and predicted accuracy (Cramér-Rao bound of the held-out RMS TP error) of the stop-and-go plan and of
-    the continuous one (``shown`` is one of them)."""
-    from acquire.plan import estimate_duration
-    from acquire.plan_report import predicted_accuracy
-
-    step = shown if not shown.continuous else build_plan(robot, site)
-    cont = shown if shown.continuous else build_continuous_plan(robot, site)
-    t_step = estimate_duration(step, robot, site.measure_time)
-    t_cont = estimate_continuous_duration(cont, site.measure_time)
-    a_step = predicted_accuracy(step, robot, site.tp_guess, site.tracker_noise)["with_free"]
-    acc = predicted_accuracy_continuous(cont, robot, site.tp_guess, site.tracker_noise, site.stream_rate)
-    samples_step = len(step.steps) * step.samples_per_step
-    samples_cont = int(acc["samples"]) + sum(1 for s in cont.steps if s.kind != "stream") * cont.samples_per_step
-    lines = ["", "modes (--mode step | continuous):",
-             f"  {'mode':<11} {'robot time':>10} {'samples':>8} {'predicted accuracy (RMS, held out)':>36}",
-             f"  {'step':<11} {_clock(t_step):>10} {samples_step:>8} {a_step * 1e3:>33.4f} mm",
-             f"  {'continuous':<11} {_clock(t_cont):>10} {samples_cont:>8} {acc['with_free'] * 1e3:>33.4f} mm",
-             f"  continuous: {t_cont / t_step:.2f} x the robot time; streams at {site.stream_rate:g} Hz, every sample "
-             "with the tracker noise; its bound leaves out the timing error, which the identification estimates"]
-    return "\n".join(lines)
-
-
-def _clock(seconds: float) -> str:
-    total = round(seconds)
-    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"

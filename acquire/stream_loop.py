@@ -4,10 +4,11 @@ joint through its range at constant speed while reading both streams, stop the s
 Sequencing only: the devices stream (drivers/base.py: StreamingRobot, StreamingTracker), the session stores
 (session/streams.py). Batches are committed at least every :data:`COMMIT_PERIOD` s of the clock (the
 virtual clock in mock mode), so a crash loses at most that much. Every wait has a timeout: the move's own
-duration plus the site's move timeout. Faults: the tracker's gaps (target lost) and the robot's (lost packets)
-are recorded with the samples and the sweep goes on; a robot fault, a lost connection or a timeout stops the
-motion and the streams, marks the attempt interrupted and re-raises (the run ends resumable; a resume redoes the
-sweep from its start); Ctrl-C (``stop.requested``) stops the motion and returns a missing record.
+duration plus the site's move timeout (also the bound given to the robot's ``start_move``). Faults: the tracker's
+gaps (target lost) and the robot's (lost packets) are recorded with the samples and the sweep goes on; a robot
+fault, a lost connection or a timeout stops the motion and the streams, marks the attempt interrupted and
+re-raises (the run ends resumable; a resume redoes the sweep from its start); Ctrl-C (``stop.requested``) stops
+the motion and returns a missing record.
 """
 
 from __future__ import annotations
@@ -34,15 +35,36 @@ class StreamingUnsupported(DriverError):
     """A device of the run cannot stream (continuous mode needs both to)."""
 
 
+def _require_streams(robot, tracker) -> None:
+    for device, method in ((robot, "start_joint_stream"), (tracker, "start_stream")):
+        if not callable(getattr(device, method, None)):
+            raise StreamingUnsupported(f"continuous mode needs a robot and a tracker that stream; "
+                                       f"{type(device).__name__} does not (use --mode step)")
+
+
+def check_streams(robot, tracker, plan: Plan, timeout: float, rate: float) -> None:
+    """Before anything moves: when ``plan`` has stream steps, start and stop both devices' streams once (``rate``
+    Hz asked of the tracker, ``timeout`` s per call); StreamingUnsupported (one line) when either cannot stream,
+    e.g. a polled serial profile or an I++ server without event reports."""
+    if not plan.continuous:
+        return
+    _require_streams(robot, tracker)
+    for device, start, stop in ((robot, lambda: robot.start_joint_stream(timeout), robot.stop_joint_stream),
+                                (tracker, lambda: tracker.start_stream(rate, timeout), tracker.stop_stream)):
+        try:
+            start()
+            stop(timeout)
+        except (ValueError, DriverError) as exc:
+            raise StreamingUnsupported(f"this plan streams, and {type(device).__name__} cannot: {exc} (use --mode "
+                                       "step)") from None
+
+
 def run_stream(robot, tracker, session: Session, clock: Clock, step: Step, plan: Plan, timeouts,
                stop, command: Callable[[tuple[float, ...]], tuple[float, ...]], rate: float) -> StepRecord:
     """Record the stream step ``step`` (module docstring); ``command`` turns DH values into the readings to command,
     ``rate`` the tracker rate asked for (Hz), ``timeouts`` the orchestrator's. Returns the step's record (ok: the
     samples are in the session; missing: stopped by the operator, or no tracker sample at all)."""
-    for device, method in ((robot, "start_joint_stream"), (tracker, "start_stream")):
-        if not callable(getattr(device, method, None)):
-            raise StreamingUnsupported(f"continuous mode needs a robot and a tracker that stream; "
-                                       f"{type(device).__name__} does not (use --mode step)")
+    _require_streams(robot, tracker)
     assert step.start is not None and step.speed is not None and step.acceleration is not None
     t_start = clock.now()
     state = robot.state()
@@ -77,8 +99,9 @@ def run_stream(robot, tracker, session: Session, clock: Clock, step: Step, plan:
         recorder.set_rates(joint_rate, tracker_rate)
         _pump_for(clock, STREAM_SLACK, pump)
         span = step.q[step.joint - 1] - step.start[step.joint - 1]
-        deadline = clock.now() + float(motion_time(span, step.speed, step.acceleration)) + timeouts.move
-        robot.start_move(command(step.q), speed, acceleration, timeouts.move)
+        limit = float(motion_time(span, step.speed, step.acceleration)) + timeouts.move  # the sweep plus the slack
+        deadline = clock.now() + limit  # of a move: the robot's own bound and this loop's are the same
+        robot.start_move(command(step.q), speed, acceleration, limit)
         while not robot.motion_done():
             if stop.requested:
                 robot.stop()

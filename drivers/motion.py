@@ -42,3 +42,19 @@ def profile_fraction(t: float, duration: float, speed: float, acceleration: floa
     else:
         covered = distance - 0.5 * acceleration * (duration - t) ** 2
     return min(max(covered / distance, 0.0), 1.0)
+
+
+def leading_joint_limits(start: Sequence[float], target: Sequence[float], speed: Sequence[float],
+                         acceleration: Sequence[float]) -> tuple[float, float]:
+    """The one speed and acceleration of a synchronised move given for its leading joint (the largest travel), as
+    a UR moveJ takes them: the largest that keep every moving joint within its own ``speed`` / ``acceleration``
+    (rad/s or m/s, rad/s² or m/s²; a joint that travels ``r`` times the leader's moves ``r`` times as fast). With
+    nothing to travel, the smallest of each."""
+    travel = np.abs(np.asarray(target, dtype=float) - np.asarray(start, dtype=float))
+    v, a = np.asarray(speed, dtype=float), np.asarray(acceleration, dtype=float)
+    lead = float(np.max(travel, initial=0.0))
+    moving = travel > 1e-12 * max(lead, 1.0)
+    if lead <= 0 or not moving.any():
+        return float(np.min(v)), float(np.min(a))
+    ratio = lead / travel[moving]
+    return float(np.min(v[moving] * ratio)), float(np.min(a[moving] * ratio))

@@ -159,6 +159,18 @@ def parse_faults(value: str, device: str) -> tuple[FaultSpec, ...]:
     return tuple(faults)
 
 
+def parse_interval(key: str, value: str) -> tuple[float, float]:
+    """``DURATION[@START]`` (s; START default 2) of option ``key`` -> (duration, start); ValueError in one line."""
+    duration, _, start = value.partition("@")
+    try:
+        out = (float(duration), float(start or 2.0))
+    except ValueError:
+        out = (math.nan, math.nan)
+    if not all(math.isfinite(v) and v >= 0 for v in out):
+        raise ValueError(f"option {key}={value} must be DURATION[@START], seconds >= 0")
+    return out
+
+
 def _typed(kind: str, key: str, value: str, device: str) -> object:
     """Convert one mock option value; ValueError with a one-line reason."""
     if kind == "faults":
@@ -168,14 +180,7 @@ def _typed(kind: str, key: str, value: str, device: str) -> object:
             raise ValueError(f"option {key}={value} must be a non-negative integer")
         return int(value)
     if kind == "interval":
-        duration, _, start = value.partition("@")
-        try:
-            out = (float(duration), float(start or 2.0))
-        except ValueError:
-            out = (math.nan, math.nan)
-        if not all(math.isfinite(v) and v >= 0 for v in out):
-            raise ValueError(f"option {key}={value} must be DURATION[@START], seconds >= 0")
-        return out
+        return parse_interval(key, value)
     if kind == "points":
         if not value.isdigit() or not 1 <= int(value) <= MAX_POINTS:
             raise ValueError(f"option {key}={value} must be an integer in 1..{MAX_POINTS}")

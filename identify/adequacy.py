@@ -10,10 +10,13 @@ Three estimates of the per-axis noise (weighted units: metres when no sigma is g
 
 Model error is called when the residual noise exceeds the declared one (chi-square test), or, without a
 declaration, its own difference estimate (F test), at a false-alarm rate of ``ALARM``. Its size is
-``sqrt(residual² - noise²)`` per axis. Systematic residuals are correlated along each arc: a sweep of n
-samples is worth only ``n_eff = n (1 - rho) / (1 + rho)`` independent ones (AR(1), ``rho`` the lag-1
-correlation of the residuals along the sweeps), and never fewer than one. The parameters' covariance is
-inflated by ``n / n_eff``: at most the samples per sweep, when each sweep's error is one shared offset.
+``sqrt(residual² - noise²)`` per axis. The residual is two components: the tracker's white noise,
+uncorrelated from sample to sample, and the model error, correlated along each arc. The model error's lag-1
+correlation is the residuals' lag-1 autocovariance over its own variance (the noise adds variance, not
+autocovariance); under AR(1) a sweep of n samples holds only ``n_eff = n (1 - rho) / (1 + rho)`` independent
+values of it, never fewer than one. The parameters' covariance is scaled to ``noise² + model_error² · n / n_eff``
+(the ``inflation`` factor relative to the residual variance): the model-error part is inflated at most by the
+samples per sweep, when each sweep's error is one shared offset, and the noise part not at all.
 """
 
 from __future__ import annotations
@@ -101,8 +104,11 @@ def assess(res_w: Array, jac_red: Array, unknown: NDArray[np.int64], runs: list[
         statistic, limit, test, reference = 1.0, float("inf"), "no reference noise (no sweep to difference)", residual
     detected = statistic > limit
     model_error = float(np.sqrt(max(residual**2 - reference**2, 0.0))) if detected else 0.0
-    rho_used = min(max(rho, 0.0), MAX_RHO) if detected else 0.0
-    per_sweep = float(np.mean([len(r) for r in runs])) if runs else 1.0
-    inflation = min((1.0 + rho_used) / (1.0 - rho_used), max(per_sweep, 1.0))
+    inflation = 1.0
+    if detected and model_error > 0.0:
+        rho_model = min(max(rho * residual**2 / model_error**2, 0.0), MAX_RHO)  # the model error's own lag-1
+        per_sweep = float(np.mean([len(r) for r in runs])) if runs else 1.0
+        model_inflation = min((1.0 + rho_model) / (1.0 - rho_model), max(per_sweep, 1.0))
+        inflation = (residual**2 - model_error**2 + model_error**2 * model_inflation) / residual**2
     return Adequacy(residual, difference, declared, model_error, bool(detected), rho, inflation, statistic, limit,
                     test)

@@ -81,6 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--extensions", choices=("auto", "none"), default="auto",
                         help="joint errors beyond DH (reading scale, once-per-turn, compliance with --robot "
                         "dynamics): selected where the data support them (auto, default) or never (none)")
+    parser.add_argument("--rows", choices=("all", "step", "streamed"), default="all",
+                        help="fit only the stop-and-go rows or only the streamed ones (held-out rows validate either); "
+                        "two such results of one session, compared with identify compare, check the streams' timing")
     parser.add_argument("--force", action="store_true", help="replace output files that already exist")
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     return parser
@@ -212,7 +215,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         content, header = read_session(Path(args.input))
     else:
         content = read_measurements(args.input, args.joints, args.units)
-    meas = split_holdout(content.measurements, args.holdout, args.seed)
+    meas = _rows(split_holdout(content.measurements, args.holdout, args.seed), args.rows)
     robot_name = args.robot or (header or {}).get("robot_model")  # a session knows its robot
     robot = robot_model(robot_name)
     nominal, nominal_name = (robot.nominal, robot.name) if robot else (None, None)
@@ -238,6 +241,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         if args.out:
             print(f"result written to {args.out}")
     return doc
+
+
+def _rows(meas: Measurements, rows: str) -> Measurements:
+    """``meas`` with only the ``rows`` kind fitted (``--rows``): ``step`` the rows not streamed, ``streamed`` the
+    streamed ones; held-out rows stay with both. InputError when no row of that kind is left to fit."""
+    if rows == "all":
+        return meas
+    fitted = ~meas.streamed if rows == "step" else meas.streamed
+    if not np.any(fitted & ~meas.check):
+        raise InputError(f"--rows {rows}: the data hold no {'stop-and-go' if rows == 'step' else 'streamed'} rows "
+                         "to fit")
+    return meas.subset(fitted | meas.check)
 
 
 SUBCOMMANDS = ("compensate", "compare")  # identify/compensate_cli.py, identify/compare_cli.py

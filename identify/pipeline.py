@@ -17,6 +17,7 @@ from numpy.typing import NDArray
 from common.errors import InputError
 from identify import verdict as checks
 from identify.adequacy import Adequacy, assess
+from identify.clock_split import ClockSplit, split_clock
 from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, home_from_measurements
 from identify.dh_output import DHOutput, dh_output, near_parallel
 from identify.estimate import FitData, LinesFit, along_arc, fit, place_nominal
@@ -77,7 +78,10 @@ class ClockFit:
     """The tracker-to-robot clock relation of streamed rows, fitted with the kinematics: robot time =
     tracker time + ``offset`` + ``drift`` · (tracker time − ``t_ref``). ``offset`` (s) is the recording's
     coarse offset plus the fitted correction; ``*_std`` their standard uncertainties (``drift`` None when not
-    fitted: streams shorter than :data:`identify.sync.DRIFT_SPAN`); ``rows`` the streamed rows fitted."""
+    fitted: streams shorter than :data:`identify.sync.DRIFT_SPAN`); ``rows`` the streamed rows fitted.
+    ``test``: whether the sweeps needed an offset each (:mod:`identify.clock_split`); when they did,
+    ``sweeps`` lists (sweep id, offset s, std s) per streamed sweep, ``offset`` is their inverse-variance
+    mean and ``offset_std`` the largest of their uncertainties."""
 
     offset: float
     offset_std: float
@@ -85,6 +89,8 @@ class ClockFit:
     drift_std: float | None
     t_ref: float
     rows: int
+    test: ClockSplit | None = None
+    sweeps: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -283,6 +289,9 @@ def identify(
         if terms.candidates:
             best = fit(best.lines, data.timed(best.timing), robust, best.start, terms.terms(q, None, best.q))
             adequacy = _adequacy(best, data, unit, declared)
+    best, clock_test = split_clock(best, data, robust, max(adequacy.residual, declared or 0.0) ** 2 / unit**2)
+    if clock_test is not None and clock_test.split:
+        adequacy = _adequacy(best, data, unit, declared)
     data = data.timed(best.timing)
     lines, inl = best.lines, best.inliers
     problem = data.subset(inl).problem(lines, best.terms.subset(inl))
@@ -337,7 +346,7 @@ def identify(
     kinematic = slice(0, problem.n_terms)  # the clock correction's parameters come last
     predictor = Predictor(lines, covariance[kinematic, kinematic], terms, best.terms.coefs, None, tuple(tp_ids))
     clock = None if best.timing is None else _clock(best.timing, covariance[problem.n_terms:, problem.n_terms:],
-                                                     meas.clock_offset)
+                                                     meas.clock_offset, clock_test)
     fitted_tp = np.asarray(tp_ids)[tp_index[inl]]
     expected = _expected_accuracy(predictor, best.q[inl], fitted_tp, adequacy)
     gap_rms, gap_statistic = gap
@@ -350,7 +359,8 @@ def identify(
         dh_check,
     ]
     if clock is not None:
-        found.append(checks.timing(clock.offset_std, _tp_speed(jac_blocks, problem, weights[inl]), adequacy.noise))
+        found.append(checks.timing(clock.offset_std, _tp_speed(jac_blocks, problem, weights[inl]), adequacy.noise,
+                                   clock.test, [o for _, o, _ in clock.sweeps]))
     if validation is not None:
         found.append(checks.holdout(validation.samples, validation.rms, validation.expected))
     if nominal is not None and np.sum(unknown < 0) >= 3:
@@ -392,12 +402,20 @@ def _tp_speed(jac_blocks: Array, problem: LineProblem, weights: Array) -> float:
     return float(np.sqrt(np.mean(np.sum(velocity**2, axis=1))))
 
 
-def _clock(timing: Retiming, covariance: Array, offset: float) -> ClockFit:
-    """The fitted clock relation (``covariance`` of ``timing.tau``; ``offset`` s the recording's coarse one)."""
+def _clock(timing: Retiming, covariance: Array, offset: float, test: ClockSplit | None) -> ClockFit:
+    """The fitted clock relation (``covariance`` of ``timing.tau``; ``offset`` s the recording's coarse one;
+    ``test`` whether the sweeps needed one offset each)."""
     std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    drift = len(timing.tau) > 1
-    return ClockFit(offset + float(timing.tau[0]), float(std[0]), float(timing.tau[1]) if drift else None,
-                    float(std[1]) if drift else None, timing.t_ref, int(np.sum(timing.rows)))
+    k = timing.offsets
+    drift, drift_std = (float(timing.tau[k]), float(std[k])) if timing.drift else (None, None)
+    rows = int(np.sum(timing.rows))
+    if k == 1:
+        return ClockFit(offset + float(timing.tau[0]), float(std[0]), drift, drift_std, timing.t_ref, rows, test)
+    offsets, stds = offset + timing.tau[:k], np.maximum(std[:k], 1e-300)
+    mean = float(np.sum(offsets / stds**2) / np.sum(1 / stds**2))
+    sweeps = tuple((int(s), float(o), float(e)) for s, o, e in zip(np.unique(timing.sweep), offsets, std[:k],
+                                                                     strict=True))
+    return ClockFit(mean, float(np.max(std[:k])), drift, drift_std, timing.t_ref, rows, test, sweeps)
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],

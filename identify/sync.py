@@ -11,6 +11,11 @@ piecewise-linear curve through its own streamed rows (time, joint values); it is
 leave a gap (a lost target, dropped joint packets: more than ``GAP_FACTOR`` median sample intervals), and
 a shifted time beyond a segment's end is extrapolated along its last interval, never across a gap.
 
+One offset serves every sweep while the clocks keep one relation. A resume after a tracker or controller
+restart, or a timestamp jump, breaks it between sweeps: :meth:`Retiming.per_sweep` gives each streamed sweep
+its own offset (the drift stays common); the pipeline switches to it when a score test says the sweeps'
+offsets differ.
+
 :class:`Retiming` carries that model through the fit: :class:`identify.poe.LineProblem` adds ``tau`` to
 its parameters (after the lines, tracked points and joint errors), so the offset comes with its
 uncertainty from the same covariance as the kinematics.
@@ -42,15 +47,19 @@ class Segment:
 @dataclass(frozen=True)
 class Retiming:
     """The clock correction of the streamed rows of a fit. Per row (m,): ``t`` tracker time (s, NaN for
-    rows not streamed) and ``segment`` (index into ``segments``, -1 for rows not streamed). ``tau`` (K,):
-    offset (s) and, with K = 2, drift; ``t_ref`` (s) the time the offset refers to; ``free``: fitted (else
-    held at ``tau``)."""
+    rows not streamed) and ``segment`` (index into ``segments``, -1 for rows not streamed); per segment its
+    ``sweep`` id and ``offset_of`` (which offset applies to it). ``tau``: the ``offsets`` offsets (s), then
+    the drift when fitted; ``t_ref`` (s) the time the offsets refer to; ``free``: fitted (else held at
+    ``tau``)."""
 
     t: Array
     segment: NDArray[np.int64]
     segments: tuple[Segment, ...]
     t_ref: float
     tau: Array
+    sweep: NDArray[np.int64]
+    offset_of: NDArray[np.int64]
+    offsets: int = 1
     free: bool = True
 
     @property
@@ -61,6 +70,26 @@ class Retiming:
     @property
     def rows(self) -> NDArray[np.bool_]:
         return self.segment >= 0
+
+    @property
+    def drift(self) -> bool:
+        """Whether the drift is part of ``tau`` (after the offsets)."""
+        return len(self.tau) > self.offsets
+
+    def sweep_index(self) -> NDArray[np.int64]:
+        """Per row (m,): the index of its sweep among the streamed sweeps (sorted ids), -1 for rows not
+        streamed."""
+        ids = np.unique(self.sweep)
+        return np.where(self.rows, np.searchsorted(ids, self.sweep[np.maximum(self.segment, 0)]), -1)
+
+    def per_sweep(self) -> Retiming:
+        """The same correction with one offset per streamed sweep (each starting at its current offset), the
+        drift, if fitted, common."""
+        ids, offset_of = np.unique(self.sweep, return_inverse=True)
+        current = self.tau[: self.offsets][self.offset_of]  # per segment
+        first = np.array([np.flatnonzero(offset_of == k)[0] for k in range(len(ids))])
+        tau = np.concatenate([current[first], self.tau[self.offsets:]])
+        return replace(self, tau=tau, offset_of=offset_of.astype(np.int64), offsets=len(ids))
 
     def subset(self, rows: NDArray[np.bool_] | NDArray[np.int64]) -> Retiming:
         return replace(self, t=self.t[rows], segment=self.segment[rows])
@@ -73,9 +102,9 @@ class Retiming:
         """Time correction (s) of every streamed row, (r,) in row order of ``rows``."""
         tau = self.tau if tau is None else tau
         t = self.t[self.rows]
-        out = np.full(len(t), tau[0])
-        if len(tau) > 1:
-            out += tau[1] * (t - self.t_ref)
+        out = np.asarray(tau[: self.offsets], dtype=float)[self.offset_of[self.segment[self.rows]]]
+        if len(tau) > self.offsets:
+            out = out + tau[self.offsets] * (t - self.t_ref)
         return out
 
     def joints(self, q: Array, tau: Array | None = None) -> Array:
@@ -91,10 +120,11 @@ class Retiming:
         """d(joint values)/d(tau) of the streamed rows, (r, n, K): the trajectory's speed (rad/s or m/s)
         times d(shift)/d(tau)."""
         _, speed = self._at(self.shift(tau))
-        basis = [np.ones(len(speed))]
-        if len(self.tau) > 1:
-            basis.append(self.t[self.rows] - self.t_ref)
-        return speed[:, :, None] * np.stack(basis, axis=1)[:, None, :]
+        basis = np.zeros((len(speed), len(self.tau)))
+        basis[np.arange(len(speed)), self.offset_of[self.segment[self.rows]]] = 1.0
+        if self.drift:
+            basis[:, self.offsets] = self.t[self.rows] - self.t_ref
+        return speed[:, :, None] * basis[:, None, :]
 
     def _at(self, shift: Array) -> tuple[Array, Array]:
         """Joint values and speeds of the streamed rows at their times plus ``shift``."""
@@ -127,6 +157,7 @@ def retiming(t: Array, streamed: NDArray[np.bool_], sweep: NDArray[np.int64], q:
         return None
     segment = np.full(len(t), -1, dtype=np.int64)
     segments: list[Segment] = []
+    sweep_of: list[int] = []
     for s in np.unique(sweep[usable]):
         rows = np.flatnonzero(usable & (sweep == s))
         times, first = np.unique(t[rows], return_index=True)  # several tracked points share a time
@@ -142,9 +173,11 @@ def retiming(t: Array, streamed: NDArray[np.bool_], sweep: NDArray[np.int64], q:
             inside = (t[rows] >= times[a]) & (t[rows] <= times[b - 1])
             segment[rows[inside]] = len(segments)
             segments.append(Segment(times[a:b], values[a:b]))
+            sweep_of.append(int(s))
     if not segments:
         return None
     span = t[segment >= 0]
     t_ref = 0.5 * float(span.min() + span.max())
     k = 2 if float(span.max() - span.min()) > DRIFT_SPAN else 1
-    return Retiming(np.where(segment >= 0, t, np.nan), segment, tuple(segments), t_ref, np.zeros(k))
+    return Retiming(np.where(segment >= 0, t, np.nan), segment, tuple(segments), t_ref, np.zeros(k),
+                    np.array(sweep_of, dtype=np.int64), np.zeros(len(segments), dtype=np.int64))

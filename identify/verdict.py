@@ -7,7 +7,9 @@ not use the model). The verdict is the worst of its checks. Limits are stated as
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from scipy.stats import chi2
 
@@ -128,16 +130,23 @@ def nominal(name: str, rms: float) -> Check:
                  f"nominal {name} placed on the data misses them by {mm(rms)} RMS: {text}")
 
 
-def timing(offset_std: float, speed: float, noise: float) -> Check:
+def timing(offset_std: float, speed: float, noise: float, split: Any = None, offsets: Sequence[float] = ()) -> Check:
     """The streamed rows' clock fit: the offset's uncertainty (s) times the RMS speed of the tracked point
-    (m/s) is the position error the timing leaves; it warns when that reaches the tracker noise (m)."""
+    (m/s) is the position error the timing leaves; it warns when that reaches the tracker noise (m). It also
+    warns when the sweeps needed one offset each (``split``: :class:`identify.clock_split.ClockSplit`;
+    ``offsets`` s, per sweep): the clocks changed their relation during the session."""
     effect = offset_std * speed
     status = "warn" if effect > noise else "pass"
     text = ("the timing is barely determined: add stop-and-go poses or sweeps with ramps" if status == "warn"
             else "the timing is determined")
-    return Check("timing", status, effect, noise,
-                 f"clock offset known to {offset_std * 1e3:.3g} ms at {speed * 1e3:.3g} mm/s RMS TP speed: "
-                 f"{mm(effect)} of position ({text})")
+    message = (f"clock offset known to {offset_std * 1e3:.3g} ms at {speed * 1e3:.3g} mm/s RMS TP speed: "
+               f"{mm(effect)} of position ({text})")
+    if split is not None and split.split:
+        status = "warn"
+        message += (f"; the streamed sweeps' clock offsets differ (score {split.statistic:.3g} > {split.limit:.3g}; "
+                    f"{min(offsets) * 1e3:.3f} to {max(offsets) * 1e3:.3f} ms): each sweep was fitted with its own "
+                    "offset (a clock restart, a resume or a timestamp jump between sweeps)")
+    return Check("timing", status, effect, noise, message)
 
 
 def dh_limit(links: int) -> float:

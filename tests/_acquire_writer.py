@@ -1,4 +1,5 @@
-"""Helper process for the crash-copy and two-writer tests: runs the real ``acquire`` command in forked children.
+"""Helper process for the crash tests: runs the real ``acquire`` command in forked children; :class:`Writer` is its
+client in the test process.
 
     python -m tests._acquire_writer        then, per line on stdin, a JSON list of ``acquire`` arguments
 
@@ -18,11 +19,16 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
 import sys
+import time
+from pathlib import Path
 
 import acquire.cli as cli
 import acquire.runner as runner
 import drivers.registry as registry
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _say(text: str) -> None:
@@ -62,6 +68,67 @@ def main() -> None:
         _say(f"pid {pid}")
         _, status = os.waitpid(pid, 0)
         _say(f"exit {os.waitstatus_to_exitcode(status)}")
+
+
+class Writer:
+    """One tests/_acquire_writer.py server: ``start(args)`` forks a child running ``acquire ARGS``."""
+
+    def __init__(self, tmp_path: Path, name: str = "writer") -> None:
+        env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+               "MKL_NUM_THREADS": "1"}
+        self.err = (tmp_path / f"{name}.err").open("w")
+        # run with -m: as a script its folder, tests/, would come first on sys.path, and tests/ holds packages named
+        # like the project's (tests/acquire/...)
+        self.proc = subprocess.Popen([sys.executable, "-m", "tests._acquire_writer"], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, stderr=self.err, text=True, cwd=tmp_path, env=env)
+        self.lines: list[str] = []
+
+    def start(self, args: list[str]) -> int:
+        """Fork a child running ``acquire ARGS``; its pid."""
+        self.lines = []
+        self.proc.stdin.write(json.dumps([str(a) for a in args]) + "\n")
+        self.proc.stdin.flush()
+        word, value = self._line()
+        assert word == "pid", (word, value)
+        return int(value)
+
+    def finish(self, timeout: float = 60.0) -> int:
+        """Read the child's lines until it ends; its exit code (negative: killed by that signal)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            word, value = self._line()
+            if word == "exit":
+                return int(value)
+        raise AssertionError("the writer child did not end in time")
+
+    def until(self, text: str) -> None:
+        """Read the child's lines until ``text`` (e.g. ``ack 1``); AssertionError if the child ends first."""
+        while True:
+            word, value = self._line()
+            assert word != "exit", f"the child ended ({value}) before {text!r}: {self.lines}"
+            if f"{word} {value}" == text:
+                return
+
+    def acked(self) -> set[int]:
+        return {int(line.split()[1]) for line in self.lines if line.startswith("ack ")}
+
+    def opened(self) -> bool:
+        return "opened" in self.lines
+
+    def _line(self) -> tuple[str, str]:
+        line = self.proc.stdout.readline()
+        assert line, f"the writer server died: {Path(self.err.name).read_text()[-2000:]}"
+        line = line.strip()
+        if line.startswith("error "):
+            raise AssertionError(f"writer child failed: {line}")
+        self.lines.append(line)
+        word, _, value = line.partition(" ")
+        return word, value
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait(timeout=10)
+        self.err.close()
 
 
 if __name__ == "__main__":

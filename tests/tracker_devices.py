@@ -13,11 +13,16 @@ streaming device). Faults, each for the next ``count`` replies (``device.inject(
 - ``reset``: the device prints its banner, forgets its initialisation (answers not_ready until
   initialised again) and drops the request; ``silence``: no answer.
 
-Streaming (a profile with ``mode: streaming``): a line every ``period`` s (wall clock), numbered (``seq``, every
-line counts, lost ones too) and stamped with the device's own clock ``t`` = ``clock_offset`` + (1 + ``drift``) ×
-host time (s; ``time.time()``), the point being the rig's true TP at that moment; each line leaves ``latency`` s
-after its time. ``lose_target(seconds)`` makes the streamed lines of the next ``seconds`` the ``lost`` reply (the
-target out of the beam), ``skip_lines(n)``: the next n lines are never sent (lost on the wire).
+Streaming (a profile with ``mode: streaming``): a line every ``period`` s of physical time, numbered (``seq``, every
+line counts, lost ones too) and stamped with the device's own clock ``t`` = ``clock_offset`` + (1 + ``drift``) × τ
+(s), τ the physical time the reading was taken, the point being the rig's true TP at τ; each line leaves
+``latency`` s after τ. ``stamp_on_send=True``: the device stamps a line when it sends it (τ + ``latency``), as a
+tracker that does not take its own latency out of its timestamps (the mock tracker's model), so a reading stamped
+``t`` was taken at τ = (t - clock_offset) / (1 + drift) - latency. Physical time is ``clock`` (default the host's
+wall clock, ``time.time()``; the UR emulator passes its rig's scaled clock, so that device and controller share one
+time base and the period runs on it); when it is the rig's clock, the rig is sampled at τ itself.
+``lose_target(seconds)`` makes the streamed lines of the next ``seconds`` the ``lost`` reply (the target out of the
+beam), ``skip_lines(n)``: the next n lines are never sent (lost on the wire).
 
 ``echo=True`` echoes every command line back first. ``mixed_endings=True`` ends each line with a random one
 of CRLF, LF and CR. A profile with ``points: N`` answers each trigger with N lines (reflector k at
@@ -39,6 +44,7 @@ import tty
 
 import numpy as np
 
+from drivers.clock import Clock, WallClock
 from drivers.sim.rig import SimulatedRig
 from drivers.trackers.ascii_profile import Profile, checksum_of, load_profile
 from tests._served import _Served
@@ -54,16 +60,18 @@ class AsciiDevice(_Served):
     def __init__(self, profile: str | Profile, rig: SimulatedRig | None = None, *, noise: float = 2e-5,
                  seed: int = 0, transport: str = "pty", mixed_endings: bool = False, latency: float = 0.0,
                  echo: bool = False, clock_offset: float = 0.0, drift: float = 0.0,
-                 period: float | None = None) -> None:
+                 period: float | None = None, clock: Clock | None = None, stamp_on_send: bool = False) -> None:
         super().__init__()
         self.profile = profile if isinstance(profile, Profile) else load_profile(profile)
         self.sim = self.profile.simulation
         self.rig = rig if rig is not None else SimulatedRig("ur5e", seed=seed)
         self.noise, self.latency, self.mixed, self.echo = noise, latency, mixed_endings, echo
-        self.clock_offset, self.drift = clock_offset, drift
+        self.clock_offset, self.drift, self.stamp_on_send = clock_offset, drift, stamp_on_send
+        self.clock: Clock = WallClock() if clock is None else clock
+        self._scale = float(getattr(self.clock, "scale", 1.0))  # physical s per wall s (a ScaledClock's scale)
         self.period = float(self.sim.get("period", 0.0)) if period is None else float(period)
         self.seq = 0  # streamed lines so far (sent or not)
-        self.lost_until = 0.0  # host time (time.time()) until which streamed lines say target lost
+        self.lost_until = 0.0  # physical time (the clock's) until which streamed lines say target lost
         self.skip = 0  # streamed lines still to leave out
         self._due: list[tuple[float, bytes]] = []  # streamed lines waiting for their latency to pass
         self.rng = np.random.default_rng(seed)
@@ -94,15 +102,17 @@ class AsciiDevice(_Served):
         with self._lock:
             self.faults.extend([fault] * count)
 
-    def device_time(self, host: float | None = None) -> float:
-        """The device's clock (s) at host time ``host`` (``time.time()``, default now)."""
-        return self.clock_offset + (1.0 + self.drift) * (time.time() if host is None else host)
+    def device_time(self, tau: float | None = None) -> float:
+        """The device's clock (s) at physical time ``tau`` (s on ``clock``, default now)."""
+        return self.clock_offset + (1.0 + self.drift) * (self.clock.now() if tau is None else tau)
 
     def lose_target(self, seconds: float) -> tuple[float, float]:
-        """Streamed lines of the next ``seconds`` say target lost; returns that span on the device's clock."""
-        now = time.time()
+        """Streamed lines of the next ``seconds`` (physical time) say target lost; returns that span on the device's
+        clock as the lines' stamps give it (with ``stamp_on_send``, ``latency`` later)."""
+        now = self.clock.now()
         self.lost_until = now + seconds
-        return self.device_time(now), self.device_time(self.lost_until)
+        shift = self.latency if self.stamp_on_send else 0.0
+        return self.device_time(now + shift), self.device_time(self.lost_until + shift)
 
     def skip_lines(self, count: int) -> None:
         self.skip += int(count)
@@ -131,9 +141,12 @@ class AsciiDevice(_Served):
 
     def _loop(self) -> None:
         period = self.period if self.profile.mode == "streaming" else 0.0
-        next_emit = time.monotonic()
+        clock = self.clock
+        next_emit = clock.now()
         while not self._stop.is_set():
-            wait = 0.01 if not (period and self.streaming) else max(0.0, min(0.01, next_emit - time.monotonic()))
+            due = [next_emit] if period and self.streaming else []
+            due += [self._due[0][0]] if self._due else []
+            wait = max(0.0, min([0.01, *((d - clock.now()) / self._scale for d in due)]))
             ready, _, _ = select.select([self.fd], [], [], wait)
             if ready:
                 try:
@@ -151,10 +164,10 @@ class AsciiDevice(_Served):
                 for raw in lines:
                     if raw.strip():
                         self._command(raw.decode("ascii", "replace").strip())
-            if period and self.streaming and time.monotonic() >= next_emit:
+            if period and self.streaming and clock.now() >= next_emit:
                 self._stream_line()
-                next_emit = max(next_emit + period, time.monotonic() - period)
-            while self._due and self._due[0][0] <= time.time():
+                next_emit = max(next_emit + period, clock.now() - period)
+            while self._due and self._due[0][0] <= clock.now():
                 self._write(self._due.pop(0)[1])
 
     def _stream_line(self) -> None:
@@ -166,9 +179,10 @@ class AsciiDevice(_Served):
         if self.skip:
             self.skip -= 1
             return
-        now = time.time()
+        now = self.clock.now()
         self.replies += 1
-        line = self._format(lost=now < self.lost_until, t=self.device_time(now))
+        stamp = self.device_time(now + self.latency if self.stamp_on_send else now)
+        line = self._format(lost=now < self.lost_until, t=stamp, tau=now)
         data = line.encode() + self._eol()
         if self.latency:
             self._due.append((now + self.latency, data))
@@ -194,7 +208,7 @@ class AsciiDevice(_Served):
         elif p.trigger is not None and text == p.trigger:
             started = time.perf_counter()
             if self.latency:
-                time.sleep(self.latency)
+                self.clock.sleep(self.latency)
             self._reply()
             self.busy.append(time.perf_counter() - started)
 
@@ -235,12 +249,16 @@ class AsciiDevice(_Served):
         else:
             self._write(line.encode() + eol)
 
-    def _format(self, lost: bool = False, far: bool = False, tp: int = 1, t: float | None = None) -> str:
+    def _format(self, lost: bool = False, far: bool = False, tp: int = 1, t: float | None = None,
+                tau: float | None = None) -> str:
+        """One reply line; ``t`` its device time (default now), ``tau`` the physical time of the reading (the
+        rig is sampled at it when the device runs on the rig's clock, else at the rig's now)."""
         sim = self.sim
         lost = lost or (self.profile.points > 1 and tp in self.hidden)
         if lost and "lost" in sim:
             return str(sim["lost"]).format(tp=tp)
-        true = self.rig.true_points()[tp - 1] if self.profile.points > 1 else self.rig.true_point()
+        at = tau if self.clock is self.rig.clock else None
+        true = self.rig.true_points(at)[tp - 1] if self.profile.points > 1 else self.rig.true_point(at)
         point = np.asarray(true, dtype=float) + self.rng.normal(0.0, self.noise, 3)
         if far:
             point = np.full(3, 1e6)

@@ -15,6 +15,7 @@ rotation vector and translation, from ``cv2.projectPoints``; s: the corner noise
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -27,6 +28,7 @@ Array = NDArray[np.float64]
 
 AMBIGUITY_RATIO = 1.5  # second-best RMS below this multiple of the best: the frame is ambiguous ...
 AMBIGUITY_FLOOR_PX = 0.05  # ... or both RMS within this many pixels of each other
+SIGMA_PX_FLOOR = 0.01  # pixels: corner noise assumed at least this (clean renders reach 0.005-0.01 px)
 _LM = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-12)
 
 
@@ -80,6 +82,35 @@ class Pose:
         d_rot = np.stack([d_r[k].reshape(3, 3) @ tp for k in range(3)], axis=1)  # (3, 3): dp / d rvec
         jp = np.hstack([d_rot, np.eye(3)])
         return jp @ pose_cov @ jp.T
+
+
+@dataclass
+class CornerNoise:
+    """The corner noise pooled over frames, for the TP covariance of each (the polled reading's frames, or every
+    frame of a stream so far): ``rss`` the observed sum of squared reprojection residuals (pixels²), ``expected``
+    its expectation under the detection's corner covariances (pixels²; None once a pose came without them),
+    ``dof`` the residual degrees of freedom."""
+
+    rss: float = 0.0
+    expected: float | None = 0.0
+    dof: int = 0
+
+    def add(self, pose: Pose) -> None:
+        """Pool one frame's pose."""
+        self.rss += pose.rms**2 * 2 * pose.points
+        self.dof += max(pose.dof, 0)
+        extra = pose.expected_rss
+        self.expected = None if self.expected is None or extra is None else self.expected + extra
+
+    def covariance(self, pose: Pose, tp: Array) -> Array:
+        """Covariance (3, 3) m² of ``pose.point(tp)``: the edge fits' corner covariances, scaled up when the pooled
+        residuals are larger than they predict; without them, independent corners with the pooled residuals' noise
+        (never below :data:`SIGMA_PX_FLOOR`)."""
+        if self.expected is not None and pose.image_covariance is not None:
+            scale = max(self.rss / max(self.expected, 1e-30), 1.0)  # corners scatter more than their edges say
+            return pose.point_covariance(tp, 0.0) * scale
+        sigma_px = max(math.sqrt(self.rss / self.dof) if self.dof else 0.0, SIGMA_PX_FLOOR)
+        return pose.point_covariance(tp, sigma_px)
 
 
 def estimate_pose(obs: Observation, matrix: Array, distortion: Array, square: bool = False,

@@ -9,10 +9,19 @@ convention: OpenCV's (the centre of the top-left pixel is (0, 0)).
 
 :class:`SimulatedCamera` is a frame source (see drivers/camera/sources.py) that renders the target mounted
 on the simulated robot's flange (``rig.flange_pose()``) at each frame's time on the rig's clock.
+
+Its stream (continuous motion): frame k is exposed at ``τ_k = τ_0 + k / fps`` (s, rig clock; τ_0 when the
+stream starts), drawn with the arm's true pose at τ_k, stamped and delivered ``latency`` s later (the camera's
+timestamp ``τ_k + latency``: a sample stamped t shows the arm at rig time ``t - latency``). ``capture`` (called
+from the tracker's ``read_stream``) renders every frame delivered by ``clock.now()`` in the caller's thread, the
+only one that reads the rig, and queues it for detection, waiting for room (rendering costs real CPU; on a
+virtual clock the simulated time stands still meanwhile). ``drop`` loses a frame with that probability (its
+number is skipped); ``lost=(D, S)`` hides the target in the frames exposed from S to S + D s into the stream.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -20,11 +29,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from drivers.camera.intrinsics import CameraIntrinsics
+from drivers.camera.sources import Frame, FrameQueue
 from drivers.camera.targets import Target
 from drivers.errors import ConnectionFailed, DeviceTimeout
 
 Array = NDArray[np.float64]
 BLACK, WHITE, BACKGROUND = 30.0, 220.0, 110.0  # grey levels of the print and of what lies behind it
+WINDOW_PAD = 2  # output pixels traced around the target's projected outline
+STREAM_QUEUE = 2  # rendered frames waiting for detection before the simulated camera waits for room
+_EPS = 1e-6  # s: time comparisons on the rig's clock (epoch values near 1.8e9 s)
 
 
 @dataclass(frozen=True)
@@ -102,16 +115,24 @@ class Renderer:
             self._pyramid.append(cv2.pyrDown(self._pyramid[-1]))
         self._texels_per_metre = abs(self._affine[0, 0])
 
-    def render(self, poses: list[Array], rng: np.random.Generator | None = None) -> NDArray[np.uint8]:
+    def render(self, poses: list[Array], rng: np.random.Generator | None = None,
+               crop: bool = True) -> NDArray[np.uint8]:
         """An 8-bit grey image with the target at each pose in ``poses`` (4x4, camera frame <- target frame,
-        metres; several poses draw several copies); ``rng`` draws the sensor noise."""
-        h, w = self._rays.shape
-        acc = np.full((h, w), BACKGROUND, dtype=np.float32)
-        depth = np.full((h, w), np.inf, dtype=np.float32)
-        for pose in poses:
-            self._draw(np.asarray(pose, dtype=float), acc, depth)
+        metres; several poses draw several copies); ``rng`` draws the sensor noise. Only the window of whole
+        pixels that holds the targets is traced (``crop=False``: every pixel; the image is the same)."""
         s = self._rays.supersample
-        image = cv2.resize(acc, (w // s, h // s), interpolation=cv2.INTER_AREA) if s > 1 else acc
+        height, width = self._rays.shape[0] // s, self._rays.shape[1] // s
+        poses = [np.asarray(pose, dtype=float) for pose in poses]
+        boxes = [self._window(pose) if crop else (0, height, 0, width) for pose in poses]
+        image = np.full((height, width), BACKGROUND, dtype=np.float32)
+        if boxes:
+            r0, r1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
+            c0, c1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
+            acc = np.full(((r1 - r0) * s, (c1 - c0) * s), BACKGROUND, dtype=np.float32)
+            depth = np.full(acc.shape, np.inf, dtype=np.float32)
+            for pose in poses:
+                self._draw(pose, acc, depth, (r0 * s, c0 * s))
+            image[r0:r1, c0:c1] = cv2.resize(acc, (c1 - c0, r1 - r0), interpolation=cv2.INTER_AREA) if s > 1 else acc
         o = self.optics
         if o.blur > 0:
             image = cv2.GaussianBlur(image, (0, 0), o.blur)
@@ -124,7 +145,31 @@ class Renderer:
             image = image + rng.normal(0.0, o.noise, image.shape).astype(np.float32)
         return np.clip(np.rint(image), 0, 255).astype(np.uint8)
 
-    def _draw(self, pose: Array, acc: NDArray[np.float32], depth: NDArray[np.float32]) -> None:
+    def _window(self, pose: Array) -> tuple[int, int, int, int]:
+        """Rows r0:r1 and columns c0:c1 (output pixels) that hold every pixel the printed target (its quiet zone
+        included) can touch at ``pose``: its outline projected (``cv2.projectPoints``, 32 points a side), widened
+        by :data:`WINDOW_PAD` pixels; the whole image when the outline leaves it or reaches behind the camera
+        (a distortion model is not to be trusted outside the image)."""
+        s = self._rays.supersample
+        height, width = self._rays.shape[0] // s, self._rays.shape[1] // s
+        th, tw = self._pyramid[0].shape
+        corners = np.linalg.solve(self._affine, np.array([[-0.5, -0.5, 1], [tw - 0.5, -0.5, 1], [tw - 0.5, th - 0.5, 1],
+                                                          [-0.5, th - 0.5, 1]]).T).T  # target (x, y, 1), m
+        steps = np.linspace(0.0, 1.0, 32, endpoint=False)[:, None]
+        outline = np.vstack([a + steps * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True)])
+        points = outline[:, :2] @ pose[:3, :2].T + pose[:3, 3]
+        if np.any(points[:, 2] <= 1e-6):
+            return 0, height, 0, width
+        uv = cv2.projectPoints(points, np.zeros(3), np.zeros(3), self.camera.matrix, self.camera.distortion)[0]
+        u, v = uv[:, 0, 0], uv[:, 0, 1]
+        if u.min() < -0.5 or v.min() < -0.5 or u.max() > width - 0.5 or v.max() > height - 0.5:
+            return 0, height, 0, width
+        return (max(int(np.floor(v.min())) - WINDOW_PAD, 0), min(int(np.ceil(v.max())) + WINDOW_PAD + 1, height),
+                max(int(np.floor(u.min())) - WINDOW_PAD, 0), min(int(np.ceil(u.max())) + WINDOW_PAD + 1, width))
+
+    def _draw(self, pose: Array, acc: NDArray[np.float32], depth: NDArray[np.float32], origin: tuple[int, int]) -> None:
+        """Draw the target at ``pose`` into the supersampled window ``acc`` (and its ``depth``) whose top-left
+        supersample is ``origin`` (row, column) of the whole supersampled image."""
         r, t = pose[:3, :3], pose[:3, 3]
         plane = np.column_stack([r[:, 0], r[:, 1], t])  # target (x, y, 1) -> camera ray scaled by depth
         try:
@@ -134,7 +179,9 @@ class Renderer:
         level = self._level(pose)
         scale = np.diag([0.5**level, 0.5**level, 1.0])  # pyrDown keeps texel j of level L at 2^L·j of level 0
         m = (scale @ self._affine @ to_plane).astype(np.float32)
-        x, y = self._rays.x, self._rays.y
+        rows = slice(origin[0], origin[0] + acc.shape[0])
+        cols = slice(origin[1], origin[1] + acc.shape[1])
+        x, y = self._rays.x[rows, cols], self._rays.y[rows, cols]
         q2 = to_plane[2, 0] * x + to_plane[2, 1] * y + to_plane[2, 2]  # 1 / depth along the ray
         with np.errstate(divide="ignore", invalid="ignore"):
             wz = m[2, 0] * x + m[2, 1] * y + m[2, 2]
@@ -164,23 +211,32 @@ class SimulatedCamera:
     """A frame source rendering ``target`` mounted on the simulated robot's flange.
 
     ``mount``: 4x4, flange frame <- target frame (m). One frame every ``1/fps`` s on the rig's clock, drawn
-    at the arm's actual pose at that time. The rig's tracker faults act per measurement
-    (:meth:`start_measurement`): ``target_lost`` hides the target, ``bad_reading`` puts a second copy of it in
-    view (duplicate ids), ``slow`` delivers no frames, ``disconnect`` loses the camera until ``open()``.
+    at the arm's actual pose at that time and stamped ``latency`` s later. The rig's tracker faults act per
+    measurement (:meth:`start_measurement`): ``target_lost`` hides the target, ``bad_reading`` puts a second copy
+    of it in view (duplicate ids), ``slow`` delivers no frames, ``disconnect`` loses the camera until ``open()``.
+    Streams: the module docstring (``drop`` a probability, ``lost`` (duration, start) s).
     """
 
     def __init__(self, rig: object, target: Target, camera: CameraIntrinsics, mount: Array,
-                 optics: Optics | None = None, fps: float = 30.0) -> None:
+                 optics: Optics | None = None, fps: float = 30.0, latency: float = 0.0, drop: float = 0.0,
+                 lost: tuple[float, float] = (0.0, 0.0)) -> None:
         self.rig, self.camera, self.mount, self.fps = rig, camera, np.asarray(mount, dtype=float), fps
+        self.latency, self.drop, self.lost = latency, drop, lost
         self.renderer = Renderer(target, camera, optics)
         self._rng = np.random.default_rng([getattr(rig, "tracker_seed", 0), 7])
+        self._drop_rng = np.random.default_rng([getattr(rig, "tracker_seed", 0), 8])
         self._fault: str | None = None
+        self._queue: FrameQueue | None = None
+        self._tau0, self._next = 0.0, 0  # the stream's first exposure (rig clock, s) and next frame number
         self.description = f"simulated camera {camera.width}x{camera.height}"
+        self.rate = fps
+        self.stamps = f"simulated: the rig's clock at exposure + latency {latency:g} s"
 
     def open(self, timeout: float) -> None:
         self.rig.tracker_connected = True  # type: ignore[attr-defined]
 
     def close(self) -> None:
+        self.stop_frames()
         self.rig.tracker_connected = False  # type: ignore[attr-defined]
 
     def start_measurement(self) -> None:
@@ -192,10 +248,10 @@ class SimulatedCamera:
             rig.tracker_connected = False  # type: ignore[attr-defined]
 
     def grab(self, timeout: float) -> tuple[NDArray[np.uint8], float]:
-        """The next frame and its time (s, rig clock); DeviceTimeout / ConnectionFailed for the faults."""
+        """The next frame and its timestamp (s, rig clock + latency); DeviceTimeout / ConnectionFailed for the
+        faults."""
         rig = self.rig
-        if not rig.tracker_connected:  # type: ignore[attr-defined]
-            raise ConnectionFailed("the simulated camera is not connected (lost link: connect again)")
+        self._require_link()
         if self._fault == "slow":
             rig.clock.sleep(timeout)  # type: ignore[attr-defined]
             raise DeviceTimeout(f"the simulated camera delivered no frame within {timeout:g} s")
@@ -207,4 +263,44 @@ class SimulatedCamera:
             twin = pose.copy()
             twin[:3, 3] += pose[:3, 0] * 1.6 * max(self.renderer.target.extent)  # beside the real one
             poses.append(twin)
-        return self.renderer.render(poses, self._rng), t
+        return self.renderer.render(poses, self._rng), t + self.latency
+
+    # --- the stream -------------------------------------------------------------------------------------------
+
+    def start_frames(self, timeout: float) -> tuple[FrameQueue, float]:
+        """Start the stream: the first frame is exposed now. Returns the queue it fills and the rate (Hz)."""
+        self._require_link()
+        self._queue = FrameQueue(STREAM_QUEUE)
+        self._tau0, self._next = self.rig.clock.now(), 0  # type: ignore[attr-defined]
+        return self._queue, self.fps
+
+    def capture(self, timeout: float) -> None:
+        """Render and queue every frame delivered by now (waiting up to ``timeout`` s for room for each one);
+        ConnectionFailed without a link, DeviceTimeout when detection does not take a frame in time."""
+        queue = self._queue
+        if queue is None:
+            return
+        self._require_link()
+        rig = self.rig
+        now = rig.clock.now()  # type: ignore[attr-defined]
+        last = math.floor((now - self.latency - self._tau0) * self.fps + _EPS)
+        lo, hi = self.lost[1], self.lost[1] + self.lost[0]
+        while self._next <= last:
+            k = self._next
+            self._next += 1
+            if self.drop > 0 and self._drop_rng.random() < self.drop:
+                continue  # lost by the camera: its number is skipped
+            tau = self._tau0 + k / self.fps
+            hidden = self.lost[0] > 0 and lo - _EPS <= tau - self._tau0 <= hi + _EPS
+            poses = [] if hidden else [rig.flange_pose(tau) @ self.mount]  # type: ignore[attr-defined]
+            queue.put(Frame(k, tau + self.latency, self.renderer.render(poses, self._rng)), timeout)
+
+    def stop_frames(self) -> None:
+        """End the stream (frames not yet delivered are never made)."""
+        if self._queue is not None:
+            self._queue.close()
+        self._queue = None
+
+    def _require_link(self) -> None:
+        if not self.rig.tracker_connected:  # type: ignore[attr-defined]
+            raise ConnectionFailed("the simulated camera is not connected (lost link: connect again)")

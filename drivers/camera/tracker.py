@@ -34,10 +34,17 @@ Camera and measurement:
               ``frames`` (default 5), then the reading fails with one line
 Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), ``fov`` horizontal degrees
 (60), ``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of
-motion streak (0), ``fps`` (30), ``distance`` m from the camera to the TP at home (1.0), ``tilt`` and
-``roll`` degrees of the flange at home (20, 10), ``seed`` (the robot's), ``fault`` as the mock tracker's
-(``target_lost`` hides the target, ``bad_reading`` shows a second copy, ``slow`` stops the frames,
-``disconnect`` loses the camera). Any other option is rejected with one line.
+motion streak (0), ``fps`` frame rate, Hz (30), ``latency`` s from a frame's exposure to its timestamp (0),
+``distance`` m from the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home
+(20, 10), ``seed`` (the robot's), ``fault`` as the mock tracker's (``target_lost`` hides the target,
+``bad_reading`` shows a second copy, ``slow`` stops the frames, ``disconnect`` loses the camera); for streams
+``drop`` (probability that the camera loses a frame, 0) and ``lost=D[@S]`` (the target hidden for D s from S s,
+default 2, into every stream). Any other option is rejected with one line.
+
+Streaming (continuous motion, drivers/aruco_stream.py): every frame at the camera's frame rate, stamped with its
+capture time (the identity's ``stream_timestamps`` says which clock), measured in a worker thread like a polled
+frame, one row each; frames where the target is not seen or fails a check, and frames the camera lost, are
+recorded gaps.
 
 A reading: the TP of every frame (pose by drivers/camera/pose.py), frames farther than 5 robust sigmas
 from the median rejected, the rest averaged. Its ``sigma`` is the standard uncertainty per axis (m), one
@@ -45,7 +52,7 @@ number as the measurement contract has it: ``sqrt(trace(C) / 3)`` of the mean's 
 pose covariance propagated to the TP, divided by the frames kept. With ``refine=edges`` the corners'
 covariance comes from the edge-line fits (drivers/camera/refinement.py: corners of one side are correlated),
 scaled up when the reprojection residuals are larger than it predicts; otherwise the corners are taken as
-independent with the noise of the pooled reprojection residuals (never below ``SIGMA_PX_FLOOR``). If
+independent with the noise of the pooled reprojection residuals (never below ``drivers.camera.pose.SIGMA_PX_FLOOR``). If
 the frames scatter significantly more than C says (F-test), their spread is used instead. A camera's
 error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
 the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights
@@ -72,9 +79,10 @@ import cv2
 import numpy as np
 from scipy.stats import f as f_dist
 
+from drivers.aruco_stream import FrameStreaming
 from drivers.base import Array, DeviceIdentity, TrackerReading
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
-from drivers.camera.pose import Pose, estimate_pose
+from drivers.camera.pose import CornerNoise, Pose, estimate_pose
 from drivers.camera.targets import (
     REFINEMENTS,
     DuplicateMarker,
@@ -86,15 +94,14 @@ from drivers.camera.targets import (
     single_marker,
 )
 from drivers.errors import BadReading, DeviceTimeout, MeasurementError, SpecError, TargetLost
-from drivers.spec import TrackerSpec, parse_faults
+from drivers.spec import TrackerSpec, parse_faults, parse_interval
 
 FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
         "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
            "refine", "frames", "max_rms", "timeout", "retries")
-SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "distance", "tilt", "roll", "seed",
-               "fault")
-SIGMA_PX_FLOOR = 0.01  # pixels: corner noise assumed at least this (clean renders reach 0.005-0.01 px)
+SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
+               "tilt", "roll", "seed", "fault")
 SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
 OUTLIER_SIGMAS = 5.0
 CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
@@ -208,16 +215,21 @@ def _sim_settings(spec: TrackerSpec, raw: dict[str, Any]) -> dict[str, Any]:
            "fov": _number(spec, raw, "fov", 60.0), "noise": _number(spec, raw, "noise", 2.0, low=0, strict=False),
            "blur": _number(spec, raw, "blur", 0.5, low=0, strict=False),
            "motion": _number(spec, raw, "motion", 0.0, low=0, strict=False), "fps": _number(spec, raw, "fps", 30.0),
+           "latency": _number(spec, raw, "latency", 0.0, low=0, strict=False),
+           "drop": _number(spec, raw, "drop", 0.0, low=0, strict=False),
            "distance": _number(spec, raw, "distance", 1.0), "tilt": _number(spec, raw, "tilt", 20.0, low=-90),
            "roll": _number(spec, raw, "roll", 10.0, low=-360),
            "seed": None if "seed" not in raw else _number(spec, raw, "seed", 0, int, 0, strict=False)}
     try:
         out["k1"] = float(raw.get("k1", 0.0))
         out["fault"] = parse_faults(str(raw["fault"]), "tracker") if "fault" in raw else ()
+        out["lost"] = parse_interval("lost", str(raw["lost"])) if "lost" in raw else (0.0, 0.0)
     except ValueError as exc:
         raise _fail(spec, str(exc).replace("could not convert string to float", "option k1 must be a number")) from None
     if not out["fov"] < 170:
         raise _fail(spec, "option fov must be below 170 degrees")
+    if not out["drop"] < 1:
+        raise _fail(spec, "option drop must be a probability below 1")
     return out
 
 
@@ -228,9 +240,10 @@ def rig_settings(spec: TrackerSpec) -> tuple[tuple[Any, ...], int | None, tuple[
     return sim["fault"], sim["seed"], (sim["distance"], math.radians(sim["tilt"]), math.radians(sim["roll"]))
 
 
-class ArucoTracker:
-    """The camera tracker (implements :class:`drivers.base.Tracker`). ``source``: a frame source
-    (drivers/camera/sources.py or the simulated camera); ``camera``: its intrinsics."""
+class ArucoTracker(FrameStreaming):
+    """The camera tracker (implements :class:`drivers.base.Tracker` and ``StreamingTracker``, the stream in
+    drivers/aruco_stream.py). ``source``: a frame source (drivers/camera/sources.py or the simulated camera);
+    ``camera``: its intrinsics."""
 
     def __init__(self, spec: TrackerSpec, settings: Settings, source: Any, camera: CameraIntrinsics) -> None:
         from drivers.camera.targets import Detector
@@ -239,6 +252,7 @@ class ArucoTracker:
         self.detector = Detector(settings.target, settings.refine, camera)
         self.reference: Array | None = None  # rotation of the last pose: keeps IPPE solutions on one branch
         self.frames_used = self.frames_failed = 0
+        self._init_stream()
 
     def connect(self, timeout: float) -> None:
         if not timeout > 0:
@@ -246,18 +260,24 @@ class ArucoTracker:
         self.source.open(timeout)
 
     def close(self) -> None:
-        self.source.close()
+        try:
+            self.stop_stream(self.settings.timeout)
+        finally:
+            self.source.close()
 
     def identity(self) -> DeviceIdentity:
         s, k = self.settings, self.camera.matrix
         target = s.target
         details = {"source": self.source.description, "target": target.kind, "markers": str(len(target.corners)),
                    "refine": s.refine, "frames": str(s.frames), "image": f"{self.camera.width}x{self.camera.height}",
-                   "tp": ",".join(f"{v!r}" for v in s.tp),
+                   "tp": ",".join(repr(float(v)) for v in s.tp),
                    # the intrinsics used, at full precision, so that a recorded session can be replayed
                    "camera_matrix": json.dumps(k.tolist()),
                    "distortion_coefficients": json.dumps(self.camera.distortion.tolist()),
-                   "camera_file": "" if s.camera_file is None else str(s.camera_file)}
+                   "camera_file": "" if s.camera_file is None else str(s.camera_file),
+                   "stream_timestamps": getattr(self.source, "stamps", "none: this source cannot stream")}
+        if math.isfinite(getattr(self.source, "rate", math.nan)):
+            details["frame_rate"] = f"{self.source.rate:g}"
         return DeviceIdentity("tracker", "ArUco camera (OpenCV)", serial=str(self.spec.target),
                               firmware=f"opencv {cv2.__version__}", details=details)
 
@@ -266,6 +286,8 @@ class ArucoTracker:
         own sigma. Raises TargetLost, BadReading, DeviceTimeout, ConnectionFailed (one line each)."""
         if int(count) != count or count < 1 or not timeout > 0:
             raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
+        if self.streaming:
+            raise RuntimeError(f"{self.source.description} is streaming: call stop_stream() before measure()")
         self.source.start_measurement()
         return [self._reading() for _ in range(count)]
 
@@ -320,15 +342,11 @@ class ArucoTracker:
     def _average(self, poses: list[tuple[Pose, float]]) -> TrackerReading:
         tp = self.settings.tp
         pts = np.array([p.point(tp) for p, _ in poses])
-        dof = sum(max(p.dof, 0) for p, _ in poses)
-        rss = sum(p.rms**2 * 2 * p.points for p, _ in poses)
-        expected = [p.expected_rss for p, _ in poses]
-        if all(e is not None for e in expected):  # corner covariances from the edge-line fits
-            scale = max(rss / max(sum(expected), 1e-30), 1.0)  # corners scatter more than their edges say
-            covs = np.array([p.point_covariance(tp, 0.0) * scale for p, _ in poses])
-        else:
-            sigma_px = max(math.sqrt(rss / dof) if dof else 0.0, SIGMA_PX_FLOOR)
-            covs = np.array([p.point_covariance(tp, sigma_px) for p, _ in poses])
+        noise = CornerNoise()
+        for p, _ in poses:
+            noise.add(p)
+        covs = np.array([noise.covariance(p, tp) for p, _ in poses])
+        dof = noise.dof
         model = math.sqrt(float(np.trace(covs.mean(axis=0))) / 3)  # per-axis RMS, one frame
         median = np.median(pts, axis=0)
         dist = np.linalg.norm(pts - median, axis=1)
@@ -395,5 +413,6 @@ def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) 
     mount = np.eye(4)
     mount[:3, 3] = rig.truth.tool - settings.tp  # the target's centre, so that its TP is the rig's true TP
     optics = Optics(noise=sim["noise"], blur=sim["blur"], motion=sim["motion"])
-    return ArucoTracker(spec, settings, SimulatedCamera(rig, settings.target, camera, mount, optics, sim["fps"]),
-                        camera)
+    source = SimulatedCamera(rig, settings.target, camera, mount, optics, sim["fps"], sim["latency"], sim["drop"],
+                             sim["lost"])
+    return ArucoTracker(spec, settings, source, camera)

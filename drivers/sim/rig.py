@@ -61,7 +61,7 @@ from drivers.errors import (
 from drivers.motion import joint_durations as _durations
 from drivers.motion import profile_fraction as _fraction
 from drivers.sim.pairing import _points_settings, _unpaired, check_pairing, is_simulated_camera
-from drivers.sim.stream import StreamSettings
+from drivers.sim.stream import StreamedMove, StreamSettings
 from drivers.sim.world import joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
 from kinematics.dh import frames_from_joints, points_from_joints
@@ -193,6 +193,11 @@ class SimulatedRig:
 
     def actual_joints(self, t: float | Array | None = None) -> Array:
         """The arm's actual joint values at clock time ``t`` (default now): (n,), or (m, n) for m times."""
+        path = self._path  # read once: a move's thread may end it meanwhile (the emulator's tracker reads here)
+        if path is not None and np.ndim(t) == 0:
+            held = path.at(self.clock.now() if t is None else float(np.asarray(t)))
+            if held is not None:
+                return held
         dt = np.maximum(np.asarray(self.clock.now() if t is None else t, dtype=float) - self._ring_start, 0.0)
         if not self._ring_decays:
             envelope = np.ones_like(dt)
@@ -202,7 +207,7 @@ class SimulatedRig:
             envelope = np.zeros_like(dt)
         wave = envelope * np.cos(2 * np.pi * RING_FREQUENCY * dt)
         out = self._rest + np.multiply.outer(wave, self._ring_amp)
-        return out if self._path is None else self._path.overlay(self.clock.now() if t is None else t, out)
+        return out if path is None else path.overlay(self.clock.now() if t is None else t, out)
 
     def readings_of(self, q: Array) -> Array:
         """The controller's readings (n,) or (m, n) that give the DH joint values ``q`` (the same without a
@@ -263,12 +268,19 @@ class SimulatedRig:
 
     def _run(self, start: Array, target: Array, speed: Array, acceleration: Array, until: float) -> bool:
         """Move from ``start`` towards ``target`` for ``until`` s of the move's profile (clock advanced in
-        chunks so that ``stop()`` can cut in), then let the arm come to rest. Returns True if stopped early."""
+        chunks so that ``stop()`` can cut in), then let the arm come to rest. Returns True if stopped early.
+
+        While it runs, the arm follows the profile on the clock (a :class:`StreamedMove` overlaid on the rest
+        model, held where the move ends): what a tracker measuring in real time (the UR emulator's) sees."""
         durations = _durations(start, target, speed, acceleration)
         k = int(np.argmax(durations))
         duration, distance = float(durations[k]), abs(float(target[k] - start[k]))
         elapsed, remaining = 0.0, until
-        self._moving, self._stop_requested, self._path = True, False, None
+        t0 = self.clock.now()
+        path = StreamedMove(start, target, speed, acceleration, t0)
+        if until < path.duration:
+            path.t_stop = t0 + until
+        self._moving, self._stop_requested, self._path = True, False, path
         try:
             while remaining > 0 and not self._stop_requested:
                 step = min(MOTION_CHUNK, remaining)
@@ -276,6 +288,8 @@ class SimulatedRig:
                 elapsed, remaining = elapsed + step, remaining - step
         finally:  # also on KeyboardInterrupt: the arm stops where it is
             self._moving = False
+            if self._stop_requested:  # where the profile has got to on the clock (a real-time clock runs on
+                elapsed = min(until, max(elapsed, self.clock.now() - t0))  # while a chunk's sleep ends)
             share = _fraction(elapsed, duration, float(speed[k]), float(acceleration[k]), distance)
             if duration > 0:
                 n = len(start)
@@ -285,6 +299,7 @@ class SimulatedRig:
                 self._ring_amp = self.ring * self._robot_rng.uniform(0.5, 1.0, n) * signs
                 self._ring_start = self.clock.now()
                 self._ring_decays = True
+            self._path = None  # last: until now the move's profile holds the arm (no glitch for a reader)
         return self._stop_requested
 
     # --- faults ---------------------------------------------------------------------------------------------

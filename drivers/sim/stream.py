@@ -17,8 +17,9 @@ read and ``clock.now()``; nothing blocks.
 A streamed move (:meth:`JointStreaming.start_move`) follows the synchronised trapezoidal profile of a blocking
 move (drivers/motion.py) while the clock runs; ``motion_done`` ends it. Faults as for blocking moves, counted per
 move: ``protective_stop``/``emergency_stop`` stop it halfway (``motion_done`` raises once the clock gets there),
-``slow`` never lets it finish (the caller's timeout), ``disconnect`` raises at once. The kinematics are the rig's
-(``true_points``), never computed here.
+``slow`` never lets it finish, ``disconnect`` raises at once. A move still running when its ``timeout`` (s from
+``start_move``) has passed is stopped there and ``motion_done`` raises DeviceTimeout, as for a blocking move.
+The kinematics are the rig's (``true_points``), never computed here.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from drivers.base import Array, JointStreamBatch, RobotState, TrackerStreamBatch
-from drivers.errors import ConnectionFailed, EmergencyStop, ProtectiveStop
+from drivers.errors import ConnectionFailed, DeviceTimeout, EmergencyStop, ProtectiveStop
 from drivers.motion import joint_durations, profile_fraction
 
 if TYPE_CHECKING:
@@ -92,6 +93,16 @@ class StreamedMove:
         dt = np.minimum(np.asarray(t, dtype=float), self.t_end) - self.t0
         share = np.array([profile_fraction(x, self.duration, v, a, d) if x > 0 else 0.0 for x in dt.reshape(-1)])
         return self.start + np.multiply.outer(share, self.target - self.start)
+
+    def at(self, t: float) -> Array | None:
+        """Readings (n,) at the one clock time ``t`` if the move holds the arm then (as :meth:`overlay`), else None;
+        the fast path of a real-time reader (the UR emulator's stream asks thousands of times a second)."""
+        if self.finished and t > self.t_end + _EPS:
+            return None
+        v, a, d = self._profile
+        dt = min(t, self.t_end) - self.t0
+        share = profile_fraction(dt, self.duration, v, a, d) if dt > 0 else 0.0
+        return self.start + share * (self.target - self.start)
 
     def overlay(self, t: Array, q: Array) -> Array:
         """``q`` (the rig's rest-and-ring model, (m, n) or (n,)) with the move's readings wherever ``t <= t_end``
@@ -166,7 +177,7 @@ class JointStreaming:
             move.t_stop, move.duration = move.t0, math.inf  # stuck: never arrives
         elif fault in ("protective_stop", "emergency_stop"):
             move.t_stop = move.t0 + move.duration / 2
-        self._fault, self._number = fault, number
+        self._fault, self._number, self._deadline = fault, number, move.t0 + float(timeout)
         rig._path, rig._moving, rig._stop_requested = move, True, False
 
     def motion_done(self) -> bool:
@@ -180,7 +191,10 @@ class JointStreaming:
         now = rig.clock.now()
         if rig._stop_requested and move.t_stop > now:
             move.t_stop = now
-        if move.duration == math.inf and not rig._stop_requested:
+        late = now >= self._deadline and move.t_end > self._deadline  # still moving when its time was up
+        if late:
+            move.t_stop = self._deadline
+        elif move.duration == math.inf and not rig._stop_requested:
             return False
         if now < move.t_end - _EPS:
             return False
@@ -197,6 +211,9 @@ class JointStreaming:
             raise error(f"simulated {rig._latched.value} during move {self._number}: clear it (rig.clear_faults()), "
                         "then resume")
         rig._stop_requested = False  # stopped by stop(): the move has ended too
+        if late:
+            raise DeviceTimeout(f"move {self._number} needs {move.duration:.3f} s, more than its timeout of "
+                                f"{self._deadline - move.t0:g} s; the robot was stopped")
         return True
 
 
@@ -261,6 +278,15 @@ class TrackerStreaming:
         batch = self.read_stream()
         self._tracker_streaming = False
         return batch
+
+
+def robot_time_of_stamps(details: dict[str, str], t: Array) -> Array:
+    """The robot-clock times (s) at which a simulated tracker took the positions it stamped ``t`` (s, its clock),
+    without jitter: the inverse of :meth:`TrackerStreaming.tracker_time`, from the tracker identity's ``details``
+    (a session header's ``tracker.details``: latency, clock_offset, drift, clock_epoch). ``result - t`` is what a
+    session's clock fit should find as its offset (robot time = tracker time + offset)."""
+    latency, offset, drift, epoch = (float(details[k]) for k in ("latency", "clock_offset", "drift", "clock_epoch"))
+    return (np.asarray(t, dtype=float) - latency - offset + drift * epoch) / (1 + drift)
 
 
 def _empty_tracker_batch(gaps: tuple[tuple[float, float], ...] = ()) -> TrackerStreamBatch:

@@ -48,6 +48,9 @@ class SimulatedTracker(TrackerStreaming):
         details = {"noise": f"{rig.noise:g}", "latency": f"{rig.latency:g}", "dropout": f"{rig.dropout:g}"}
         if rig.points > 1 or rig.occlusion > 0:
             details.update(points=str(rig.points), occlusion=f"{rig.occlusion:g}")
+        s = rig.stream  # its streams' clock (drivers/sim/stream.py): what a session's clock fit should find
+        details.update(clock_offset=f"{s.clock_offset!r}", drift=f"{s.drift!r}", stamp_jitter=f"{s.jitter!r}",
+                       clock_epoch=f"{rig.stream_epoch!r}")
         return DeviceIdentity("tracker", "simulated tracker", serial=f"SIM-T{rig.tracker_seed}", firmware="sim",
                               details=details)
 

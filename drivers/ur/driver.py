@@ -26,7 +26,9 @@ How it drives the arm:
   program running) in one request to the worker.
 - ``move_joints`` sends ``moveJ(q, speed, acceleration, asynchronous=True)`` and watches the state stream until
   the arm is at the target and still, so that a timeout, ``stop()`` or Ctrl-C can cut in with ``stopJ``. UR's
-  moveJ takes one speed for the leading joint: the smallest of the per-joint values is used.
+  moveJ takes one speed and acceleration, the leading joint's (the largest travel): the largest that keeps every
+  moving joint within its own value is sent (drivers/motion.py), so a move of one joint (a continuous sweep)
+  runs at that joint's speed.
 - readings are ``getActualQ`` (encoder values); ``wait_until_still`` watches ``getActualQd``.
 - robot mode and safety mode are checked before every move and while moving and settling; a protective stop,
   emergency stop, safeguard stop or a powered-off arm raises with what to do on the teach pendant.
@@ -63,6 +65,7 @@ from drivers.errors import (
     RobotFault,
     SpecError,
 )
+from drivers.motion import leading_joint_limits
 from drivers.spec import ROBOT_FORMS, RobotSpec
 from drivers.ur.info import DASHBOARD_PORT, Dashboard, dashboard_model, polyscope_major, read_factory_calibration
 from drivers.ur.stream import JointStreaming
@@ -394,7 +397,7 @@ class URRobot(JointStreaming):
             self.stop()
             raise
 
-    def _move(self, target: Array, v: float, a: float, deadline: float, timeout: float, stops: int) -> None:
+    def _move(self, target: Array, v: Array, a: Array, deadline: float, timeout: float, stops: int) -> None:
         """Command the move and watch it to the end (run again after a reconnection: same target)."""
         self._command_move(target, v, a, stops)
         while True:
@@ -409,15 +412,18 @@ class URRobot(JointStreaming):
                                     "it was stopped (stopJ)")
             time.sleep(self.poll_period)
 
-    def _command_move(self, target: Array, v: float, a: float, stops: int) -> None:
-        """Send the asynchronous moveJ (the control script started first if it is not running); RobotFault when
-        the controller refuses it twice."""
+    def _command_move(self, target: Array, speed: Array, acceleration: Array, stops: int) -> None:
+        """Send the asynchronous moveJ (the control script started first if it is not running) with the leading
+        joint's speed and acceleration from where the arm stands (per-joint ``speed`` rad/s, ``acceleration``
+        rad/s²); RobotFault when the controller refuses it twice."""
         for attempt in (1, 2):
-            if not self._checked_snapshot()[6]:  # ur_rtde's control script is not running, e.g. after a
+            snap = self._checked_snapshot()
+            if not snap[6]:  # ur_rtde's control script is not running, e.g. after a
                 with contextlib.suppress(WorkerError):  # cleared protective stop or another script
                     self._call("reupload")
                 self._wait_program(2.0)
             self._raise_if_stopped(stops)
+            v, a = leading_joint_limits(snap[4], target, speed, acceleration)
             try:
                 accepted, why = self._call("move", target.tolist(), v, a), "moveJ returned false"
             except WorkerError as exc:
@@ -477,7 +483,8 @@ class URRobot(JointStreaming):
             self._call("stop", STOP_DECELERATION)
 
     def _checked(self, q: Sequence[float], speed: Sequence[float], acceleration: Sequence[float],
-                 timeout: float) -> tuple[Array, float, float]:
+                 timeout: float) -> tuple[Array, Array, Array]:
+        """Target (6,) rad, per-joint speeds rad/s and accelerations rad/s², each checked against the limits."""
         model, n = self.model, len(self.joint_types)
         target, vs, accs = (np.asarray(x, dtype=float).reshape(-1) for x in (q, speed, acceleration))
         for name, values in (("target", target), ("speed", vs), ("acceleration", accs)):
@@ -486,13 +493,14 @@ class URRobot(JointStreaming):
         for i, (value, (lo, hi)) in enumerate(zip(target, model.limits, strict=True)):
             if not lo <= value <= hi:
                 raise ValueError(f"joint {i + 1} target {value:.6g} is outside its limits [{lo:.6g}, {hi:.6g}]")
-        v, a = float(np.min(vs)), float(np.min(accs))
-        top = min(float(self.options["max_speed"]), float(np.min(model.max_speed)))
-        if not 0 < v <= top * (1 + 1e-9):
-            raise ValueError(f"joint speed {v:.6g} rad/s must be in (0, {top:.6g}] (option max_speed)")
-        if not 0 < a <= float(self.options["max_acceleration"]) * (1 + 1e-9):
-            raise ValueError(f"joint acceleration {a:.6g} rad/s² must be in (0, {self.options['max_acceleration']:g}]"
-                             " (option max_acceleration)")
+        top_a = float(self.options["max_acceleration"])
+        for i, (v, a, limit) in enumerate(zip(vs, accs, model.max_speed, strict=True)):
+            top = min(float(self.options["max_speed"]), float(limit))
+            if not 0 < v <= top * (1 + 1e-9):
+                raise ValueError(f"joint {i + 1} speed {v:.6g} rad/s must be in (0, {top:.6g}] (option max_speed)")
+            if not 0 < a <= top_a * (1 + 1e-9):
+                raise ValueError(f"joint {i + 1} acceleration {a:.6g} rad/s² must be in (0, {top_a:g}] (option "
+                                 "max_acceleration)")
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
-        return target, v, a
+        return target, vs, accs

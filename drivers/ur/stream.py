@@ -42,12 +42,12 @@ EARLY_END_HOLD = 0.25
 
 @dataclass
 class _Motion:
-    """The move begun by start_move: target, speed, acceleration, host deadline, timeout, stop count, the
-    worker that got the command, since when (host monotonic s) it has looked ended short of its target."""
+    """The move begun by start_move: target, per-joint speed and acceleration, host deadline, timeout, stop count,
+    the worker that got the command, since when (host monotonic s) it has looked ended short of its target."""
 
     target: Array
-    speed: float
-    acceleration: float
+    speed: Array
+    acceleration: Array
     deadline: float
     timeout: float
     stops: int

@@ -51,6 +51,10 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
                         "t_ref_s": c.t_ref, "streamed_rows": c.rows,
                         "note": "streamed rows: robot time = tracker time + offset_s + drift * (tracker time - "
                                 "t_ref_s), fitted with the kinematics"}
+        if c.sweeps:
+            doc["clock"]["per_sweep"] = [{"sweep": s, "offset_s": o, "offset_std_s": e} for s, o, e in c.sweeps]
+            doc["clock"]["note"] += ("; the sweeps' offsets differed (a clock restart or jump): each streamed sweep "
+                                     "has its own (per_sweep), offset_s is their weighted mean")
     lines = ident.lines
     doc["axis_lines"] = {
         "note": "the identified model as joint axes at the home readings (tracker frame, m): exact even where "

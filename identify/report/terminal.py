@@ -93,6 +93,10 @@ _EXT_SCALE = {"scale": (1e6, "ppm"), "ecc_sin": (np.degrees(1.0) * 3600, "arcsec
 def format_clock(clock: ClockFit) -> str:
     """One line: the fitted clock relation of the streamed rows."""
     drift = "" if clock.drift is None else f", drift {clock.drift * 1e6:+.1f} ± {clock.drift_std * 1e6:.1f} ppm"
+    if clock.sweeps:
+        each = ", ".join(f"{s}: {o * 1e3:+.3f} ± {e * 1e3:.3f}" for s, o, e in clock.sweeps)
+        return (f"clock of {clock.rows} streamed rows, one offset per sweep (they differ): robot time = tracker "
+                f"time + offset (ms; {each}){drift}")
     return (f"clock of {clock.rows} streamed rows: robot time = tracker time {clock.offset * 1e3:+.3f} "
             f"± {clock.offset_std * 1e3:.3f} ms{drift}")
 

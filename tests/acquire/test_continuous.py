@@ -21,6 +21,8 @@ from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.base import DeviceIdentity
 from drivers.clock import VirtualClock
+from drivers.errors import DeviceTimeout
+from drivers.motion import motion_time
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.robot import open_robot
 from drivers.sim.tracker import open_tracker
@@ -202,6 +204,29 @@ def test_protective_stop_mid_sweep_interrupts_it_and_the_resume_redoes_it(tmp_pa
     assert meas.streamed.sum() > current - 10  # only a handful outside the joint stream
 
 
+def test_a_sweep_longer_than_the_move_timeout_runs_to_its_end(tmp_path: Path) -> None:
+    """The move timeout is the slack a move gets beyond its own duration: a constant-speed sweep longer than it
+    runs to its end, and the robot's own bound (given to ``start_move``) is as long as the loop's."""
+    site = SMALL.with_overrides(speed_fraction=2.0, acceleration_fraction=2.0)
+    session, arm, sensor, rig = _session(tmp_path, "mock:ur5e", "mock", site)
+    plan = session.plan
+    sweeps = [float(motion_time(s.q[s.joint - 1] - s.start[s.joint - 1], s.speed, s.acceleration))
+              for s in plan.steps if s.kind == "stream"]
+    timeout = 5.0
+    assert max(sweeps) > timeout + 1.0  # the joint 6 sweep: 7.1 s
+    with session:
+        result = Orchestrator(arm, sensor, session, rig.clock, Timeouts(timeout, 10.0, 10.0)).run()
+        assert result.outcome == "complete", result.reason
+    assert [s[3] for s in _streams(tmp_path / "c.session")] == ["complete", "complete"]
+    # the simulated robot keeps a streamed move's timeout as a blocking move does: stopped where it was then
+    arm.start_move(np.add(plan.home, [1.0, 0, 0, 0, 0, 0]), plan.speed, plan.acceleration, 0.5)  # 1.5 s
+    rig.clock.sleep(0.6)
+    with pytest.raises(DeviceTimeout, match=r"timeout of 0\.5 s"):
+        arm.motion_done()
+    move = rig._path
+    assert not rig._moving and move.t_end == pytest.approx(move.t0 + 0.5)
+
+
 class _Crash(BaseException):
     """Stands for the process dying (kill -9): not an error any layer handles."""
 
@@ -264,7 +289,7 @@ def test_cli_continuous_session_end_to_end_and_export(tmp_path: Path, capsys) ->
 def test_cli_dry_run_compares_the_modes_and_bad_combinations_are_one_line(tmp_path: Path, capsys) -> None:
     assert main(["--robot", "ur5e", "--tracker", "mock", "--dry-run", "--mode", "continuous"]) == 0
     out = capsys.readouterr().out
-    assert "modes (--mode step | continuous)" in out
+    assert "modes (--mode step | continuous | both)" in out
     step_line = next(line for line in out.splitlines() if line.strip().startswith("step "))
     cont_line = next(line for line in out.splitlines() if line.strip().startswith("continuous "))
     h, m, s = (int(v) for v in step_line.split()[1].split(":"))

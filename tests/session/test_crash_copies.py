@@ -9,7 +9,6 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import re
 import shutil
@@ -23,9 +22,9 @@ import numpy as np
 import pytest
 
 from acquire.session import Session
+from tests._acquire_writer import Writer
 
 ROOT = Path(__file__).resolve().parents[2]
-WRITER = "tests._acquire_writer"  # run with -m: tests/ holds packages named like the project's (tests/acquire/...)
 # a short plan whose real-time steps take ~0.17 s: small sweeps at full speed, no settle time
 FAST_SITE = """schema: 1
 robot:
@@ -43,57 +42,6 @@ plan:
 """
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not hasattr(os, "fork"),
                                 reason="needs SIGKILL and fork")
-
-
-class Writer:
-    """One tests/_acquire_writer.py server: ``start(args)`` forks a child running ``acquire ARGS``."""
-
-    def __init__(self, tmp_path: Path, name: str = "writer") -> None:
-        env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
-               "MKL_NUM_THREADS": "1"}
-        self.err = (tmp_path / f"{name}.err").open("w")
-        self.proc = subprocess.Popen([sys.executable, "-m", WRITER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=self.err, text=True, cwd=tmp_path, env=env)
-        self.lines: list[str] = []
-
-    def start(self, args: list[str]) -> int:
-        """Fork a child running ``acquire ARGS``; its pid."""
-        self.lines = []
-        self.proc.stdin.write(json.dumps([str(a) for a in args]) + "\n")
-        self.proc.stdin.flush()
-        word, value = self._line()
-        assert word == "pid", (word, value)
-        return int(value)
-
-    def finish(self, timeout: float = 60.0) -> int:
-        """Read the child's lines until it ends; its exit code (negative: killed by that signal)."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            word, value = self._line()
-            if word == "exit":
-                return int(value)
-        raise AssertionError("the writer child did not end in time")
-
-    def acked(self) -> set[int]:
-        return {int(line.split()[1]) for line in self.lines if line.startswith("ack ")}
-
-    def opened(self) -> bool:
-        return "opened" in self.lines
-
-    def _line(self) -> tuple[str, str]:
-        line = self.proc.stdout.readline()
-        assert line, f"the writer server died: {Path(self.err.name).read_text()[-2000:]}"
-        line = line.strip()
-        if line.startswith("error "):
-            raise AssertionError(f"writer child failed: {line}")
-        self.lines.append(line)
-        word, _, value = line.partition(" ")
-        return word, value
-
-    def close(self) -> None:
-        self.proc.stdin.close()
-        self.proc.wait(timeout=10)
-        self.err.close()
 
 
 def _steps(path: Path) -> dict[int, object]:

@@ -355,6 +355,26 @@ def test_a_complete_session_is_reported_and_nothing_moves(session_copy: Path, ca
     assert not session_copy.with_suffix(".result.yaml").exists()  # nothing rewritten (none was copied here)
 
 
+def test_a_run_that_died_after_its_last_step_is_closed_and_identified_on_resume(session_copy: Path, capsys,
+                                                                                monkeypatch) -> None:
+    """Killed after the last step's commit, before the run was closed and the session identified: the resume
+    connects nothing, closes the dead run, ends its own as complete and writes the result and report."""
+    import drivers.registry as registry
+
+    with sqlite3.connect(session_copy) as db:  # what the file holds after such a kill
+        db.execute("UPDATE runs SET outcome = 'running', ended = NULL, reason = '' "
+                   "WHERE id = (SELECT max(id) FROM runs)")
+    with Session.open(session_copy) as session:
+        assert session.outcome() == "running" and session.next_index() is None
+        steps, runs = session.steps(), len(session.runs())
+    monkeypatch.setattr(registry, "open_robot", lambda *a, **k: pytest.fail("a device was opened"))
+    assert acquire_main(["--resume", str(session_copy), "--quiet"]) == 0
+    capsys.readouterr()
+    with Session.open(session_copy) as session:
+        assert session.outcome() == "complete" and session.steps() == steps and len(session.runs()) == runs + 1
+    assert session_copy.with_suffix(".result.yaml").exists() and session_copy.with_suffix(".report.html").exists()
+
+
 def test_missing_steps_are_measured_again_on_request_keeping_the_first_attempt(tmp_path: Path, capsys) -> None:
     path = tmp_path / "m.session"
     log = tmp_path / "run.log"

@@ -25,8 +25,10 @@ is the async progress: 0 while an async move runs, then -1 / -2 alternately. Oth
 Motion: the arm is a :class:`drivers.sim.rig.SimulatedRig` on a :class:`ScaledClock` (``time_scale``: emulated
 seconds per wall second, default 1; the tests run at 10 to 100, so a move of seconds takes a fraction of a
 second while the RTDE stream keeps its wall-clock rate); a moveJ is the rig's synchronised trapezoidal move
-(``SimulatedRobot.move_joints`` with the commanded speed / acceleration on every joint), and the streamed
-``actual_q`` follows that profile during the move, then the rig's resting / ringing arm.
+(``SimulatedRobot.move_joints`` with the commanded speed / acceleration on every joint). The streamed
+``actual_q`` is the rig's arm at the package's time: the move's profile on the emulated clock while it runs
+(the rig holds it at the target until its move has ended), then the rig's resting / ringing arm; the simulated
+tracker measures the same arm, so streams and tracker see one world.
 
 Native rate (``native_rate=True``): every RTDE stream sends one package per period (1 / ``rate``) of EMULATED
 time, stamped with that tick's controller time and carrying the state at it, as a controller does on its own
@@ -47,7 +49,9 @@ emulated arm, not after a wall-clock delay, so that a loaded machine cannot move
 
 Tracker: :meth:`UREmulator.serve_tracker` starts a simulated ASCII tracker (``tests/tracker_devices.py``,
 loopback TCP) measuring this emulator's true TP, for whole acquisitions with the real serial driver
-(``serial:socket://127.0.0.1:PORT?protocol=polled-xyz``); :meth:`truth` is the true robot (DH, base, tool),
+(``serial:socket://127.0.0.1:PORT?protocol=polled-xyz``, or a streaming profile such as ``stream-csv`` for
+continuous motion: its lines run on the emulated clock, with a ``latency``, ``clock_offset`` and ``drift`` of
+their own; :meth:`lose_tracker_target` blinds it for a while); :meth:`truth` is the true robot (DH, base, tool),
 which the primary interface also reports as the controller's factory calibration.
 
 Each emulator binds its own loopback address (127.x.y.z), since the ports are fixed. Run it in a child process

@@ -13,7 +13,6 @@ import numpy as np
 
 from drivers.errors import ConnectionFailed, EmergencyStop, ProtectiveStop, RobotFault
 from drivers.motion import joint_durations as _durations
-from drivers.motion import profile_fraction as _fraction
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.robot import SimulatedRobot
 from tests.ur_emulator.protocol import (
@@ -43,8 +42,6 @@ from tests.ur_emulator.protocol import (
     STATUS_PROGRAM_RUNNING,
 )
 from tests.ur_emulator.servers import ControllerServers
-
-APPROACH = 2e-3  # rad: how far short of its target the streamed arm stays until the rig has finished the move
 
 
 class ScaledClock:
@@ -214,12 +211,22 @@ class UREmulator(ControllerServers):
         """The emulated arm's true DHModel (base, tool: the simulated tracker's view); also its factory calibration."""
         return self.rig.truth
 
-    def serve_tracker(self, profile: str = "polled-xyz", noise: float = 2e-5, seed: int = 0) -> str:
+    def serve_tracker(self, profile: str = "polled-xyz", noise: float = 2e-5, seed: int = 0, *,
+                      latency: float = 0.0, clock_offset: float = 0.0, drift: float = 0.0,
+                      period: float | None = None) -> str:
         """Start a simulated ASCII tracker (tests/tracker_devices.py, loopback TCP) that measures this
-        emulator's true TP; returns its pyserial URL ``socket://127.0.0.1:PORT``."""
+        emulator's true TP (noise m per axis); returns its pyserial URL ``socket://127.0.0.1:PORT``.
+
+        The device runs on the emulator's clock (emulated time: a streaming profile's ``period``, default the
+        profile's, is in emulated seconds). A streamed reading taken at emulated time τ leaves ``latency`` s
+        later stamped with the device time of leaving, ``clock_offset + (1 + drift)·(τ + latency)``, as the mock
+        tracker stamps: the clock offset a session should find is ``-(latency + clock_offset)`` when drift is 0.
+        A polled reply comes ``latency`` s after its trigger."""
         from tests.tracker_devices import AsciiDevice
 
-        device = AsciiDevice(profile, self.rig, noise=noise, seed=seed, transport="tcp")
+        device = AsciiDevice(profile, self.rig, noise=noise, seed=seed, transport="tcp", latency=latency,
+                             clock_offset=clock_offset, drift=drift, period=period, clock=self.rig.clock,
+                             stamp_on_send=True)
         self._trackers.append(device)
         return str(device.port)
 
@@ -227,6 +234,13 @@ class UREmulator(ControllerServers):
         """(start, duration) of the latest move on the emulator's clock (s since the epoch, s), or None."""
         motion = self._motion
         return None if motion is None else (motion.t0, motion.duration)
+
+    def lose_tracker_target(self, seconds: float) -> tuple[float, float]:
+        """The simulated streaming tracker loses its target for the next ``seconds`` (emulated s); returns that span
+        on its clock, as its lines' stamps give it (tests/tracker_devices.py, ``AsciiDevice.lose_target``)."""
+        if not self._trackers:
+            raise RuntimeError("no simulated tracker: call serve_tracker first")
+        return self._trackers[-1].lose_target(seconds)
 
     def tracker_replies(self) -> int:
         """Measurements the simulated trackers answered so far."""
@@ -251,19 +265,9 @@ class UREmulator(ControllerServers):
         return self._program_running
 
     def actual_q(self, t: float | None = None) -> np.ndarray:
-        now = self.rig.clock.now() if t is None else t
-        motion = self._motion
-        if motion is not None and not motion.done:
-            distance = np.abs(motion.target - motion.start)
-            k = int(np.argmax(distance))
-            share = _fraction(now - motion.t0, motion.duration, motion.speed, motion.acceleration, float(distance[k]))
-            # the rig (whose arm the simulated tracker measures) settles the move in its own thread, which a
-            # loaded machine delays: until it has, the streamed arm stays short of the target, so a client never
-            # sees an arrival the rig has not made
-            if distance[k] > 0:
-                share = min(share, max(0.0, 1.0 - APPROACH / float(distance[k])))
-            return motion.start + share * (motion.target - motion.start)
-        return self.rig.actual_joints(now)
+        """The arm's joints (6,) rad at emulated time ``t`` (default now): the rig's, which follow a running move's
+        profile on the clock, so the RTDE stream and the simulated tracker see one arm."""
+        return np.asarray(self.rig.actual_joints(self.rig.clock.now() if t is None else t), dtype=float)
 
     def _state(self, t: float | None = None) -> dict[str, Any]:
         now = self.rig.clock.now() if t is None else t
@@ -349,6 +353,7 @@ class UREmulator(ControllerServers):
 
     def _run_move(self, motion: _Motion, asynchronous: bool) -> None:
         n = len(motion.target)
+        motion.t0 = self.rig.clock.now()  # the rig's move starts now: last_motion() reports when the arm moved
         try:
             if self.stall:  # a move that never finishes: the arm stays put, the script never reports done
                 motion.target, motion.duration = motion.start.copy(), float("inf")

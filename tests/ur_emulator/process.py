@@ -35,9 +35,9 @@ def _child(host: str, options: dict[str, Any], conn: Any) -> None:
     conn.send(("ok", None))
     while True:
         try:
-            name, args = conn.recv()
+            name, args, kwargs = conn.recv()
         except EOFError:
-            name, args = "close", ()
+            name, args, kwargs = "close", (), {}
         if name == "close":
             emulator.close()
             with contextlib.suppress(OSError):
@@ -49,7 +49,7 @@ def _child(host: str, options: dict[str, Any], conn: Any) -> None:
                 result = None
             else:
                 target = getattr(emulator, name)
-                result = target(*args) if callable(target) else target
+                result = target(*args, **kwargs) if callable(target) else target
             conn.send(("ok", result))
         except Exception as exc:
             conn.send(("error", f"{type(exc).__name__}: {exc}"))
@@ -87,9 +87,9 @@ class EmulatorProcess:
             raise TimeoutError("the UR emulator process does not answer")
         return self._conn.recv()  # type: ignore[no-any-return]
 
-    def call(self, name: str, *args: Any) -> Any:
+    def call(self, name: str, *args: Any, **kwargs: Any) -> Any:
         with self._call_lock:
-            self._conn.send((name, args))
+            self._conn.send((name, args, kwargs))
             status, result = self._receive(timeout=10.0)
         if status != "ok":
             raise RuntimeError(f"UR emulator: {name}: {result}")
@@ -97,7 +97,7 @@ class EmulatorProcess:
 
     def set(self, name: str, value: Any) -> None:
         with self._call_lock:
-            self._conn.send(("set", (name, value)))
+            self._conn.send(("set", (name, value), {}))
             self._receive(timeout=10.0)
 
     def get(self, name: str) -> Any:
@@ -106,7 +106,7 @@ class EmulatorProcess:
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_"):
             raise AttributeError(name)
-        return lambda *args: self.call(name, *args)
+        return lambda *args, **kwargs: self.call(name, *args, **kwargs)
 
     def close(self) -> None:
         if self._process.is_alive():

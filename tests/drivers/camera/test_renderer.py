@@ -65,3 +65,23 @@ def test_edges_are_drawn_where_opencv_projects_them(camera, supersample, blur):
     print(f"mean {errors.mean():+.4f} rms {np.sqrt(np.mean(errors**2)):.4f} max {np.abs(errors).max():.4f} px")
     # a straight edge on a supersampled grid is not perfectly antialiased: +-0.03 px ripple along it
     assert abs(errors.mean()) < 0.01 and np.sqrt(np.mean(errors**2)) < 0.02 and np.abs(errors).max() < 0.05
+
+
+def test_tracing_only_the_targets_window_gives_the_same_image():
+    """The renderer traces only the pixels around the target's projected outline: bit for bit the image that
+    tracing every pixel gives, for one copy, two copies, a target half out of view and none."""
+    board = grid_board(3, 3, 0.03, 0.006, D4)
+    rng = np.random.default_rng(5)
+    for camera in (PINHOLE, BARREL):
+        renderer = Renderer(board, camera, Optics(blur=0.7, supersample=2))
+        for k in range(4):
+            pose = np.eye(4)
+            pose[:3, :3] = Rotation.from_euler("xyz", [180 + rng.uniform(-40, 40), rng.uniform(-40, 40),
+                                                       rng.uniform(0, 360)], degrees=True).as_matrix()
+            pose[:3, 3] = [0.25 if k == 3 else rng.uniform(-0.05, 0.05), rng.uniform(-0.04, 0.04), 0.45]
+            twin = pose.copy()
+            twin[:3, 3] += [0.09, 0.0, 0.03]
+            for poses in ([pose], [pose, twin], []):
+                cropped, full = renderer.render(poses, crop=True), renderer.render(poses, crop=False)
+                assert np.array_equal(cropped, full)
+                assert poses == [] or np.count_nonzero(full != full[0, 0]) > 100  # the target is in the image

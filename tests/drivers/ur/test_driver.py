@@ -29,6 +29,7 @@ from drivers.errors import (
     RobotFault,
     SpecError,
 )
+from drivers.motion import leading_joint_limits, motion_time
 from drivers.registry import open_robot
 from drivers.sim.rig import SimulatedRig
 from drivers.spec import parse_faults
@@ -100,6 +101,9 @@ def test_connect_move_read_settle_stop(emulator: EmulatorProcess) -> None:
         assert robot.state() is RobotState.READY
         robot.move_joints(HOME, SPEED, ACC, timeout=10.0)
         np.testing.assert_allclose(robot.read_joints(), HOME, atol=1e-3)
+        # one joint moving: at its own speed, not at the slowest joint's (the controller's move duration says)
+        robot.move_joints(HOME + np.array([0.4, 0, 0, 0, 0, 0]), [0.8] + [0.2] * 5, ACC, timeout=10.0)
+        assert emulator.last_motion()[1] == pytest.approx(float(motion_time(0.4, 0.8, ACC[0])), rel=1e-6)
         robot.stop()  # nothing moving: harmless, never raises
     finally:
         robot.close()
@@ -233,6 +237,18 @@ def test_cb3_controller_is_told_apart_from_e_series() -> None:
 def test_controller_not_in_remote_control_is_refused() -> None:
     with EmulatorProcess(remote_control=False) as emu, pytest.raises(ConnectionFailed, match="Remote Control"):
         open_robot(f"ur5e@{emu.host}").connect(5.0)
+
+
+def test_move_j_gets_the_leading_joints_speed_within_every_joints_own() -> None:
+    """UR's moveJ takes one speed (the leading joint's): a move of one joint runs at that joint's speed whatever the
+    others' (a continuous sweep); in a move of several, none exceeds its own."""
+    home = np.zeros(6)
+    one = home + np.array([0, 0, 0, 0, 0, 2.0])
+    assert leading_joint_limits(home, one, [0.5] * 5 + [1.0], [1.0] * 5 + [2.0]) == (1.0, 2.0)
+    two = home + np.array([1.0, 0.5, 0, 0, 0, 0])  # joint 1 leads; joint 2 goes half as fast
+    v, a = leading_joint_limits(home, two, [0.8, 0.3, 1, 1, 1, 1], [2.0, 0.6, 1, 1, 1, 1])
+    assert (v, a) == pytest.approx((0.6, 1.2))  # joint 2 at its own 0.3 rad/s and 0.6 rad/s²
+    assert leading_joint_limits(home, home, [0.8, 0.3, 1, 1, 1, 1], [2.0] * 6) == (0.3, 2.0)  # nothing moves
 
 
 def test_spec_checks() -> None:
