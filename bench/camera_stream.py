@@ -2,7 +2,7 @@
 
     .venv/bin/python -m bench.camera_stream [--width 1280 --height 720 --fps 30] [--no-sessions]
 
-Stream (``drivers/aruco_stream.py`` on ``aruco:sim``: images rendered from the simulated UR5e, read by OpenCV):
+Stream (``drivers/camera/stream.py`` on ``aruco:sim``: images rendered from the simulated UR5e, read by OpenCV):
 a 2x2 grid board of 50 mm markers at 0.8 m facing the camera (60 deg horizontal field of view, noise 2 grey
 levels, blur 0.5 px), 40 ms from exposure to stamp. "still": 2 s with the arm at rest; "moving": joint 1 turning
 0.5 rad at up to 1 rad/s (the TP at up to 0.4 m/s). Per stream: the rate delivered (rows per second of stamps),

@@ -12,7 +12,7 @@ drivers/camera/renderer.py counts measurements there) and ``grab(timeout) -> (im
 Timestamps of ``grab`` are seconds since the epoch (the time the frame arrived; for a replay, the time it was
 read).
 
-Streams (continuous motion, drivers/aruco_stream.py): a source that streams has ``start_frames(timeout) ->
+Streams (continuous motion, drivers/camera/stream.py): a source that streams has ``start_frames(timeout) ->
 (FrameQueue, rate Hz)``, ``capture(timeout)`` (called from ``read_stream``, in the caller's thread) and
 ``stop_frames()``, and says in ``stamps`` what its frames' times are. :class:`LiveCamera` hands *every* frame
 its reader thread grabs to the queue, numbered, stamped with its capture time: the camera's own

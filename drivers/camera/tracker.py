@@ -41,7 +41,7 @@ motion streak (0), ``fps`` frame rate, Hz (30), ``latency`` s from a frame's exp
 ``drop`` (probability that the camera loses a frame, 0) and ``lost=D[@S]`` (the target hidden for D s from S s,
 default 2, into every stream). Any other option is rejected with one line.
 
-Streaming (continuous motion, drivers/aruco_stream.py): every frame at the camera's frame rate, stamped with its
+Streaming (continuous motion, drivers/camera/stream.py): every frame at the camera's frame rate, stamped with its
 capture time (the identity's ``stream_timestamps`` says which clock), measured in a worker thread like a polled
 frame, one row each; frames where the target is not seen or fails a check, and frames the camera lost, are
 recorded gaps.
@@ -79,10 +79,10 @@ import cv2
 import numpy as np
 from scipy.stats import f as f_dist
 
-from drivers.aruco_stream import FrameStreaming
 from drivers.base import Array, DeviceIdentity, TrackerReading
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
 from drivers.camera.pose import CornerNoise, Pose, estimate_pose
+from drivers.camera.stream import FrameStreaming
 from drivers.camera.targets import (
     REFINEMENTS,
     DuplicateMarker,
@@ -242,7 +242,7 @@ def rig_settings(spec: TrackerSpec) -> tuple[tuple[Any, ...], int | None, tuple[
 
 class ArucoTracker(FrameStreaming):
     """The camera tracker (implements :class:`drivers.base.Tracker` and ``StreamingTracker``, the stream in
-    drivers/aruco_stream.py). ``source``: a frame source (drivers/camera/sources.py or the simulated camera);
+    drivers/camera/stream.py). ``source``: a frame source (drivers/camera/sources.py or the simulated camera);
     ``camera``: its intrinsics."""
 
     def __init__(self, spec: TrackerSpec, settings: Settings, source: Any, camera: CameraIntrinsics) -> None:

@@ -236,7 +236,7 @@ def test_stop_and_go_rows_check_the_streams_timing(mixed: Path, tmp_path: Path, 
 
 
 def test_rows_of_a_kind_the_data_do_not_hold_is_one_line(tmp_path: Path, capsys) -> None:
-    sample = Path(__file__).resolve().parents[1] / "identify" / "data" / "sample_ur5e.csv"
+    sample = Path(__file__).resolve().parents[2] / "identify" / "data" / "sample_ur5e.csv"
     assert identify_main([str(sample), "--rows", "streamed"]) == 2
     assert "--rows streamed: the data hold no streamed rows to fit" in _one_line(capsys.readouterr().err)
 

@@ -47,7 +47,7 @@ NOISE = 5e-5  # m per axis: the stream-csv profile's stated sigma, which the sim
 LATENCY = 0.02  # s: each reading leaves the tracker this long after it was taken, stamped when it leaves
 FALSE_ALARM = 1e-4  # chance that a noise-derived check below fails on a correct system
 HOME = np.array(load_robot("ur5e").home, dtype=float)
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def stream_profile(folder: Path) -> Path:
