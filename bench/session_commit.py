@@ -43,9 +43,9 @@ def _configure_wal(conn: sqlite3.Connection) -> None:
 
 def one_run(folder: Path, mode: str, steps: int) -> list[float]:
     """Seconds per ``record_step`` for ``steps`` steps in a new session under ``folder``."""
-    original = session_module._configure
+    original = session_module.configure
     if mode != "delete":
-        session_module._configure = _configure_wal
+        session_module.configure = _configure_wal
     path = folder / f"bench-{mode.replace('+', '-')}-{time.time_ns()}.session"
     plan = small_plan()
     times = []
@@ -70,7 +70,7 @@ def one_run(folder: Path, mode: str, steps: int) -> list[float]:
         session.end_run("complete")
         session.close()
     finally:
-        session_module._configure = original
+        session_module.configure = original
         for p in folder.glob(f"{path.name}*"):
             p.unlink()
     return times
