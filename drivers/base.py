@@ -87,6 +87,12 @@ class Robot(Protocol):
         ...
 
 
+def check_measure_request(count: int, timeout: float) -> None:
+    """The arguments of :meth:`Tracker.measure`: ValueError unless ``count`` is an integer >= 1, ``timeout`` > 0 s."""
+    if int(count) != count or count < 1 or not timeout > 0:
+        raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
+
+
 @runtime_checkable
 class Tracker(Protocol):
     """A device that measures the TP's position."""

@@ -31,6 +31,11 @@ class BufferedStreaming:
     def streaming(self) -> bool:
         return self._reader is not None
 
+    def _refuse_while_streaming(self, device: str) -> None:
+        """RuntimeError when the stream runs: a polled measurement would compete with the reader thread."""
+        if self.streaming:
+            raise RuntimeError(f"{device} is streaming: call stop_stream() before measure()")
+
     def read_stream(self) -> TrackerStreamBatch:
         """Every sample since the last read; the reader's failure (ConnectionFailed...) if it stopped on one,
         keeping what it had read for the next call."""

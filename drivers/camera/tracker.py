@@ -79,7 +79,7 @@ import cv2
 import numpy as np
 from scipy.stats import f as f_dist
 
-from drivers.base import Array, DeviceIdentity, TrackerReading
+from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
 from drivers.camera.pose import CornerNoise, Pose, estimate_pose
 from drivers.camera.stream import FrameStreaming
@@ -284,10 +284,8 @@ class ArucoTracker(FrameStreaming):
     def measure(self, count: int, timeout: float) -> list[TrackerReading]:
         """``count`` readings of the TP (m, camera frame), each the average of ``frames`` frames with its
         own sigma. Raises TargetLost, BadReading, DeviceTimeout, ConnectionFailed (one line each)."""
-        if int(count) != count or count < 1 or not timeout > 0:
-            raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
-        if self.streaming:
-            raise RuntimeError(f"{self.source.description} is streaming: call stop_stream() before measure()")
+        check_measure_request(count, timeout)
+        self._refuse_while_streaming(self.source.description)
         self.source.start_measurement()
         return [self._reading() for _ in range(count)]
 

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drivers.base import DeviceIdentity, TrackerReading
+from drivers.base import DeviceIdentity, TrackerReading, check_measure_request
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, SpecError, TargetLost
 from drivers.sim.stream import TrackerStreaming
 from drivers.spec import TrackerSpec
@@ -62,8 +62,7 @@ class SimulatedTracker(TrackerStreaming):
         if not rig.tracker_connected:
             raise ConnectionFailed("the simulated tracker is not connected (call connect(); after a lost link, "
                                    "connect again)")
-        if int(count) != count or count < 1 or not timeout > 0:
-            raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
+        check_measure_request(count, timeout)
         number = rig.measurements = rig.measurements + 1
         fault = rig._take("tracker", number)
         clock, latency = rig.clock, rig.latency

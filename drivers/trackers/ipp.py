@@ -62,7 +62,7 @@ from typing import IO, Any
 import numpy as np
 
 from drivers.averaging import robust_mean
-from drivers.base import DeviceIdentity, TrackerReading
+from drivers.base import DeviceIdentity, TrackerReading, check_measure_request
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, SpecError
 from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
@@ -185,12 +185,10 @@ class IppTracker(EventStreaming, IppProtocol):
         """``count`` readings of the current point (m), each averaged as set up at connect; errors of
         severity >= 2 are cleared and retried ``retries`` times, a dropped connection re-opened once per
         reading; warnings go into the reading's ``status``; ``timeout`` bounds the call."""
-        if int(count) != count or count < 1 or not timeout > 0:
-            raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
+        check_measure_request(count, timeout)
         if self._sock is None:
             raise ConnectionFailed(f"I++ tracker {self.where} is not connected (call connect())")
-        if self.streaming:
-            raise RuntimeError(f"I++ tracker {self.where} is streaming: call stop_stream() before measure()")
+        self._refuse_while_streaming(f"I++ tracker {self.where}")
         deadline = time.monotonic() + timeout
         if not self.tools:
             return [self._one_reading(deadline) for _ in range(int(count))]

@@ -41,7 +41,7 @@ from typing import IO, Any
 import numpy as np
 
 from config.robots import ConfigError
-from drivers.base import DeviceIdentity, TrackerReading
+from drivers.base import DeviceIdentity, TrackerReading, check_measure_request
 from drivers.errors import (
     BackendUnavailable,
     BadReading,
@@ -189,12 +189,10 @@ class SerialTracker(LineStreaming):
         """``count`` readings (m, tracker frame) of each tracked point in sight. Bad lines, timeouts and resets are
         retried ``retries`` times per reading; then BadReading / TargetLost / DeviceTimeout. ``timeout`` bounds
         the whole call."""
-        if int(count) != count or count < 1 or not timeout > 0:
-            raise ValueError(f"count must be an integer >= 1 and timeout > 0 s, got {count!r} and {timeout!r}")
+        check_measure_request(count, timeout)
         if self._port is None:
             raise ConnectionFailed(f"serial tracker {self.url} is not connected (call connect())")
-        if self.streaming:
-            raise RuntimeError(f"serial tracker {self.url} is streaming: call stop_stream() before measure()")
+        self._refuse_while_streaming(f"serial tracker {self.url}")
         deadline = time.monotonic() + timeout
         self._flush()
         return [reading for _ in range(int(count)) for reading in self._one_reading(deadline)]
