@@ -36,8 +36,8 @@ def split_clock(best: LinesFit, data: FitData, robust: bool, variance: float) ->
     timing = best.timing
     if timing is None or timing.offsets > 1 or not timing.free:
         return best, None
-    sweep_of = timing.sweep_index()
-    sweeps = int(sweep_of.max()) + 1
+    per_sweep = timing.per_sweep()
+    sweeps = per_sweep.offsets
     if sweeps < 2:
         return best, None
     inl = best.inliers
@@ -46,7 +46,7 @@ def split_clock(best: LinesFit, data: FitData, robust: bool, variance: float) ->
     jac = problem.jacobian_blocks(x0)
     res = problem.residuals(x0).reshape(-1, 3)
     offset = jac[:, :, problem.n_terms]  # the offset's column: the TP's velocity on streamed rows
-    rows = sweep_of[inl]
+    rows = per_sweep.offset_index()[inl]
     columns = np.zeros((len(rows), 3, sweeps))
     for k in range(sweeps):
         columns[rows == k, :, k] = offset[rows == k]
@@ -54,5 +54,5 @@ def split_clock(best: LinesFit, data: FitData, robust: bool, variance: float) ->
     limit = limit_for(sweeps - 1, 1, res.size)
     split = bool(np.isfinite(statistic) and statistic > limit)
     if split:
-        best = fit(best.lines, data.timed(timing.per_sweep()), robust, best.start, best.terms)
+        best = fit(best.lines, data.timed(per_sweep), robust, best.start, best.terms)
     return best, ClockSplit(float(statistic), float(limit), sweeps, split)

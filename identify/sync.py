@@ -76,20 +76,16 @@ class Retiming:
         """Whether the drift is part of ``tau`` (after the offsets)."""
         return len(self.tau) > self.offsets
 
-    def sweep_index(self) -> NDArray[np.int64]:
-        """Per row (m,): the index of its sweep among the streamed sweeps (sorted ids), -1 for rows not
-        streamed."""
-        ids = np.unique(self.sweep)
-        return np.where(self.rows, np.searchsorted(ids, self.sweep[np.maximum(self.segment, 0)]), -1)
-
     def per_sweep(self) -> Retiming:
         """The same correction with one offset per streamed sweep (each starting at its current offset), the
         drift, if fitted, common."""
-        ids, offset_of = np.unique(self.sweep, return_inverse=True)
-        current = self.tau[: self.offsets][self.offset_of]  # per segment
-        first = np.array([np.flatnonzero(offset_of == k)[0] for k in range(len(ids))])
-        tau = np.concatenate([current[first], self.tau[self.offsets:]])
+        ids, first, offset_of = np.unique(self.sweep, return_index=True, return_inverse=True)
+        tau = np.concatenate([self.tau[: self.offsets][self.offset_of[first]], self.tau[self.offsets:]])
         return replace(self, tau=tau, offset_of=offset_of.astype(np.int64), offsets=len(ids))
+
+    def offset_index(self) -> NDArray[np.int64]:
+        """Per row (m,): the index of the offset that applies to it, -1 for rows not streamed."""
+        return np.where(self.rows, self.offset_of[np.maximum(self.segment, 0)], -1)
 
     def subset(self, rows: NDArray[np.bool_] | NDArray[np.int64]) -> Retiming:
         return replace(self, t=self.t[rows], segment=self.segment[rows])

@@ -9,11 +9,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 from scipy.stats import chi2
 
 from identify.adequacy import Adequacy
+
+if TYPE_CHECKING:
+    from identify.clock_split import ClockSplit
 
 STATUSES = ("pass", "warn", "fail")
 
@@ -130,7 +133,8 @@ def nominal(name: str, rms: float) -> Check:
                  f"nominal {name} placed on the data misses them by {mm(rms)} RMS: {text}")
 
 
-def timing(offset_std: float, speed: float, noise: float, split: Any = None, offsets: Sequence[float] = ()) -> Check:
+def timing(offset_std: float, speed: float, noise: float, split: ClockSplit | None = None,
+           offsets: Sequence[float] = ()) -> Check:
     """The streamed rows' clock fit: the offset's uncertainty (s) times the RMS speed of the tracked point
     (m/s) is the position error the timing leaves; it warns when that reaches the tracker noise (m). It also
     warns when the sweeps needed one offset each (``split``: :class:`identify.clock_split.ClockSplit`;
