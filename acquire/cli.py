@@ -249,15 +249,13 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         robot_spec = settings.robot if args.robot else _without_faults(settings.robot)
         tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
         site, plan, path, changes = settings.site, session.plan, args.resume, settings.changes
-        if not args.dry_run and _nothing_to_do(session, args.remeasure_missing):
-            if session.outcome() != "running":
-                return 0
-            # every step is in the file but the process that recorded the last one died before it closed its run
-            # (and identified): close it here, nothing connects or moves
-            session.begin_run()
+        if not args.dry_run and _died_after_its_last_step(session, args.remeasure_missing):
+            session.begin_run()  # closes the dead run; nothing connects or moves
             session.end_run("complete")
             return finish(RunResult("complete", "", 0, len(session.missing_indices())), session, args.resume,
                            load_robot(robot_spec.model))
+        if not args.dry_run and _nothing_to_do(session, args.remeasure_missing):
+            return 0
     else:
         site = mode_site(_site(args), args.mode, args.free_poses)  # streams carry the fit: no free poses unless asked
         robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
@@ -336,6 +334,18 @@ def _default_session_path(robot: str) -> Path:
     path = folder / f"{robot}-{time.strftime('%Y%m%d-%H%M%S')}.session"
     check_target(path, option="session")
     return path
+
+
+def _died_after_its_last_step(session: Session, remeasure: bool) -> bool:
+    """True (after saying so) when every step is recorded (or only missing ones not to be measured again) but the
+    process that recorded the last one died before it closed its run and identified the session."""
+    if session.next_index() is not None or session.outcome() != "running":
+        return False
+    if remeasure and session.missing_indices():
+        return False
+    print(f"{session.path}: every step is recorded, but the run that recorded them ended without closing; "
+          "closing it and identifying the session (nothing connects or moves)")
+    return True
 
 
 def _nothing_to_do(session: Session, remeasure: bool) -> bool:
