@@ -41,6 +41,7 @@ from drivers.clock import VirtualClock
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.robot import SimulatedRobot
 from drivers.spec import RobotSpec, TrackerSpec
+from identify.io.result_io import validation_of
 from kinematics.dh import model_from_dict, points_from_joints
 
 ROBOT = "mock:ur5e?seed=3"
@@ -113,7 +114,7 @@ def session(mode: str, tracker: str, folder: Path) -> dict[str, object]:
     err = points_from_joints(model_from_dict(result), q) - points_from_joints(truth, q)
     terms = [t.get("name", str(t)) if isinstance(t, dict) else str(t)
              for t in (result.get("extensions") or {}).get("terms", [])]
-    bound = (result.get("validation") or {}).get("bound")
+    bound = (validation_of(result, "plain") or {}).get("bound")
     return {"robot": seconds, "samples": samples, "held_out": held_out(result_path), "wall": wall, "bound": bound,
             "verdict": result["verdict"]["status"], "clock": result.get("clock"), "terms": terms,
             "truth": float(np.sqrt(np.mean(np.sum(err**2, axis=1))))}

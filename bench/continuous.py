@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from identify.io.result_io import validation_of
+
 ROBOT = "mock:ur5e"
 EVAL_POSES = 200  # random held-out poses of the true error
 BOOTSTRAP = 4000  # resamples of the ratio's interval
@@ -123,7 +125,7 @@ def measure(session: Path, wall: float, truth, q_eval: np.ndarray) -> Result:
     model, doc = load_result(str(session.with_suffix(".result.yaml")))
     miss = model.points(q_eval) - points_from_joints(truth, q_eval)
     true_error = float(np.sqrt(np.mean(np.sum(miss**2, axis=1))))
-    v = doc.get("validation") or {}
+    v = validation_of(doc) or {}
     offset_error = offset_std = drift_error = math.nan
     clock = doc.get("clock")
     if clock:

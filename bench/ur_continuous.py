@@ -37,6 +37,7 @@ import yaml
 
 from config.robots import load_robot
 from drivers.trackers.ascii_profile import TRACKERS_DIR
+from identify.io.result_io import validation_of
 from identify.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from tests.ur_emulator import EmulatorProcess
@@ -137,14 +138,14 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'mode':<11} {'robot time [s]':>14} {'steps':>6} {'samples':>8} {'held-out RMS [mm]':>18} "
           f"{'(expected)':>10} {'vs truth [mm]':>14} {'wall [s]':>9}  load before / after")
     for mode, r in rows.items():
-        v = r["doc"]["validation"]
+        v = validation_of(r["doc"])
         (a, b, c), (d, e, f) = r["load"]
         print(f"{mode:<11} {r['robot_time']:>14.1f} {r['steps']:>6} {r['samples']:>8} {v['rms'] * 1e3:>18.4f} "
               f"{v['expected_rms'] * 1e3:>10.4f} {r['truth_rms'] * 1e3:>14.4f} {r['wall']:>9.1f}  "
               f"{a:.1f} {b:.1f} {c:.1f} / {d:.1f} {e:.1f} {f:.1f}")
     step, cont = rows["step"], rows["continuous"]
     time_ratio = cont["robot_time"] / step["robot_time"]
-    rms_ratio = cont["doc"]["validation"]["rms"] / step["doc"]["validation"]["rms"]
+    rms_ratio = validation_of(cont["doc"])["rms"] / validation_of(step["doc"])["rms"]
     truth_ratio = cont["truth_rms"] / step["truth_rms"]
     verdicts = ", ".join(f"{m} {r['doc']['verdict']['status']}" for m, r in rows.items())
     print(f"verdicts: {verdicts}; held-out poses: step {step['doc']['validation']['samples']}, continuous "

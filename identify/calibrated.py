@@ -57,14 +57,16 @@ class CalibratedModel:
 
     @classmethod
     def from_document(cls, doc: dict[str, Any], name: str = "identified") -> CalibratedModel:
-        """The model of a result document (identify --out); ResultError (one line) if it cannot be used."""
+        """The model a result document (identify --out) recommends (``use``: its extended model, DH with joint
+        errors, when it has one; else the top-level plain model); ResultError (one line) if it cannot be used."""
         if not isinstance(doc, dict):
             raise ResultError("not a result document (expected a YAML mapping with joints, base, tool)")
+        section = used_section(doc)
         try:
-            model = model_from_dict(doc)
+            model = model_from_dict(section)
         except ValueError as exc:
             raise ResultError(str(exc)) from None
-        cov = doc.get("covariance")
+        cov = section.get("covariance")
         if not isinstance(cov, dict) or "matrix" not in cov or cov.get("predictor") is None:
             raise ResultError("the result has no parameter covariance ('covariance:' with its predictor; written by "
                               "dh-calib before compensation existed): identify the data again")
@@ -72,7 +74,7 @@ class CalibratedModel:
         try:
             free = np.isin(names, cov["parameters"])
             matrix = np.array(cov["matrix"], dtype=float).reshape(int(free.sum()), int(free.sum()))
-            tools = {int(k): np.array(v, dtype=float).reshape(3) for k, v in (doc.get("tools") or {}).items()}
+            tools = {int(k): np.array(v, dtype=float).reshape(3) for k, v in (section.get("tools") or {}).items()}
             predictor = predictor_from_document(doc, model, sorted(tools) or [1])
             noise = doc.get("noise") or {}
         except (KeyError, TypeError, ValueError) as exc:
@@ -85,8 +87,9 @@ class CalibratedModel:
     @classmethod
     def from_identification(cls, ident: Any, name: str = "identified") -> CalibratedModel:
         """The model of an :class:`~identify.pipeline.Identification` (what its result document would give)."""
-        tools = {int(i): np.asarray(t, dtype=float) for i, t in zip(ident.tp_ids, ident.tools, strict=True)}
-        return cls(ident.model, ident.refinement.free.copy(), ident.refinement.covariance, ident.predictor,
+        used = ident.used
+        tools = {int(i): np.asarray(t, dtype=float) for i, t in zip(ident.tp_ids, used.tools, strict=True)}
+        return cls(used.model, used.refinement.free.copy(), used.refinement.covariance, ident.predictor,
                    float(ident.adequacy.model_error), float(ident.adequacy.noise),
                    tools if len(tools) > 1 else None, name)
 
@@ -248,7 +251,8 @@ def predictor_from_document(doc: dict[str, Any], model: DHModel, tp_ids: list[in
     from identify.extensions import Candidate, TermSet
     from kinematics.joint_errors import Coupling, gravity_torques
 
-    al = doc["axis_lines"]
+    section = used_section(doc)
+    al = section["axis_lines"]
     tps = np.array(al.get("tps") or [al["tp_home"]], dtype=float).reshape(-1, 3)
     lines = AxisLines(model.joint_types, np.array(al["points"], dtype=float), np.array(al["directions"], dtype=float),
                       np.array(al["home"], dtype=float), np.array(al["tp_home"], dtype=float), tps[1:])
@@ -282,8 +286,21 @@ def predictor_from_document(doc: dict[str, Any], model: DHModel, tp_ids: list[in
     by_name = {t["name"]: float(t["value"]) for t in terms}
     coefs = np.array([by_name[n] for n in term_set.names], dtype=float)
     size = lines.n_parameters + len(coefs)
-    covariance = np.array(doc["covariance"]["predictor"], dtype=float).reshape(size, size)
+    covariance = np.array(section["covariance"]["predictor"], dtype=float).reshape(size, size)
     return Predictor(lines, covariance, term_set, coefs, coupling, tuple(tp_ids))
+
+
+def used_section(doc: dict[str, Any]) -> dict[str, Any]:
+    """The part of a result document that holds the model it recommends: ``extensions.model`` (with the
+    extended model's axis lines and covariance) when ``use`` is ``extended``, else the document itself (the
+    top-level plain model; results written before ``use`` existed keep their joint errors beside it)."""
+    ext = doc.get("extensions") if isinstance(doc.get("extensions"), dict) else {}
+    if doc.get("use") != "extended":
+        return doc
+    if not isinstance(ext.get("model"), dict) or "axis_lines" not in ext or "covariance" not in ext:
+        raise ResultError("the result recommends its extended model but extensions.model, axis_lines or covariance "
+                          "is missing")
+    return {**ext["model"], "axis_lines": ext["axis_lines"], "covariance": ext["covariance"]}
 
 
 def nominal_name(doc: dict[str, Any]) -> str | None:

@@ -28,7 +28,6 @@ from identify.io.result_io import result_to_dict
 from identify.io.session_measurements import open_session, read_session
 from identify.measurements import Measurements
 from identify.pipeline import Identification, identify, split_holdout
-from identify.refine import DEFAULT_MAX_OFFSET
 from identify.report.terminal import format_reference, format_report
 from kinematics.joint_errors import Coupling
 from session.schema import is_session_file
@@ -68,10 +67,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="seed of the hold-out draw (0)")
     parser.add_argument("--parallel-tol", type=float, default=DEFAULT_PARALLEL_TOL, metavar="RAD",
                         help=f"axes closer than this are treated as parallel ({DEFAULT_PARALLEL_TOL} rad)")
-    parser.add_argument("--max-offset", type=float, default=DEFAULT_MAX_OFFSET, metavar="M",
+    parser.add_argument("--max-offset", type=float, default=None, metavar="M",
                         help="where the data resolve a near-parallel pair's misalignment, keep the parallel-axis "
-                        "convention instead of exact DH if exact DH would move d more than M metres (default: "
-                        "no cap; the verdict's dh_table check says what a cap costs)")
+                        "convention instead of exact DH if exact DH would move d more than M metres (default: the "
+                        "robot's size, the farthest measured point from joint 1's axis; 'inf' for exact DH always; "
+                        "the verdict's dh_table check says what the convention costs, and the URDF and UR exports "
+                        "carry the exact axes whatever the cap)")
     parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
     parser.add_argument("--noise", type=float, metavar="M",
                         help="the tracker's noise, m per axis (1 sigma), to judge the fit by (a sigma column wins)")

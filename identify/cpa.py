@@ -166,9 +166,16 @@ def _line_anchors(types: str, points: list[Array], dirs: list[Array], tp_home: A
     return points
 
 
+SIGN_BY_ALPHA = 0.5  # |sin alpha| above which (axes 30 deg or more apart) alpha's sign fixes x_i; below it, a's
+
+
 def _oriented_normal(x: Array, ref: DHModel | None, i: int, a: float, alpha: float) -> Array:
-    """Pick the sign of x_i: match the reference model's sign of a_i (or alpha_i), else a_i >= 0."""
+    """Pick the sign of x_i: match the reference model's sign of a_i (or alpha_i). Without one, a fixed rule that
+    noise cannot flip on real arms, whose links are either clearly twisted or nearly parallel: alpha_i in
+    [0, pi] for twisted links (|sin alpha_i| > SIGN_BY_ALPHA), a_i >= 0 for nearly parallel ones."""
     if ref is None:
+        if abs(np.sin(alpha)) > SIGN_BY_ALPHA:
+            return x if np.sin(alpha) >= 0 else -x
         return x if a >= -1e-12 else -x
     if abs(ref.a[i]) > 1e-6:
         return x if np.sign(a) == np.sign(ref.a[i]) or abs(a) < 1e-12 else -x
@@ -194,7 +201,8 @@ def dh_from_axes(
     frame 0 takes theta_1 and d_1 from it (the base absorbs the rest); the last frame n is placed by
     the last link's conventional theta, d, a, alpha (the tool carries the TP); for axes parallel within
     ``parallel_tol`` the common normal passes where d_i takes its conventional value; a prismatic axis
-    meets the next axis (a_i = 0). Signs of x_i follow ``reference`` when given, else a_i >= 0.
+    meets the next axis (a_i = 0). Signs of x_i follow ``reference`` when given, else
+    :func:`_oriented_normal`'s fixed rule.
     Links in ``force_parallel`` (1-based) are treated as parallel whatever their measured angle (their
     misalignment is within its uncertainty).
     """

@@ -201,6 +201,21 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
     return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms, data.timing)
 
 
+def fit_kept(start: AxisLines, data: FitData, inliers: NDArray[np.bool_], label: str, terms: JointTerms) -> LinesFit:
+    """Least squares from ``start`` (with the joint errors ``terms``) on the rows ``inliers`` alone, with no outlier
+    test of its own; joint values and residuals for every row."""
+    kept = data.subset(inliers).fit(start, terms.subset(inliers))
+    if kept.timing is not None:
+        data = data.timed(replace(data.timing, tau=kept.timing.tau))
+    terms = replace(terms, coefs=kept.terms.coefs)
+    problem = data.problem(kept.lines, terms)
+    res = problem.residuals(np.zeros(problem.size)).reshape(-1, 3)
+    scale = max(robust_scale(res[inliers], np.zeros(int(inliers.sum()))), NOISE_FLOOR)
+    cost = float(np.sum(2.0 * (np.sqrt(1.0 + np.sum(res**2, axis=1) / (ROBUST_WIDTH * scale) ** 2) - 1.0)))
+    return LinesFit(kept.lines, problem.joints(kept.lines), inliers.copy(), -res / data.weights[:, None], cost, label,
+                    terms, data.timing)
+
+
 def along_arc(q: Array, joint: NDArray[np.int64]) -> Array:
     """Each sweep row's position along its arc: the value of the joint it moves (free poses: 0)."""
     swept = joint > 0

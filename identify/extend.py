@@ -1,36 +1,49 @@
 """Joint errors on top of a fitted lines model: the selection of :mod:`identify.extensions` run on the
-inliers of a fit (:mod:`identify.estimate`), with the held-out rows as the veto. Frames: tracker; metres."""
+inliers of a fit (:mod:`identify.estimate`), its result tested by grouped cross-validation on those same fit
+rows (never on the rows held out for validation). Frames: tracker; metres."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.estimate import FitData, LinesFit
-from identify.extensions import Candidate, Decision, TermSet, score_statistics, select
-from identify.poe import JointTerms, LeastSquares, points_from_lines
+from identify.estimate import FitData, LinesFit, along_arc
+from identify.extensions import ROWS_PER_TERM, Candidate, Decision, TermSet, score_statistics, select
+from identify.poe import JointTerms, LeastSquares
 
 Array = NDArray[np.float64]
 
-
-@dataclass(frozen=True)
-class HeldOut:
-    """Held-out rows for the veto: DH joint values ``q`` (k, n), ``points`` (k, 3), ``weights`` (k,),
-    ``tp_index`` (k,)."""
-
-    q: Array
-    points: Array
-    weights: Array
-    tp_index: NDArray[np.int64]
+FOLDS = 5  # cross-validation blocks: each sweep cut into this many arcs, the free poses dealt into as many groups
+MIN_FOLD_ROWS = 3  # rows a block must have for the cross-validation to use it
 
 
-def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candidate], variance: float,
-                 heldout: HeldOut | None) -> tuple[TermSet, LeastSquares | None, list[Decision]]:
-    """Forward selection of ``pool`` on the inliers of ``best`` (fitted without terms). ``data.q`` holds
-    readings (NaN where unread); ``variance`` is the noise variance in weighted units. Returns the terms
-    kept, their least-squares fit on the inliers (None when none is kept) and every decision."""
+def cv_folds(rows: FitData, filled: Array, folds: int = FOLDS) -> NDArray[np.int64]:
+    """The block (0 .. folds-1) of each row: every sweep (and tracked point) cut into ``folds`` contiguous arcs
+    along the joint it moves, so a block leaves a stretch of arc out rather than single samples between
+    neighbours that would still pin it; free poses dealt round-robin by pose, every tracked point of a pose in
+    the same block. ``filled`` (m, n): joint values with the unread ones solved."""
+    out = np.zeros(len(rows.q), dtype=np.int64)
+    key = along_arc(filled, rows.joint)
+    for g in np.unique(rows.group[rows.group > 0]):
+        idx = np.flatnonzero(rows.group == g)
+        rank = np.empty(len(idx), dtype=np.int64)
+        rank[np.argsort(key[idx], kind="stable")] = np.arange(len(idx))
+        out[idx] = rank * folds // max(len(idx), 1)
+    free = np.flatnonzero(rows.group == 0)
+    if len(free):
+        _, pose = np.unique(np.round(filled[free], 12), axis=0, return_inverse=True)
+        out[free] = pose.ravel() % folds
+    return out
+
+
+def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candidate], variance: float
+                 ) -> tuple[TermSet, LeastSquares | None, list[Decision]]:
+    """Forward selection of ``pool`` on the inliers of ``best`` (fitted without terms), then the grouped
+    cross-validation veto (:func:`cv_folds`) on the same rows. ``data.q`` holds readings (NaN where unread);
+    ``variance`` is the noise variance in weighted units. Returns the terms kept, their least-squares fit on the
+    inliers (None when none is kept) and every decision."""
     rows = data.subset(best.inliers)
     filled = best.q[best.inliers]  # unread values as solved, for the gravity torques
 
@@ -59,13 +72,35 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
     def chi_square(fit: LeastSquares) -> float:
         return float(np.sum(fit.residuals**2)) / variance
 
-    def held(fit: LeastSquares, terms: TermSet) -> float:
-        assert heldout is not None
-        q = terms.terms(heldout.q, fit.terms.coefs).corrected(heldout.q)
-        err = (points_from_lines(fit.lines, q, heldout.tp_index) - heldout.points) * heldout.weights[:, None]
-        return float(np.sum(err**2))
+    fold = cv_folds(rows, filled)
+    blocks = [k for k in range(FOLDS) if np.sum(fold == k) >= MIN_FOLD_ROWS and np.sum(fold != k) > 0]
+
+    def left_out_squares(terms: TermSet, fit: LeastSquares) -> float:
+        """Sum of squared weighted residuals of every block, each predicted by a fit of the other blocks."""
+        total = 0.0
+        for k in blocks:
+            train = fold != k
+            part = rows.subset(train)
+            coefs = fit.terms.coefs
+            trained = part.fit(fit.lines, JointTerms(terms.regressors(rows.q[train], filled[train]), terms.joints,
+                                                     coefs.copy()))
+            everyone = rows if rows.timing is None else rows.timed(replace(rows.timing, tau=trained.timing.tau))
+            problem = everyone.problem(trained.lines, terms_of(terms, trained.terms.coefs))
+            res = problem.residuals(np.zeros(problem.size)).reshape(-1, 3)
+            total += float(np.sum(res[fold == k] ** 2))
+        return total
+
+    plain_cv: list[float] = []
+
+    def cross_validate(terms: TermSet, fit: LeastSquares) -> float | None:
+        if len(blocks) < 2:
+            return None
+        if not plain_cv:
+            plain_cv.append(left_out_squares(empty, base))
+        return left_out_squares(terms, fit) / max(plain_cv[0], 1e-300)
 
     base = LeastSquares(best.lines, filled, -best.residuals[best.inliers] * data.weights[best.inliers, None],
                         JointTerms.none(len(filled)))
-    return select(base, pool, empty, refit, score, chi_square, held if heldout is not None else None,
-                  3 * len(filled))
+    room = 3 * len(filled) - best.lines.n_parameters
+    return select(base, pool, empty, refit, score, chi_square, cross_validate, 3 * len(filled),
+                  max(room // ROWS_PER_TERM, 0))

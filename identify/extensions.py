@@ -9,12 +9,13 @@ Forward selection: at each step every remaining candidate is scored by the Lagra
 test at the current fit, ``s = rᵀ G⊥ (G⊥ᵀ G⊥)⁻¹ G⊥ᵀ r / σ²`` with ``G⊥`` the candidate's columns projected
 off the fitted parameters' (chi-square with the candidate's dof when it is absent); the best is refitted
 and kept when its likelihood ratio passes both the information criterion (BIC: ``dof · ln N``) and a
-family-wise 5 % false-selection limit over all candidates (Bonferroni), when its size is physically
-plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error). A kind of error found on one
-joint is then fitted on every joint it can be seen on (it acts on all of them; one below the limit would
-otherwise cost accuracy far from its sweep, unreported). With held-out rows, the
-terms selected are kept only if together they do not make the held-out error grow. Every decision is
-recorded.
+family-wise 5 % false-selection limit over all candidates (Bonferroni), and when its size is physically
+plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error). Each term enters on its own
+evidence only: a kind of error found on one joint does not bring the same kind on the others. The terms
+stay within what the rows can carry (:data:`ROWS_PER_TERM`). The set selected is then tested by grouped
+cross-validation on the fit rows (:mod:`identify.extend`): it is kept only if it predicts left-out blocks
+of the fit rows better than the model without it; the rows held out for validation never take part.
+Every decision is recorded.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ Array = NDArray[np.float64]
 
 FAMILY_WISE = 0.05  # chance of selecting any term when the data hold none
 MIN_INDEPENDENT = 1e-6  # a candidate whose columns the lines absorb to this fraction is not identifiable
+ROWS_PER_TERM = 10  # residual degrees of freedom (3 per row, less the lines') per joint-error coefficient
 PLAUSIBLE = {"scale": 1e-2, "eccentricity": 1e-2, "compliance": 1e-3}  # beyond these a term hides another error
 UNITS = {"scale": "1", "ecc_sin": "rad", "ecc_cos": "rad", "compliance": "rad/(N m)"}
 EQUATIONS = {
@@ -131,13 +133,14 @@ def candidates(joint_types: str, q: Array, torques: Callable[[Array], Array] | N
 @dataclass(frozen=True)
 class Decision:
     """One candidate's fate: the score and likelihood-ratio statistics, the limit it had to pass, the
-    held-out change (ratio of held-out sums of squares, with / without; None without held-out rows)."""
+    cross-validated change of the selected set (ratio of the left-out blocks' sums of squares, with / without
+    the terms; None when not tested)."""
 
     candidate: Candidate
     score: float
     ratio: float | None
     limit: float
-    heldout: float | None
+    cv: float | None
     selected: bool
     reason: str
 
@@ -169,29 +172,37 @@ def limit_for(dof: int, n_candidates: int, n_observations: int) -> float:
 
 Refit = Callable[[TermSet, LeastSquares], LeastSquares]
 Score = Callable[[LeastSquares, TermSet, list[Candidate]], list[float]]
+CrossValidate = Callable[[TermSet, LeastSquares], float | None]
 
 
 def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Refit, score: Score,
-           chi_square: Callable[[LeastSquares], float], heldout: Callable[[LeastSquares, TermSet], float] | None,
-           n_observations: int) -> tuple[TermSet, LeastSquares, list[Decision]]:
+           chi_square: Callable[[LeastSquares], float], cross_validate: CrossValidate | None,
+           n_observations: int, max_coefficients: int) -> tuple[TermSet, LeastSquares, list[Decision]]:
     """Forward selection from ``base`` (the fit without terms) over ``pool``. ``refit(terms, start)`` fits
     with ``terms``; ``score(fit, terms, remaining)`` the score statistics of the remaining candidates;
-    ``chi_square(fit)`` its sum of squared weighted residuals over the noise variance; ``heldout(fit,
-    terms)`` the held-out sum of squares: the terms are kept only if they do not make it grow (one test of
-    the final set; step by step, the other terms still missing would blur it). Returns the terms kept,
-    their fit and every decision."""
+    ``chi_square(fit)`` its sum of squared weighted residuals over the noise variance; ``cross_validate(terms,
+    fit)`` the ratio of cross-validated sums of squares with and without ``terms`` (None: not testable): the set
+    is kept only when it is below 1, else its last term is dropped and the smaller set tested. At most
+    ``max_coefficients`` coefficients enter. Returns the terms kept, their fit and every decision."""
     chosen, current = empty, base
+    fits = [base]  # the fit after each term kept
     remaining = list(pool)
     decisions: list[Decision] = []
     while remaining:
         scores = score(current, chosen, remaining)
-        score_of = dict(zip(remaining, scores, strict=True))
         top = int(np.argmax([s if np.isfinite(s) else -np.inf for s in scores]))
         best, best_score = remaining[top], scores[top]
         limit = limit_for(best.dof, len(pool), n_observations)
         if not np.isfinite(best_score) or best_score <= limit:
             decisions += [Decision(c, s, None, limit_for(c.dof, len(pool), n_observations), None, False,
                                    "score below the limit" if np.isfinite(s) else "not identifiable beside the lines")
+                          for c, s in zip(remaining, scores, strict=True)]
+            break
+        if len(chosen.joints) + best.dof > max_coefficients:
+            why = (f"not tried: the fit rows carry at most {max_coefficients} joint-error coefficient(s) "
+                   f"({ROWS_PER_TERM} residual degrees of freedom each)")
+            decisions += [Decision(c, s, None, limit_for(c.dof, len(pool), n_observations), None, False,
+                                   why if np.isfinite(s) else "not identifiable beside the lines")
                           for c, s in zip(remaining, scores, strict=True)]
             break
         trial_terms = chosen.with_candidate(best)
@@ -208,27 +219,19 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
             continue
         decisions.append(Decision(best, best_score, ratio, limit, None, True, "selected"))
         chosen, current = trial_terms, trial
-        # an error of this kind acts on every joint: the others it can be seen on join it (a joint whose term
-        # stayed below the limit is still in error, and predictions far from its sweep would pay for it)
-        members = [c for c in remaining if c.family == best.family and np.isfinite(score_of[c])]
-        if members:
-            grown = chosen
-            for c in members:
-                grown = grown.with_candidate(c)
-            trial = refit(grown, current)
-            sizes = np.abs(trial.terms.coefs[len(chosen.joints):])
-            if np.all(sizes <= PLAUSIBLE[best.family]):
-                for c in members:
-                    remaining.remove(c)
-                    why = f"selected with its family ({best.family} found on joint {best.joint + 1})"
-                    decisions.append(Decision(c, score_of[c], None, limit, None, True, why))
-                chosen, current = grown, trial
-    if heldout is not None and chosen.candidates:
-        before, after = heldout(base, empty), heldout(current, chosen)
-        held = after / before if before > 0 else 1.0
-        kept = held <= 1.0
-        reason = "selected" if kept else f"held-out error grew ({held:.3g}x the sum of squares without the terms)"
-        decisions = [replace(d, heldout=held, selected=kept, reason=reason) if d.selected else d for d in decisions]
-        if not kept:
-            return empty, base, decisions
-    return chosen, current, decisions
+        fits.append(trial)
+    if cross_validate is None or not chosen.candidates:
+        return chosen, current, decisions
+    kept = list(chosen.candidates)
+    while kept:
+        terms = TermSet(tuple(kept), chosen.home, chosen.torques)
+        ratio = cross_validate(terms, fits[len(kept)])
+        decisions = [replace(d, cv=ratio) if d.selected and d.candidate in kept else d for d in decisions]
+        if ratio is None or ratio < 1.0:
+            return terms, fits[len(kept)], decisions
+        dropped = kept.pop()
+        why = (f"cross-validation on the fit rows: left-out blocks predicted {ratio:.3g}x worse (sum of squares) "
+               "with the terms up to this one")
+        decisions = [replace(d, selected=False, reason=why) if d.candidate == dropped and d.selected else d
+                     for d in decisions]
+    return empty, base, decisions

@@ -154,6 +154,7 @@ class Refinement:
     q: Array
     points: Array
     notes: list[str] = field(default_factory=list)
+    tools: Array | None = None  # every tracked point's tool (k, 3, frame n) when fitted with several
 
     def std(self) -> Array:
         """Standard uncertainty of every full-vector parameter (0 for fixed ones)."""
@@ -163,27 +164,56 @@ class Refinement:
 
 
 class _Problem:
-    """Residuals and Jacobian over the free parameters, weighted by 1/sigma when given."""
+    """Residuals and Jacobian over the free parameters, weighted by 1/sigma when given. With several tracked
+    points (``tp_index`` (m,), 0-based), the parameters end with the other points' tools (3 each, frame n):
+    ``tools`` (k, 3) holds every point's, the first being the model's."""
 
-    def __init__(self, start: DHModel, q: Array, points: Array, weights: Array, free: NDArray[np.bool_]):
+    def __init__(self, start: DHModel, q: Array, points: Array, weights: Array, free: NDArray[np.bool_],
+                 tp_index: NDArray[np.int64] | None = None, tools: Array | None = None):
         self.start, self.q, self.points, self.weights, self.free = start, q, points, weights, free
-        self.template = vector_from_model(start)
+        self.tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index
+        self.extra = np.zeros((0, 3)) if tools is None else np.asarray(tools, dtype=float)[1:]
+        self.template = np.concatenate([vector_from_model(start), self.extra.ravel()])
+        self.size = len(self.free)
+
+    @property
+    def x0(self) -> Array:
+        return np.concatenate([self.template[: self.size][self.free], self.extra.ravel()])
 
     def full(self, x: Array) -> Array:
-        v = self.template.copy()
-        v[self.free] = x
+        v = self.template[: self.size].copy()
+        v[self.free] = x[: int(self.free.sum())]
         return v
 
+    def tools(self, x: Array) -> Array:
+        """Every tracked point's tool (k, 3) at ``x``."""
+        return np.vstack([self.full(x)[6:9], x[int(self.free.sum()):].reshape(-1, 3)])
+
+    def model(self, x: Array) -> DHModel:
+        return model_from_vector(self.start, self.full(x))
+
     def residuals(self, x: Array) -> Array:
-        model = model_from_vector(self.start, self.full(x))
-        frames_p = points_from_joints(model, self.q)
-        return ((frames_p - self.points) * self.weights[:, None]).ravel()
+        model, tools = self.model(x), self.tools(x)
+        predicted = np.empty_like(self.points)
+        for k, tool in enumerate(tools):
+            rows = self.tp_index == k
+            predicted[rows] = points_from_joints(replace(model, tool=tool), self.q[rows])
+        return ((predicted - self.points) * self.weights[:, None]).ravel()
 
     def jacobian(self, x: Array) -> Array:
         v = self.full(x)
-        _, jac = full_jacobian(model_from_vector(self.start, v), self.q, omega=v[:3])
-        jac = jac * self.weights[:, None, None]
-        return jac.reshape(-1, jac.shape[2])[:, self.free]
+        model, tools = model_from_vector(self.start, v), self.tools(x)
+        n_free, n_extra = int(self.free.sum()), 3 * (len(tools) - 1)
+        out = np.zeros((len(self.q), 3, n_free + n_extra))
+        for k, tool in enumerate(tools):
+            rows = self.tp_index == k
+            _, jac = full_jacobian(replace(model, tool=tool), self.q[rows], omega=v[:3])
+            if k:  # this point's tool has its own parameters
+                out[rows, :, n_free + 3 * (k - 1): n_free + 3 * k] = jac[:, :, 6:9]
+                jac[:, :, 6:9] = 0.0
+            out[rows, :, :n_free] = jac[:, :, self.free]
+        out *= self.weights[:, None, None]
+        return out.reshape(-1, out.shape[2])
 
 
 def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
@@ -217,6 +247,8 @@ def refine(
     noise_guess: float = 1e-4,
     robust: bool = True,
     max_offset: float = DEFAULT_MAX_OFFSET,
+    tp_index: NDArray[np.int64] | None = None,
+    tools: Array | None = None,
 ) -> Refinement:
     """Maximum-likelihood DH model for joint readings ``q`` (m, n) and TP ``points`` (m, 3, tracker frame).
 
@@ -226,27 +258,32 @@ def refine(
     ``parallel``: 1-based links whose consecutive axes are treated as parallel (their ``d`` stays
     conventional unless the data resolve the misalignment). ``max_offset`` (m): the most a near-parallel
     pair's ``d`` may move from its conventional value when the data resolve the pair's misalignment
-    (see :func:`_release_parallel`).
+    (see :func:`_release_parallel`). Several tracked points: ``tp_index`` (m,) 0-based and their ``tools`` (k, 3,
+    frame n) as a start; each keeps its own tool (``Refinement.tools``), all share the table.
     """
+    tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else np.asarray(tp_index)
+    tools = start.tool[None, :] if tools is None else np.asarray(tools, dtype=float)
     weights = np.ones(len(q)) if sigma is None else 1.0 / np.asarray(sigma, dtype=float)
     free = select_free(start, q, parallel)
     free_exact = select_free(start, q, ()) if parallel else free
     notes: list[str] = []
     # values the data cannot determine take their conventional ones; the fit absorbs the change
     model, moved = _with_conventions(start, free, conventional)
-    problem = _Problem(model, q, points, weights, free)
-    x = _solve(problem, problem.template[free], "linear", 1.0)
+    problem = _Problem(model, q, points, weights, free, tp_index, tools)
+    x = _solve(problem, problem.x0, "linear", 1.0)
     inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
     if robust and not np.all(inliers):
         scale = max(noise_guess, NOISE_FLOOR) * 3.0 * (1.0 if sigma is None else float(np.median(weights)))
         x = _solve(problem, x, "soft_l1", scale)
         inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
-        model = model_from_vector(model, problem.full(x))
-        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free)
-        x = _solve(problem, problem.template[free], "linear", 1.0)
+        model, tools = problem.model(x), problem.tools(x)
+        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
+        x = _solve(problem, problem.x0, "linear", 1.0)
     elif not robust:
         inliers[:] = True
-    model = model_from_vector(problem.start, problem.full(x))
+    model, tools = problem.model(x), problem.tools(x)
+    if len(tools) > 1 and max_offset > 0:
+        raise ValueError("releasing the parallel-axis convention is for one tracked point")
     if max_offset > 0 and np.any(free_exact & ~free):  # with no offset allowed, the convention stays
         model, free, note = _release_parallel(
             model, q[inliers], points[inliers], weights[inliers], free, free_exact, conventional, max_offset
@@ -254,8 +291,8 @@ def refine(
         notes += [note] if note else []
     if moved:
         notes.append(f"{moved} undetermined parameter(s) set to their conventional values")
-    problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free)
-    x = problem.template[free]
+    problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
+    x = problem.x0
     jac = problem.jacobian(x)
     res_w = problem.residuals(x)
     dof = max(len(res_w) - int(free.sum()), 1)
@@ -263,16 +300,17 @@ def refine(
     scale2 = cost / dof
     _, s, vt = np.linalg.svd(jac, full_matrices=False)
     cov = (vt.T / s**2) @ vt
-    covariance = cov * (scale2 if sigma is None else 1.0)
+    n_free = int(free.sum())
+    covariance = (cov * (scale2 if sigma is None else 1.0))[:n_free, :n_free]
     col_norm = np.linalg.norm(jac, axis=0)
     s_scaled = np.linalg.svd(jac / col_norm, compute_uv=False)
-    predicted = points_from_joints(model, q)
-    residuals = points - predicted
+    everyone = _Problem(model, q, points, np.ones(len(q)), free, tp_index, tools)
+    residuals = -everyone.residuals(x).reshape(-1, 3)
     noise = float(np.sqrt(np.sum((residuals[inliers]) ** 2) / dof))
     if sigma is not None:
         notes.append(f"reduced chi-square {scale2:.3g} (1 when the given sigma is right)")
     return Refinement(model, free, covariance, noise, inliers, residuals, float(s_scaled[0] / s_scaled[-1]), cost,
-                      q, points, notes)
+                      q, points, notes, tools)
 
 
 def inlier_mask(weighted_residuals: Array, n_free: int, probability: float = OUTLIER_PROBABILITY) -> NDArray[np.bool_]:
@@ -334,7 +372,7 @@ def _release_parallel(
     then the convention is kept and the returned note says what it costs.
     """
     exact = _Problem(model, q, points, weights, free_exact)
-    x0 = exact.template[free_exact]
+    x0 = exact.x0
     residuals = exact.residuals(x0)
     cost_c = float(residuals @ residuals)
     dof = max(3 * len(q) - int(free_exact.sum()), 1)

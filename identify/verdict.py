@@ -70,13 +70,17 @@ def mm(value: float) -> str:
     return f"{value * 1e3:.3g} mm"
 
 
-def model_fit(rms_3d: float, adequacy: Adequacy) -> Check:
-    """Residuals against the noise: gross misfit fails, detected model error warns (uncertainties inflated)."""
+def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None) -> Check:
+    """Residuals against the noise: gross misfit fails, detected model error warns (uncertainties inflated).
+    ``cause``: what the joint-error selection found (the kinds of error selected and what they explain)."""
     a = adequacy
     if rms_3d > GROSS_MISFIT:
+        why = (f"{cause}; a DH model with these joint errors still does not describe the data"
+               if cause and "selected" in cause else
+               f"{cause}: joint types, units, the robot model or mixed data sets?" if cause else
+               "joint types, units, robot model or mixed data sets?")
         return Check("model_fit", "fail", rms_3d, GROSS_MISFIT,
-                     f"residual RMS {mm(rms_3d)} exceeds {mm(GROSS_MISFIT)}: the model does not describe these data "
-                     "(joint types, units, robot model or mixed data sets?)")
+                     f"residual RMS {mm(rms_3d)} exceeds {mm(GROSS_MISFIT)}: {why}")
     if a.declared is not None:
         reference = f"the declared tracker noise {mm(a.declared)}"
     elif a.difference is not None:
@@ -84,10 +88,11 @@ def model_fit(rms_3d: float, adequacy: Adequacy) -> Check:
     else:
         reference = "no independent noise estimate (no sweeps to difference)"
     if a.detected:
+        found = f"; {cause}" if cause else ""
         return Check("model_fit", "warn", a.model_error, None,
                      f"model error {mm(a.model_error)} per axis against tracker noise {mm(a.noise)}: residuals "
                      f"{mm(a.residual)} per axis vs {reference} ({a.statistic:.3g} > {a.limit:.3g}); uncertainties "
-                     f"inflated {a.inflation:.3g}x in variance to cover it")
+                     f"inflated {a.inflation:.3g}x in variance to cover it{found}")
     return Check("model_fit", "pass", a.statistic, a.limit,
                  f"residuals {mm(a.residual)} per axis, consistent with {reference}")
 
@@ -101,8 +106,13 @@ def conditioning(condition: float) -> Check:
                  f"condition number {condition:.3g}: {text}")
 
 
-def holdout(samples: int, rms: float, expected: float) -> Check:
-    """Held-out RMS against the RMS the model's uncertainty and the noise predict (chi-square on 3k)."""
+MODEL_NAMES = {"plain": "plain model (DH)", "extended": "extended model (DH + joint errors)"}
+
+
+def holdout(samples: int, rms: float, expected: float, model: str = "plain",
+            others: dict[str, float] | None = None) -> Check:
+    """Held-out RMS of the written ``model`` (``plain`` or ``extended``) against the RMS its uncertainty and the
+    noise predict (chi-square on 3k); ``others``: the other written models' held-out RMS (m), for the message."""
     limit = float(expected * (chi2.isf(HOLDOUT_ALARM, 3 * samples) / (3 * samples)) ** 0.5)
     ratio = rms / expected if expected > 0 else float("inf")
     if rms > limit and ratio > HOLDOUT_FAIL:
@@ -111,8 +121,10 @@ def holdout(samples: int, rms: float, expected: float) -> Check:
         status = "warn"
     else:
         status = "pass"
+    also = "".join(f"; {MODEL_NAMES.get(k, k)} {mm(v)}" for k, v in (others or {}).items())
     return Check("holdout", status, rms, limit,
-                 f"held-out RMS {mm(rms)} over {samples} poses vs expected {mm(expected)} ({ratio:.2f}x)")
+                 f"{MODEL_NAMES.get(model, model)}: held-out RMS {mm(rms)} over {samples} poses vs expected "
+                 f"{mm(expected)} ({ratio:.2f}x){also}")
 
 
 def outliers(rejected: int, samples: int, lost_sweeps: list[str]) -> Check:

@@ -16,7 +16,9 @@ from common import __version__
 from identify.calibrated import CalibratedModel, ResultError
 from identify.extensions import EQUATIONS, UNITS
 from identify.pipeline import Identification
+from identify.poe import AxisLines
 from identify.refine import parameter_names
+from identify.written import WrittenModel
 from kinematics.dh import DH_NAMES, DHModel, model_to_dict
 
 CONVENTION = (
@@ -37,9 +39,8 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
     ref = ident.refinement
     n = ident.model.n_joints
     std = ident.std
-    doc = model_to_dict(ident.model)
-    if len(ident.tp_ids) > 1:  # DESIGN.md: every tracked point's tool; ``tool`` is the smallest id's
-        doc["tools"] = {int(i): _floats(t) for i, t in zip(ident.tp_ids, ident.tools, strict=True)}
+    doc = model_section(ident.plain, ident.tp_ids)
+    doc["use"] = ident.use
     doc["verdict"] = ident.verdict.as_dict()
     if ident.coupling is not None and not ident.coupling.is_identity:
         doc["coupling"] = {**ident.coupling.as_dict(), "note": "the joint values of this model are DH values; "
@@ -55,15 +56,10 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
             doc["clock"]["per_sweep"] = [{"sweep": s, "offset_s": o, "offset_std_s": e} for s, o, e in c.sweeps]
             doc["clock"]["note"] += ("; the sweeps' offsets differed (a clock restart or jump): each streamed sweep "
                                      "has its own (per_sweep), offset_s is their weighted mean")
-    lines = ident.lines
     doc["axis_lines"] = {
-        "note": "the identified model as joint axes at the home readings (tracker frame, m): exact even where "
+        "note": "the plain model as joint axes at the home readings (tracker frame, m): exact even where "
                 "the DH table keeps a parallel-axis convention (see verdict check dh_table)",
-        "home": _floats(lines.home),
-        "points": _floats(lines.points),
-        "directions": _floats(lines.directions),
-        "tp_home": _floats(lines.tp_home),
-        **({"tps": _floats(lines.tps)} if len(lines.tps) > 1 else {}),
+        **lines_to_dict(ident.lines),
     }
     a = ident.adequacy
     doc["noise"] = {
@@ -99,9 +95,11 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         ],
     }
     doc["condition_number"] = ref.condition
-    v = ident.validation
-    doc["validation"] = None if v is None else {
-        "samples": v.samples, "rms": v.rms, "max": v.max, "bound": v.bound, "expected_rms": v.expected,
+    doc["validation"] = None if not ident.validations else {
+        "note": "held-out (check) rows predicted by each model from the numbers written in this file (plain: the "
+                "top-level DH table and tools; extended: extensions.model with extensions.terms); m",
+        "use": ident.use,
+        **{name: v.as_dict() for name, v in ident.validations.items()},
     }
     geo = ident.geometric
     doc["geometric_step"] = None if geo is None else {
@@ -115,7 +113,7 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "model": model_to_dict(geo.model),
     }
     doc["fit_start"] = ident.start
-    doc["covariance"] = covariance_to_dict(ident)
+    doc["covariance"] = covariance_to_dict(ident.plain)
     if nominal is not None:
         delta = ident.model.dh_table() - nominal.dh_table()
         delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
@@ -133,34 +131,73 @@ def extensions_to_dict(ident: Identification) -> dict[str, Any]:
     terms = [{"name": name, "value": value, "std": std, "unit": UNITS[name.rsplit("_", 1)[0]]}
              for name, value, std in ident.extensions]
     families = sorted({d.candidate.family for d in ident.decisions if d.selected})
-    return {
-        "note": "joint errors beyond the DH table: the joint stands at q + dq(q) (q: DH joint value, rad or m); "
-                "a reader that ignores this section gets the DH model without them",
-        "home": _floats(ident.predictor.terms.home),
+    out: dict[str, Any] = {
+        "note": "joint errors beyond the DH table: the extended model is extensions.model with the joint standing "
+                "at q + dq(q) (q: DH joint value, rad or m); the top-level model is the plain one, fitted without "
+                "them",
+        "home": _floats(ident.used.terms.home),
         "terms": terms,
         "equations": {f: EQUATIONS[f] for f in families},
         "selection": [
             {"term": d.candidate.family, "joint": d.candidate.joint + 1, "statistic": d.score,
-             "likelihood_ratio": d.ratio, "limit": d.limit, "heldout_ratio": d.heldout, "selected": d.selected,
+             "likelihood_ratio": d.ratio, "limit": d.limit, "cv_ratio": d.cv, "selected": d.selected,
              "reason": d.reason}
             for d in ident.decisions
         ],
     }
+    ext = ident.extended
+    if ext is not None:
+        out["model"] = model_section(ext, ident.tp_ids)
+        out["axis_lines"] = lines_to_dict(ext.lines)
+        out["covariance"] = covariance_to_dict(ext)
+    return out
 
 
-def covariance_to_dict(ident: Identification) -> dict[str, Any]:
+def validation_of(doc: dict[str, Any], model: str | None = None) -> dict[str, Any] | None:
+    """The held-out figures (``samples``, ``rms``, ``max``, ``bound``, ``expected_rms``) of a result's ``model``
+    (``plain`` or ``extended``; default: the one it recommends), or None (no check rows, or no such model).
+    Results written before the two models read as their one."""
+    v = doc.get("validation")
+    if not isinstance(v, dict):
+        return None
+    if "rms" in v:  # one model only (older results)
+        return v
+    return v.get(model or v.get("use") or doc.get("use") or "plain")
+
+
+def model_section(model: WrittenModel, tp_ids: tuple[int, ...]) -> dict[str, Any]:
+    """``joints``, ``base``, ``tool`` and (several tracked points) ``tools`` of a written model; ``tool`` is the
+    smallest id's, so a reader of the plain contract still gets a valid model."""
+    doc = model_to_dict(model.model)
+    if len(tp_ids) > 1:
+        doc["tools"] = {int(i): _floats(t) for i, t in zip(tp_ids, model.tools, strict=True)}
+    return doc
+
+
+def lines_to_dict(lines: AxisLines) -> dict[str, Any]:
+    """Axis lines at the home readings (tracker frame, m)."""
+    return {
+        "home": _floats(lines.home),
+        "points": _floats(lines.points),
+        "directions": _floats(lines.directions),
+        "tp_home": _floats(lines.tp_home),
+        **({"tps": _floats(lines.tps)} if len(lines.tps) > 1 else {}),
+    }
+
+
+def covariance_to_dict(model: WrittenModel) -> dict[str, Any]:
     """The parameters' covariance, for compensation, verification and comparison (identify/calibrated.py):
     ``parameters`` (the free names of :func:`identify.refine.parameter_names`; base rotation a rotation vector
     applied on the left of ``base``) and ``matrix`` (their covariance, m and rad squared: the DH table's), and
     ``predictor``: the covariance of what predicts (the axis lines' minimal parameters, the tracked points', then
     the joint-error coefficients: :class:`identify.predict.Predictor`)."""
-    names = parameter_names(ident.model.n_joints)
-    free = np.flatnonzero(ident.refinement.free)
+    names = parameter_names(model.model.n_joints)
+    free = np.flatnonzero(model.refinement.free)
     return {
         "note": "covariance of the free parameters (1 sigma squared; m, rad), noise and model error included",
         "parameters": [names[k] for k in free],
-        "matrix": _floats(ident.refinement.covariance),
-        "predictor": _floats(ident.predictor.covariance),
+        "matrix": _floats(model.refinement.covariance),
+        "predictor": _floats(model.predictor.covariance),
     }
 
 

@@ -45,11 +45,12 @@ def accuracy_summary(ident: Identification, meas: Measurements, nominal: DHModel
     k = len(check)
     predicted = model.points(check.q)
     after_pred = model.expected_rms(check.q)
-    after_meas = _rms(check.points - predicted)
+    # measured: the figure of the written model the result recommends (identify.validation), not of the fit's lines
+    after_meas = ident.validation.rms if ident.validation is not None else _rms(check.points - predicted)
     noise = ident.adequacy.noise if check.sigma is None else float(np.sqrt(np.mean(check.sigma**2)))
     out: dict[str, Any] = {
         "poses": k, "noise_3d": math.sqrt(3) * noise,
-        "after": {"label": "identified", "predicted": after_pred, "measured": after_meas,
+        "after": {"label": f"identified, {ident.use} model", "predicted": after_pred, "measured": after_meas,
                   "measured_std": rms_std(after_meas, k), "expected_measured": ident.validation.expected
                   if ident.validation is not None else None},
     }
@@ -116,7 +117,8 @@ def headline_html(status: str, checks: list[tuple[str, str, str]], accuracy: dic
         parts.append(f"<p><b>Verification ({_e(v.get('status', '?'))}):</b> {_e(v.get('message', ''))}</p>")
     if rows:
         label_before = ((accuracy or {}).get("before") or {}).get("label") or "nominal model"
-        head = ["", f"before ({_e(label_before)})", "after (identified)"]
+        label_after = ((accuracy or {}).get("after") or {}).get("label") or "identified"
+        head = ["", f"before ({_e(label_before)})", f"after ({_e(label_after)})"]
         body = "".join("<tr>" + "".join(f'<td class="l">{_e(c)}</td>' if i == 0 else f"<td>{_e(c)}</td>"
                                          for i, c in enumerate(r)) + "</tr>" for r in rows)
         parts.append('<div class="scroll"><table><tr>' + "".join(f"<th>{h}</th>" for h in head) + "</tr>" + body

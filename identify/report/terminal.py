@@ -25,7 +25,9 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     names = ("theta", "d", "a", "alpha")
     lines = [ident.verdict.summary()]
     lines += [f"  {c.status:<4}  {c.name}: {c.message}" for c in ident.verdict.checks]
-    lines.append(f"Identified DH model, joints {model.joint_types} (standard DH; lengths mm, angles deg)")
+    lines += format_models(ident)
+    lines.append(f"Plain DH model (the result's top-level table), joints {model.joint_types} (standard DH; "
+                 "lengths mm, angles deg)")
     head = "joint type " + "".join(f"{f'{n} [{_UNIT[n]}]':>20}" for n in names)
     if nominal is not None:
         head += f"   Δ vs {nominal_name or 'nominal'} (d, a mm; theta, alpha deg)"
@@ -73,14 +75,17 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
         lines.append(f"rejected outliers (CSV lines): {ident.rejected_rows}")
     if ident.geometric is not None:
         lines.append(f"geometric step alone (the paper's method): residual RMS {ident.geometric_rms * 1e3:.4f} mm")
-    v = ident.validation
-    if v is None:
+    if not ident.validations:
         lines.append("validation: no held-out poses (add free poses, or rows with role=check)")
-    else:
+    for name, v in ident.validations.items():
         lines.append(
-            f"validation on {v.samples} held-out poses: RMS {v.rms * 1e3:.4f} mm, max {v.max * 1e3:.4f} mm; "
-            f"expected RMS {v.expected * 1e3:.4f} mm (model bound {v.bound * 1e3:.4f} mm + tracker noise)"
+            f"validation of the {name} model on {v.samples} held-out poses: RMS {v.rms * 1e3:.4f} mm, max "
+            f"{v.max * 1e3:.4f} mm; expected RMS {v.expected * 1e3:.4f} mm (model bound {v.bound * 1e3:.4f} mm + "
+            "tracker noise)"
         )
+        if len(v.per_tp) > 1:
+            lines.append("  per tracked point: " + ", ".join(f"{tp}: {rms * 1e3:.4f} mm ({k})"
+                                                             for tp, (k, rms, _) in v.per_tp.items()))
     for warning in ident.warnings + ref.notes:
         lines.append(f"note: {warning}")
     return "\n".join(lines)
@@ -88,6 +93,18 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
 
 _EXT_SCALE = {"scale": (1e6, "ppm"), "ecc_sin": (np.degrees(1.0) * 3600, "arcsec"),
               "ecc_cos": (np.degrees(1.0) * 3600, "arcsec"), "compliance": (np.degrees(1.0) * 3600, "arcsec/(N m)")}
+
+
+def format_models(ident: Identification) -> list[str]:
+    """Which model to use, and what each written model predicts at the held-out poses."""
+    figure = {name: (f"held-out {v.rms * 1e3:.4f} mm" if (v := ident.validations.get(name)) else "not validated")
+              for name in ident.models}
+    if ident.use == "extended":
+        ext = ident.models["extended"]
+        return [f"use: the extended model (DH + {len(ext.coefs)} joint-error coefficients: extensions.model and "
+                f"extensions.terms of the result), {figure['extended']}; the plain DH table below, "
+                f"{figure['plain']}, is for tools that cannot apply joint errors"]
+    return [f"use: the plain DH model (no joint errors selected), {figure['plain']}"]
 
 
 def format_clock(clock: ClockFit) -> str:

@@ -25,7 +25,7 @@ from drivers.sim.rig import SimulatedRig
 from drivers.sim.stream import robot_time_of_stamps
 from identify.cli import main as identify_main
 from identify.io.csvio import read_measurements
-from identify.io.result_io import load_result
+from identify.io.result_io import load_result, validation_of
 from identify.simulate import random_poses
 from kinematics.dh import points_from_joints
 from session.plan import Plan
@@ -187,7 +187,7 @@ def test_a_mixed_session_is_identified_within_its_uncertainties(mixed: Path) -> 
     distance = np.einsum("ki,kij,kj->k", error, np.linalg.inv(cov), error)
     assert distance.max() < chi2.ppf(1 - FALSE_ALARM / len(q), 3), distance
     # the held-out poses: measured RMS near its expectation (chi-square with 3 dof per pose)
-    v = doc["validation"]
+    v = validation_of(doc)
     k = 3 * v["samples"]
     ratio = (v["rms"] / v["expected_rms"]) ** 2
     assert chi2.ppf(FALSE_ALARM / 2, k) / k < ratio < chi2.ppf(1 - FALSE_ALARM / 2, k) / k, ratio

@@ -37,6 +37,7 @@ from drivers.base import JointStreamBatch, TrackerStreamBatch
 from drivers.registry import open_tracker
 from drivers.trackers.ascii_profile import TRACKERS_DIR
 from identify.bounds import prediction_rms_bound
+from identify.io.result_io import validation_of
 from identify.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from tests.ur_emulator import CMD_STOPJ, EmulatorProcess, connected_robot
@@ -227,7 +228,7 @@ def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_
     assert abs(clock["offset_s"] + LATENCY) < tolerance, f"{clock['offset_s'] * 1e3:.4f} ms vs {-LATENCY * 1e3} ms"
     assert abs(clock["drift"]) < 5 * clock["drift_std"] + 1e-9  # one clock: no drift
     # held out: the check poses and home checks, as the result expects (chi-square over 3 N values)
-    validation = doc["validation"]
+    validation = validation_of(doc)
     n = 3 * validation["samples"]
     assert validation["samples"] >= 6
     assert validation["rms"] < validation["expected_rms"] * np.sqrt(chi2.ppf(1 - FALSE_ALARM, n) / n)

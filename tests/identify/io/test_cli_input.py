@@ -18,6 +18,7 @@ import yaml
 from config.robots import load_robot
 from identify.cli import main
 from identify.io.csvio import format_measurements
+from identify.io.result_io import validation_of
 from identify.measurements import Measurements
 from identify.simulate import simulate
 from kinematics.dh import DHModel, points_from_joints
@@ -484,7 +485,7 @@ def test_check_rows_are_reported_under_validation(tmp_path, session, lines, caps
     code, out, err = invoke([write(tmp_path, text), "--json"], capsys)
     assert code == 0, err
     doc = json.loads(out)
-    validation = doc["validation"]
+    validation = validation_of(doc)
     assert validation["samples"] == 4
     assert validation["rms"] < 3 * NOISE * np.sqrt(3)
     assert validation["max"] >= validation["rms"]
