@@ -165,6 +165,17 @@ class FitData:
                          self.timing)
 
 
+def pose_ids(data: FitData) -> NDArray[np.int64]:
+    """Each row's pose (rows with equal readings, each at its own tracked point, share it); -1 for rows with an
+    unread joint (their poses cannot be told apart by the readings)."""
+    known = data.unknown < 0
+    out = np.full(len(data.q), -1, dtype=np.int64)
+    if np.any(known):
+        _, index = np.unique(np.round(data.q[known], 12), axis=0, return_inverse=True)
+        out[known] = index.ravel()
+    return out
+
+
 def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointTerms | None = None) -> LinesFit:
     """Least squares from ``start`` (with the joint errors ``terms``); if any sample fails the outlier
     test, a soft-L1 fit, the test again on its residuals, and a final least-squares fit on the samples
@@ -172,16 +183,17 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
     lines, q_s, res, terms, timing = data.fit(start, terms)
     data = data.timed(timing)
     inliers = np.ones(len(data.q), dtype=bool)
+    poses = pose_ids(data) if len(np.unique(data.tp_index)) > 1 else None
     if robust:
         zero = np.zeros(data.problem(lines, terms).size)
         lev = leverages(data.problem(lines, terms).jacobian_blocks(zero), data.unknown)
-        inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown)
+        inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown, poses, data.points)
         if not np.all(inliers):
             for _ in range(ROBUST_PASSES):  # the scale of a fit pulled by outliers is too wide: shrink it
                 scale = max(robust_scale(res, lev), NOISE_FLOOR * float(np.median(data.weights)))
                 lines, q_s, res, terms, timing = data.fit(lines, terms, "soft_l1", ROBUST_WIDTH * scale)
                 data = data.timed(timing)
-            inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown)
+            inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown, poses, data.points)
             for _ in range(2):  # least squares on the samples kept; re-admit those it then explains
                 kept_fit = data.subset(inliers).fit(lines, terms.subset(inliers))
                 lines, terms = kept_fit.lines, replace(terms, coefs=kept_fit.terms.coefs)
@@ -192,7 +204,8 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
                 res = problem.residuals(zero).reshape(-1, 3)
                 kept = inliers
                 lev = leverages(problem.jacobian_blocks(zero), data.unknown)
-                inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown)
+                inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown, poses,
+                                       data.points)
                 if np.array_equal(inliers, kept):
                     break
     scale = max(robust_scale(res[inliers], np.zeros(int(inliers.sum()))), NOISE_FLOOR)

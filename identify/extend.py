@@ -92,12 +92,13 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
 
     plain_cv: list[float] = []
 
-    def cross_validate(terms: TermSet, fit: LeastSquares) -> float | None:
+    def cross_validate(terms: TermSet, fit: LeastSquares) -> tuple[float, float] | None:
         if len(blocks) < 2:
             return None
         if not plain_cv:
             plain_cv.append(left_out_squares(empty, base))
-        return left_out_squares(terms, fit) / max(plain_cv[0], 1e-300)
+        with_terms = left_out_squares(terms, fit)
+        return with_terms / max(plain_cv[0], 1e-300), (plain_cv[0] - with_terms) / variance
 
     base = LeastSquares(best.lines, filled, -best.residuals[best.inliers] * data.weights[best.inliers, None],
                         JointTerms.none(len(filled)))

@@ -172,7 +172,7 @@ def limit_for(dof: int, n_candidates: int, n_observations: int) -> float:
 
 Refit = Callable[[TermSet, LeastSquares], LeastSquares]
 Score = Callable[[LeastSquares, TermSet, list[Candidate]], list[float]]
-CrossValidate = Callable[[TermSet, LeastSquares], float | None]
+CrossValidate = Callable[[TermSet, LeastSquares], tuple[float, float] | None]
 
 
 def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Refit, score: Score,
@@ -181,8 +181,10 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
     """Forward selection from ``base`` (the fit without terms) over ``pool``. ``refit(terms, start)`` fits
     with ``terms``; ``score(fit, terms, remaining)`` the score statistics of the remaining candidates;
     ``chi_square(fit)`` its sum of squared weighted residuals over the noise variance; ``cross_validate(terms,
-    fit)`` the ratio of cross-validated sums of squares with and without ``terms`` (None: not testable): the set
-    is kept only when it is below 1, else its last term is dropped and the smaller set tested. At most
+    fit)`` the ratio of cross-validated sums of squares with and without ``terms`` and the gain (their
+    difference, in noise variances; None: not testable): the set is kept only when the left-out blocks gain what
+    the selection demanded of the fit rows (:func:`limit_for` the set's coefficients), else its last term is
+    dropped and the smaller set tested. At most
     ``max_coefficients`` coefficients enter. Returns the terms kept, their fit and every decision."""
     chosen, current = empty, base
     fits = [base]  # the fit after each term kept
@@ -225,13 +227,17 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
     kept = list(chosen.candidates)
     while kept:
         terms = TermSet(tuple(kept), chosen.home, chosen.torques)
-        ratio = cross_validate(terms, fits[len(kept)])
+        tested = cross_validate(terms, fits[len(kept)])
+        if tested is None:
+            return terms, fits[len(kept)], decisions
+        ratio, gain = tested
         decisions = [replace(d, cv=ratio) if d.selected and d.candidate in kept else d for d in decisions]
-        if ratio is None or ratio < 1.0:
+        demanded = limit_for(len(terms.joints), len(pool), n_observations)
+        if gain > demanded:
             return terms, fits[len(kept)], decisions
         dropped = kept.pop()
-        why = (f"cross-validation on the fit rows: left-out blocks predicted {ratio:.3g}x worse (sum of squares) "
-               "with the terms up to this one")
+        why = (f"cross-validation on the fit rows: left-out blocks gained {gain:.3g} noise variances with the terms "
+               f"up to this one (sum of squares {ratio:.3g}x), less than the {demanded:.3g} demanded")
         decisions = [replace(d, selected=False, reason=why) if d.candidate == dropped and d.selected else d
                      for d in decisions]
     return empty, base, decisions

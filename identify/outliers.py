@@ -11,7 +11,15 @@ shared by neighbouring samples. Only the first are outliers. So a sample is reje
 2. within its sweep (ordered by the moved joint's value), it also departs from the straight line through
    its two neighbours by more than the noise of such second differences allows, at the same per-sample
    false-alarm rate: a smooth systematic residual follows its neighbours, a gross error does not. Free
-   poses and sweeps of fewer than four samples have no such neighbours; for them the first test decides.
+   poses and sweeps of fewer than four samples have no such neighbours; for them the first test decides,
+3. unless the pose was seen at three or more tracked points (reflectors) and their residuals together are a
+   rigid motion of the end effector within the noise (the residual after a small-motion fit, chi-square
+   with 3k - 6 dof at the same false-alarm rate, its scale estimated robustly from every such pose): an
+   error of the joints moves every reflector together, a beam break moves one;
+4. and, in any case, only when it stands out from the errors the data set already accepts: its studentised
+   residual beyond GROSS_FACTOR times the largest kept in its scale group. Systematic errors of thin sweeps
+   (four to six samples over a turn, too far apart for the neighbour test) and of free poses far from home
+   reach a size of their own; a sample within it is not gross, whatever the bulk's scale.
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ def leverages(jac_blocks: Array, unknown: NDArray[np.int64]) -> Array:
 
 
 MIN_GROUP = 10  # samples a group needs for a scale of its own
+GROSS_FACTOR = 1.5  # a gross error stands out by this factor from the largest residual kept beside it
 CORE = 0.975  # share of clean rows the noise is estimated from
 
 
@@ -92,10 +101,48 @@ def _isotropic_inliers(res: Array, leverage: Array, unknown: NDArray[np.int64], 
     return f_dist.sf(t / (dof * s2), dof, nu) >= probability / len(res)
 
 
+def rigid_motion_residuals(res: Array, points: Array) -> Array:
+    """What is left of residuals ``res`` (k, 3) of one pose's tracked points at ``points`` (k, 3, m) after the
+    best small rigid motion (translation t, rotation w: r ≈ t + w × (p - centre)), by linear least squares."""
+    arm = points - points.mean(axis=0)
+    a = np.zeros((len(res), 3, 6))
+    a[:, :, :3] = np.eye(3)
+    a[:, 0, 4], a[:, 0, 5] = arm[:, 2], -arm[:, 1]  # w × arm = (w_y z - w_z y, w_z x - w_x z, w_x y - w_y x)
+    a[:, 1, 3], a[:, 1, 5] = -arm[:, 2], arm[:, 0]
+    a[:, 2, 3], a[:, 2, 4] = arm[:, 1], -arm[:, 0]
+    flat = a.reshape(-1, 6)
+    x, *_ = np.linalg.lstsq(flat, res.reshape(-1), rcond=None)
+    return (res.reshape(-1) - flat @ x).reshape(-1, 3)
+
+
+def _rigid_poses(res: Array, points: Array, pose: NDArray[np.int64], keep: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Rows of poses (``pose`` ids, -1: none) seen at three or more points whose residuals are a rigid motion
+    within the noise (test 3 of the module docstring)."""
+    ids, counts = np.unique(pose[pose >= 0], return_counts=True)
+    multi = ids[counts >= 3]
+    if not len(multi):
+        return np.zeros(len(res), dtype=bool)
+    stats = {}
+    for p in multi:
+        rows = np.flatnonzero(pose == p)
+        e = rigid_motion_residuals(res[rows], points[rows])
+        stats[p] = (rows, float(np.sum(e**2)), 3 * len(rows) - 6)
+    scale2 = float(np.median([t / dof for _, t, dof in stats.values()])) / (chi2.median(3) / 3)
+    scale2 = max(scale2, NOISE_FLOOR**2)
+    out = np.zeros(len(res), dtype=bool)
+    for rows, t, dof in stats.values():
+        if not np.all(keep[rows]) and t / scale2 <= chi2.isf(OUTLIER_PROBABILITY / len(res), dof):
+            out[rows] = True
+    return out
+
+
 def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Array,
-                 unknown: NDArray[np.int64] | None = None) -> NDArray[np.bool_]:
+                 unknown: NDArray[np.int64] | None = None, pose: NDArray[np.int64] | None = None,
+                 points: Array | None = None) -> NDArray[np.bool_]:
     """Mask of the samples kept: see the module docstring. ``res`` (m, 3) weighted residuals; ``leverage``
-    (m,) the parameters' mean leverage per row; ``unknown`` (m,) rows' unread joints (-1: none)."""
+    (m,) the parameters' mean leverage per row; ``unknown`` (m,) rows' unread joints (-1: none); ``pose`` (m,)
+    the pose of each row (rows of one pose seen at several tracked points share it; -1: not comparable) with
+    the measured ``points`` (m, 3), for test 3."""
     unknown = np.full(len(res), -1) if unknown is None else unknown
     lev = np.clip(leverage, 0.0, 0.99)
     keep = np.ones(len(res), dtype=bool)
@@ -107,9 +154,21 @@ def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Arr
             keep[rows] = inlier_mask(res[rows] / np.sqrt(1.0 - lev[rows])[:, None], 0, share)
     if np.all(keep):
         return keep
+    if pose is not None and points is not None:
+        keep |= _rigid_poses(res, points, pose, keep)
     runs = [r for r in sweep_neighbours(group, key) if len(r) >= 4]
-    if not runs:
-        return keep
+    if runs:
+        _smooth(res, runs, keep)
+    size = np.linalg.norm(res, axis=1) / np.sqrt(1.0 - lev)
+    for rows in _scale_groups(group):
+        kept = rows[keep[rows]]
+        if len(kept):
+            keep[rows[size[rows] <= GROSS_FACTOR * size[kept].max()]] = True
+    return keep
+
+
+def _smooth(res: Array, runs: list[NDArray[np.int64]], keep: NDArray[np.bool_]) -> None:
+    """Test 2 of the module docstring: re-admit (in ``keep``) the samples that move with their neighbours."""
     parts = [second_differences(res, r) for r in runs]
     inner = np.vstack([e[1:-1] / np.sqrt(s[1:-1])[:, None] for e, s in parts])
     scale = np.maximum(1.4826 * np.median(np.abs(inner), axis=0), NOISE_FLOOR)  # noise per axis, robust
@@ -118,4 +177,3 @@ def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Arr
         d2 = np.sum((e / scale) ** 2, axis=1) / spread
         smooth = d2 <= limit
         keep[run[smooth & ~keep[run]]] = True  # it moves with its neighbours: systematic, not gross
-    return keep

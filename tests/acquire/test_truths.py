@@ -123,7 +123,9 @@ def test_acquire_runs_the_issue_mock_spec_end_to_end(tmp_path: Path, capsys: pyt
     assert code == 0  # complete, and its identification passes its verdict
     doc = yaml.safe_load(path.with_suffix(".result.yaml").read_text())
     assert set(doc["tools"]) == {1, 2, 3}
-    assert {"compliance_2", "compliance_3"} <= {t["name"] for t in doc["extensions"]["terms"]}
+    assert doc["use"] == "extended" and "compliance_2" in {t["name"] for t in doc["extensions"]["terms"]}
+    # every term selected passed its own test (a kind found on one joint no longer brings the others along)
+    assert all(s["likelihood_ratio"] > s["limit"] for s in doc["extensions"]["selection"] if s["selected"])
     assert main(["export", str(path), "--csv", str(csv)]) == 0
     assert read_measurements(csv).measurements.tp_ids == [1, 2, 3]
     capsys.readouterr()

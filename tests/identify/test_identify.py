@@ -192,7 +192,7 @@ def test_bundled_sample_identifies_to_its_truth(tmp_path, capsys):
     truth = model_from_dict(yaml.safe_load((sample.with_name("sample_ur5e_truth.yaml")).read_text()))
     out = tmp_path / "result.yaml"
     assert main([str(sample), "--robot", "ur5e", "--out", str(out)]) == 0
-    assert "validation on 9 held-out poses" in capsys.readouterr().out
+    assert "validation of the plain model on 9 held-out poses" in capsys.readouterr().out
     model = model_from_dict(yaml.safe_load(out.read_text()))
     robot = load_robot("ur5e")
     meas = read_measurements(sample).measurements

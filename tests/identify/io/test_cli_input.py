@@ -492,7 +492,7 @@ def test_check_rows_are_reported_under_validation(tmp_path, session, lines, caps
     # check rows are never fitted: the fit counts all rows but the 4 (no hold-out draw with a role column)
     assert doc["residuals"]["samples"] == len(meas) - 4
     code, out, _ = invoke([write(tmp_path, text, "again.csv")], capsys)
-    assert "validation on 4 held-out poses" in out
+    assert "validation of the plain model on 4 held-out poses" in out
 
 
 def test_ignored_extra_columns_are_noted(tmp_path, session, lines, capsys):
