@@ -1,0 +1,170 @@
+"""``identify check RESULT DATA``: a second session of the same arm with the tracker moved holds, with the
+held-out RMS of the first session within noise and the tracker's move recovered; another arm of the same model
+fails (exit 3); gross errors are found and left out; a re-mounted reflector fails unless ``--refit-tool``; the
+extended model is checked beside the plain one; bad inputs give one line and exit 2."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import yaml
+
+from config.robots import load_robot
+from identify.cli import main
+from identify.holds import check_models, pose_groups
+from identify.io.csvio import format_measurements
+from identify.io.result_io import result_to_dict
+from identify.pipeline import identify
+from identify.result_models import result_models
+from identify.simulate import dh_truth, make_scenario, reading_error, simulate, transform_lines
+from kinematics.truth import random_base, random_truth
+
+ROBOT = load_robot("ur5e")
+NOISE = 5e-5
+CHECK_POSES = 30
+
+
+def _session(truth, seed, steps=6, free=30, check=0):
+    meas, _ = simulate(truth, ROBOT.home, ROBOT.limits, np.random.default_rng(seed), noise=NOISE, steps=steps,
+                       free_poses=free, check_poses=check)
+    return meas
+
+
+def _moved(truth, seed):
+    """The tracker moved: any rotation, up to 2.5 m away (new tracker <- old tracker)."""
+    move = random_base(np.random.default_rng(seed), distance=1.0)
+    return replace(truth, base=move @ truth.base), move
+
+
+@pytest.fixture(scope="module")
+def first():
+    """Session 1 of a UR5e (sweeps, 15 free poses, 30 held-out): its result document and truth."""
+    truth = random_truth(ROBOT.nominal, ROBOT.home, np.random.default_rng(1))
+    meas = _session(truth, 2, steps=12, free=15, check=CHECK_POSES)
+    doc = result_to_dict(identify(meas, ROBOT.nominal), ROBOT.nominal, ROBOT.name)
+    return yaml.safe_load(yaml.safe_dump(doc)), truth
+
+
+def _check(doc, meas, **kw):
+    models = result_models(doc, meas.q, meas.tp)
+    return check_models(meas.points, meas.q, meas.tp, models.models, models.use, **kw)
+
+
+def test_same_arm_with_the_tracker_moved_holds_at_the_first_sessions_heldout_rms(first):
+    """Five second sessions, the tracker moved anywhere: each passes; the registration is the move (to what the
+    noise allows); the held-out RMS pooled over them matches session 1's held-out RMS within the two figures'
+    chi-square spread (4 sigma)."""
+    doc, truth = first
+    square, count = 0.0, 0
+    for seed in range(5):
+        moved, move = _moved(truth, 10 + seed)
+        meas = _session(moved, 20 + seed)
+        check = _check(doc, meas)
+        plain = check.chosen
+        assert check.status == "pass" and plain.name == "plain" and not len(plain.gross)
+        turn = plain.registration.rotation @ move[:3, :3].T
+        assert np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2, -1, 1))) < 0.01
+        assert np.linalg.norm(plain.registration.translation - move[:3, 3]) < 1e-3
+        assert plain.registration.moved == pytest.approx(np.linalg.norm(move[:3, 3]), abs=1e-3)
+        square += plain.heldout.rms**2 * plain.heldout.samples
+        count += plain.heldout.samples
+    rms2, rms1 = np.sqrt(square / count), doc["validation"]["rms"]
+    spread = np.sqrt(1 / (2 * 3 * CHECK_POSES) + 1 / (2 * 3 * count))  # relative std of an RMS of k squares
+    assert abs(rms2 / rms1 - 1) < 4 * spread
+
+
+def test_another_arm_of_the_same_model_fails(first, tmp_path, capsys):
+    doc, _ = first
+    other = random_truth(ROBOT.nominal, ROBOT.home, np.random.default_rng(77))
+    check = _check(doc, _session(other, 3))
+    assert check.status == "fail" and check.chosen.ratio > 10
+    result, data = tmp_path / "r.yaml", tmp_path / "other.csv"
+    result.write_text(yaml.safe_dump(doc))
+    data.write_text(format_measurements(_session(other, 3)))
+    assert main(["check", str(result), str(data)]) == 3
+    out = capsys.readouterr().out
+    assert out.startswith("FAIL") and max(len(line) for line in out.splitlines()) <= 80
+
+
+def test_gross_errors_are_found_and_do_not_break_the_registration(first):
+    doc, truth = first
+    meas = _session(_moved(truth, 5)[0], 6)
+    clean = _check(doc, meas).chosen
+    rng = np.random.default_rng(7)
+    bad = rng.choice(len(meas.points), 4, replace=False)
+    points = meas.points.copy()
+    points[bad] += rng.normal(size=(4, 3)) / np.sqrt(3) * rng.uniform(5e-3, 20e-3, (4, 1))
+    broken = _check(doc, replace(meas, points=points)).chosen
+    assert broken.status == "pass" and set(broken.gross) == set(bad)
+    assert broken.heldout.rms == pytest.approx(clean.heldout.rms, rel=0.1)  # the same rows but four
+    assert np.allclose(broken.registration.translation, clean.registration.translation, atol=1e-4)
+
+
+def test_a_remounted_reflector_fails_unless_the_tool_is_refitted(first):
+    doc, truth = first
+    moved, _ = _moved(truth, 8)
+    shift = np.array([0.02, -0.01, 0.005])
+    meas = _session(replace(moved, tool=moved.tool + shift), 9)
+    assert _check(doc, meas).status == "fail"
+    refit = _check(doc, meas, refit_tool=True)
+    assert refit.status == "pass" and refit.chosen.parameters == 9
+    assert np.linalg.norm(refit.chosen.registration.tools[1] - shift) < 2e-4
+
+
+def test_the_extended_model_is_checked_beside_the_plain_one():
+    """A result with joint errors (reading scale and once-per-turn terms simulated): both models are checked on
+    a second session; the extended one holds at its stated figure, the DH table alone does not hold it."""
+    rng = np.random.default_rng(3)
+    truth = dh_truth(ROBOT.nominal, ROBOT.home, rng)
+    errors = reading_error("RRRRRR", rng, scale=2e-4, amplitude=np.radians(0.02))
+    s1 = make_scenario(truth, ROBOT.home, ROBOT.limits, rng, noise=2e-5, steps=18, free_poses=20, check_poses=20,
+                       errors=errors)
+    doc = result_to_dict(identify(s1.meas, ROBOT.nominal), ROBOT.nominal, ROBOT.name)
+    assert doc["extensions"]["terms"]
+    s2 = make_scenario(transform_lines(truth, random_base(rng)), ROBOT.home, ROBOT.limits, rng, noise=2e-5, steps=6,
+                       free_poses=30, errors=errors)
+    check = _check(doc, s2.meas)
+    by_name = {m.name: m for m in check.models}
+    assert check.use == "extended" and check.status == "pass"
+    assert by_name["extended"].ratio < 1.5
+    assert by_name["plain"].heldout.rms > 3 * by_name["extended"].heldout.rms
+
+
+def test_pose_groups_join_the_rows_of_one_pose():
+    q = np.array([[1.0, 2.0], [0.0, 0.0], [1.0, 2.0], [3.0, 1.0]])
+    assert pose_groups(q).tolist() == [0, 1, 0, 2]
+
+
+def test_command_json_out_and_refusals(first, tmp_path, capsys):
+    doc, truth = first
+    result, data, out = tmp_path / "r.yaml", tmp_path / "today.csv", tmp_path / "check.yaml"
+    result.write_text(yaml.safe_dump(doc))
+    data.write_text(format_measurements(_session(_moved(truth, 4)[0], 4)))
+    assert main(["check", str(result), str(data), "--json", "--out", str(out)]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    written = yaml.safe_load(out.read_text())
+    assert printed["status"] == written["status"] == "pass" and printed["models"]["plain"]["heldout"]["samples"] > 60
+    assert main(["check", str(result), str(data)]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("PASS") and max(len(line) for line in text.splitlines()) <= 80
+    few = tmp_path / "few.csv"
+    meas = _session(truth, 4, steps=3, free=0)
+    few.write_text(format_measurements(meas.subset(np.isin(meas.sweep, [1, 2]))))
+    not_result = tmp_path / "not.yaml"
+    not_result.write_text("a: 1\n")
+    cases = [
+        ([str(tmp_path / "none.yaml"), str(data)], "no such result file"),
+        ([str(not_result), str(data)], "not a result file"),
+        ([str(result), str(tmp_path / "none.csv")], "no such file"),
+        ([str(result), str(data), "--out", str(out)], "exists"),
+        ([str(result), str(data), "--noise", "-1"], "--noise"),
+        ([str(result), str(few)], "at least 6 are needed"),
+        ([str(result), str(data), "--joints", "RRRR"], ""),
+    ]
+    for argv, words in cases:
+        assert main(["check", *argv]) == 2, argv
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err, err
