@@ -84,6 +84,9 @@ def load(args: argparse.Namespace) -> tuple[dict[str, Any], Measurements, list[s
     else:
         meas = read_measurements(args.data, args.joints, args.units).measurements
     notes = []
+    if meas.has_streams:
+        notes.append(f"{int(meas.streamed.sum())} streamed rows: readings interpolated at the recorded clock offset "
+                     "(not refined here)")
     read = np.all(np.isfinite(meas.q), axis=1)
     if not read.all():
         notes.append(f"{int((~read).sum())} rows without every joint reading left out (cannot be predicted)")

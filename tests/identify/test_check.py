@@ -133,6 +133,20 @@ def test_the_extended_model_is_checked_beside_the_plain_one():
     assert by_name["plain"].heldout.rms > 3 * by_name["extended"].heldout.rms
 
 
+def test_two_model_results_are_read_by_their_stated_figures_and_use(first):
+    """A result of the two-model form (validation.plain / validation.extended, use): each model's stated figure
+    is its expected RMS, with the new tracker noise in place of the calibration's; ``use`` picks the verdict."""
+    doc, truth = first
+    doc = {**doc, "validation": {"plain": {"expected_rms": 2e-4}, "extended": {"expected_rms": 1e-4}}, "use": "plain"}
+    meas = _session(_moved(truth, 11)[0], 12)
+    old = doc["noise"]["tracker_per_axis"]
+    models = result_models(doc, meas.q, meas.tp, noise=2 * old)
+    assert [m.name for m in models.models] == ["plain"] and models.use == "plain"  # no terms: no extended model
+    assert models.sources == {"plain": "stated"}
+    assert models.models[0].expected == pytest.approx(np.sqrt(2e-4**2 + 9 * old**2), rel=1e-12)
+    assert result_models(doc, meas.q, meas.tp).models[0].expected == pytest.approx(2e-4, rel=1e-12)
+
+
 def test_pose_groups_join_the_rows_of_one_pose():
     q = np.array([[1.0, 2.0], [0.0, 0.0], [1.0, 2.0], [3.0, 1.0]])
     assert pose_groups(q).tolist() == [0, 1, 0, 2]
@@ -168,3 +182,29 @@ def test_command_json_out_and_refusals(first, tmp_path, capsys):
         assert main(["check", *argv]) == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err, err
+
+
+def _session_then_check(folder: str) -> tuple[int, int, str]:
+    """A mock acquisition of a simulated UR5e (it writes its result beside the session), then that result checked
+    on the session file itself: the session is read as DATA. Exit codes and the check's output."""
+    import contextlib
+    import io
+    from pathlib import Path
+
+    from acquire.cli import main as acquire
+
+    path, out = Path(folder) / "s.session", io.StringIO()
+    with contextlib.redirect_stdout(io.StringIO()):
+        acquired = acquire(["--robot", "mock:ur5e", "--tracker", "mock?seed=1", "--steps", "6", "--free-poses", "6",
+                            "--session", str(path), "--quiet"])
+    with contextlib.redirect_stdout(out):
+        code = main(["check", str(path.with_suffix(".result.yaml")), str(path)])
+    return acquired, code, out.getvalue()
+
+
+def test_check_reads_a_session_file(tmp_path):
+    from tests._single_thread import run_single_threaded
+
+    acquired, code, out = run_single_threaded(_session_then_check, str(tmp_path))
+    assert acquired == 0 and code == 0, out
+    assert out.startswith("PASS") and "moved 0.0 mm" in out  # the mock tracker stayed where it was
