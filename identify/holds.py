@@ -5,7 +5,8 @@ tracker stands elsewhere (and the reflector may have been re-mounted), so new me
 that frame by a rigid 6-DoF fit (closed-form Kabsch start, then a robust least-squares refinement), optionally with
 each TP's position on the flange refitted too (``refit_tool``: 3 more parameters per point, which absorb a moved
 reflector and anything else that looks like one, e.g. a changed last link). Gross errors (beam breaks) are found
-on that fit and left out.
+on that fit and left out: rows beyond :data:`GROSS` times the residuals' robust scale, as long as they are a few
+(at most :data:`GROSS_SHARE` of the rows; more are not beam breaks, and none is left out).
 
 The registration's own parameters bend towards the data, so an in-sample RMS flatters the model. The figure that
 decides is cross-validated: the poses are split into ``folds`` interleaved blocks, each block is predicted from a
@@ -36,7 +37,7 @@ Array = NDArray[np.float64]
 WARN_RATIO = 1.5  # cross-validated RMS / expected RMS above which the check warns
 FAIL_RATIO = 3.0  # ... and above which it fails
 GROSS = 6.0  # a row is gross beyond GROSS x the per-axis scale (robust, floored at expected / sqrt(3))
-GROSS_SHARE = 0.1  # more gross rows than this share of the data: a warning (not beam breaks any more)
+GROSS_SHARE = 0.1  # more rows beyond the cutoff than this share: not beam breaks; none left out, and a warning
 FOLDS = 5
 MIN_POSES = 6
 CHI3_MEDIAN = float(np.sqrt(chi2.ppf(0.5, 3)))  # median 3D error norm / per-axis sigma (Gaussian, isotropic)
@@ -174,7 +175,9 @@ def _check_one(model: Model, y: Array, q: Array, tp: NDArray[np.int64], tp_index
     scale = max(_robust_scale(fit.norms(x0)), floor, 1e-9)
     x = fit.refine(x0, every, loss="soft_l1", scale=scale)
     cutoff = GROSS * max(_robust_scale(fit.norms(x)), floor)
-    kept = fit.norms(x) <= cutoff
+    beyond = fit.norms(x) > cutoff
+    too_many = beyond.sum() > GROSS_SHARE * len(y)  # not a few beam breaks: a systematic error is not hidden
+    kept = np.ones(len(y), dtype=bool) if too_many else ~beyond
     x = fit.refine(x, kept)
     fitted = fit.norms(x)[kept]
     held = np.full(len(y), np.nan)
@@ -190,19 +193,23 @@ def _check_one(model: Model, y: Array, q: Array, tp: NDArray[np.int64], tp_index
     dof_rms = float(np.sqrt(np.sum(fitted**2) / max(m_rows - n_par / 3, 1.0)))
     ratio = heldout.rms / model.expected if model.expected > 0 else float("inf")
     limit = max(WARN_RATIO, float(np.sqrt(chi2.ppf(0.999, 3 * m_rows) / (3 * m_rows))))
-    status, reasons = _status(ratio, limit, int((~kept).sum()), len(y))
+    status, reasons = _status(ratio, limit, int(beyond.sum()) if too_many else 0, len(y), cutoff)
     return ModelCheck(model.name, fit.registration(x, ids), n_par, heldout, per_tp, Errors.of(fitted), dof_rms,
                       model.expected, ratio, limit, np.flatnonzero(~kept), cutoff, status, reasons)
 
 
-def _status(ratio: float, limit: float, gross: int, rows: int) -> tuple[str, list[str]]:
-    if ratio > max(FAIL_RATIO, 2 * limit):
-        return "fail", [f"held-out RMS {ratio:.1f}x the expected: another arm, another tool, or the arm changed"]
+def _status(ratio: float, limit: float, beyond: int, rows: int, cutoff: float) -> tuple[str, list[str]]:
+    """pass, warn or fail, and why; ``beyond`` rows past the gross ``cutoff`` (m) that were too many to leave
+    out (0 when they were left out)."""
     reasons = []
+    if beyond:
+        reasons.append(f"{beyond} of {rows} rows miss by more than {cutoff * 1e3:.2f} mm: too many for beam breaks, "
+                       "none left out")
+    if ratio > max(FAIL_RATIO, 2 * limit):
+        return "fail", [f"held-out RMS {ratio:.1f}x the expected: another arm, another tool, or the arm changed",
+                        *reasons]
     if ratio > limit:
         reasons.append(f"held-out RMS {ratio:.2f}x the expected (limit {limit:.2f}x)")
-    if gross > GROSS_SHARE * rows:
-        reasons.append(f"{gross} of {rows} rows are gross errors: more than beam breaks")
     return ("warn" if reasons else "pass"), reasons
 
 
