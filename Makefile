@@ -43,6 +43,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.robustness || status=1; \
 	$(BIN)/python -m bench.compensation || status=1; \
 	$(BIN)/python -m bench.continuous || status=1; \
+	$(BIN)/python -m bench.second_session || status=1; \
 	$(BIN)/python -m bench.ur_continuous || status=1; \
 	$(BIN)/python -m bench.camera_stream || status=1; \
 	exit $$status

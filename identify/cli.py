@@ -256,7 +256,7 @@ def _rows(meas: Measurements, rows: str) -> Measurements:
     return meas.subset(fitted | meas.check)
 
 
-SUBCOMMANDS = ("compensate", "compare")  # identify/compensate_cli.py, identify/compare_cli.py
+SUBCOMMANDS = ("compensate", "compare", "check")  # identify/compensate_cli.py, compare_cli.py, check_cli.py
 
 
 def _with_coupling(meas: Measurements, path: str | None, robot: RobotModel | None, notes: list[str]) -> Measurements:

@@ -14,6 +14,9 @@ requires ``a_6 = alpha_6 = 0`` (the UR convention, which the identification keep
 Frames: the identified model's DH frame 0 stands for the robot's base frame; the base transform
 (tracker <- frame 0) and the tool are not part of this file.
 
+:func:`calibration_from_lines` writes an axis-lines model instead: each joint's origin is then a full frame on its
+exact axis (``identify/exports/joint_frames.py``), with no DH singularity for nearly parallel axes.
+
 ``hash``: the driver compares it with the checksum the controller reports for its own calibration and warns
 when they differ; that is expected here, since this model is not the controller's. We write
 ``calib_<n>`` with ``n`` a 64-bit number derived from the values, so the same model gives the same hash.
@@ -29,7 +32,9 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
+from identify.exports.joint_frames import joint_frames
 from identify.exports.urdf import rpy_from_matrix, transform_from_xyz_rpy
+from identify.poe import AxisLines
 from kinematics.dh import DHModel, transform_from_dh
 
 Array = NDArray[np.float64]
@@ -68,7 +73,28 @@ def calibration_from_model(model: DHModel, hash_value: str | None = None) -> dic
 
     ``hash_value`` replaces the derived hash (e.g. to reuse the controller's, at your own risk).
     """
-    origins = origins_from_model(model)
+    return _document(origins_from_model(model), hash_value)
+
+
+def calibration_from_lines(lines: AxisLines, base: ArrayLike, flange: ArrayLike | None = None,
+                           hash_value: str | None = None) -> dict[str, Any]:
+    """The calibration document of an axis-lines model of a 6R arm: each joint's full frame
+    (:func:`identify.exports.joint_frames.joint_frames`), so the exact axes with no DH singularity; each joint's
+    zero is reading 0.
+
+    ``base`` (4, 4): tracker <- the robot's base frame (``base_link_inertia``; e.g. the identified DH model's
+    ``base``); ``flange`` (4, 4): tracker <- flange frame at the home readings, which ``wrist_3_link`` then follows
+    (default: the frames' own rule, an x axis carried along from the base). The tracked points are not part of the
+    file: ``joint_frames(...).tps`` gives them in ``wrist_3_link``. Raises ValueError unless the lines are 6R.
+    """
+    if lines.joint_types != "RRRRRR":
+        raise ValueError(f"the UR calibration file describes six revolute joints; the model has {lines.joint_types}")
+    frames = joint_frames(lines, np.asarray(base, dtype=float), None if flange is None else np.asarray(flange,
+                                                                                                          dtype=float))
+    return _document(frames.origins, hash_value)
+
+
+def _document(origins: Array, hash_value: str | None) -> dict[str, Any]:
     kinematics: dict[str, Any] = {}
     for name, origin in zip(SEGMENTS, origins, strict=True):
         values = [*origin[:3, 3], *rpy_from_matrix(origin[:3, :3])]

@@ -1,4 +1,5 @@
-"""URDF of an identified robot: links and joints whose origins reproduce the DH model of DESIGN.md exactly.
+"""URDF of an identified robot: links and joints whose origins reproduce the DH model of DESIGN.md exactly
+(:func:`urdf_from_model`), or an axis-lines model with a full frame per joint (:func:`urdf_from_lines`).
 
 The forward model ``T(q) = base · A_1(q_1) · … · A_n(q_n)`` with ``A_i = M_i(q_i) · D_i``, where ``M_i`` is the
 joint's motion (``Rz(q_i)`` revolute, ``Tz(q_i)`` prismatic) and ``D_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``
@@ -19,12 +20,15 @@ floating-point precision.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from identify.exports.joint_frames import joint_frames
+from identify.poe import AxisLines
 from kinematics.dh import DHModel, transform_from_dh
 
 Array = NDArray[np.float64]
@@ -99,23 +103,68 @@ def urdf_from_model(
     value). ``prefix`` is put before every link and joint name. ``comment`` is written at the top.
     """
     n = model.n_joints
+    parts = fixed_parts(model)
+    origins = np.concatenate([np.eye(4)[None], parts[:-1]])
+    tool = np.eye(4)
+    tool[:3, 3] = model.tool
+    tail = [(f"link_{n}_to_flange", f"link_{n}", "flange", parts[-1]), ("flange_to_tp", "flange", "tp", tool)]
+    text = comment or "identified DH model (dh-calib); frames and units: see identify/exports/urdf.py"
+    return _chain_urdf(model.joint_types, model.base, origins, tail, name, limits, velocities, prefix, text)
+
+
+def urdf_from_lines(
+    lines: AxisLines,
+    base: ArrayLike | None = None,
+    flange: ArrayLike | None = None,
+    name: str = "identified_robot",
+    limits: ArrayLike | None = None,
+    velocities: ArrayLike | None = None,
+    prefix: str = "",
+    comment: str | None = None,
+    tp_ids: Sequence[int] | None = None,
+) -> str:
+    """The URDF text of an axis-lines model: every joint a full frame (origin xyz/rpy, axis z), so the exact axis
+    geometry with no DH singularity (see :mod:`identify.exports.joint_frames`); each joint's zero is reading 0.
+
+    ``base`` (4, 4): tracker <- ``base_link`` (e.g. the DH model's ``base``; default: the tracker frame);
+    ``flange`` (4, 4): tracker <- flange frame at the home readings, which ``link_n`` then follows. Tracked points
+    are fixed links on ``link_n``: ``tp`` (the first) and ``tp_<id>`` for the others (``tp_ids``: the ids of
+    ``lines.tps``' rows, default 1, 2, ...). Other arguments as :func:`urdf_from_model`.
+    """
+    frames = joint_frames(lines, None if base is None else np.asarray(base, dtype=float),
+                          None if flange is None else np.asarray(flange, dtype=float))
+    n = len(lines.joint_types)
+    ids = list(range(1, len(frames.tps) + 1)) if tp_ids is None else [int(i) for i in tp_ids]
+    tail = []
+    for k, (point, tp_id) in enumerate(zip(frames.tps, ids, strict=True)):
+        child = "tp" if k == 0 else f"tp_{tp_id}"
+        offset = np.eye(4)
+        offset[:3, 3] = point
+        tail.append((f"link_{n}_to_{child}", f"link_{n}", child, offset))
+    text = comment or "identified axis lines (dh-calib); frames and units: see identify/exports/joint_frames.py"
+    return _chain_urdf(lines.joint_types, frames.base, frames.origins, tail, name, limits, velocities, prefix, text)
+
+
+def _chain_urdf(joint_types: str, base: Array, origins: Array, tail: list[tuple[str, str, str, Array]], name: str,
+                limits: ArrayLike | None, velocities: ArrayLike | None, prefix: str, comment: str) -> str:
+    """tracker --fixed(base)--> base_link --joint_i (origins[i], axis z)--> link_i ..., then the fixed ``tail``
+    joints (name, parent, child, origin)."""
+    n = len(joint_types)
     lim = None if limits is None else np.asarray(limits, dtype=float).reshape(n, 2)
     vel = np.zeros(n) if velocities is None else np.asarray(velocities, dtype=float).reshape(n)
-    parts = fixed_parts(model)
     p = prefix
     out = ['<?xml version="1.0"?>']
-    text = comment or "identified DH model (dh-calib); frames and units: see identify/exports/urdf.py"
-    out.append(f"<!-- {text.replace('--', '- -')} -->")
+    out.append(f"<!-- {comment.replace('--', '- -')} -->")
     out.append(f"<robot name={quoteattr(name)}>")
-    links = [f"{p}tracker", f"{p}base_link", *(f"{p}link_{i}" for i in range(1, n + 1)), f"{p}flange", f"{p}tp"]
+    links = [f"{p}tracker", f"{p}base_link", *(f"{p}link_{i}" for i in range(1, n + 1)),
+             *(f"{p}{child}" for _, _, child, _ in tail)]
     out.extend(f'  <link name="{link}"/>' for link in links)
     out.append(f'  <joint name="{p}tracker_to_base" type="fixed">')
-    out.append(f'    <parent link="{p}tracker"/>\n    <child link="{p}base_link"/>\n    {_origin(model.base)}')
+    out.append(f'    <parent link="{p}tracker"/>\n    <child link="{p}base_link"/>\n    {_origin(base)}')
     out.append("  </joint>")
     for i in range(n):
         parent = f"{p}base_link" if i == 0 else f"{p}link_{i}"
-        origin = np.eye(4) if i == 0 else parts[i - 1]
-        revolute = model.joint_types[i] == "R"
+        revolute = joint_types[i] == "R"
         note = ""
         if lim is not None:
             kind = "revolute" if revolute else "prismatic"
@@ -126,7 +175,7 @@ def urdf_from_model(
             kind, lower, upper = "prismatic", -PRISMATIC_PLACEHOLDER, PRISMATIC_PLACEHOLDER
             note = "    <!-- no limits given: placeholder stroke -->\n"
         out.append(f'  <joint name="{p}joint_{i + 1}" type="{kind}">')
-        out.append(f'    <parent link="{parent}"/>\n    <child link="{p}link_{i + 1}"/>\n    {_origin(origin)}')
+        out.append(f'    <parent link="{parent}"/>\n    <child link="{p}link_{i + 1}"/>\n    {_origin(origins[i])}')
         out.append('    <axis xyz="0 0 1"/>')
         if lower is None:
             out.append(f'    <limit effort="0" velocity="{_num(vel[i])}"/>')
@@ -134,12 +183,9 @@ def urdf_from_model(
             out.append(f'{note}    <limit lower="{_num(lower)}" upper="{_num(upper)}" effort="0" '
                        f'velocity="{_num(vel[i])}"/>')
         out.append("  </joint>")
-    tool = np.eye(4)
-    tool[:3, 3] = model.tool
-    for joint, parent, child, transform in ((f"{p}link_{n}_to_flange", f"{p}link_{n}", f"{p}flange", parts[-1]),
-                                            (f"{p}flange_to_tp", f"{p}flange", f"{p}tp", tool)):
-        out.append(f'  <joint name="{joint}" type="fixed">')
-        out.append(f'    <parent link="{parent}"/>\n    <child link="{child}"/>\n    {_origin(transform)}')
+    for joint, parent, child, transform in tail:
+        out.append(f'  <joint name="{p}{joint}" type="fixed">')
+        out.append(f'    <parent link="{p}{parent}"/>\n    <child link="{p}{child}"/>\n    {_origin(transform)}')
         out.append("  </joint>")
     out.append("</robot>")
     return "\n".join(out) + "\n"
