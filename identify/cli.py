@@ -29,6 +29,7 @@ from identify.io.session_measurements import open_session, read_session
 from identify.measurements import Measurements
 from identify.pipeline import Identification, identify, split_holdout
 from identify.report.terminal import format_reference, format_report
+from kinematics.dh import frames_from_joints
 from kinematics.joint_errors import Coupling
 from session.schema import is_session_file
 
@@ -105,29 +106,44 @@ def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
 
 
 def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measurements, doc: dict[str, Any],
-                   robot: RobotModel | None, reference: tuple[str, Any] | None = None, note: str = "") -> None:
-    """Every export asked for, each written atomically."""
+                   robot: RobotModel | None, reference: tuple[str, Any] | None = None, note: str = ""
+                   ) -> list[tuple[str, str]]:
+    """Every export asked for, each written atomically; the model files written, each with what it carries."""
     name = robot.name if robot else "identified_robot"
     limits = robot.limits if robot else None
-    comment = "\n".join([f"identified from {args.input} by dh-calib {__version__}", *export_notes(ident)])
+    written: list[tuple[str, str]] = []  # (path, what it carries)
+
+    def comment(carries: str) -> str:
+        return "\n".join([f"identified from {args.input} by dh-calib {__version__}", carries, *export_notes(ident)])
+
+    exact = export_figure(ident, meas, "exact")
+    plain = export_figure(ident, meas, "plain")
+    if args.urdf or args.ur_calibration:
+        flange = frames_from_joints(ident.model, ident.lines.home[None, :])[0, -1]
     if args.urdf:
-        from identify.exports.urdf import urdf_from_model
+        from identify.exports.urdf import urdf_from_lines
 
         velocities = robot.max_speed if robot else None
-        _write_atomic(Path(args.urdf), urdf_from_model(ident.model, name, limits, velocities, comment=comment))
+        text = urdf_from_lines(ident.lines, ident.model.base, flange, name, limits, velocities,
+                               comment=comment(f"carries: {exact}"), tp_ids=ident.tp_ids)
+        _write_atomic(Path(args.urdf), text)
+        written.append((args.urdf, exact))
     if args.ur_calibration:
-        from identify.exports.ur_calibration import calibration_from_model, format_calibration
+        from identify.exports.ur_calibration import calibration_from_lines, format_calibration
 
         try:
-            text = format_calibration(calibration_from_model(ident.model), comment=comment)
+            text = format_calibration(calibration_from_lines(ident.lines, ident.model.base, flange),
+                                      comment=comment(f"carries: {exact}"))
         except ValueError as exc:
             raise InputError(f"--ur-calibration: {exc}") from None
         _write_atomic(Path(args.ur_calibration), text)
+        written.append((args.ur_calibration, exact))
     if args.rtb:
         from identify.exports.rtb import rtb_snippet
 
-        head = "".join(f"# {line}\n" for line in comment.splitlines())
+        head = "".join(f"# {line}\n" for line in comment(f"carries: {plain}").splitlines())
         _write_atomic(Path(args.rtb), head + rtb_snippet(ident.model, name, limits))
+        written.append((args.rtb, plain))
     if args.json_out:
         from identify.exports.rtb import result_json
 
@@ -146,6 +162,26 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
             if session is not None:
                 session.close()
         _write_atomic(Path(args.report), page)
+    return written
+
+
+def export_figure(ident: Identification, meas: Measurements, carried: str) -> str:
+    """What an export carries, with its held-out figure: ``plain`` (the DH table), ``exact`` (the plain model's exact
+    axes: URDF, UR calibration); the extended model's figure beside it when the format cannot hold joint errors."""
+    if carried == "plain":
+        what, v = "plain model (DH table)", ident.validations.get("plain")
+        rms = None if v is None else v.rms
+    else:
+        what = "plain model (exact axes)"
+        check = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
+        predictor = replace(ident.plain.predictor, coupling=ident.coupling)
+        rms = None if not len(check) else float(np.sqrt(np.mean(np.sum(
+            (check.points - predictor.points(check.q, check.tp)) ** 2, axis=1))))
+    text = f"{what}, held-out {rms * 1e3:.4f} mm" if rms is not None else f"{what}, not validated (no held-out rows)"
+    ext = ident.validations.get("extended")
+    if ident.use == "extended":
+        text += " (joint errors not carried: extended model" + (f" {ext.rms * 1e3:.4f} mm)" if ext else ")")
+    return text
 
 
 def _verification(path: str | None) -> dict[str, Any] | None:
@@ -162,13 +198,12 @@ def _verification(path: str | None) -> dict[str, Any] | None:
 
 
 def export_notes(ident: Identification) -> list[str]:
-    """What a DH-only export (URDF, UR calibration, Robotics Toolbox) leaves out, one line each."""
+    """What a model export (URDF, UR calibration, Robotics Toolbox) leaves out, one line each."""
     notes = []
     if ident.extensions:
         names = ", ".join(name for name, _, _ in ident.extensions)
-        notes.append(f"NOT carried: joint errors beyond DH ({names}); this format holds a DH chain only. They are in "
-                     "the result YAML's 'extensions' section; without them predictions differ from the identified "
-                     "model")
+        notes.append(f"NOT carried: the extended model's joint errors ({names}); this file carries the plain model, "
+                     "fitted without them. The extended model is in the result YAML's 'extensions' section")
     else:
         notes.append("joint errors beyond DH: none selected; this file is the whole identified model")
     if ident.coupling is not None and not ident.coupling.is_identity:
@@ -232,7 +267,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     if args.out:
         _write_atomic(Path(args.out), yaml.safe_dump(doc, sort_keys=False, width=120))
     reference, note = _factory_reference(header, meas.joint_types) if header is not None else (None, "")
-    _write_exports(args, ident, meas, doc, robot, reference, note)
+    written = _write_exports(args, ident, meas, doc, robot, reference, note)
+    announce = sys.stderr if args.json else sys.stdout
     if args.json:
         print(json.dumps(doc, allow_nan=False))
     else:
@@ -240,7 +276,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         if reference is not None or note:
             print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
         if args.out:
-            print(f"result written to {args.out}")
+            used = ident.validation
+            figure = f", held-out {used.rms * 1e3:.4f} mm" if used is not None else ", not validated"
+            print(f"{args.out}: the result (use: its {ident.use} model{figure})")
+    for path, carries in written:
+        print(f"{path}: {carries}", file=announce)
     return doc
 
 

@@ -43,7 +43,7 @@ def _truth():
 def test_mock_session_identifies_the_simulated_truth(tmp_path, capsys):
     code, path = _run(tmp_path)
     assert code == 0
-    assert "validation on" in capsys.readouterr().out
+    assert "validation of the plain model on" in capsys.readouterr().out
     model = model_from_dict(yaml.safe_load(path.with_suffix(".result.yaml").read_text()))
     truth = _truth()
     with Session.open(path) as session:
@@ -137,7 +137,7 @@ def test_export_and_offline_identify_of_a_session(tmp_path, capsys):
     assert identify_main([str(csv), "--robot", "ur5e"]) == 0
     assert identify_main([str(path), "--robot", "ur5e"]) == 0
     out = capsys.readouterr().out
-    assert out.count("Identified DH model") == 3  # acquire, CSV, session
+    assert out.count("Plain DH model (the result's top-level table)") == 3  # acquire, CSV, session
 
 
 def test_bad_specs_and_sessions_give_one_line_and_exit_2(tmp_path, capsys):

@@ -15,8 +15,8 @@ import pytest
 import yaml
 
 from config.robots import load_robot
-from identify.io.result_io import result_to_dict
 from identify.dh_output import dh_output
+from identify.io.result_io import result_to_dict
 from identify.pipeline import identify
 from identify.simulate import tilted_truth
 from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses

@@ -163,7 +163,7 @@ def test_cli_records_coupling_tools_and_extensions_and_exports_say_what_they_lac
     assert {"scale_1", "scale_2", "scale_3"} <= names
     assert "scale" in doc["extensions"]["equations"]
     text = urdf.read_text()
-    assert "NOT carried: joint errors beyond DH" in text and "q_dh = C . readings" in text
+    assert "NOT carried: the extended model's joint errors" in text and "q_dh = C . readings" in text
     capsys.readouterr()
     assert main([str(csv_path), "--extensions", "none", "--json"]) == 2  # the missing coupling, in one line
     assert "move together" in capsys.readouterr().err

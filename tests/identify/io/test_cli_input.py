@@ -421,7 +421,7 @@ def test_out_writes_the_result_yaml(tmp_path, session, capsys):
     out_path.parent.mkdir()  # a missing folder is an error (issue 13), never made
     code, out, err = invoke([write(tmp_path, format_measurements(meas)), "--out", out_path], capsys)
     assert code == 0, err
-    assert f"result written to {out_path}" in out
+    assert f"{out_path}: the result (use: its plain model, held-out " in out
     doc = yaml.safe_load(out_path.read_text(encoding="utf-8"))
     assert list(doc)[:3] == ["joints", "base", "tool"]
     model = model_from_yaml(doc)
