@@ -7,7 +7,8 @@
 hold: ``bench/realdata/README.md``). Nothing is downloaded. Per set present: the converter writes the
 measurement CSV (and the second session's, where the set has one) into ``--out`` (default: a temporary
 folder); the product identifies it as a user would (``identify CSV --out result.yaml``, in-process, timed,
-with ``--robot DATA/<set>/robot.yaml`` when the folder has a nominal model); the written result's plain and
+with ``--robot DATA/<set>/robot.yaml`` when the folder has a nominal model, else the set's own in
+``bench/realdata/robots/``); the written result's plain and
 extended models are read back and scored on the check rows by this package's own forward model
 (:mod:`bench.realdata.score`), and on the second session after a rigid re-registration of the tracker
 (fitted on the even rows, scored on the odd ones); a DH-only least-squares baseline (:mod:`bench.realdata.baseline`)
@@ -32,10 +33,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from bench.realdata import baseline, boby2021, hust2022, score
+from bench.realdata import baseline, boby2021, hust2022, score, zhang2016
 from bench.realdata.common import Converted, DataError, rigid_fit, rms
 
-SETS = {module.NAME: module for module in (boby2021, hust2022)}
+SETS = {module.NAME: module for module in (boby2021, hust2022, zhang2016)}
 BASELINE_TARGET, STATED_TOLERANCE = 1.02, 1.02
 
 
@@ -90,7 +91,7 @@ def run_set(name: str, folder: Path, out: Path) -> SetResult:
     if second is not None:
         second.write(out / f"{name}.second.csv")
     robot = folder / "robot.yaml"
-    robot = robot if robot.is_file() else None
+    robot = robot if robot.is_file() else getattr(module, "NOMINAL", None)
     if data.joint.max() == 0 and robot is None:
         result.skipped = f"free poses only and no nominal model ({folder / 'robot.yaml'} missing)"
         return result
