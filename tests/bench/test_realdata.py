@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 
-from bench.realdata import boby2021, hust2022, run, score
+from bench.realdata import boby2021, hust2022, run, score, zhang2016
 from bench.realdata.common import Converted, DataError, dh_points, rigid_fit, rms
 from config.robots import load_robot
 from identify.io.csvio import read_measurements
@@ -226,3 +226,78 @@ def test_converted_csv_has_a_role_and_tp_column() -> None:
                      np.array([False, True]), np.array([1, 2]))
     header = next(line for line in data.csv_text().splitlines() if not line.startswith("#"))
     assert header == "sweep,joint,q1,q2,x,y,z,role,tp"
+
+
+# --- zhang2016: number, 7 readings (rad), 7 torques, row-major 4x4 pose (mm); an A1 x A2 grid ----------------
+
+ZHANG_HEADER = ("number, " + ", ".join(f"theta_{k}" for k in range(1, 8)) + ", "
+                + ", ".join(f"tau_{k}" for k in range(1, 8)) + ", "
+                + ", ".join(f"m_{r}{c}" for r in range(4) for c in range(4)))
+IIWA_A1A2 = np.array([[0.0, 0.34, 0.0, -np.pi / 2], [0.0, 0.0, 0.0, 0.0]])
+
+
+def write_zhang(path: Path, rng: np.random.Generator, a3: float = 0.0) -> np.ndarray:
+    """A synthetic run: the home row, then the grid A1 in -90..90 deg (18 levels) x A2 in 5..80 deg (8 levels);
+    returns the true points (m) of the grid rows."""
+    grid = np.radians([[a1, a2] for a1 in np.linspace(-90, 90, 18) for a2 in np.linspace(5.3, 79.4, 8)])
+    q = np.vstack([[0.0, 0.0], grid])
+    tool = np.array([0.005, -0.988, 0.0003])
+    table = IIWA_A1A2 + np.array([[0, 0, 0.0005, 0.0003], [0.001, 0, 0, 0]])  # the true arm: 0.5 mm, 0.06 deg off
+    truth = dh_points(table, "RR", np.eye(4), tool, q)
+    measured = truth + rng.normal(0, NOISE, truth.shape)
+    rows = []
+    for k, (angles, point) in enumerate(zip(q, measured, strict=True)):
+        pose = np.eye(4)
+        pose[:3, 3] = point * 1e3
+        readings = [*angles, a3, 0, 0, 0, 0]
+        rows.append(", ".join(f"{float(v):.15f}" for v in [k, *readings, *np.zeros(7), *pose.ravel()]))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(ZHANG_HEADER + "\n" + "\n".join(rows) + "\n")
+    return truth[1:]
+
+
+def test_zhang_converter_keeps_one_sweep_per_joint_and_frees_the_rest(tmp_path: Path) -> None:
+    truth = write_zhang(tmp_path / "zhang2016" / zhang2016.FIT_FILE, np.random.default_rng(RNG_SEED))
+    data = zhang2016.convert(tmp_path / "zhang2016")
+    assert data.joints == "RR" and len(data.q) == 18 * 8  # the home row dropped
+    assert rms(data.points - truth) < 3 * NOISE * np.sqrt(3)  # mm -> m
+    j2, j1 = data.joint == 2, data.joint == 1
+    assert j2.sum() == 8 and np.ptp(data.q[j2, 0]) < 1e-12  # A1 fixed at the level nearest 0 (-5.3 deg)
+    assert j1.sum() == 17 and np.ptp(data.q[j1, 1]) < 1e-12  # A2 fixed at the level nearest 45 deg
+    assert not np.any(data.check & (data.joint != 0)) and data.check.sum() == (18 * 8 - 25) // 4
+    assert zhang2016.convert_second(tmp_path / "zhang2016") is None
+    write_zhang(tmp_path / "moved" / zhang2016.FIT_FILE, np.random.default_rng(0), a3=0.01)
+    with pytest.raises(DataError, match=r"A3\.\.A7 move by 0\.0100 rad"):
+        zhang2016.convert(tmp_path / "moved")
+
+
+def test_bench_on_zhang_layout_matches_the_baseline(tmp_path: Path) -> None:
+    rng = np.random.default_rng(RNG_SEED)
+    write_zhang(tmp_path / "zhang2016" / zhang2016.FIT_FILE, rng)
+    write_zhang(tmp_path / "zhang2016" / zhang2016.SECOND_FILE, rng)
+    result = run.run_set("zhang2016", tmp_path / "zhang2016", tmp_path)
+    rows = {r.model: r for r in result.rows}
+    plain, base = rows["product plain"], rows["DH-only least squares"]
+    assert base.check < 2 * NOISE * np.sqrt(3) and base.second < 2 * NOISE * np.sqrt(3)
+    assert plain.check <= run.BASELINE_TARGET * base.check
+
+
+@pytest.mark.xfail(strict=True, reason="defect: a grid cut into sweeps (one joint-2 sweep per A1 level, one joint-1 "
+                   "sweep per A2 level) identifies to 0.03 mm without a nominal but to ~100 mm with --robot, though "
+                   "the geometric step alone reaches 0.07 mm")
+def test_a_grid_of_sweeps_identifies_with_the_nominal_as_without(tmp_path: Path) -> None:
+    from identify.cli import main
+
+    write_zhang(tmp_path / "zhang2016" / zhang2016.FIT_FILE, np.random.default_rng(5))
+    data = zhang2016.convert(tmp_path / "zhang2016")
+    level1, level2 = zhang2016.levels(data.q[:, 0]), zhang2016.levels(data.q[:, 1])
+    _, sweep = np.unique(np.where(level1 % 2 == 0, level1, 1000 + level2), return_inverse=True)
+    data.sweep, data.joint = sweep + 1, np.where(level1 % 2 == 0, 2, 1)
+    csv = data.write(tmp_path / "grid.csv")
+    fits = []
+    for extra in ([], ["--robot", str(zhang2016.NOMINAL)]):
+        main([str(csv), "--out", str(tmp_path / "r.yaml"), "--force", *extra])
+        doc = yaml.safe_load((tmp_path / "r.yaml").read_text())
+        fits.append(rms(score.models(doc)["plain"].predict(data.q, data.tp) - data.points))
+    assert fits[0] < 3 * NOISE * np.sqrt(3)  # without a nominal: the noise
+    assert fits[1] < 3 * NOISE * np.sqrt(3), fits
