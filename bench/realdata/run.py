@@ -82,7 +82,33 @@ def identify_in_process(csv: Path, result: Path, robot: Path | None) -> tuple[in
     return code, time.perf_counter() - began, text.getvalue()
 
 
-def run_set(name: str, folder: Path, out: Path) -> SetResult:
+def pybotics_row(python: str, start: score.Model, data: Converted, second: Converted | None) -> Row:
+    """pybotics' calibration (its own venv, ``bench._pybotics_worker``) on the first tracked point's fit rows,
+    started from ``start``, scored like the others on that point's check rows (and the second session's)."""
+    from bench.pybotics_compare import run_pybotics
+    from kinematics.dh import DHModel
+
+    first = int(data.tp.min())
+    one = data.tp == first
+    model = DHModel(start.types, *start.table.T, base=start.base, tool=start.tools[first])
+    fit, check = one & ~data.check, one & data.check
+    q_check = data.dh_values()[check]
+    if second is not None:
+        q_check = np.vstack([q_check, second.dh_values()[second.tp == first]])
+    out = run_pybotics(python, model, data.dh_values()[fit], data.points[fit], q_check)
+    n = int(check.sum())
+    row = Row(f"pybotics (point {first} only)", seconds=float(out["seconds"]),
+              check=rms(out["predicted"][:n] - data.points[check]))
+    if second is not None:
+        mine = second.tp == first
+        predicted, measured = out["predicted"][n:], second.points[mine]
+        even = np.arange(len(measured)) % 2 == 0
+        rotation, shift = rigid_fit(predicted[even], measured[even])
+        row.second = rms(predicted[~even] @ rotation.T + shift - measured[~even])
+    return row
+
+
+def run_set(name: str, folder: Path, out: Path, pybotics: str | None = None) -> SetResult:
     module = SETS[name]
     result = SetResult(name)
     data = module.convert(folder)
@@ -123,6 +149,8 @@ def run_set(name: str, folder: Path, out: Path) -> SetResult:
     if second is not None:
         base.second = second_session_rms(fitted, second)
     result.rows.append(base)
+    if pybotics:
+        result.rows.append(pybotics_row(pybotics, start, data, second))
     result.rows.append(Row("published", note=getattr(module, "PUBLISHED", None) or "none for this split"))
     result.missed = targets(result.rows, result.verdict)
     return result
@@ -169,6 +197,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("data", type=Path, help="folder with one sub-folder per set (see bench/realdata/README.md)")
     parser.add_argument("--set", action="append", choices=sorted(SETS), help="only these sets (default: all present)")
     parser.add_argument("--out", type=Path, help="folder for the converted CSVs and results (default: temporary)")
+    parser.add_argument("--pybotics-python", default="/tmp/pyb-venv/bin/python",
+                        help="python of a venv with pybotics (see bench/pybotics_compare.py); skipped if absent")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"bench.realdata: error: {args.data}: not a folder", file=sys.stderr)
@@ -178,13 +208,16 @@ def main(argv: list[str] | None = None) -> int:
     if not present:
         print(f"bench.realdata: error: {args.data} holds none of {', '.join(names)}", file=sys.stderr)
         return 2
+    pybotics = args.pybotics_python if Path(args.pybotics_python).exists() else None
+    if pybotics is None:
+        print(f"pybotics: {args.pybotics_python} not found, its rows are left out")
     status = 0
     with tempfile.TemporaryDirectory() as scratch:
         out = args.out or Path(scratch)
         out.mkdir(parents=True, exist_ok=True)
         for name in present:
             try:
-                result = run_set(name, args.data / name, out)
+                result = run_set(name, args.data / name, out, pybotics)
             except DataError as exc:
                 print(f"bench.realdata: error: {name}: {exc}", file=sys.stderr)
                 return 2

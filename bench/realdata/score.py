@@ -110,14 +110,3 @@ def stated(doc: dict[str, Any]) -> dict[str, float]:
     if v.get("expected_rms") is None:
         return {}
     return {("extended" if (doc.get("extensions") or {}).get("terms") else "plain"): float(v["expected_rms"])}
-
-
-def vouched(doc: dict[str, Any]) -> str | None:
-    """The model the verdict's holdout check vouches for (``plain``/``extended``), when the file names one."""
-    for check in (doc.get("verdict") or {}).get("checks", []):
-        if check.get("name") == "holdout":
-            text = f"{check.get('model', '')} {check.get('message', '')}".lower()
-            for name in ("extended", "plain"):
-                if name in text:
-                    return name
-    return None
