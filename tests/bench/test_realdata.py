@@ -114,8 +114,7 @@ def test_bench_on_boby_layout_fits_the_baseline_to_the_noise(boby_bench) -> None
     assert result.verdict in ("pass", "warn") and not (doc.get("extensions") or {}).get("terms")
     # check rows of a DH arm: tracker noise (sqrt(3) sigma in 3D) plus the fit's own error, under 2x the noise
     assert rows["DH-only least squares"].check < 2 * NOISE * np.sqrt(3)
-    assert rows["product plain"].stated == pytest.approx(doc["validation"]["expected_rms"])
-    assert result.missed == run.targets(result.rows, result.verdict)
+    assert rows["product plain"].stated == pytest.approx(doc["validation"]["expected_rms"])  # what the file states
 
 
 @pytest.mark.xfail(strict=True, reason="defect: with several reflectors, the written DH table turns reflectors 2 "
