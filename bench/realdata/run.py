@@ -1,18 +1,18 @@
 """Real-data benchmark (issue 27): every public robot-calibration set the data folder holds, one table per set.
 
-    .venv/bin/python -m bench.realdata DATA [--set boby2021 ...] [--out DIR]
+    .venv/bin/python -m bench.realdata DATA [--set boby2021 ...] [--out DIR] [--pybotics-python PATH]
     make bench-realdata DATA=folder
 
-``DATA`` holds one sub-folder per set, named as the set (``DATA/boby2021/``, ``DATA/hust2022/``; what each must
-hold: ``bench/realdata/README.md``). Nothing is downloaded. Per set present: the converter writes the
-measurement CSV (and the second session's, where the set has one) into ``--out`` (default: a temporary
-folder); the product identifies it as a user would (``identify CSV --out result.yaml``, in-process, timed,
-with ``--robot DATA/<set>/robot.yaml`` when the folder has a nominal model, else the set's own in
-``bench/realdata/robots/``); the written result's plain and
-extended models are read back and scored on the check rows by this package's own forward model
-(:mod:`bench.realdata.score`), and on the second session after a rigid re-registration of the tracker
-(fitted on the even rows, scored on the odd ones); a DH-only least-squares baseline (:mod:`bench.realdata.baseline`)
-is fitted to the same fit rows and scored the same way.
+``DATA`` holds one sub-folder per set, named as the set (``DATA/boby2021/``, ``DATA/hust2022/``,
+``DATA/zhang2016/``; what each must hold: ``bench/realdata/README.md``). Nothing is downloaded. Per set present:
+the converter writes the measurement CSV (and the second session's, where the set has one) into ``--out``
+(default: a temporary folder); the product identifies it as a user would (``identify CSV --out result.yaml``,
+in-process, timed, with ``--robot DATA/<set>/robot.yaml`` when the folder has a nominal model, else the set's
+own in ``bench/realdata/robots/``); the written result's plain and extended models are read back and scored on
+the check rows by this package's own forward model (:mod:`bench.realdata.score`), and on the second session
+after a rigid re-registration of the tracker (fitted on its even rows, scored on its odd ones). A DH-only
+least-squares baseline (:mod:`bench.realdata.baseline`) and, where its venv exists, pybotics are fitted to the
+same fit rows from the product's plain model and scored the same way.
 
 Targets (exit status 1 when one is missed): the plain model's check RMS <= 1.02x the baseline's; the extended
 model no worse than the plain one on the second session; no model the verdict passes whose independently scored
