@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench bench-realdata clean
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -47,6 +47,12 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.ur_continuous || status=1; \
 	$(BIN)/python -m bench.camera_stream || status=1; \
 	exit $$status
+
+# public robot-calibration data sets (never downloaded here): DATA holds one folder per set, as
+# bench/realdata/README.md describes; one table per set, exit status 1 when a target is missed
+bench-realdata: $(STAMP)
+	@test -n "$(DATA)" || { echo "usage: make bench-realdata DATA=folder (see bench/realdata/README.md)"; exit 2; }
+	$(BIN)/python -m bench.realdata "$(DATA)"
 
 clean:
 	rm -rf $(VENV) sessions

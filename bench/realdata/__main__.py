@@ -1,0 +1,5 @@
+import sys
+
+from bench.realdata.run import main
+
+sys.exit(main())
