@@ -12,7 +12,7 @@
 
 Exit codes: 0 complete, 1 the run failed (robot fault, lost connection; resumable), 2 bad input or a
 plan that breaks a limit or comes too close to the cell, 3 complete but its identification fails its
-verdict, 130 stopped by the operator (resumable).
+verdict, 130 stopped by Ctrl-C, SIGTERM or SIGHUP (the motion stops; resumable).
 
 The run itself, its progress and what a complete session leaves beside it (result YAML, HTML report):
 acquire/runner.py.
@@ -40,6 +40,7 @@ from acquire.runner import finish, run_session
 from acquire.session import Session
 from acquire.session_backup import backup_session
 from acquire.stream_loop import check_streams
+from common import stop_signals
 from common.errors import InputError
 from common.outputs import OutputError, check_outputs, check_target, same_file
 from config.robots import ConfigError, RobotModel, load_robot
@@ -453,6 +454,11 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    with stop_signals.raising():  # SIGTERM and SIGHUP stop like Ctrl-C (common/stop_signals.py)
+        return _main(argv)
+
+
+def _main(argv: list[str]) -> int:
     try:
         if argv[:1] == ["export"]:
             return _export(argv[1:])
@@ -470,8 +476,8 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, ResumeRefused, ConfigError, SessionError, InputError, DriverError, ValueError) as exc:
         print(f"acquire: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("acquire: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # outside a run (a run records its stop and prints its own line)
+        print(f"acquire: {stop_signals.reason_of(exc)}", file=sys.stderr)
         return 130
 
 

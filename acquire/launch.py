@@ -13,8 +13,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from session.lock import Locked, busy_message, drop_held, hold
-
 
 def resume_target(argv: list[str]) -> Path | None:
     """The session a writing ``--resume`` names in ``argv`` (None for a dry run, another command, or none)."""
@@ -29,8 +27,23 @@ def resume_target(argv: list[str]) -> Path | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``acquire`` with a fast refusal of a second writer; see :func:`acquire.cli.main` for the rest."""
+    """``acquire`` with a fast refusal of a second writer; see :func:`acquire.cli.main` for the rest. A stop signal
+    (Ctrl-C, SIGTERM, SIGHUP) while the command starts up stops it with one line and exit code 130: this module
+    imports nothing else before its handlers are set."""
     argv = sys.argv[1:] if argv is None else argv
+    try:
+        from common import stop_signals
+
+        with stop_signals.raising():
+            return _main(argv)
+    except KeyboardInterrupt as exc:  # a Stopped says which signal; Python's own KeyboardInterrupt is Ctrl-C
+        print(f"acquire: {str(exc) or 'stopped by the operator (Ctrl-C)'}", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str]) -> int:
+    from session.lock import Locked, busy_message, drop_held, hold
+
     target = resume_target(argv)
     if target is not None:
         try:

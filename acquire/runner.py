@@ -27,8 +27,8 @@ log = logging.getLogger("acquire")
 
 
 def run_session(robot, tracker, session: Session, clock, site: SiteConfig, quiet: bool) -> RunResult:
-    """Run ``session``'s remaining steps on the devices (Ctrl-C stops the motion; the site's timeouts and
-    retries), printing progress unless ``quiet``."""
+    """Run ``session``'s remaining steps on the devices (Ctrl-C, SIGTERM or SIGHUP stops the motion; the site's
+    timeouts and retries), printing progress unless ``quiet``."""
     stop = StopRequest()
     orchestrator = Orchestrator(robot, tracker, session, clock,
                                 Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
@@ -44,9 +44,8 @@ def finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -
     log.info("run %s%s; %d step(s) recorded, %d missing", result.outcome,
              f" ({result.reason})" if result.reason else "", result.recorded, result.missing)
     if result.outcome != "complete":
-        print(f"acquire: run {result.outcome}: {result.reason}", file=sys.stderr)
-        print(f"acquire: {result.recorded} step(s) recorded this run; resume with: acquire --resume {path}",
-              file=sys.stderr)
+        print(f"acquire: run {result.outcome} ({result.reason}); {result.recorded} step(s) recorded this run; "
+              f"resume with: acquire --resume {path}", file=sys.stderr)
         return 130 if result.outcome == "aborted" else 1
     if result.missing:
         print(f"note: {result.missing} step(s) still missing after a second attempt (tracker failures); the "

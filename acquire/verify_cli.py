@@ -235,8 +235,8 @@ def _measure(args, session: Session | None, path: Path, plan, robot_spec: RobotS
         print(f"session: {path}")
         result = run_session(robot_dev, tracker, session, clock, site, args.quiet)
         if result.outcome != "complete":
-            print(f"acquire verify: run {result.outcome}: {result.reason}", file=sys.stderr)
-            print(f"acquire verify: resume with: acquire verify --resume {path}", file=sys.stderr)
+            print(f"acquire verify: run {result.outcome} ({result.reason}); resume with: acquire verify --resume "
+                  f"{path}", file=sys.stderr)
             return 130 if result.outcome == "aborted" else 1
         outcome, _ = _finish(session, path, robot)
         return _code(outcome)
