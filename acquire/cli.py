@@ -43,6 +43,7 @@ from acquire.stream_loop import check_streams
 from common import stop_signals
 from common.errors import InputError
 from common.outputs import OutputError, check_outputs, check_target, same_file
+from common.units import positive_length
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
@@ -86,7 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, help="steps per sweep (site default 36)")
     p.add_argument("--samples", type=int, help="tracker samples per step (site default)")
     p.add_argument("--free-poses", type=int, help="free poses added for the fit and validation")
-    p.add_argument("--noise", type=float, help="tracker noise per axis, m, for the predicted accuracy")
+    p.add_argument("--noise", type=positive_length, metavar="LENGTH",
+                   help="tracker noise per axis (1 sigma) for the predicted accuracy, e.g. 0.05mm or 50um (a bare "
+                        "number is metres)")
     p.add_argument("--probe", action="store_true",
                    help="open the tracker, take --count readings, print them with their spread, and exit")
     p.add_argument("--count", type=int, default=10, help="readings taken by --probe (10)")

@@ -20,6 +20,7 @@ import yaml
 from common import __version__
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
+from common.units import length, positive_length
 from config.robots import RobotModel
 from identify.calibrated import robot_model
 from identify.cpa import DEFAULT_PARALLEL_TOL
@@ -68,13 +69,15 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="seed of the hold-out draw (0)")
     parser.add_argument("--parallel-tol", type=float, default=DEFAULT_PARALLEL_TOL, metavar="RAD",
                         help=f"axes closer than this are treated as parallel ({DEFAULT_PARALLEL_TOL} rad)")
-    parser.add_argument("--max-offset", type=float, default=DEFAULT_MAX_OFFSET, metavar="M",
+    parser.add_argument("--max-offset", type=length, default=DEFAULT_MAX_OFFSET, metavar="LENGTH",
                         help="where the data resolve a near-parallel pair's misalignment, keep the parallel-axis "
-                        "convention instead of exact DH if exact DH would move d more than M metres (default: "
-                        "no cap; the verdict's dh_table check says what a cap costs)")
+                        "convention instead of exact DH if exact DH would move d more than LENGTH (e.g. 50mm; a "
+                        "bare number is metres; default: no cap; the verdict's dh_table check says what a cap "
+                        "costs)")
     parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
-    parser.add_argument("--noise", type=float, metavar="M",
-                        help="the tracker's noise, m per axis (1 sigma), to judge the fit by (a sigma column wins)")
+    parser.add_argument("--noise", type=positive_length, metavar="LENGTH",
+                        help="the tracker's noise per axis (1 sigma) to judge the fit by, e.g. 0.05mm or 50um (a bare "
+                        "number is metres; a sigma column wins)")
     parser.add_argument("--coupling", metavar="FILE",
                         help="YAML with the readings' coupling, DH values = matrix . readings + offset: a row-major "
                         "n x n list, or {matrix: ..., offset: [...]} (wins over '# coupling:' and the robot model's)")
@@ -207,8 +210,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Identify per ``args``; returns the result document. Raises InputError for bad input."""
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
-    if args.noise is not None and not (args.noise > 0 and math.isfinite(args.noise)):
-        raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
+    if not 0.0 <= args.parallel_tol < math.pi / 2:
+        raise InputError(f"--parallel-tol must be an angle in [0, pi/2) rad, got {args.parallel_tol}")
+    if not args.max_offset >= 0.0:
+        raise InputError(f"--max-offset must be a length >= 0, got {args.max_offset} m")
     _check_outputs(args)
     header = None
     if is_session_file(Path(args.input)):
