@@ -68,8 +68,9 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="acquire", description=__doc__.splitlines()[0].replace("``", ""),
                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:12]))
-    p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e (mock:ur5e; on --resume: the session's,"
-                   " whose address may change)")
+    p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e; the model may be a robot YAML file: "
+                   "mock:my_arm.yaml, my_arm.yaml@HOST (mock:ur5e; on --resume: the session's, whose address may "
+                   "change)")
     p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock, or none (motion "
                    "rehearsal) (mock; on --resume: the session's, whose port or host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
@@ -262,7 +263,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
             return 0
     else:
         site = mode_site(_site(args), args.mode, args.free_poses)  # streams carry the fit: no free poses unless asked
-        robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
+        robot_spec = RobotSpec.parse(args.robot if args.robot is not None else "mock:ur5e").resolved()
         tracker_arg = args.tracker or "mock"
         tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)
         path, plan = None, None

@@ -81,7 +81,7 @@ def _load(path: Path) -> tuple[CalibratedModel, dict[str, Any], str]:
 
 def _robot_for(args: argparse.Namespace, doc: dict[str, Any], model: CalibratedModel) -> tuple[RobotSpec, RobotModel]:
     name = nominal_name(doc)
-    spec = RobotSpec.parse(args.robot or f"mock:{name or 'ur5e'}")
+    spec = RobotSpec.parse(args.robot if args.robot is not None else f"mock:{name or 'ur5e'}").resolved()
     robot = load_robot(spec.model)
     if name is not None and name.lower() != robot.name.lower():
         raise UsageError(f"{args.result} is a calibration of {name}; --robot {spec} is a {robot.name}")

@@ -221,7 +221,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     else:
         content = read_measurements(args.input, args.joints, args.units)
     meas = _rows(split_holdout(content.measurements, args.holdout, args.seed), args.rows)
-    robot_name = args.robot or (header or {}).get("robot_model")  # a session knows its robot
+    # a session knows its robot; --robot '' is refused, not taken for no --robot
+    robot_name = args.robot if args.robot is not None else (header or {}).get("robot_model")
     robot = robot_model(robot_name)
     nominal, nominal_name = (robot.nominal, robot.name) if robot else (None, None)
     if nominal is not None and nominal.joint_types != meas.joint_types:

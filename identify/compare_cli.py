@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
     if len({s for s, _ in serials}) > 1:
         a, b = sorted(serials)[:2]
         raise InputError(f"{a[1]} is robot serial {a[0]}, {b[1]} serial {b[0]}: different robots cannot be compared")
-    robot = robot_model(args.robot or next((r for _, r, *_ in loaded if r), None))
+    robot = robot_model(args.robot if args.robot is not None else next((r for _, r, *_ in loaded if r), None))
     if robot is not None and robot.joint_types != models[0].model.joint_types:
         raise InputError(f"--robot {robot.name} has joints {robot.joint_types}, the inputs "
                          f"{models[0].model.joint_types}")

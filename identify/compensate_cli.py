@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     status = (doc.get("verdict") or {}).get("status")
     if status == "fail":
         raise InputError(f"{args.result} fails its verdict: its model must not be used (see the result's checks)")
-    robot = robot_model(args.robot or nominal_name(doc))
+    robot = robot_model(args.robot if args.robot is not None else nominal_name(doc))
     n = identified.n_joints
     if robot is not None and robot.joint_types != identified.model.joint_types:
         raise InputError(f"--robot {robot.name} has joints {robot.joint_types}, the result "
