@@ -144,10 +144,12 @@ class Orchestrator:
         on_progress: Callable[[Progress], None] | None = None,
         stop: StopRequest | None = None,
         stream_rate: float = 250.0,
+        on_start: Callable[[Step, int, int], None] | None = None,
     ) -> None:
         self.robot, self.tracker, self.session, self.clock = robot, tracker, session, clock
         self.timeouts, self.retries = timeouts, retries
         self.on_progress = on_progress
+        self.on_start = on_start  # (step, number in this run, steps in this run) before each step
         self.stop = stop or StopRequest()
         self.plan: Plan = session.plan
         self.coupling = session.coupling
@@ -178,6 +180,8 @@ class Orchestrator:
                 count += 1
                 if self.stop.requested:
                     return self._end("aborted", self.stop.reason, recorded)
+                if self.on_start is not None:
+                    self.on_start(step, count, total)
                 record = self._do_step(step)
                 if self.stop.requested and record.status != "ok":
                     return self._end("aborted", self.stop.reason, recorded)

@@ -12,11 +12,13 @@ from typing import Any
 
 import yaml
 
-from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
+from acquire.orchestrator import Orchestrator, RunResult, StopRequest, Timeouts
+from acquire.progress import ProgressDisplay
 from acquire.session import Session
 from common.outputs import write_output
 from config.robots import ConfigError, RobotModel
 from config.site import SiteConfig
+from drivers.clock import VirtualClock
 from identify.factory import factory_reference
 from identify.io.result_io import result_to_dict
 from identify.pipeline import identify
@@ -28,16 +30,21 @@ log = logging.getLogger("acquire")
 
 def run_session(robot, tracker, session: Session, clock, site: SiteConfig, quiet: bool) -> RunResult:
     """Run ``session``'s remaining steps on the devices (Ctrl-C, SIGTERM or SIGHUP stops the motion; the site's
-    timeouts and retries), printing progress unless ``quiet``."""
+    timeouts and retries), showing progress unless ``quiet`` (acquire/progress.py)."""
     stop = StopRequest()
+    display = ProgressDisplay(session.plan, site.measure_time, quiet, simulated=isinstance(clock, VirtualClock))
+    done = session.recorded_indices()
+    steps = session.plan.steps
+    display.plan_steps([s for s in steps if s.index not in done] + [steps[i] for i in session.missing_indices()])
     orchestrator = Orchestrator(robot, tracker, session, clock,
                                 Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
-                                site.retries, progress_printer(quiet), stop, site.stream_rate)
-    with stop.installed():
-        result = orchestrator.run()
-    if not quiet and sys.stderr.isatty():
-        sys.stderr.write("\n")
-    return result
+                                site.retries, progress_printer(quiet, display), stop, site.stream_rate,
+                                on_start=display.start)
+    try:
+        with stop.installed():
+            return orchestrator.run()
+    finally:
+        display.close()
 
 
 def finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -> int:
@@ -66,30 +73,10 @@ def finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -
 
 
 
-def progress_printer(quiet: bool):
-    """Progress to the log always, and to the terminal unless ``quiet``."""
-    tty = sys.stderr.isatty()
-
-    def show(p: Progress) -> None:
-        residual = f", sweep residual {p.residual * 1e3:.3f} mm" if p.residual is not None else ""
-        what = f"joint {p.step.joint} sweep" if p.step.kind == "sweep" else p.step.kind
-        line = (f"step {p.done}/{p.total} ({what}): {p.samples} samples, {p.status}; "
-                f"elapsed {hms(p.elapsed)}, remaining {hms(p.remaining)}{residual}")
-        log.info(line)
-        if quiet:
-            return
-        if tty:
-            sys.stderr.write("\r" + line[:150].ljust(150))
-            sys.stderr.flush()
-        elif p.done == p.total or p.done % 25 == 0:
-            print(line, file=sys.stderr)
-
-    return show
-
-
-def hms(seconds: float) -> str:
-    seconds = max(0, round(seconds))
-    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+def progress_printer(quiet: bool, display: ProgressDisplay):
+    """What the orchestrator calls after each step: the display's :meth:`~ProgressDisplay.done` (logs the step,
+    and shows it unless ``quiet``)."""
+    return display.done
 
 
 def cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:

@@ -28,8 +28,9 @@ import yaml
 from acquire.cli import UsageError, _check_start, _confirm, _open_devices, _Parser, _site, _without_faults
 from acquire.plan import estimate_duration, plan_clearance
 from acquire.plan_report import format_clearance
+from acquire.progress import hms
 from acquire.resume import resume_settings
-from acquire.runner import hms, run_session
+from acquire.runner import run_session
 from acquire.session import Session
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
 from common.outputs import check_outputs, check_target, write_output
