@@ -1,21 +1,7 @@
 """``acquire``: plan, move, measure and record a session, then identify (the operator's main job).
 
-    acquire --robot mock:ur5e --tracker mock            mock-mode rehearsal (simulated robot and tracker)
-    acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
-    acquire --robot ur5e --tracker mock --dry-run      print the plan, its duration and accuracy; move nothing
-    acquire --robot ur5e@192.168.1.10 --tracker none    rehearse the plan's motion at 25 % speed, measuring nothing
-    acquire --resume SESSION                            continue an interrupted session
-    acquire export SESSION --csv out.csv                measurement CSV of a session
-    acquire backup SESSION COPY                         a safe copy of a session, even while it is written
-    acquire verify --result RESULT                      ISO 9283-style accuracy before/after compensation
-    acquire --tracker serial:/dev/ttyUSB0?protocol=polled-xyz --probe   check the tracker on site
-
-Exit codes: 0 complete, 1 the run failed (robot fault, lost connection; resumable), 2 bad input or a
-plan that breaks a limit or comes too close to the cell, 3 complete but its identification fails its
-verdict, 130 stopped by Ctrl-C, SIGTERM or SIGHUP (the motion stops; resumable).
-
-The run itself, its progress and what a complete session leaves beside it (result YAML, HTML report):
-acquire/runner.py.
+Its options, subcommands and exit codes: acquire/options.py (``acquire --help``). The run itself, its progress and
+what a complete session leaves beside it (result YAML, HTML report): acquire/runner.py.
 """
 
 from __future__ import annotations
@@ -30,6 +16,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from acquire.cell import Clearance
+from acquire.options import _Parser, build_parser
 from acquire.orchestrator import RunResult, StopRequest
 from acquire.plan import check_plan, estimate_duration, plan_clearance
 from acquire.plan_continuous import estimate_continuous_duration
@@ -43,7 +30,6 @@ from acquire.stream_loop import check_streams
 from common import stop_signals
 from common.errors import InputError
 from common.outputs import OutputError, check_outputs, check_target, same_file
-from common.units import positive_length
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
@@ -58,55 +44,6 @@ log = logging.getLogger("acquire")
 
 class UsageError(Exception):
     """Bad input: one line, exit code 2."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="acquire", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:12]))
-    p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e; the model may be a robot YAML file: "
-                   "mock:my_arm.yaml, my_arm.yaml@HOST (mock:ur5e; on --resume: the session's, whose address may "
-                   "change)")
-    p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock, or none (motion "
-                   "rehearsal) (mock; on --resume: the session's, whose port or host may change)")
-    p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
-    p.add_argument("--session", type=Path, help="session file to create (default sessions/<robot>-<time>.session)")
-    p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this session where it stopped")
-    p.add_argument("--remeasure-missing", action="store_true",
-                   help="with --resume: measure a complete session's missing steps again (the first attempt is kept)")
-    p.add_argument("--force", action="store_true",
-                   help="replace an existing result or report beside a new session")
-    p.add_argument("--dry-run", action="store_true", help="print the plan and what it will reach; move nothing")
-    p.add_argument("--yes", action="store_true", help="do not ask before moving a real robot")
-    p.add_argument("--realtime", action="store_true", help="mock mode at the speed of a real run")
-    p.add_argument("--quiet", action="store_true", help="no progress display")
-    p.add_argument("--log", type=Path, metavar="FILE", help="log every step and event to FILE")
-    p.add_argument("--steps", type=int, help="steps per sweep (site default 36)")
-    p.add_argument("--samples", type=int, help="tracker samples per step (site default)")
-    p.add_argument("--free-poses", type=int, help="free poses added for the fit and validation")
-    p.add_argument("--noise", type=positive_length, metavar="LENGTH",
-                   help="tracker noise per axis (1 sigma) for the predicted accuracy, e.g. 0.05mm or 50um (a bare "
-                        "number is metres)")
-    p.add_argument("--probe", action="store_true",
-                   help="open the tracker, take --count readings, print them with their spread, and exit")
-    p.add_argument("--count", type=int, default=10, help="readings taken by --probe (10)")
-    p.add_argument("--json", action="store_true",
-                   help="with --probe: one JSON object per reading; with --dry-run: the plan as one JSON object")
-    p.add_argument("--speed-fraction", type=float, metavar="F",
-                   help="joint speeds and accelerations as this fraction of the model's defaults (site "
-                        "robot.speed_fraction; 0.25 with --tracker none)")
-    p.add_argument("--mode", choices=("step", "continuous", "both"), default=None,
-                   help="step: stop-and-go sweeps (the default); continuous: each sweep one constant-speed move while "
-                        "robot and tracker stream (both must stream); both: per joint the stop-and-go sweep and the "
-                        "continuous one (the stop-and-go sweeps need no clock: they anchor the streams' timing and can "
-                        "check it; --steps sets their size); the dry run compares the three")
-    p.add_argument("--trace-io", type=Path, metavar="FILE",
-                   help="log every byte to and from the tracker (serial and I++ trackers)")
-    return p
 
 
 def _export(argv: list[str]) -> int:

@@ -41,7 +41,14 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+SUBCOMMANDS = ("export", "backup", "verify", "calibrate-camera", "print-board")  # parsed by their own modules
+
+
 def _main(argv: list[str]) -> int:
+    if not argv[:1] or argv[0] not in SUBCOMMANDS:
+        refusal = _quick_refusal(argv)  # --help, --version, a bad option or device spec: before the heavy imports
+        if refusal is not None:
+            return refusal
     from session.lock import Locked, busy_message, drop_held, hold
 
     target = resume_target(argv)
@@ -59,6 +66,25 @@ def _main(argv: list[str]) -> int:
         return full_main(argv)
     finally:
         drop_held()  # a lock the command never claimed (it stopped before opening the session)
+
+
+def _quick_refusal(argv: list[str]) -> int | None:
+    """Parse ``argv`` with the light parser (``--help`` and ``--version`` exit here) and check the device specs;
+    the exit code of a refusal (its one line printed), or None to go on."""
+    from acquire.options import build_parser
+    from drivers.errors import SpecError
+    from drivers.spec import RobotSpec, TrackerSpec
+
+    args = build_parser().parse_args(argv)
+    try:
+        if args.robot is not None:
+            RobotSpec.parse(args.robot)
+        if args.tracker is not None and args.tracker != "none":
+            TrackerSpec.parse(args.tracker)
+    except SpecError as exc:
+        print(f"acquire: error: {exc}", file=sys.stderr)
+        return 2
+    return None
 
 
 if __name__ == "__main__":
