@@ -47,9 +47,11 @@ class UsageError(Exception):
 
 
 def _export(argv: list[str]) -> int:
-    p = _Parser(prog="acquire export", description="Write a session's measurements as the CSV contract.")
-    p.add_argument("session", type=Path)
-    p.add_argument("--csv", type=Path, required=True)
+    p = _Parser(prog="acquire export", description="Write a session's measurements as a measurement CSV (the file "
+                "identify reads; its columns: README.md, File contracts). A session being written can be exported.",
+                epilog="exit codes: 0 written, 2 bad input (one line)")
+    p.add_argument("session", type=Path, help="the session file to read (never changed)")
+    p.add_argument("--csv", type=Path, required=True, metavar="OUT.csv", help="the CSV to write")
     p.add_argument("--force", action="store_true", help="replace the CSV if it exists")
     args = p.parse_args(argv)
     check_outputs([args.session], [("--csv", args.csv)], args.force)
@@ -64,8 +66,8 @@ def _export(argv: list[str]) -> int:
 
 def _backup(argv: list[str]) -> int:
     p = _Parser(prog="acquire backup", description="Copy a session safely, even while it is being written "
-                "(SQLite's online backup API).")
-    p.add_argument("session", type=Path)
+                "(SQLite's online backup API).", epilog="exit codes: 0 copied, 2 bad input (one line)")
+    p.add_argument("session", type=Path, help="the session file to copy (never changed)")
     p.add_argument("dest", type=Path, help="the copy (a new file; an existing one only with --force)")
     p.add_argument("--force", action="store_true", help="replace DEST if it exists")
     args = p.parse_args(argv)

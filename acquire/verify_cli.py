@@ -33,6 +33,7 @@ from acquire.resume import resume_settings
 from acquire.runner import run_session
 from acquire.session import Session
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
+from common.help_text import description as _description
 from common.outputs import check_outputs, check_target, write_output
 from config.robots import RobotModel, load_robot
 from drivers.spec import RobotSpec, TrackerSpec
@@ -44,8 +45,9 @@ MM = 1e3
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="acquire verify", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:7]))
+    first, rest = __doc__.split("\n\n", 1)
+    p = _Parser(prog="acquire verify", description=_description(first),
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("--result", type=Path, help="the calibration to verify (result YAML, with its covariance)")
     p.add_argument("--robot", help="robot spec (default: mock:<the result's robot>, the simulated rig)")
     p.add_argument("--tracker", help="tracker spec (default mock)")

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from common.errors import InputError
+from common.help_text import description as _description
 from common.outputs import check_outputs, write_output
 from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
@@ -31,8 +32,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="identify compare", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
+    first, rest = __doc__.split("\n\n", 1)
+    p = _Parser(prog="identify compare", description=_description(first),
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("inputs", nargs="+", metavar="RESULT_OR_SESSION", help="two or more, oldest first")
     p.add_argument("--robot", metavar="MODEL", help="nominal model (joint limits of the displacement poses; default: "
                    "the inputs')")
