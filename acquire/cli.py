@@ -29,6 +29,7 @@ from acquire.session_backup import backup_session
 from acquire.stream_loop import check_streams
 from common import stop_signals
 from common.errors import InputError
+from common.fit_width import say
 from common.outputs import OutputError, check_outputs, check_target, same_file
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
@@ -236,10 +237,10 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     else:
         duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
         accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
-    print(format_plan(plan, robot_model, duration, accuracy))
-    print(format_clearance(clearance, plan, site))
+    say(format_plan(plan, robot_model, duration, accuracy))
+    say(format_clearance(clearance, plan, site))
     if args.dry_run and not rehearsal and session is None:
-        print(format_modes(robot_model, _site(args), plan, args.free_poses))
+        say(format_modes(robot_model, _site(args), plan, args.free_poses))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0

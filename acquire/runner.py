@@ -15,6 +15,7 @@ import yaml
 from acquire.orchestrator import Orchestrator, RunResult, StopRequest, Timeouts
 from acquire.progress import ProgressDisplay
 from acquire.session import Session
+from common.fit_width import say
 from common.outputs import write_output
 from config.robots import ConfigError, RobotModel
 from config.site import SiteConfig
@@ -55,13 +56,13 @@ def finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -
               f"resume with: acquire --resume {path}", file=sys.stderr)
         return 130 if result.outcome == "aborted" else 1
     if result.missing:
-        print(f"note: {result.missing} step(s) still missing after a second attempt (tracker failures); the "
+        say(f"note: {result.missing} step(s) still missing after a second attempt (tracker failures); the "
               f"identification uses the rest; acquire --resume {path} --remeasure-missing tries them again")
     drift = session.drift()
     if len(drift) > 1:
         worst = max(d for _, d in drift)
         minutes = (drift[-1][0] - drift[0][0]) / 60
-        print(f"home drift: {len(drift)} re-measurements over {minutes:.1f} min, largest {worst * 1e3:.4f} mm "
+        say(f"home drift: {len(drift)} re-measurements over {minutes:.1f} min, largest {worst * 1e3:.4f} mm "
               "from the first")
     doc = identify_session(session, path, robot)
     if doc["verdict"]["status"] == "fail":

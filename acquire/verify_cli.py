@@ -33,6 +33,8 @@ from acquire.resume import resume_settings
 from acquire.runner import run_session
 from acquire.session import Session
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
+from common import fit_width
+from common.fit_width import say
 from common.help_text import description as _description
 from common.outputs import check_outputs, check_target, write_output
 from config.robots import RobotModel, load_robot
@@ -99,14 +101,12 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
     lines = [f"verification of {info['result']} (verdict {info['result_verdict']}) on {robot.name}: ISO 9283-style, "
              f"5 poses x {info['cycles']} cycles, before (nominal model) then after (identified model)",
              f"test cube: centre {', '.join(f'{v * MM:.1f}' for v in info['centre'])} mm, edge {info['edge'] * MM:.0f} "
-             "mm (base frame)",
-             f"{'pose':<5} {'target x, y, z [mm]':<28} {'commanded before: q [deg]':<44} predicted AP before / after "
-             "[mm]"]
-    for k in range(5):
-        qb = ", ".join(f"{np.degrees(v):.1f}" for v in info["q"]["before"][k])
-        xyz = " ".join(f"{v:8.1f}" for v in targets[k])
-        lines.append(f"P{k + 1:<4} {xyz:<28} {qb:<44} {info['predicted']['before'][k] * MM:.3f} / 0 ± "
-                     f"{info['expected'][k] * MM:.3f}")
+             "mm (base frame); per pose: its target, the joints commanded before compensation, and the AP "
+             "predicted before / after [mm]"]
+    rows = [[f"P{k + 1}", *(f"{v:.1f}" for v in targets[k]),
+             ", ".join(f"{np.degrees(v):.1f}" for v in info["q"]["before"][k]),
+             f"{info['predicted']['before'][k] * MM:.3f} / 0 ± {info['expected'][k] * MM:.3f}"] for k in range(5)]
+    lines += fit_width.table(["pose", "x [mm]", "y [mm]", "z [mm]", "q before [deg]", "AP before / after"], rows)
     change = np.max(np.abs(np.array(info["q"]["after"]) - np.array(info["q"]["before"])))
     lines.append(f"compensation changes the joints by up to {change * 1e3:.2f} mrad")
     lines += [f"note: {n}" for n in info["notes"]]
@@ -133,7 +133,7 @@ def format_outcome(outcome: Outcome) -> str:
 def _finish(session: Session, path: Path, robot: RobotModel) -> tuple[Outcome, dict[str, Any]]:
     info = session.header["config"]["verification"]
     outcome = analyse(info, session.steps())
-    print(format_outcome(outcome))
+    say(format_outcome(outcome))
     summary = outcome.as_dict(info)
     yaml_path, report_path = _outputs(path)
     write_output(yaml_path, yaml.safe_dump(summary, sort_keys=False, width=120), force=True)
@@ -183,8 +183,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     plan, labels = build(robot, site, d.q, cycles)
     info = header(d, labels, model, str(args.result), sha, (doc.get("verdict") or {}).get("status"), cycles)
-    print(format_design(info, robot, plan, estimate_duration(plan, robot, site.measure_time)))
-    print(format_clearance(plan_clearance(plan, robot, site), plan, site))
+    say(format_design(info, robot, plan, estimate_duration(plan, robot, site.measure_time)))
+    say(format_clearance(plan_clearance(plan, robot, site), plan, site))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
@@ -210,7 +210,7 @@ def _resume(args: argparse.Namespace, session: Session) -> int:
     tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
     if args.dry_run:
         duration = estimate_duration(session.plan, robot, settings.site.measure_time)
-        print(format_design(info, robot, session.plan, duration))
+        say(format_design(info, robot, session.plan, duration))
         print("dry run: nothing was connected or moved")
         return 0
     if session.next_index() is None:

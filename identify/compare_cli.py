@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from common import fit_width
 from common.errors import InputError
 from common.help_text import description as _description
 from common.outputs import check_outputs, write_output
@@ -148,7 +149,7 @@ def format_comparison(c: Comparison) -> str:
         lines += [f"note: {e}" for e in p.excluded]
         lines.append(f"cell: base moved {p.base_shift * 1e3:.3f} mm and turned {math.degrees(p.base_turn):.4f} deg "
                      f"relative to the tracker; TP {p.tool_shift * 1e3:.3f} mm on the flange (not the robot)")
-    return "\n".join(lines)
+    return "\n".join(fit_width.wrap_lines(lines))  # within the terminal's width
 
 
 def main(argv: list[str] | None = None) -> int:

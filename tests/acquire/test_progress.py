@@ -113,10 +113,12 @@ def test_without_a_terminal_one_line_every_few_seconds_of_wall_time(plans):
     assert re.search(r"step 3/23 \(joint \d continuous sweep\): running for 12 s \(planned \d+ s\)", out.getvalue())
 
 
-def _pty_run(argv: list[str], cols: int) -> str:
+def _pty_run(argv: list[str], cols: int, cwd: Path | None = None) -> str:
     """The command's terminal output at ``cols`` columns (a real pseudo-terminal), escape sequences removed."""
     pid, fd = pty.fork()
     if pid == 0:  # the child: the command on the terminal
+        if cwd is not None:
+            os.chdir(cwd)
         os.execv(argv[0], argv)
     fcntl.ioctl(fd, termios.TIOCSWINSZ, struct.pack("HHHH", 24, cols, 0, 0))
     out = b""
@@ -144,3 +146,17 @@ def test_the_bar_fits_a_real_terminal_and_shows_wall_clock_time(tmp_path, cols):
     assert re.search(r"100%\|█+\| 00:0\d<00:00", last)  # done in seconds of wall-clock time
     if cols >= 80:  # and minutes of simulated time, labelled (narrower: the label and the bar keep the room)
         assert re.search(r"simulated 0:0[1-9]:\d\d", last) and "joint 3 sweep" in text
+
+
+def test_a_session_and_its_verification_fit_an_80_column_terminal(tmp_path):
+    """What ``make demo`` prints (plan, progress, identification, verification), on a real 80-column terminal:
+    no line wider, the DH table's four columns side by side."""
+    bin_ = Path(sys.executable).parent
+    text = _pty_run([str(bin_ / "acquire"), "--robot", "mock:ur5e", "--tracker", "mock", "--steps", "6",
+                     "--samples", "2", "--free-poses", "4", "--session", "s.session"], 80, tmp_path)
+    text += _pty_run([str(bin_ / "acquire"), "verify", "--result", "s.result.yaml", "--robot", "mock:ur5e",
+                      "--tracker", "mock", "--cycles", "2", "--session", "v.session"], 80, tmp_path)
+    lines = re.split(r"[\r\n]", text)
+    assert "verification written to" in text and "Traceback" not in text
+    assert max(len(line) for line in lines) <= 80, max(lines, key=len)
+    assert any(re.search(r"theta \[deg\] +d \[mm\] +a \[mm\] +alpha \[deg\]", line) for line in lines)
