@@ -237,6 +237,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     else:
         duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
         accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
+    if session is not None:
+        say(_resuming(session))
     say(format_plan(plan, robot_model, duration, accuracy))
     say(format_clearance(clearance, plan, site))
     if args.dry_run and not rehearsal and session is None:
@@ -279,6 +281,22 @@ def _default_session_path(robot: str) -> Path:
     path = folder / f"{robot}-{time.strftime('%Y%m%d-%H%M%S')}.session"
     check_target(path, option="session")
     return path
+
+
+def _resuming(session: Session) -> str:
+    """What a resume continues: ``resuming S: 12 of 256 steps recorded (1 missing); run 1 aborted (stopped by
+    SIGTERM)``; the plan printed after it is the session's own."""
+    total = len(session.plan.steps)
+    missing = len(session.missing_indices())
+    text = f"resuming {session.path}: {len(session.recorded_indices())} of {total} steps recorded" + (
+        f" ({missing} missing)" if missing else "")
+    runs = session.runs()
+    if runs:
+        last = runs[-1]
+        how = ("ended without closing (the process died)" if last.outcome == "running"
+               else last.outcome + (f" ({last.reason})" if last.reason else ""))
+        text += f"; run {last.id} {how}"
+    return text + "; the session's plan:"
 
 
 def _died_after_its_last_step(session: Session, remeasure: bool) -> bool:

@@ -20,7 +20,7 @@ from typing import Any
 from common import fit_width
 from common.errors import InputError
 from common.help_text import description as _description
-from common.outputs import check_outputs, write_output
+from common.outputs import check_outputs, same_file, write_output
 from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
 from identify.io.result_io import load_result
@@ -89,6 +89,10 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
         raise InputError("give at least two results or sessions to compare, oldest first")
     if not 0 < args.alpha < 1 or args.poses < 1:
         raise InputError(f"--alpha must be in (0, 1) and --poses >= 1, got {args.alpha} and {args.poses}")
+    for k, a in enumerate(args.inputs):
+        for b in args.inputs[k + 1:]:
+            if same_file(a, b):
+                raise InputError(f"{a} and {b} are the same file: compare calibrations made at different times")
     robot_file = args.robot if args.robot and Path(args.robot).is_file() else None
     check_outputs([*args.inputs, robot_file], [("--html", args.html)], args.force)
     loaded = [load_input(path) for path in args.inputs]

@@ -55,7 +55,8 @@ def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, capsys, signum, s
         total = len(session.plan.steps)
     assert 2 <= done < total
     assert main(["--resume", str(path), "--quiet"]) == 0
-    capsys.readouterr()
+    out = capsys.readouterr().out
+    assert f"resuming {path}: {done} of {total} steps recorded; run 1 aborted ({said}" in out
     with Session.open(path) as session:
         assert session.outcome() == "complete"
         assert sorted(s.plan_index for s in session.steps()) == list(range(total))
