@@ -105,7 +105,7 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
     for s in plan.steps:
         if s.kind in ("sweep", "stream"):
             sweeps.setdefault(s.sweep, []).append(s)
-    for sweep, steps in sweeps.items():
+    for sweep, steps in enumerate(sweeps.values(), 1):  # numbered as the operator sees them, 1, 2, 3...
         j = steps[0].joint
         values = [s.q[j - 1] for s in steps] + [s.start[j - 1] for s in steps if s.start is not None]
         kind = types[j - 1] if 0 < j <= len(types) else "P"
@@ -114,12 +114,17 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
                      f"{count:>5}")
     count = {k: sum(1 for s in plan.steps if s.kind == k) for k in STEP_KINDS}
     check = sum(1 for s in plan.steps if s.kind == "free" and s.role == "check")
+    starts = {s.start for s in plan.steps if s.kind == "stream"}  # a continuous sweep starts from a stop-and-go pose
+    at_starts = sum(1 for s in plan.steps if s.kind == "free" and s.role != "check" and s.q in starts)
     lines += ["",
-              f"free poses: {count['free'] - check} fitted + {check} held out for checking; "
-              f"home checks: {count['home']}",
+              f"free poses: {count['free'] - check - at_starts} fitted + {check} held out for checking; "
+              + (f"{at_starts} stop-and-go poses at the continuous sweeps' starts; " if at_starts else "")
+              + f"home checks: {count['home']}",
               f"total: {len(plan.steps)} steps x {plan.samples_per_step} samples = "
               f"{len(plan.steps) * plan.samples_per_step} samples; settle {plan.settle_time:g} s per step",
-              f"speed: {_per_joint_text(plan.speed, types, '°/s', ' mm/s')}",
+              f"speed{' between steps' if count['stream'] else ''}: "
+              + _per_joint_text(plan.speed, types, "°/s", " mm/s")
+              + (" (each continuous sweep at its own speed: notes)" if count["stream"] else ""),
               f"acceleration: {_per_joint_text(plan.acceleration, types, '°/s²', ' mm/s²')}",
               f"estimated duration: {_hms(duration_s)}"]
     if accuracy:
