@@ -45,6 +45,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.continuous || status=1; \
 	$(BIN)/python -m bench.ur_continuous || status=1; \
 	$(BIN)/python -m bench.camera_stream || status=1; \
+	$(BIN)/python -m bench.startup || status=1; \
 	exit $$status
 
 clean:
