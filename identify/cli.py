@@ -185,9 +185,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         print(format_report(ident, nominal, nominal_name))
         if reference is not None or note:
             print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
-        if args.out:
-            print(f"result written to {args.out}")
+        for option, what in WRITTEN:  # every file written, not only the result
+            if getattr(args, option):
+                print(f"{what} written to {getattr(args, option)}")
     return doc
+
+
+#: the files identify writes, by option, as it announces them
+WRITTEN = (("out", "result"), ("report", "report"), ("urdf", "URDF"), ("ur_calibration", "UR calibration"),
+           ("rtb", "Robotics Toolbox script"), ("json_out", "JSON result"), ("csv", "measurement CSV"))
 
 
 def _rows(meas: Measurements, rows: str) -> Measurements:
