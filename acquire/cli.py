@@ -228,15 +228,15 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         for line in problems:
             print(f"acquire: plan refused: {line}", file=sys.stderr)
         return 2
-    if args.json:
-        print(json.dumps(plan_json(plan, clearance)))
-        return 0
     if plan.continuous:
         duration = estimate_continuous_duration(plan, site.measure_time)
         accuracy = None
     else:
         duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
         accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
+    if args.json:
+        print(json.dumps(plan_json(plan, clearance, duration, accuracy), allow_nan=False))
+        return 0
     if session is not None:
         say(_resuming(session))
     say(format_plan(plan, robot_model, duration, accuracy))

@@ -149,17 +149,22 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
 JSON_KINDS = ("sweep", "free", "check", "home", "stream")
 
 
-def plan_json(plan: Plan, clearance: Clearance | None) -> dict[str, Any]:
+def plan_json(plan: Plan, clearance: Clearance | None, duration_s: float | None = None,
+              accuracy: dict[str, float] | None = None) -> dict[str, Any]:
     """The plan as DESIGN.md's Plan JSON: ``robot``, ``joint_types``, ``home``, ``steps`` (execution order,
     ``{index, kind, joint, q}``, a held-out free pose's kind is "check") and ``clearance_m`` (m; None when the
-    robot model has no collision geometry)."""
+    robot model has no collision geometry); then what the dry run prints besides: ``duration_s`` (s),
+    ``predicted_accuracy`` (:func:`predicted_accuracy`'s figures, m; None for a continuous plan or a motion
+    rehearsal; an undetermined figure is null) and ``notes`` (the plan's notes: clipped sweeps, the TP guess...)."""
     steps = [{"index": s.index, "kind": "check" if s.kind == "free" and s.role == "check" else s.kind,
               "joint": s.joint, "q": list(s.q)} for s in plan.steps]
     for out, s in zip(steps, plan.steps, strict=True):  # a continuous sweep: where it starts, how fast it moves
         if s.kind == "stream":
             out.update(start=list(s.start or ()), speed=s.speed, acceleration=s.acceleration)
+    shown = None if accuracy is None else {k: (float(v) if math.isfinite(v) else None) for k, v in accuracy.items()}
     return {"robot": plan.robot, "joint_types": plan.joint_types, "home": list(plan.home), "steps": steps,
-            "clearance_m": None if clearance is None else clearance.distance}
+            "clearance_m": None if clearance is None else clearance.distance, "duration_s": duration_s,
+            "predicted_accuracy": shown, "notes": list(plan.notes)}
 
 
 def format_clearance(clearance: Clearance | None, plan: Plan, site: SiteConfig) -> str:
