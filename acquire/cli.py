@@ -392,17 +392,27 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
         robot.close()
         raise
 
-    def show(step, done: int, total: int) -> None:
-        what = f"joint {step.joint} sweep" if step.kind == "sweep" else step.kind
-        log.info("rehearsal step %d/%d (%s) reached", done, total, what)
-        if not args.quiet and (done == total or done % 25 == 0):
-            print(f"rehearsal: step {done}/{total} ({what}) reached", file=sys.stderr)
+    from acquire.orchestrator import Progress
+    from acquire.progress import ProgressDisplay
+
+    clock = rig.clock if rig is not None else WallClock()  # the rehearsal's own clock (virtual in mock mode)
+    display = ProgressDisplay(plan, 0.0, args.quiet, simulated=isinstance(clock, VirtualClock))
+    display.plan_steps(list(plan.steps))
+    started = clock.now()
+
+    def show(step, done: int, total: int) -> None:  # after each move: this step reached, the next one starts
+        display.done(Progress(step, done, total, clock.now() - started, 0.0, 0, "reached", None))
+        if done < total:
+            display.start(plan.steps[done], done + 1, total)
 
     stop = StopRequest()
     try:
+        if plan.steps:
+            display.start(plan.steps[0], 1, len(plan.steps))
         with stop.installed():
             result = rehearse(robot, plan, site.timeouts.move, stop, show, load_robot(robot_spec.model).coupling)
     finally:
+        display.close()
         robot.close()
     log.info("rehearsal %s%s; %d of %d steps reached", result.outcome, f" ({result.reason})" if result.reason else "",
              result.recorded, len(plan.steps))

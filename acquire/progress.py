@@ -136,7 +136,8 @@ class ProgressDisplay:
             self.step, self.count, self.total = None, p.done, p.total
             self.simulated_elapsed = p.elapsed
         extra = f", sweep residual {p.residual * 1e3:.3f} mm" if p.residual is not None else ""
-        line = f"step {p.done}/{p.total} ({what(p.step)}): {p.samples} samples, {p.status}; {self._times()}{extra}"
+        outcome = f"{p.samples} samples, {p.status}" if p.samples else p.status  # a rehearsal measures nothing
+        line = f"step {p.done}/{p.total} ({what(p.step)}): {outcome}; {self._times()}{extra}"
         log.info(line)
         if self.quiet:
             return

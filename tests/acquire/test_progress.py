@@ -160,3 +160,14 @@ def test_a_session_and_its_verification_fit_an_80_column_terminal(tmp_path):
     assert "verification written to" in text and "Traceback" not in text
     assert max(len(line) for line in lines) <= 80, max(lines, key=len)
     assert any(re.search(r"theta \[deg\] +d \[mm\] +a \[mm\] +alpha \[deg\]", line) for line in lines)
+
+
+def test_a_motion_rehearsal_shows_the_same_progress(capsys):
+    """--tracker none: the same display (without a terminal: the first and the last step), in wall-clock time with
+    the simulated time labelled; nothing measured, so no sample counts."""
+    from acquire.cli import main
+
+    assert main(["--robot", "mock:ur5e", "--tracker", "none", "--steps", "6", "--free-poses", "4"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and err[0].startswith("step 1/") and re.match(r"step (\d+)/\1 \(home\): reached;", err[1])
+    assert re.search(r"elapsed 0:00:0\d, .*\(simulated time 0:[01]\d:\d\d\)", err[1])
