@@ -256,6 +256,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("identify: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader of stdout went away (| head): the entry point stops quietly
+        raise
     except Exception as exc:  # numerical failure: one line, not a traceback; --debug-free by design
         print(f"identify: error: identification failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1

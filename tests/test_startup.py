@@ -52,3 +52,16 @@ def test_the_light_parsers_defaults_are_the_estimators():
 
     assert (options.DEFAULT_PARALLEL_TOL, options.DEFAULT_MAX_OFFSET) == (DEFAULT_PARALLEL_TOL, DEFAULT_MAX_OFFSET)
     assert sorted(options.UNITS) == sorted(UNITS)
+
+
+def test_a_pipe_closed_by_its_reader_stops_the_command_quietly():
+    """``acquire --dry-run | head -1``: no traceback, the exit status a shell gives a command its pipe stopped (the
+    dry run prints again after seconds of computing, when the reader is gone)."""
+    from pathlib import Path
+
+    argv = [str(Path(sys.executable).with_name("acquire")), "--robot", "ur5e", "--tracker", "mock", "--dry-run"]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0)
+    proc.stdout.read(10)
+    proc.stdout.close()  # the reader goes away after its first bytes
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141 and "Traceback" not in err and "Error" not in err, err
