@@ -46,6 +46,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.second_session || status=1; \
 	$(BIN)/python -m bench.ur_continuous || status=1; \
 	$(BIN)/python -m bench.camera_stream || status=1; \
+	$(BIN)/python -m bench.startup || status=1; \
 	exit $$status
 
 # public robot-calibration data sets (never downloaded here): DATA holds one folder per set, as

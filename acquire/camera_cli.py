@@ -26,7 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from acquire.options import _Parser
 from common.outputs import check_outputs, commit_file, write_output
+from common.units import positive_length
 from drivers.camera.intrinsics import CameraIntrinsics, write_intrinsics
 from drivers.camera.targets import Target, charuco_board, dictionary_id, grid_board, single_marker
 from drivers.errors import DriverError
@@ -39,12 +41,15 @@ class CameraToolError(Exception):
 
 
 def _parser(prog: str, description: str) -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog=prog, description=description)
+    p = _Parser(prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter,
+                epilog=__doc__.split("\n\n", 1)[1].replace("``", ""))
     p.add_argument("--dict", default="4X4_50", help="ArUco dictionary (4X4_50)")
     p.add_argument("--cols", type=int, help="board columns (markers of a grid, squares of a ChArUco)")
     p.add_argument("--rows", type=int, help="board rows")
-    p.add_argument("--square", type=float, help="ChArUco square side, m")
-    p.add_argument("--size", type=float, help="marker side, m")
+    p.add_argument("--square", type=positive_length, metavar="LENGTH",
+                   help="ChArUco square side, e.g. 30mm (a bare number is metres)")
+    p.add_argument("--size", type=positive_length, metavar="LENGTH",
+                   help="marker side, e.g. 22mm (a bare number is metres)")
     p.add_argument("--first", type=int, default=0, help="id of the board's first marker (0)")
     return p
 
@@ -63,7 +68,7 @@ def calibrate_main(argv: list[str]) -> int:
     if (args.images is None) == (args.live is None):
         raise CameraToolError("give a folder or glob of images, or --live CAMERA (one of them)")
     if not all(v and v > 0 for v in (args.cols, args.rows, args.square, args.size)):
-        raise CameraToolError("the ChArUco board needs --cols, --rows, --square and --size (m), all > 0")
+        raise CameraToolError("the ChArUco board needs --cols, --rows, --square and --size, all > 0")
     target = _charuco(args)
     images = _live_images(args.live, args.views) if args.live is not None else _folder_images(args.images)
     result = calibrate(images, target, args.min_corners)
@@ -179,7 +184,8 @@ def print_main(argv: list[str]) -> int:
     p = _parser("acquire print-board", "Write a marker or board at true scale: PNG (with its DPI) or PDF.")
     p.add_argument("--marker", type=int, help="a single marker of this id (with --size)")
     p.add_argument("--board", choices=("grid", "charuco"), help="a board (with --cols, --rows, --size ...)")
-    p.add_argument("--gap", type=float, help="grid board: gap between markers, m (size/5)")
+    p.add_argument("--gap", type=positive_length, metavar="LENGTH",
+                   help="grid board: gap between markers, e.g. 5mm (a bare number is metres; size/5)")
     p.add_argument("--dpi", type=int, default=600, help="print resolution, dots per inch (600)")
     p.add_argument("--out", type=Path, required=True, help="output file: .png or .pdf")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
@@ -207,7 +213,7 @@ def _print_target(args: argparse.Namespace) -> Target:
         if (args.marker is None) == (args.board is None):
             raise CameraToolError("give --marker ID or --board grid|charuco")
         if not args.size or args.size <= 0:
-            raise CameraToolError("--size (the marker side, m) is required and must be > 0")
+            raise CameraToolError("--size (the marker side) is required and must be > 0")
         if args.marker is not None:
             return single_marker(args.marker, args.size, dictionary)
         if not (args.cols and args.rows and args.cols > 0 and args.rows > 0):

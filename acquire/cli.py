@@ -1,21 +1,7 @@
 """``acquire``: plan, move, measure and record a session, then identify (the operator's main job).
 
-    acquire --robot mock:ur5e --tracker mock            mock-mode rehearsal (simulated robot and tracker)
-    acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
-    acquire --robot ur5e --tracker mock --dry-run      print the plan, its duration and accuracy; move nothing
-    acquire --robot ur5e@192.168.1.10 --tracker none    rehearse the plan's motion at 25 % speed, measuring nothing
-    acquire --resume SESSION                            continue an interrupted session
-    acquire export SESSION --csv out.csv                measurement CSV of a session
-    acquire backup SESSION COPY                         a safe copy of a session, even while it is written
-    acquire verify --result RESULT                      ISO 9283-style accuracy before/after compensation
-    acquire --tracker serial:/dev/ttyUSB0?protocol=polled-xyz --probe   check the tracker on site
-
-Exit codes: 0 complete, 1 the run failed (robot fault, lost connection; resumable), 2 bad input or a
-plan that breaks a limit or comes too close to the cell, 3 complete but its identification fails its
-verdict, 130 stopped by the operator (resumable).
-
-The run itself, its progress and what a complete session leaves beside it (result YAML, HTML report):
-acquire/runner.py.
+Its options, subcommands and exit codes: acquire/options.py (``acquire --help``). The run itself, its progress and
+what a complete session leaves beside it (result YAML, HTML report): acquire/runner.py.
 """
 
 from __future__ import annotations
@@ -30,6 +16,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from acquire.cell import Clearance
+from acquire.options import _Parser, build_parser
 from acquire.orchestrator import RunResult, StopRequest
 from acquire.plan import check_plan, estimate_duration, plan_clearance
 from acquire.plan_continuous import estimate_continuous_duration
@@ -40,7 +27,9 @@ from acquire.runner import finish, run_session
 from acquire.session import Session
 from acquire.session_backup import backup_session
 from acquire.stream_loop import check_streams
+from common import stop_signals
 from common.errors import InputError
+from common.fit_width import say
 from common.outputs import OutputError, check_outputs, check_target, same_file
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
@@ -58,56 +47,12 @@ class UsageError(Exception):
     """Bad input: one line, exit code 2."""
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="acquire", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:12]))
-    p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e (mock:ur5e; on --resume: the session's,"
-                   " whose address may change)")
-    p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock, or none (motion "
-                   "rehearsal) (mock; on --resume: the session's, whose port or host may change)")
-    p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
-    p.add_argument("--session", type=Path, help="session file to create (default sessions/<robot>-<time>.session)")
-    p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this session where it stopped")
-    p.add_argument("--remeasure-missing", action="store_true",
-                   help="with --resume: measure a complete session's missing steps again (the first attempt is kept)")
-    p.add_argument("--force", action="store_true",
-                   help="replace an existing result or report beside a new session")
-    p.add_argument("--dry-run", action="store_true", help="print the plan and what it will reach; move nothing")
-    p.add_argument("--yes", action="store_true", help="do not ask before moving a real robot")
-    p.add_argument("--realtime", action="store_true", help="mock mode at the speed of a real run")
-    p.add_argument("--quiet", action="store_true", help="no progress display")
-    p.add_argument("--log", type=Path, metavar="FILE", help="log every step and event to FILE")
-    p.add_argument("--steps", type=int, help="steps per sweep (site default 36)")
-    p.add_argument("--samples", type=int, help="tracker samples per step (site default)")
-    p.add_argument("--free-poses", type=int, help="free poses added for the fit and validation")
-    p.add_argument("--noise", type=float, help="tracker noise per axis, m, for the predicted accuracy")
-    p.add_argument("--probe", action="store_true",
-                   help="open the tracker, take --count readings, print them with their spread, and exit")
-    p.add_argument("--count", type=int, default=10, help="readings taken by --probe (10)")
-    p.add_argument("--json", action="store_true",
-                   help="with --probe: one JSON object per reading; with --dry-run: the plan as one JSON object")
-    p.add_argument("--speed-fraction", type=float, metavar="F",
-                   help="joint speeds and accelerations as this fraction of the model's defaults (site "
-                        "robot.speed_fraction; 0.25 with --tracker none)")
-    p.add_argument("--mode", choices=("step", "continuous", "both"), default=None,
-                   help="step: stop-and-go sweeps (the default); continuous: each sweep one constant-speed move while "
-                        "robot and tracker stream (both must stream); both: per joint the stop-and-go sweep and the "
-                        "continuous one (the stop-and-go sweeps need no clock: they anchor the streams' timing and can "
-                        "check it; --steps sets their size); the dry run compares the three")
-    p.add_argument("--trace-io", type=Path, metavar="FILE",
-                   help="log every byte to and from the tracker (serial and I++ trackers)")
-    return p
-
-
 def _export(argv: list[str]) -> int:
-    p = _Parser(prog="acquire export", description="Write a session's measurements as the CSV contract.")
-    p.add_argument("session", type=Path)
-    p.add_argument("--csv", type=Path, required=True)
+    p = _Parser(prog="acquire export", description="Write a session's measurements as a measurement CSV (the file "
+                "identify reads; its columns: README.md, File contracts). A session being written can be exported.",
+                epilog="exit codes: 0 written, 2 bad input (one line)")
+    p.add_argument("session", type=Path, help="the session file to read (never changed)")
+    p.add_argument("--csv", type=Path, required=True, metavar="OUT.csv", help="the CSV to write")
     p.add_argument("--force", action="store_true", help="replace the CSV if it exists")
     args = p.parse_args(argv)
     check_outputs([args.session], [("--csv", args.csv)], args.force)
@@ -122,8 +67,8 @@ def _export(argv: list[str]) -> int:
 
 def _backup(argv: list[str]) -> int:
     p = _Parser(prog="acquire backup", description="Copy a session safely, even while it is being written "
-                "(SQLite's online backup API).")
-    p.add_argument("session", type=Path)
+                "(SQLite's online backup API).", epilog="exit codes: 0 copied, 2 bad input (one line)")
+    p.add_argument("session", type=Path, help="the session file to copy (never changed)")
     p.add_argument("dest", type=Path, help="the copy (a new file; an existing one only with --force)")
     p.add_argument("--force", action="store_true", help="replace DEST if it exists")
     args = p.parse_args(argv)
@@ -258,7 +203,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
             return 0
     else:
         site = mode_site(_site(args), args.mode, args.free_poses)  # streams carry the fit: no free poses unless asked
-        robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
+        robot_spec = RobotSpec.parse(args.robot if args.robot is not None else "mock:ur5e").resolved()
         tracker_arg = args.tracker or "mock"
         tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)
         path, plan = None, None
@@ -283,19 +228,21 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         for line in problems:
             print(f"acquire: plan refused: {line}", file=sys.stderr)
         return 2
-    if args.json:
-        print(json.dumps(plan_json(plan, clearance)))
-        return 0
     if plan.continuous:
         duration = estimate_continuous_duration(plan, site.measure_time)
         accuracy = None
     else:
         duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
         accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
-    print(format_plan(plan, robot_model, duration, accuracy))
-    print(format_clearance(clearance, plan, site))
+    if args.json:
+        print(json.dumps(plan_json(plan, clearance, duration, accuracy), allow_nan=False))
+        return 0
+    if session is not None:
+        say(_resuming(session))
+    say(format_plan(plan, robot_model, duration, accuracy))
+    say(format_clearance(clearance, plan, site))
     if args.dry_run and not rehearsal and session is None:
-        print(format_modes(robot_model, _site(args), plan, args.free_poses))
+        say(format_modes(robot_model, _site(args), plan, args.free_poses))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
@@ -334,6 +281,22 @@ def _default_session_path(robot: str) -> Path:
     path = folder / f"{robot}-{time.strftime('%Y%m%d-%H%M%S')}.session"
     check_target(path, option="session")
     return path
+
+
+def _resuming(session: Session) -> str:
+    """What a resume continues: ``resuming S: 12 of 256 steps recorded (1 missing); run 1 aborted (stopped by
+    SIGTERM)``; the plan printed after it is the session's own."""
+    total = len(session.plan.steps)
+    missing = len(session.missing_indices())
+    text = f"resuming {session.path}: {len(session.recorded_indices())} of {total} steps recorded" + (
+        f" ({missing} missing)" if missing else "")
+    runs = session.runs()
+    if runs:
+        last = runs[-1]
+        how = ("ended without closing (the process died)" if last.outcome == "running"
+               else last.outcome + (f" ({last.reason})" if last.reason else ""))
+        text += f"; run {last.id} {how}"
+    return text + "; the session's plan:"
 
 
 def _died_after_its_last_step(session: Session, remeasure: bool) -> bool:
@@ -429,17 +392,27 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
         robot.close()
         raise
 
-    def show(step, done: int, total: int) -> None:
-        what = f"joint {step.joint} sweep" if step.kind == "sweep" else step.kind
-        log.info("rehearsal step %d/%d (%s) reached", done, total, what)
-        if not args.quiet and (done == total or done % 25 == 0):
-            print(f"rehearsal: step {done}/{total} ({what}) reached", file=sys.stderr)
+    from acquire.orchestrator import Progress
+    from acquire.progress import ProgressDisplay
+
+    clock = rig.clock if rig is not None else WallClock()  # the rehearsal's own clock (virtual in mock mode)
+    display = ProgressDisplay(plan, 0.0, args.quiet, simulated=isinstance(clock, VirtualClock))
+    display.plan_steps(list(plan.steps))
+    started = clock.now()
+
+    def show(step, done: int, total: int) -> None:  # after each move: this step reached, the next one starts
+        display.done(Progress(step, done, total, clock.now() - started, 0.0, 0, "reached", None))
+        if done < total:
+            display.start(plan.steps[done], done + 1, total)
 
     stop = StopRequest()
     try:
+        if plan.steps:
+            display.start(plan.steps[0], 1, len(plan.steps))
         with stop.installed():
             result = rehearse(robot, plan, site.timeouts.move, stop, show, load_robot(robot_spec.model).coupling)
     finally:
+        display.close()
         robot.close()
     log.info("rehearsal %s%s; %d of %d steps reached", result.outcome, f" ({result.reason})" if result.reason else "",
              result.recorded, len(plan.steps))
@@ -453,6 +426,11 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    with stop_signals.raising():  # SIGTERM and SIGHUP stop like Ctrl-C (common/stop_signals.py)
+        return _main(argv)
+
+
+def _main(argv: list[str]) -> int:
     try:
         if argv[:1] == ["export"]:
             return _export(argv[1:])
@@ -470,8 +448,8 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, ResumeRefused, ConfigError, SessionError, InputError, DriverError, ValueError) as exc:
         print(f"acquire: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("acquire: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:  # outside a run (a run records its stop and prints its own line)
+        print(f"acquire: {stop_signals.reason_of(exc)}", file=sys.stderr)
         return 130
 
 

@@ -10,10 +10,9 @@ writers started together, one is refused within milliseconds). Every other comma
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
-
-from session.lock import Locked, busy_message, drop_held, hold
 
 
 def resume_target(argv: list[str]) -> Path | None:
@@ -29,8 +28,33 @@ def resume_target(argv: list[str]) -> Path | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``acquire`` with a fast refusal of a second writer; see :func:`acquire.cli.main` for the rest."""
+    """``acquire`` with a fast refusal of a second writer; see :func:`acquire.cli.main` for the rest. A stop signal
+    (Ctrl-C, SIGTERM, SIGHUP) while the command starts up stops it with one line and exit code 130: this module
+    imports nothing else before its handlers are set."""
     argv = sys.argv[1:] if argv is None else argv
+    try:
+        from common import stop_signals
+
+        with stop_signals.raising():
+            return _main(argv)
+    except KeyboardInterrupt as exc:  # a Stopped says which signal; Python's own KeyboardInterrupt is Ctrl-C
+        print(f"acquire: {str(exc) or 'stopped by the operator (Ctrl-C)'}", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # the reader of stdout went away (``| head``): stop quietly, as a pipeline expects
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes it
+        return 141  # 128 + SIGPIPE, what a shell reports for a command its pipe stopped
+
+
+SUBCOMMANDS = ("export", "backup", "verify", "calibrate-camera", "print-board")  # parsed by their own modules
+
+
+def _main(argv: list[str]) -> int:
+    if not argv[:1] or argv[0] not in SUBCOMMANDS:
+        refusal = _quick_refusal(argv)  # --help, --version, a bad option or device spec: before the heavy imports
+        if refusal is not None:
+            return refusal
+    from session.lock import Locked, busy_message, drop_held, hold
+
     target = resume_target(argv)
     if target is not None:
         try:
@@ -46,6 +70,25 @@ def main(argv: list[str] | None = None) -> int:
         return full_main(argv)
     finally:
         drop_held()  # a lock the command never claimed (it stopped before opening the session)
+
+
+def _quick_refusal(argv: list[str]) -> int | None:
+    """Parse ``argv`` with the light parser (``--help`` and ``--version`` exit here) and check the device specs;
+    the exit code of a refusal (its one line printed), or None to go on."""
+    from acquire.options import build_parser
+    from drivers.errors import SpecError
+    from drivers.spec import RobotSpec, TrackerSpec
+
+    args = build_parser().parse_args(argv)
+    try:
+        if args.robot is not None:
+            RobotSpec.parse(args.robot)
+        if args.tracker is not None and args.tracker != "none":
+            TrackerSpec.parse(args.tracker)
+    except SpecError as exc:
+        print(f"acquire: error: {exc}", file=sys.stderr)
+        return 2
+    return None
 
 
 if __name__ == "__main__":

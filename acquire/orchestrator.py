@@ -5,8 +5,8 @@ acquire/stream_loop.py) (so a resumed session continues where it stopped), then
 one more attempt at each step recorded as missing (the first attempt stays in the session). Each step is
 committed to the session before the next move. Tracker failures are retried a bounded number
 of times, then the step is recorded as missing and the run goes on; robot faults and lost connections
-stop the motion, end the run as failed and return (the session says how to resume); Ctrl-C stops the
-motion at once and ends the run as aborted. Every device call has a timeout.
+stop the motion, end the run as failed and return (the session says how to resume); Ctrl-C, SIGTERM or SIGHUP
+stops the motion at once and ends the run as aborted. Every device call has a timeout.
 
 The plan is in DH joint values; a robot whose controller reports coupled readings (the session's ``coupling``,
 e.g. FANUC J2/J3) is commanded the readings that give them, and its readings are recorded as they come. A
@@ -17,7 +17,6 @@ step is recorded when at least one point was seen.
 from __future__ import annotations
 
 import signal
-import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -26,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acquire.session import Session
+from common import stop_signals
 from drivers.averaging import robust_mean
 from drivers.base import Robot, RobotState, Tracker, TrackerReading
 from drivers.clock import Clock
@@ -101,30 +101,33 @@ def average_points(readings: list[TrackerReading]) -> tuple[list[PointRecord], l
 
 
 class StopRequest:
-    """Set by Ctrl-C (first press); the loop checks it between phases. A second press raises at once."""
+    """Set by a stop signal (Ctrl-C, SIGTERM or SIGHUP: common/stop_signals.py); the loop checks it between
+    phases. A second signal raises at once."""
 
     def __init__(self) -> None:
         self.requested = False
+        self.signum: int | None = None
         self.on_request: Callable[[], None] | None = None
 
-    def request(self) -> None:
+    @property
+    def reason(self) -> str:
+        """Why the run stopped, as the session records it: ``stopped by the operator (Ctrl-C)``, ``stopped by
+        SIGTERM``..."""
+        return stop_signals.reason(self.signum)
+
+    def request(self, signum: int = signal.SIGINT) -> None:
         if self.requested:
-            raise KeyboardInterrupt
+            raise KeyboardInterrupt if signum == signal.SIGINT else stop_signals.Stopped(signum)
         self.requested = True
+        self.signum = signum
         if self.on_request is not None:
             self.on_request()
 
     @contextmanager
     def installed(self) -> Iterator[StopRequest]:
-        """Route SIGINT to :meth:`request` while inside the block (main thread only)."""
-        if threading.current_thread() is not threading.main_thread():
+        """Route the stop signals to :meth:`request` while inside the block (main thread only)."""
+        with stop_signals.routed(self.request):
             yield self
-            return
-        previous = signal.signal(signal.SIGINT, lambda *_: self.request())
-        try:
-            yield self
-        finally:
-            signal.signal(signal.SIGINT, previous)
 
 
 class Orchestrator:
@@ -141,10 +144,12 @@ class Orchestrator:
         on_progress: Callable[[Progress], None] | None = None,
         stop: StopRequest | None = None,
         stream_rate: float = 250.0,
+        on_start: Callable[[Step, int, int], None] | None = None,
     ) -> None:
         self.robot, self.tracker, self.session, self.clock = robot, tracker, session, clock
         self.timeouts, self.retries = timeouts, retries
         self.on_progress = on_progress
+        self.on_start = on_start  # (step, number in this run, steps in this run) before each step
         self.stop = stop or StopRequest()
         self.plan: Plan = session.plan
         self.coupling = session.coupling
@@ -174,10 +179,12 @@ class Orchestrator:
                 step, retake = todo.pop(0)
                 count += 1
                 if self.stop.requested:
-                    return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded)
+                    return self._end("aborted", self.stop.reason, recorded)
+                if self.on_start is not None:
+                    self.on_start(step, count, total)
                 record = self._do_step(step)
                 if self.stop.requested and record.status != "ok":
-                    return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded)
+                    return self._end("aborted", self.stop.reason, recorded)
                 if retake:
                     self.session.retake_step(record)
                 else:
@@ -191,14 +198,14 @@ class Orchestrator:
         except (RobotFault, ConnectionFailed, DeviceTimeout) as exc:
             self.robot.stop()
             if self.stop.requested:  # the operator's stop interrupted the motion: not a fault
-                return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded)
+                return self._end("aborted", self.stop.reason, recorded)
             kind = {RobotFault: "robot fault", ConnectionFailed: "connection lost", DeviceTimeout: "timeout"}
             label = next(v for k, v in kind.items() if isinstance(exc, k))
             self.session.event(label, str(exc))
             return self._end("failed", f"{label}: {exc}", recorded)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:  # a second stop signal
             self.robot.stop()
-            return self._end("aborted", "stopped by the operator (Ctrl-C)", recorded)
+            return self._end("aborted", stop_signals.reason_of(exc), recorded)
         return self._end("complete", "", recorded)
 
     def _end(self, outcome: str, reason: str, recorded: int) -> RunResult:

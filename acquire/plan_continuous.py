@@ -146,7 +146,8 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
         poses.append(("free", 0, tuple(start), "fit", None, None))
         poses.append(("stream", j, tuple(end), "fit", tuple(start), (speed, acceleration)))
         notes.append(f"joint {j}: one continuous sweep at {_speed_text(speed, robot.joint_types[j - 1])} "
-                     f"(acceleration {acceleration:.3g}), {motion_time(hi - lo, speed, acceleration):.1f} s")
+                     f"(acceleration {_speed_text(acceleration, robot.joint_types[j - 1])}²), "
+                     f"{motion_time(hi - lo, speed, acceleration):.1f} s")
     if poses[-1][0] != "home":
         poses.append(("home", 0, tuple(home), "fit", None, None))
     first_free = next((i for i, s in enumerate(base.steps) if s.kind == "free"), len(base.steps))

@@ -105,7 +105,7 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
     for s in plan.steps:
         if s.kind in ("sweep", "stream"):
             sweeps.setdefault(s.sweep, []).append(s)
-    for sweep, steps in sweeps.items():
+    for sweep, steps in enumerate(sweeps.values(), 1):  # numbered as the operator sees them, 1, 2, 3...
         j = steps[0].joint
         values = [s.q[j - 1] for s in steps] + [s.start[j - 1] for s in steps if s.start is not None]
         kind = types[j - 1] if 0 < j <= len(types) else "P"
@@ -114,12 +114,17 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
                      f"{count:>5}")
     count = {k: sum(1 for s in plan.steps if s.kind == k) for k in STEP_KINDS}
     check = sum(1 for s in plan.steps if s.kind == "free" and s.role == "check")
+    starts = {s.start for s in plan.steps if s.kind == "stream"}  # a continuous sweep starts from a stop-and-go pose
+    at_starts = sum(1 for s in plan.steps if s.kind == "free" and s.role != "check" and s.q in starts)
     lines += ["",
-              f"free poses: {count['free'] - check} fitted + {check} held out for checking; "
-              f"home checks: {count['home']}",
+              f"free poses: {count['free'] - check - at_starts} fitted + {check} held out for checking; "
+              + (f"{at_starts} stop-and-go poses at the continuous sweeps' starts; " if at_starts else "")
+              + f"home checks: {count['home']}",
               f"total: {len(plan.steps)} steps x {plan.samples_per_step} samples = "
               f"{len(plan.steps) * plan.samples_per_step} samples; settle {plan.settle_time:g} s per step",
-              f"speed: {_per_joint_text(plan.speed, types, '°/s', ' mm/s')}",
+              f"speed{' between steps' if count['stream'] else ''}: "
+              + _per_joint_text(plan.speed, types, "°/s", " mm/s")
+              + (" (each continuous sweep at its own speed: notes)" if count["stream"] else ""),
               f"acceleration: {_per_joint_text(plan.acceleration, types, '°/s²', ' mm/s²')}",
               f"estimated duration: {_hms(duration_s)}"]
     if accuracy:
@@ -144,17 +149,22 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
 JSON_KINDS = ("sweep", "free", "check", "home", "stream")
 
 
-def plan_json(plan: Plan, clearance: Clearance | None) -> dict[str, Any]:
+def plan_json(plan: Plan, clearance: Clearance | None, duration_s: float | None = None,
+              accuracy: dict[str, float] | None = None) -> dict[str, Any]:
     """The plan as DESIGN.md's Plan JSON: ``robot``, ``joint_types``, ``home``, ``steps`` (execution order,
     ``{index, kind, joint, q}``, a held-out free pose's kind is "check") and ``clearance_m`` (m; None when the
-    robot model has no collision geometry)."""
+    robot model has no collision geometry); then what the dry run prints besides: ``duration_s`` (s),
+    ``predicted_accuracy`` (:func:`predicted_accuracy`'s figures, m; None for a continuous plan or a motion
+    rehearsal; an undetermined figure is null) and ``notes`` (the plan's notes: clipped sweeps, the TP guess...)."""
     steps = [{"index": s.index, "kind": "check" if s.kind == "free" and s.role == "check" else s.kind,
               "joint": s.joint, "q": list(s.q)} for s in plan.steps]
     for out, s in zip(steps, plan.steps, strict=True):  # a continuous sweep: where it starts, how fast it moves
         if s.kind == "stream":
             out.update(start=list(s.start or ()), speed=s.speed, acceleration=s.acceleration)
+    shown = None if accuracy is None else {k: (float(v) if math.isfinite(v) else None) for k, v in accuracy.items()}
     return {"robot": plan.robot, "joint_types": plan.joint_types, "home": list(plan.home), "steps": steps,
-            "clearance_m": None if clearance is None else clearance.distance}
+            "clearance_m": None if clearance is None else clearance.distance, "duration_s": duration_s,
+            "predicted_accuracy": shown, "notes": list(plan.notes)}
 
 
 def format_clearance(clearance: Clearance | None, plan: Plan, site: SiteConfig) -> str:

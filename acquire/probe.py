@@ -28,7 +28,7 @@ def probe(args: argparse.Namespace) -> int:
         # looks at a simulated robot standing at home
         from drivers.sim.rig import SimulatedRig
 
-        robot_spec = RobotSpec.parse(args.robot or "mock:ur5e")
+        robot_spec = RobotSpec.parse(args.robot if args.robot is not None else "mock:ur5e")
         robot_spec = robot_spec if robot_spec.backend == "mock" else RobotSpec.parse(f"mock:{robot_spec.model}")
         rig = SimulatedRig.from_spec(robot_spec, tracker_spec, VirtualClock())
     tracker = _open_tracker(tracker_spec, rig, site, args.trace_io)

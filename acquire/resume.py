@@ -79,7 +79,8 @@ def resume_settings(header: dict[str, Any], robot: str | None = None, tracker: s
 
 
 def _robot(old: RobotSpec, new: RobotSpec, text: str) -> RobotSpec:
-    if (new.backend, new.model) != (old.backend, old.model):
+    new = new.resolved()  # a model file named from another folder is the same file
+    if (new.backend, new.model) != (old.backend, old.resolved().model):
         raise ResumeRefused(f"--robot {text}: the session was measured with {old}; a resume may change the robot's "
                             f"address, not the robot ({old.backend}:{old.model})")
     if new.backend == "mock" and _world(new.options) != _world(old.options):

@@ -12,11 +12,14 @@ from typing import Any
 
 import yaml
 
-from acquire.orchestrator import Orchestrator, Progress, RunResult, StopRequest, Timeouts
+from acquire.orchestrator import Orchestrator, RunResult, StopRequest, Timeouts
+from acquire.progress import ProgressDisplay
 from acquire.session import Session
+from common.fit_width import say
 from common.outputs import write_output
 from config.robots import ConfigError, RobotModel
 from config.site import SiteConfig
+from drivers.clock import VirtualClock
 from identify.factory import factory_reference
 from identify.io.result_io import result_to_dict
 from identify.pipeline import identify
@@ -27,35 +30,39 @@ log = logging.getLogger("acquire")
 
 
 def run_session(robot, tracker, session: Session, clock, site: SiteConfig, quiet: bool) -> RunResult:
-    """Run ``session``'s remaining steps on the devices (Ctrl-C stops the motion; the site's timeouts and
-    retries), printing progress unless ``quiet``."""
+    """Run ``session``'s remaining steps on the devices (Ctrl-C, SIGTERM or SIGHUP stops the motion; the site's
+    timeouts and retries), showing progress unless ``quiet`` (acquire/progress.py)."""
     stop = StopRequest()
+    display = ProgressDisplay(session.plan, site.measure_time, quiet, simulated=isinstance(clock, VirtualClock))
+    done = session.recorded_indices()
+    steps = session.plan.steps
+    display.plan_steps([s for s in steps if s.index not in done] + [steps[i] for i in session.missing_indices()])
     orchestrator = Orchestrator(robot, tracker, session, clock,
                                 Timeouts(site.timeouts.move, site.timeouts.settle, site.timeouts.measure),
-                                site.retries, progress_printer(quiet), stop, site.stream_rate)
-    with stop.installed():
-        result = orchestrator.run()
-    if not quiet and sys.stderr.isatty():
-        sys.stderr.write("\n")
-    return result
+                                site.retries, progress_printer(quiet, display), stop, site.stream_rate,
+                                on_start=display.start)
+    try:
+        with stop.installed():
+            return orchestrator.run()
+    finally:
+        display.close()
 
 
 def finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -> int:
     log.info("run %s%s; %d step(s) recorded, %d missing", result.outcome,
              f" ({result.reason})" if result.reason else "", result.recorded, result.missing)
     if result.outcome != "complete":
-        print(f"acquire: run {result.outcome}: {result.reason}", file=sys.stderr)
-        print(f"acquire: {result.recorded} step(s) recorded this run; resume with: acquire --resume {path}",
-              file=sys.stderr)
+        print(f"acquire: run {result.outcome} ({result.reason}); {result.recorded} step(s) recorded this run; "
+              f"resume with: acquire --resume {path}", file=sys.stderr)
         return 130 if result.outcome == "aborted" else 1
     if result.missing:
-        print(f"note: {result.missing} step(s) still missing after a second attempt (tracker failures); the "
+        say(f"note: {result.missing} step(s) still missing after a second attempt (tracker failures); the "
               f"identification uses the rest; acquire --resume {path} --remeasure-missing tries them again")
     drift = session.drift()
     if len(drift) > 1:
         worst = max(d for _, d in drift)
         minutes = (drift[-1][0] - drift[0][0]) / 60
-        print(f"home drift: {len(drift)} re-measurements over {minutes:.1f} min, largest {worst * 1e3:.4f} mm "
+        say(f"home drift: {len(drift)} re-measurements over {minutes:.1f} min, largest {worst * 1e3:.4f} mm "
               "from the first")
     doc = identify_session(session, path, robot)
     if doc["verdict"]["status"] == "fail":
@@ -67,30 +74,10 @@ def finish(result: RunResult, session: Session, path: Path, robot: RobotModel) -
 
 
 
-def progress_printer(quiet: bool):
-    """Progress to the log always, and to the terminal unless ``quiet``."""
-    tty = sys.stderr.isatty()
-
-    def show(p: Progress) -> None:
-        residual = f", sweep residual {p.residual * 1e3:.3f} mm" if p.residual is not None else ""
-        what = f"joint {p.step.joint} sweep" if p.step.kind == "sweep" else p.step.kind
-        line = (f"step {p.done}/{p.total} ({what}): {p.samples} samples, {p.status}; "
-                f"elapsed {hms(p.elapsed)}, remaining {hms(p.remaining)}{residual}")
-        log.info(line)
-        if quiet:
-            return
-        if tty:
-            sys.stderr.write("\r" + line[:150].ljust(150))
-            sys.stderr.flush()
-        elif p.done == p.total or p.done % 25 == 0:
-            print(line, file=sys.stderr)
-
-    return show
-
-
-def hms(seconds: float) -> str:
-    seconds = max(0, round(seconds))
-    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+def progress_printer(quiet: bool, display: ProgressDisplay):
+    """What the orchestrator calls after each step: the display's :meth:`~ProgressDisplay.done` (logs the step,
+    and shows it unless ``quiet``)."""
+    return display.done
 
 
 def cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:

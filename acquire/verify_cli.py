@@ -28,10 +28,14 @@ import yaml
 from acquire.cli import UsageError, _check_start, _confirm, _open_devices, _Parser, _site, _without_faults
 from acquire.plan import estimate_duration, plan_clearance
 from acquire.plan_report import format_clearance
+from acquire.progress import hms
 from acquire.resume import resume_settings
-from acquire.runner import hms, run_session
+from acquire.runner import run_session
 from acquire.session import Session
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
+from common import fit_width
+from common.fit_width import say
+from common.help_text import description as _description
 from common.outputs import check_outputs, check_target, write_output
 from config.robots import RobotModel, load_robot
 from drivers.spec import RobotSpec, TrackerSpec
@@ -43,8 +47,9 @@ MM = 1e3
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="acquire verify", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:7]))
+    first, rest = __doc__.split("\n\n", 1)
+    p = _Parser(prog="acquire verify", description=_description(first),
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("--result", type=Path, help="the calibration to verify (result YAML, with its covariance)")
     p.add_argument("--robot", help="robot spec (default: mock:<the result's robot>, the simulated rig)")
     p.add_argument("--tracker", help="tracker spec (default mock)")
@@ -81,7 +86,7 @@ def _load(path: Path) -> tuple[CalibratedModel, dict[str, Any], str]:
 
 def _robot_for(args: argparse.Namespace, doc: dict[str, Any], model: CalibratedModel) -> tuple[RobotSpec, RobotModel]:
     name = nominal_name(doc)
-    spec = RobotSpec.parse(args.robot or f"mock:{name or 'ur5e'}")
+    spec = RobotSpec.parse(args.robot if args.robot is not None else f"mock:{name or 'ur5e'}").resolved()
     robot = load_robot(spec.model)
     if name is not None and name.lower() != robot.name.lower():
         raise UsageError(f"{args.result} is a calibration of {name}; --robot {spec} is a {robot.name}")
@@ -96,14 +101,12 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
     lines = [f"verification of {info['result']} (verdict {info['result_verdict']}) on {robot.name}: ISO 9283-style, "
              f"5 poses x {info['cycles']} cycles, before (nominal model) then after (identified model)",
              f"test cube: centre {', '.join(f'{v * MM:.1f}' for v in info['centre'])} mm, edge {info['edge'] * MM:.0f} "
-             "mm (base frame)",
-             f"{'pose':<5} {'target x, y, z [mm]':<28} {'commanded before: q [deg]':<44} predicted AP before / after "
-             "[mm]"]
-    for k in range(5):
-        qb = ", ".join(f"{np.degrees(v):.1f}" for v in info["q"]["before"][k])
-        xyz = " ".join(f"{v:8.1f}" for v in targets[k])
-        lines.append(f"P{k + 1:<4} {xyz:<28} {qb:<44} {info['predicted']['before'][k] * MM:.3f} / 0 ± "
-                     f"{info['expected'][k] * MM:.3f}")
+             "mm (base frame); per pose: its target, the joints commanded before compensation, and the AP "
+             "predicted before / after [mm]"]
+    rows = [[f"P{k + 1}", *(f"{v:.1f}" for v in targets[k]),
+             ", ".join(f"{np.degrees(v):.1f}" for v in info["q"]["before"][k]),
+             f"{info['predicted']['before'][k] * MM:.3f} / 0 ± {info['expected'][k] * MM:.3f}"] for k in range(5)]
+    lines += fit_width.table(["pose", "x [mm]", "y [mm]", "z [mm]", "q before [deg]", "AP before / after"], rows)
     change = np.max(np.abs(np.array(info["q"]["after"]) - np.array(info["q"]["before"])))
     lines.append(f"compensation changes the joints by up to {change * 1e3:.2f} mrad")
     lines += [f"note: {n}" for n in info["notes"]]
@@ -130,7 +133,7 @@ def format_outcome(outcome: Outcome) -> str:
 def _finish(session: Session, path: Path, robot: RobotModel) -> tuple[Outcome, dict[str, Any]]:
     info = session.header["config"]["verification"]
     outcome = analyse(info, session.steps())
-    print(format_outcome(outcome))
+    say(format_outcome(outcome))
     summary = outcome.as_dict(info)
     yaml_path, report_path = _outputs(path)
     write_output(yaml_path, yaml.safe_dump(summary, sort_keys=False, width=120), force=True)
@@ -180,8 +183,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     plan, labels = build(robot, site, d.q, cycles)
     info = header(d, labels, model, str(args.result), sha, (doc.get("verdict") or {}).get("status"), cycles)
-    print(format_design(info, robot, plan, estimate_duration(plan, robot, site.measure_time)))
-    print(format_clearance(plan_clearance(plan, robot, site), plan, site))
+    say(format_design(info, robot, plan, estimate_duration(plan, robot, site.measure_time)))
+    say(format_clearance(plan_clearance(plan, robot, site), plan, site))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
@@ -207,7 +210,7 @@ def _resume(args: argparse.Namespace, session: Session) -> int:
     tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
     if args.dry_run:
         duration = estimate_duration(session.plan, robot, settings.site.measure_time)
-        print(format_design(info, robot, session.plan, duration))
+        say(format_design(info, robot, session.plan, duration))
         print("dry run: nothing was connected or moved")
         return 0
     if session.next_index() is None:
@@ -235,8 +238,8 @@ def _measure(args, session: Session | None, path: Path, plan, robot_spec: RobotS
         print(f"session: {path}")
         result = run_session(robot_dev, tracker, session, clock, site, args.quiet)
         if result.outcome != "complete":
-            print(f"acquire verify: run {result.outcome}: {result.reason}", file=sys.stderr)
-            print(f"acquire verify: resume with: acquire verify --resume {path}", file=sys.stderr)
+            print(f"acquire verify: run {result.outcome} ({result.reason}); resume with: acquire verify --resume "
+                  f"{path}", file=sys.stderr)
             return 130 if result.outcome == "aborted" else 1
         outcome, _ = _finish(session, path, robot)
         return _code(outcome)

@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from config.geometry import RobotGeometry, geometry_from_dict
+from config.model_path import names_a_file
 from kinematics.dh import Array, DHModel, check_joint_types
 from kinematics.joint_errors import Coupling, LinkMasses
 
@@ -106,8 +107,7 @@ def config_file(name_or_path: str | Path, directory: Path, kind: str, names: Cal
     ``directory``), or the file at that path: a ``Path``, or a string with a path separator or ending in
     ``.yaml``/``.yml``. ConfigError (one line) if it does not exist; ``names()`` lists the bundled ones."""
     text = str(name_or_path)
-    is_path = "/" in text or "\\" in text or text.lower().endswith((".yaml", ".yml"))
-    if isinstance(name_or_path, Path) or is_path:
+    if isinstance(name_or_path, Path) or names_a_file(text):
         path = Path(name_or_path)
         if not path.is_file():
             raise ConfigError(path, None, f"an existing {kind} YAML file", "no such file")

@@ -5,6 +5,9 @@ Robot specs::
     ur5e                      a real UR robot; its host comes from the site configuration
     ur5e@192.168.1.10[:PORT]  a real UR robot at that host (IPv6 in brackets: ur5e@[fe80::1])
     mock:ur5e                 the simulated robot of that model (drivers/sim/)
+    mock:arms/cell7.yaml      the model may be a path to a robot YAML file (validated as the bundled ones are),
+    arms/cell7.yaml@HOST      in every form: a separator or a .yaml/.yml ending makes it a path (no '@', '?',
+                              '#', '&' or white space in it)
     ...?key=value&key=value   options; ``ur:ur5e`` is accepted as the explicit form of ``ur5e``
 
 Tracker specs::
@@ -32,14 +35,16 @@ import difflib
 import math
 import re
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
+from config.model_path import names_a_file
 from drivers.errors import SpecError
 
 ROBOT_BACKENDS = ("ur", "mock")
 TRACKER_BACKENDS = ("serial", "ipp", "aruco", "mock")
-ROBOT_FORMS = "MODEL, MODEL@HOST[:PORT] or mock:MODEL (e.g. ur5e, ur5e@192.168.1.10, mock:ur5e), each with " \
-              "optional ?key=value&..."
+ROBOT_FORMS = "MODEL, MODEL@HOST[:PORT] or mock:MODEL (e.g. ur5e, ur5e@192.168.1.10, mock:ur5e, mock:my_arm.yaml; " \
+              "MODEL: a bundled name or a path to a robot YAML file), each with optional ?key=value&..."
 TRACKER_FORMS = "serial:PORT[?opts], ipp://HOST[:PORT], aruco:SOURCE[?opts] or mock[?opts]"
 
 #: Faults of the simulated robot: at move N (see drivers/sim/rig.py for what each does).
@@ -89,6 +94,7 @@ MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
 }
 
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]*\Z")
+_MODEL_PATH = re.compile(r"[^\s?#@&]+\Z")  # a model given as a file (config.model_path.names_a_file)
 _HOST = re.compile(r"(?:[A-Za-z0-9_][A-Za-z0-9_.-]*|\[[0-9A-Fa-f:.]+\])\Z")
 _KEY = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 _VALUE = re.compile(r"[^&=?#\s]+\Z")
@@ -244,9 +250,9 @@ class RobotSpec:
             raise _fail("empty robot spec", text, ROBOT_FORMS)
         head, options = _split_options(text, ROBOT_FORMS)
         model_part, at, address = head.partition("@")
-        backend, colon, model = model_part.rpartition(":")
-        if not colon:
-            backend = "ur"
+        backend, colon, model = model_part.partition(":")
+        if not colon or (backend not in ROBOT_BACKENDS and names_a_file(model_part)):  # C:\arms\x.yaml
+            backend, model = "ur", model_part
         elif backend not in ROBOT_BACKENDS:
             raise _fail(f"unknown robot backend {backend!r}{_suggest(backend, ROBOT_BACKENDS)}", text, ROBOT_FORMS)
         host: str | None = None
@@ -263,8 +269,10 @@ class RobotSpec:
     def _check(self, text: str) -> None:
         if self.backend not in ROBOT_BACKENDS:
             raise _fail(f"unknown robot backend {self.backend!r}", text, ROBOT_FORMS)
-        if not isinstance(self.model, str) or not _NAME.match(self.model):
-            raise _fail(f"bad robot model {self.model!r} (letters, digits, '_' and '-')", text, ROBOT_FORMS)
+        if not isinstance(self.model, str) or not (
+                _NAME.match(self.model) or (names_a_file(self.model) and _MODEL_PATH.match(self.model))):
+            raise _fail(f"bad robot model {self.model!r} (a bundled name: letters, digits, '_' and '-'; or a path "
+                        "to a robot YAML file)", text, ROBOT_FORMS)
         if self.backend == "mock" and (self.host is not None or self.port is not None):
             raise _fail("a mock robot has no host", text, ROBOT_FORMS)
         if self.host is not None and not _HOST.match(self.host if ":" not in self.host else f"[{self.host}]"):
@@ -281,6 +289,18 @@ class RobotSpec:
     @property
     def is_mock(self) -> bool:
         return self.backend == "mock"
+
+    @property
+    def model_is_file(self) -> bool:
+        """True when the model is a path to a robot YAML file, not a bundled name."""
+        return names_a_file(self.model)
+
+    def resolved(self) -> RobotSpec:
+        """The same spec with a model file's path made absolute (what a session records: a resume from another
+        folder finds the same file); a bundled name as it is."""
+        if not self.model_is_file:
+            return self
+        return RobotSpec(self.backend, str(Path(self.model).resolve()), self.host, self.port, self.options)
 
     def with_host(self, host: str, port: int | None = None) -> RobotSpec:
         """The same spec at ``host`` (e.g. from the site configuration)."""

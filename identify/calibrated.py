@@ -314,6 +314,8 @@ def robot_model(name: str | None):
     :class:`~common.errors.InputError` (one line)."""
     if name is None:
         return None
+    if not name.strip():
+        raise InputError("--robot is empty: name a bundled model (e.g. ur5e) or a robot YAML file")
     from config.robots import ConfigError, load_robot
 
     try:

@@ -1,7 +1,7 @@
 """``identify INPUT``: identify DH parameters from a measurement CSV (the edge where files are read).
 
-Exit codes: 0 a result that passes its verdict or passes with warnings, 3 a result that fails its verdict
-(still written, for diagnosis), 2 bad input or usage (one line on stderr), 1 an identification that failed.
+Its options, subcommands and exit codes: identify/options.py (``identify --help``); the entry point that answers
+those before the heavy imports: identify/launch.py.
 """
 
 from __future__ import annotations
@@ -22,73 +22,16 @@ from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from config.robots import RobotModel
 from identify.calibrated import robot_model
-from identify.cpa import DEFAULT_PARALLEL_TOL
-from identify.io.csvio import UNITS, format_measurements, read_measurements
+from identify.io.csvio import format_measurements, read_measurements
 from identify.io.result_io import result_to_dict
 from identify.io.session_measurements import open_session, read_session
 from identify.measurements import Measurements
+from identify.options import SUBCOMMANDS, build_parser
 from identify.pipeline import Identification, identify, split_holdout
 from identify.report.terminal import format_reference, format_report
 from kinematics.dh import frames_from_joints
 from kinematics.joint_errors import Coupling
 from session.schema import is_session_file
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors in one line with exit code 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="identify",
-        description="Identify a robot's DH parameters, base and tracked point from a measurement CSV "
-        "(sweeps of one joint at a time; see README for the format).",
-    )
-    parser.add_argument("input", help="measurement CSV (sweep,joint,q1..qN,x,y,z) or an acquisition session file")
-    parser.add_argument("--out", metavar="FILE", help="write the result YAML (DESIGN.md contract) to FILE")
-    parser.add_argument("--json", action="store_true", help="print the full result as JSON instead of a table")
-    parser.add_argument("--report", metavar="FILE", help="write a self-contained HTML report (needs matplotlib)")
-    parser.add_argument("--verification", metavar="FILE",
-                        help="with --report: show this acquire verify run (its .verify.yaml) in the headline")
-    parser.add_argument("--urdf", metavar="FILE", help="write the identified robot as URDF")
-    parser.add_argument("--ur-calibration", metavar="FILE",
-                        help="write the UR ROS driver's kinematics calibration YAML (6R UR arms)")
-    parser.add_argument("--rtb", metavar="FILE", help="write a Robotics Toolbox for Python script (DHRobot)")
-    parser.add_argument("--json-out", metavar="FILE", help="write the full result as JSON")
-    parser.add_argument("--csv", metavar="FILE", help="write the measurements as the CSV contract (e.g. of a session)")
-    parser.add_argument("--joints", metavar="TYPES", help="joint types base to tip, e.g. RRPR (overrides the file)")
-    parser.add_argument("--units", choices=sorted(UNITS), help="unit of x, y, z and sigma (default: file or m)")
-    parser.add_argument("--robot", metavar="MODEL",
-                        help="nominal model for comparison (e.g. ur5e, or a YAML path; a session: its robot)")
-    parser.add_argument("--holdout", type=float, default=0.3, metavar="FRACTION",
-                        help="share of free poses held out for validation when there is no role column (0.3)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the hold-out draw (0)")
-    parser.add_argument("--parallel-tol", type=float, default=DEFAULT_PARALLEL_TOL, metavar="RAD",
-                        help=f"axes closer than this are treated as parallel ({DEFAULT_PARALLEL_TOL} rad)")
-    parser.add_argument("--max-offset", type=float, default=None, metavar="M",
-                        help="where the data resolve a near-parallel pair's misalignment, keep the parallel-axis "
-                        "convention instead of exact DH if exact DH would move d more than M metres (default: the "
-                        "robot's size, the farthest measured point from joint 1's axis; 'inf' for exact DH always; "
-                        "the verdict's dh_table check says what the convention costs, and the URDF and UR exports "
-                        "carry the exact axes whatever the cap)")
-    parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
-    parser.add_argument("--noise", type=float, metavar="M",
-                        help="the tracker's noise, m per axis (1 sigma), to judge the fit by (a sigma column wins)")
-    parser.add_argument("--coupling", metavar="FILE",
-                        help="YAML with the readings' coupling, DH values = matrix . readings + offset: a row-major "
-                        "n x n list, or {matrix: ..., offset: [...]} (wins over '# coupling:' and the robot model's)")
-    parser.add_argument("--extensions", choices=("auto", "none"), default="auto",
-                        help="joint errors beyond DH (reading scale, once-per-turn, compliance with --robot "
-                        "dynamics): selected where the data support them (auto, default) or never (none)")
-    parser.add_argument("--rows", choices=("all", "step", "streamed"), default="all",
-                        help="fit only the stop-and-go rows or only the streamed ones (held-out rows validate either); "
-                        "two such results of one session, compared with identify compare, check the streams' timing")
-    parser.add_argument("--force", action="store_true", help="replace output files that already exist")
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    return parser
 
 
 def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
@@ -243,8 +186,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     """Identify per ``args``; returns the result document. Raises InputError for bad input."""
     if not 0.0 <= args.holdout < 1.0:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
-    if args.noise is not None and not (args.noise > 0 and math.isfinite(args.noise)):
-        raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
+    if not 0.0 <= args.parallel_tol < math.pi / 2:
+        raise InputError(f"--parallel-tol must be an angle in [0, pi/2) rad, got {args.parallel_tol}")
+    if not args.max_offset >= 0.0:
+        raise InputError(f"--max-offset must be a length >= 0, got {args.max_offset} m")
     _check_outputs(args)
     header = None
     if is_session_file(Path(args.input)):
@@ -252,7 +197,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     else:
         content = read_measurements(args.input, args.joints, args.units)
     meas = _rows(split_holdout(content.measurements, args.holdout, args.seed), args.rows)
-    robot_name = args.robot or (header or {}).get("robot_model")  # a session knows its robot
+    # a session knows its robot; --robot '' is refused, not taken for no --robot
+    robot_name = args.robot if args.robot is not None else (header or {}).get("robot_model")
     robot = robot_model(robot_name)
     nominal, nominal_name = (robot.nominal, robot.name) if robot else (None, None)
     if nominal is not None and nominal.joint_types != meas.joint_types:
@@ -279,9 +225,19 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             used = ident.validation
             figure = f", held-out {used.rms * 1e3:.4f} mm" if used is not None else ", not validated"
             print(f"{args.out}: the result (use: its {ident.use} model{figure})")
+        models = {path for path, _ in written}
+        for option, what in WRITTEN:  # every other file written
+            path = getattr(args, option)
+            if path and option != "out" and path not in models:
+                print(f"{what} written to {path}")
     for path, carries in written:
         print(f"{path}: {carries}", file=announce)
     return doc
+
+
+#: the files identify writes, by option, as it announces them
+WRITTEN = (("out", "result"), ("report", "report"), ("urdf", "URDF"), ("ur_calibration", "UR calibration"),
+           ("rtb", "Robotics Toolbox script"), ("json_out", "JSON result"), ("csv", "measurement CSV"))
 
 
 def _rows(meas: Measurements, rows: str) -> Measurements:
@@ -294,9 +250,6 @@ def _rows(meas: Measurements, rows: str) -> Measurements:
         raise InputError(f"--rows {rows}: the data hold no {'stop-and-go' if rows == 'step' else 'streamed'} rows "
                          "to fit")
     return meas.subset(fitted | meas.check)
-
-
-SUBCOMMANDS = ("compensate", "compare", "check")  # identify/compensate_cli.py, compare_cli.py, check_cli.py
 
 
 def _with_coupling(meas: Measurements, path: str | None, robot: RobotModel | None, notes: list[str]) -> Measurements:
@@ -347,6 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("identify: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader of stdout went away (| head): the entry point stops quietly
+        raise
     except Exception as exc:  # numerical failure: one line, not a traceback; --debug-free by design
         print(f"identify: error: identification failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1

@@ -264,8 +264,12 @@ def compare(models: list[CalibratedModel], labels: list[str], limits: Array | No
     if not changed:
         verdict = (f"no significant change over {len(models)} calibrations (family-wise false-alarm rate {alpha:g}); "
                    f"largest TP displacement RMS {_mm(max(p.displacement_rms for p in pairs))}")
-    else:
-        verdict = " | ".join(p.verdict for p in changed)
+    else:  # one short line: each pair's own verdict follows it (printed once, there)
+        largest = [max(p.changed, key=lambda c: abs(c.z)).text() if p.changed else "the parameters together"
+                   for p in changed]
+        verdict = ("SIGNIFICANT CHANGE " + "; ".join(f"{p.a} -> {p.b} (largest: {w})" for p, w in
+                                                      zip(changed, largest, strict=True))
+                   + f"; family-wise false-alarm rate {alpha:g}; each pair's test below")
     return Comparison(tuple(labels), pairs, alpha, verdict)
 
 

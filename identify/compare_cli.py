@@ -17,8 +17,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from common import fit_width
 from common.errors import InputError
-from common.outputs import check_outputs, write_output
+from common.help_text import description as _description
+from common.outputs import check_outputs, same_file, write_output
 from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
 from identify.io.result_io import load_result
@@ -31,8 +33,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="identify compare", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
+    first, rest = __doc__.split("\n\n", 1)
+    p = _Parser(prog="identify compare", description=_description(first),
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("inputs", nargs="+", metavar="RESULT_OR_SESSION", help="two or more, oldest first")
     p.add_argument("--robot", metavar="MODEL", help="nominal model (joint limits of the displacement poses; default: "
                    "the inputs')")
@@ -86,6 +89,10 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
         raise InputError("give at least two results or sessions to compare, oldest first")
     if not 0 < args.alpha < 1 or args.poses < 1:
         raise InputError(f"--alpha must be in (0, 1) and --poses >= 1, got {args.alpha} and {args.poses}")
+    for k, a in enumerate(args.inputs):
+        for b in args.inputs[k + 1:]:
+            if same_file(a, b):
+                raise InputError(f"{a} and {b} are the same file: compare calibrations made at different times")
     robot_file = args.robot if args.robot and Path(args.robot).is_file() else None
     check_outputs([*args.inputs, robot_file], [("--html", args.html)], args.force)
     loaded = [load_input(path) for path in args.inputs]
@@ -99,7 +106,7 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
     if len({s for s, _ in serials}) > 1:
         a, b = sorted(serials)[:2]
         raise InputError(f"{a[1]} is robot serial {a[0]}, {b[1]} serial {b[0]}: different robots cannot be compared")
-    robot = robot_model(args.robot or next((r for _, r, *_ in loaded if r), None))
+    robot = robot_model(args.robot if args.robot is not None else next((r for _, r, *_ in loaded if r), None))
     if robot is not None and robot.joint_types != models[0].model.joint_types:
         raise InputError(f"--robot {robot.name} has joints {robot.joint_types}, the inputs "
                          f"{models[0].model.joint_types}")
@@ -146,7 +153,7 @@ def format_comparison(c: Comparison) -> str:
         lines += [f"note: {e}" for e in p.excluded]
         lines.append(f"cell: base moved {p.base_shift * 1e3:.3f} mm and turned {math.degrees(p.base_turn):.4f} deg "
                      f"relative to the tracker; TP {p.tool_shift * 1e3:.3f} mm on the flange (not the robot)")
-    return "\n".join(lines)
+    return "\n".join(fit_width.wrap_lines(lines))  # within the terminal's width
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -34,6 +34,7 @@ import numpy as np
 
 from common import __version__
 from common.errors import InputError
+from common.help_text import description as _description
 from common.outputs import check_outputs, write_output
 from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
 from identify.compensate import Compensation, compensate, controller_poses, pose_matrices, rotvecs, ur_pose
@@ -48,9 +49,9 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="identify compensate", description=__doc__.splitlines()[0].replace("``", ""),
-                formatter_class=argparse.RawDescriptionHelpFormatter,
-                epilog="\n".join(__doc__.splitlines()[2:]))
+    first, rest = __doc__.split("\n\n", 1)  # the first paragraph is the description (one sentence over two lines)
+    p = _Parser(prog="identify compensate", description=_description(first),
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("result", help="result YAML of identify --out (with its covariance)")
     p.add_argument("--targets", required=True, metavar="FILE", help="targets CSV (see above)")
     p.add_argument("--out", required=True, metavar="FILE", help="output CSV")
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     status = (doc.get("verdict") or {}).get("status")
     if status == "fail":
         raise InputError(f"{args.result} fails its verdict: its model must not be used (see the result's checks)")
-    robot = robot_model(args.robot or nominal_name(doc))
+    robot = robot_model(args.robot if args.robot is not None else nominal_name(doc))
     n = identified.n_joints
     if robot is not None and robot.joint_types != identified.model.joint_types:
         raise InputError(f"--robot {robot.name} has joints {robot.joint_types}, the result "

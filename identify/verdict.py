@@ -28,6 +28,8 @@ HOLDOUT_ALARM = 1e-3  # false-alarm rate of the held-out test
 HOLDOUT_FAIL = 3.0  # held-out RMS over its expectation beyond which the model is wrong, not just optimistic
 REJECTED_WARN = 0.05  # share of samples rejected as outliers above which the data deserve a look
 NOMINAL_TOLERANCE = 0.01  # m RMS: an arm differs from its catalogue model by millimetres, not centimetres
+UNIT_SLIP = 10.0  # residuals this many times below the declared noise: no fit beats its tracker tenfold, a noise
+#                  declared in the wrong unit does (a value meant in mm read as metres is 1000x)
 
 
 @dataclass(frozen=True)
@@ -87,6 +89,11 @@ def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None) -> Ch
         reference = f"the noise of successive differences along the sweeps, {mm(a.difference)}"
     else:
         reference = "no independent noise estimate (no sweeps to difference)"
+    if a.declared is not None and a.residual * UNIT_SLIP < a.declared:
+        return Check("model_fit", "warn", a.residual, a.declared / UNIT_SLIP,
+                     f"residuals {mm(a.residual)} per axis are {a.declared / a.residual:.3g}x below {reference}: "
+                     "a unit slip? (--noise 0.05 is metres; write 0.05mm); the uncertainties, and the limits "
+                     "compensation and verification take from them, are that much too loose")
     if a.detected:
         found = f"; {cause}" if cause else ""
         return Check("model_fit", "warn", a.model_error, None,

@@ -38,7 +38,7 @@ from typing import Any, Self
 
 import numpy as np
 
-from common import __version__
+from common import __version__, stop_signals
 from common.outputs import OutputError, check_target, commit_file
 from drivers.base import DeviceIdentity
 from kinematics.joint_errors import Coupling
@@ -230,8 +230,8 @@ class SessionFile:
                  tb: TracebackType | None) -> None:
         if self._run_id is not None and exc is not None and self._conn is not None:
             with contextlib.suppress(SessionError):  # never hide the exception that is propagating
-                if isinstance(exc, KeyboardInterrupt):
-                    self.end_run("aborted", "stopped by the operator (Ctrl-C)")
+                if isinstance(exc, KeyboardInterrupt):  # Ctrl-C, SIGTERM or SIGHUP (common/stop_signals.py)
+                    self.end_run("aborted", stop_signals.reason_of(exc))
                 else:
                     self.end_run("failed", f"{type(exc).__name__}: {exc}")
         if exc is None:

@@ -47,7 +47,7 @@ def _child(argv: list[str]) -> int:
     runner.identify_session = lambda *args, **kwargs: {"verdict": {"status": "pass"}}
     cli.predicted_accuracy = lambda *args, **kwargs: None
     cli.format_plan = lambda *args, **kwargs: "(plan)"
-    runner.progress_printer = lambda quiet: (lambda p: _say(f"ack {p.step.index}"))
+    runner.progress_printer = lambda quiet, display: (lambda p: _say(f"ack {p.step.index}"))
     return cli.main(argv)
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 
@@ -162,7 +163,9 @@ def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock:
         return SimulatedRobot(SimulatedRig.from_spec(spec, None, clock))
     if clock is not None and clock is not rig.clock:
         raise ValueError("the clock belongs to the rig: give it to SimulatedRig.from_spec, not open_robot")
-    if spec.model.lower() != rig.model.name.lower():
+    same = (Path(spec.model).resolve() == Path(rig.model.path).resolve() if spec.model_is_file
+            else spec.model.lower() == rig.model.name.lower())
+    if not same:
         raise ValueError(f"spec {str(spec)!r} names model {spec.model!r} but the rig simulates {rig.model.name!r}")
     ours = {key: getattr(rig, key) for key in ("seed", "repeatability", "ring", "ring_tau", "scale", "eccentricity",
                                                 "compliance")}

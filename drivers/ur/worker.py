@@ -9,8 +9,9 @@ request has a timeout; a worker that dies (a crash included), hangs or reports a
 :class:`LinkLost`, and the driver starts a fresh worker (a bounded number of times) or gives up with
 ConnectionFailed. The driver process survives either way.
 
-- The worker ignores SIGINT: Ctrl-C in the terminal reaches the whole process group, and the driver must
-  still be able to send stopJ through its worker after the operator's Ctrl-C.
+- The worker ignores the stop signals (SIGINT, SIGTERM, SIGHUP): Ctrl-C in the terminal, ``timeout`` and a
+  closed terminal reach the whole process group, and the driver must still be able to send stopJ through its
+  worker after them. The worker ends when the driver's end of its socket closes.
 - One I/O thread per worker does every exchange on the socket, one request at a time, and the caller waits
   for its answer. A Ctrl-C handler that calls the driver's ``stop()`` while a request is in flight (Python
   runs signal handlers in the main thread, between any two bytecodes) only queues its stopJ behind it, and a
@@ -46,6 +47,8 @@ from typing import Any
 START_TIMEOUT = 10.0  # s, at most, for the worker to start and open both interfaces
 CALL_TIMEOUT = 3.0  # s, default for one request (stopJ waits for the arm to stop: seconds)
 CLOSE_TIMEOUT = 2.0  # s, for stopScript at close before the worker is killed
+#: the signals the worker ignores (see above); SIGHUP is POSIX only
+STOP_SIGNALS = {s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None)) if s is not None}
 
 #: (link_ok, timestamp s, robot_mode, safety_mode, actual_q rad (6), actual_qd rad/s (6), program_running)
 Snapshot = tuple[bool, float, int, int, list[float], list[float], bool]
@@ -100,9 +103,10 @@ def _handle(receive: Any, control: Any, name: str, args: tuple[Any, ...], stream
 def serve(conn: Any, host: str, frequency: float, quiet: bool = True) -> None:
     """The worker's main loop (runs in the child): open the interfaces, then answer requests until ``close``
     or until the driver's end of the pipe closes. ``quiet``: ur_rtde's own printing goes to /dev/null."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
     with contextlib.suppress(AttributeError, OSError):
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     if quiet:  # ur_rtde prints its reconnection attempts and errors; the driver reports what happened instead
         null = os.open(os.devnull, os.O_WRONLY)
         os.dup2(null, 1)
@@ -146,10 +150,11 @@ def serve(conn: Any, host: str, frequency: float, quiet: bool = True) -> None:
 
 
 @contextlib.contextmanager
-def _sigint_blocked() -> Iterator[None]:
-    """Hold SIGINT back in this thread for the block; it is delivered (the handler runs) right after."""
+def _stop_signals_blocked() -> Iterator[None]:
+    """Hold the stop signals back in this thread for the block; they are delivered (the handlers run) right
+    after."""
     try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
     except (AttributeError, OSError, ValueError):  # no pthread_sigmask (Windows)
         yield
         return
@@ -176,7 +181,7 @@ class Worker:
         env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (root, os.environ.get("PYTHONPATH"))))}
         command = [sys.executable, "-m", "drivers.ur.worker", host, str(theirs.fileno()), repr(float(frequency))]
         try:
-            with _sigint_blocked():  # the child inherits the mask: no Ctrl-C window before it ignores SIGINT
+            with _stop_signals_blocked():  # the child inherits the mask: no window before it ignores them
                 self._process = subprocess.Popen(command, pass_fds=(theirs.fileno(),), env=env,
                                                  stdin=subprocess.DEVNULL)
         except OSError as exc:

@@ -265,8 +265,11 @@ def _columns(header: list[str], types: str, line: int, notes: list[str]) -> dict
     required = ["sweep", "joint", *(f"q{j}" for j in range(1, n + 1)), "x", "y", "z"]
     missing = [name for name in required if name not in seen]
     if missing:
+        separator = next((c for c in (";", "\t") if any(c in name for name in header)), None)
+        hint = (f" (the header is separated by {'semicolons' if separator == ';' else 'tabs'}: the file must be "
+                "comma-separated, with a decimal point)" if separator else "")
         raise InputError(f"line {line}: missing column(s) {', '.join(missing)}; expected "
-                         f"sweep,joint,q1..q{n},x,y,z")
+                         f"sweep,joint,q1..q{n},x,y,z{hint}")
     ignored = [name for name in header if name not in (*required, "sigma", "role", "tp", "t")]
     if ignored:
         notes.append(f"ignored column(s): {', '.join(ignored)}")

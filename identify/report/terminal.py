@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from common import fit_width
 from identify.pipeline import ClockFit, Identification
 from kinematics.dh import DHModel
 
@@ -27,22 +28,21 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     lines += [f"  {c.status:<4}  {c.name}: {c.message}" for c in ident.verdict.checks]
     lines += format_models(ident)
     lines.append(f"Plain DH model (the result's top-level table), joints {model.joint_types} (standard DH; "
-                 "lengths mm, angles deg)")
-    head = "joint type " + "".join(f"{f'{n} [{_UNIT[n]}]':>20}" for n in names)
-    if nominal is not None:
-        head += f"   Δ vs {nominal_name or 'nominal'} (d, a mm; theta, alpha deg)"
-    lines.append(head)
+                 "lengths mm, angles deg)" + (f"; Δ: identified - {nominal_name or 'nominal'}" if nominal is not None
+                                              else ""))
+    head = ["", *(f"{n} [{_UNIT[n]}]" for n in names)] + ([f"Δ{n}" for n in names] if nominal is not None else [])
+    rows = []
     for i in range(model.n_joints):
-        cells = []
+        cells = [f"J{i + 1} {model.joint_types[i]}"]
         for k, name in enumerate(names):
             value = model.dh_table()[i, k]
-            cells.append(_cell(value, std[9 + 4 * i + k], f"{name}{i + 1}" in fixed, name))
-        row = f"{i + 1:>5}  {model.joint_types[i]}   " + " ".join(cells)
+            cells.append(_cell(value, std[9 + 4 * i + k], f"{name}{i + 1}" in fixed, name).strip())
         if nominal is not None:
             delta = model.dh_table()[i] - nominal.dh_table()[i]
             delta[0] = np.angle(np.exp(1j * delta[0]))
-            row += "   " + " ".join(f"{d * _SCALE[n]:+8.3f}" for d, n in zip(delta, names, strict=True))
-        lines.append(row)
+            cells += [f"{d * _SCALE[n]:+8.3f}" for d, n in zip(delta, names, strict=True)]
+        rows.append(cells)
+    lines += fit_width.table(head, rows)  # split into column blocks on a narrow terminal
     t = model.base[:3, 3] * 1e3
     lines.append(f"base origin in tracker frame [mm]: {t[0]:.3f}, {t[1]:.3f}, {t[2]:.3f}"
                  f"  (± {', '.join(f'{s * 1e3:.3f}' for s in std[3:6])})")
@@ -88,7 +88,7 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
                                                              for tp, (k, rms, _) in v.per_tp.items()))
     for warning in ident.warnings + ref.notes:
         lines.append(f"note: {warning}")
-    return "\n".join(lines)
+    return "\n".join(fit_width.wrap_lines(lines))  # every line within the terminal's width
 
 
 _EXT_SCALE = {"scale": (1e6, "ppm"), "ecc_sin": (np.degrees(1.0) * 3600, "arcsec"),
@@ -146,4 +146,4 @@ def format_reference(ident: Identification, label: str, reference: DHModel) -> s
         delta[0] = np.angle(np.exp(1j * delta[0]))
         lines.append(f"{i + 1:>5}  " + " ".join(f"{name} {d * _SCALE[name]:+9.4f}"
                                             for d, name in zip(delta, names, strict=True)))
-    return "\n".join(lines)
+    return "\n".join(fit_width.wrap_lines(lines))

@@ -295,7 +295,8 @@ def test_dry_run_shows_the_clearance_and_json_is_the_design_contract(capsys) -> 
     text = capsys.readouterr().out
     assert len(text.strip().splitlines()) == 1
     doc = json.loads(text)
-    assert list(doc) == ["robot", "joint_types", "home", "steps", "clearance_m"]
+    assert list(doc) == ["robot", "joint_types", "home", "steps", "clearance_m", "duration_s", "predicted_accuracy",
+                         "notes"]  # the contract's keys first, then what the dry run prints besides
     plan = build_plan(load_robot("ur5e"), SITE)
     assert doc["robot"] == "ur5e" and doc["joint_types"] == "RRRRRR" and doc["home"] == list(plan.home)
     assert [s["index"] for s in doc["steps"]] == list(range(len(plan.steps)))
@@ -303,6 +304,11 @@ def test_dry_run_shows_the_clearance_and_json_is_the_design_contract(capsys) -> 
     kinds = [s["kind"] for s in doc["steps"]]
     assert set(kinds) == {"sweep", "free", "check", "home"}
     assert kinds.count("check") == SITE.check_poses
+    from acquire.plan import estimate_duration
+
+    assert doc["duration_s"] == pytest.approx(estimate_duration(plan, load_robot("ur5e"), SITE.measure_time), rel=1e-9)
+    assert 0 < doc["predicted_accuracy"]["with_free"] < doc["predicted_accuracy"]["step_noise"]
+    assert any("clipped" in note for note in doc["notes"])
     clearance = plan_clearance(plan, load_robot("ur5e"), SITE)
     assert doc["clearance_m"] == pytest.approx(clearance.distance)
     assert f"closest approach {clearance.distance * 1e3:.1f} mm, {clearance.what}" in line

@@ -145,6 +145,6 @@ def test_ctrl_c_mid_run_stops_the_arm_resume_completes_and_the_report_says_no_fa
     report = tmp_path / "again.html"
     assert identify([str(path), "--report", str(report)]) == 0
     out = capsys.readouterr().out
-    assert "Δ vs ur5e" in out and "factory calibration: not available" in out
+    assert "Δ: identified - ur5e" in out and "factory calibration: not available" in out
     text = report.read_text()
     assert "vs ur5e" in text and "factory calibration: not available" in text

@@ -49,7 +49,8 @@ TRACKERS = [
 ]
 
 BAD_ROBOTS = ["", "   ", "sim:ur5e", "mock:", "mock:ur5e@10.0.0.1", "ur5e@", "ur5e@host:0", "ur5e@host:70000",
-              "ur5e@host:abc", "ur 5e", "ur5e/arm", "ur5e?", "ur5e?speed", "ur5e?a=1&a=2", "ur5e?a=1&", "ur5e?=1",
+              "ur5e@host:abc", "ur 5e", "mock:arm#2.yaml", "ur5e?", "ur5e?speed", "ur5e?a=1&a=2", "ur5e?a=1&",
+              "ur5e?=1",
               "ur5e@[fe80::1", "ur5e@ho st", "mock:ur5e?colour=red", "mock:ur5e?seed=-1", "mock:ur5e?seed=1.5",
               "mock:ur5e?ring=-1e-5", "mock:ur5e?ring_tau=nan", "mock:ur5e?fault=explode@3",
               "mock:ur5e?fault=protective_stop@3x2", "mock:ur5e?fault=slow@0", "mock:ur5e?fault=target_lost@3",

@@ -85,8 +85,8 @@ def test_compare_command_results_html_json_and_refusals(tmp_path, capsys) -> Non
     assert main(["compare", *files, "--html", str(html)]) == 3
     out = capsys.readouterr().out
     first = out.splitlines()[0]
-    assert first.startswith("verdict: feb -> mar: SIGNIFICANT CHANGE")
-    assert "joint 2 offset (theta2) changed by +0." in first
+    assert first.startswith("verdict: SIGNIFICANT CHANGE feb -> mar (largest: joint 2 offset (theta2) changed by +0.")
+    assert out.count("feb -> mar: SIGNIFICANT CHANGE") == 1  # the pair's full verdict, once
     assert "jan -> feb: no significant change" in out
     text = html.read_text()
     assert "SIGNIFICANT CHANGE" in text and "joint 2 offset (theta2)" in text and text.count("<img") == 2

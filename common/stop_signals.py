@@ -1,0 +1,66 @@
+"""The signals that mean "stop": Ctrl-C (SIGINT), SIGTERM (``timeout``, ``kill``, a supervisor) and SIGHUP (the
+terminal or the SSH session closed). The commands treat the three alike: a run stops its motion and is recorded
+``aborted`` (resumable); at any other moment the command stops with one line and exit code 130.
+
+Python raises KeyboardInterrupt for SIGINT; :func:`raising` makes SIGTERM and SIGHUP raise :class:`Stopped`, a
+KeyboardInterrupt that remembers its signal, so every ``except KeyboardInterrupt`` handles them too.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+#: The stop signals this platform has (SIGHUP is POSIX only).
+SIGNALS: tuple[int, ...] = tuple(s for s in (signal.SIGINT, signal.SIGTERM, getattr(signal, "SIGHUP", None))
+                                 if s is not None)
+
+
+def reason(signum: int | None) -> str:
+    """Why the command stopped, as recorded in the session and printed: ``stopped by the operator (Ctrl-C)``."""
+    if signum is None or signum == signal.SIGINT:
+        return "stopped by the operator (Ctrl-C)"
+    if signum == getattr(signal, "SIGHUP", None):
+        return "stopped by SIGHUP (the terminal or the SSH session closed)"
+    return f"stopped by {signal.Signals(signum).name}"
+
+
+class Stopped(KeyboardInterrupt):
+    """A stop signal other than Ctrl-C, raised where Python raises KeyboardInterrupt for Ctrl-C."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(reason(signum))
+        self.signum = signum
+
+
+def reason_of(exc: BaseException) -> str:
+    """The stop reason of a KeyboardInterrupt (a :class:`Stopped` names its signal)."""
+    return reason(exc.signum if isinstance(exc, Stopped) else None)
+
+
+def _raise(signum: int, _frame: object) -> None:
+    raise Stopped(signum)
+
+
+@contextmanager
+def routed(handler: Callable[[int], None], signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
+    """Call ``handler(signum)`` for each of ``signals`` inside the block; the previous handlers afterwards. Does
+    nothing outside the main thread (only it may set handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.signal(s, lambda signum, _frame: handler(signum)) for s in signals}
+    try:
+        yield
+    finally:
+        for s, old in previous.items():
+            signal.signal(s, old)
+
+
+@contextmanager
+def raising() -> Iterator[None]:
+    """Inside the block SIGTERM and SIGHUP raise :class:`Stopped` (SIGINT keeps Python's KeyboardInterrupt)."""
+    with routed(lambda signum: _raise(signum, None), tuple(s for s in SIGNALS if s != signal.SIGINT)):
+        yield

@@ -1,0 +1,48 @@
+"""Lengths on the command line: a number with its unit (``0.05mm``, ``50um``, ``2 cm``); a bare number is metres.
+
+Every option that takes a length (``--noise``, ``--max-offset``, a marker's ``--size``...) parses it here, so a
+tracker noise meant in millimetres can be written as such instead of being read as metres.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+
+#: metres per unit; ``um``, ``µm`` (micro sign) and ``μm`` (Greek mu) are the same micrometre
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6, "in": 0.0254}
+_SHOWN = ("m", "cm", "mm", "um", "in")  # as the error message lists them
+
+_LENGTH = re.compile(r"\s*(?P<number>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*(?P<unit>[^\d\s.+-]*)\s*")
+
+
+def parse_length(text: str) -> float:
+    """``text`` as metres: ``0.05mm`` -> 5e-05, ``50um`` -> 5e-05, ``5e-5`` -> 5e-05. ValueError (one line, naming
+    the accepted units) for anything else, non-finite numbers included."""
+    match = _LENGTH.fullmatch(text)
+    unit = match["unit"] if match else None
+    if match is None or unit not in ("", *LENGTH_UNITS):
+        raise ValueError(f"{text!r} is not a length: write a number with a unit ({', '.join(_SHOWN)}), e.g. 0.05mm "
+                         "or 50um; a bare number is metres")
+    value = float(match["number"]) * (LENGTH_UNITS[unit] if unit else 1.0)
+    if not math.isfinite(value):
+        raise ValueError(f"{text!r} is not a finite length")
+    return value
+
+
+
+def length(text: str) -> float:
+    """argparse ``type=`` for a length option (metres)."""
+    try:
+        return parse_length(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def positive_length(text: str) -> float:
+    """argparse ``type=`` for a length that must be > 0 (metres)."""
+    value = length(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive length")
+    return value

@@ -1,0 +1,78 @@
+"""SIGTERM and SIGHUP stop ``acquire`` as Ctrl-C does, and a stop at start-up is one line: real processes of the
+installed ``acquire`` console script, real signals. (Not ``python -m``: CPython then reports a KeyboardInterrupt
+caught inside an import's ``exec`` as death by SIGINT, whatever the code returns.)"""
+
+from __future__ import annotations
+
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from acquire.cli import main
+from acquire.session import Session
+
+ROBOT = "mock:ur5e?seed=3"
+SMALL = ["--steps", "12", "--samples", "3", "--free-poses", "6", "--quiet"]
+COMMAND = [str(Path(sys.executable).with_name("acquire"))]
+
+
+def _recorded(path: Path) -> int:
+    """Steps recorded so far, read without disturbing the writer (0 before the file exists)."""
+    if not path.exists():
+        return 0
+    try:
+        with sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=1) as db:
+            return int(db.execute("SELECT count(*) FROM steps").fetchone()[0])
+    except sqlite3.Error:
+        return 0
+
+
+@pytest.mark.parametrize(("signum", "said"), [(signal.SIGTERM, "stopped by SIGTERM"),
+                                              (signal.SIGHUP, "stopped by SIGHUP")])
+def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, capsys, signum, said):
+    """Mid-plan (a real-time mock run): exit 130, one line naming the signal and the resume command, the run
+    recorded aborted with the signal as its reason; the resume records the remaining steps, each once."""
+    path = tmp_path / "s.session"
+    proc = subprocess.Popen([*COMMAND, "--robot", ROBOT, "--tracker", "mock", *SMALL, "--realtime",
+                             "--session", str(path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while _recorded(path) < 2 and time.monotonic() < deadline and proc.poll() is None:
+        time.sleep(0.01)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    lines = err.splitlines()
+    assert len(lines) == 1 and said in lines[0] and f"resume with: acquire --resume {path}" in lines[0], err
+    with Session.open(path) as session:
+        assert session.outcome() == "aborted"
+        assert said in session.runs()[-1].reason
+        done = len(session.recorded_indices())
+        total = len(session.plan.steps)
+    assert 2 <= done < total
+    assert main(["--resume", str(path), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert f"resuming {path}: {done} of {total} steps recorded; run 1 aborted ({said}" in out
+    with Session.open(path) as session:
+        assert session.outcome() == "complete"
+        assert sorted(s.plan_index for s in session.steps()) == list(range(total))
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("delay", [0.1, 0.6])
+def test_a_stop_during_start_up_is_one_line_without_a_traceback(tmp_path, signum, delay):
+    """While the command imports, plans and connects (a dry run of a real-robot plan is the same start-up without
+    moving), a stop gives one line and exit 130, never a traceback."""
+    proc = subprocess.Popen([*COMMAND, "--robot", ROBOT, "--tracker", "mock", *SMALL, "--realtime",
+                             "--session", str(tmp_path / "s.session")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    proc.send_signal(signum)
+    _, err = proc.communicate(timeout=30)
+    assert "Traceback" not in err, err
+    assert proc.returncode == 130, err
+    assert len(err.splitlines()) == 1 and err.startswith("acquire: "), err

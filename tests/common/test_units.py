@@ -1,0 +1,41 @@
+"""Lengths on the command line (common/units.py): a number with its unit, a bare number in metres."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from common.units import length, parse_length, positive_length
+
+
+@pytest.mark.parametrize(("text", "metres"), [
+    ("0.05mm", 5e-5), ("50um", 5e-5), ("50µm", 5e-5), ("50μm", 5e-5), ("5e-5", 5e-5), ("5e-5m", 5e-5),
+    (" 2 cm ", 0.02), (".5mm", 5e-4), ("1in", 0.0254), ("-3mm", -3e-3), ("+1.5E-3 m", 1.5e-3)])
+def test_a_length_is_a_number_with_a_unit_and_a_bare_number_is_metres(text, metres):
+    assert parse_length(text) == pytest.approx(metres, rel=1e-12)
+
+
+@pytest.mark.parametrize("text", ["0.05xx", "mm", "", "inf", "nan", "1e400", "5 m m", "0.05 mm2", "1,5mm", "--1"])
+def test_anything_else_is_refused_in_one_line_naming_the_units(text):
+    with pytest.raises(ValueError) as info:
+        parse_length(text)
+    assert "\n" not in str(info.value)
+    with pytest.raises(argparse.ArgumentTypeError):
+        length(text)
+
+
+def test_a_positive_length_refuses_zero_and_negatives():
+    assert positive_length("50um") == pytest.approx(5e-5)
+    for text in ("0", "0mm", "-1mm"):
+        with pytest.raises(argparse.ArgumentTypeError, match="positive"):
+            positive_length(text)
+
+
+def test_every_length_option_of_the_commands_takes_units():
+    from acquire.cli import build_parser as acquire_parser
+    from identify.cli import build_parser as identify_parser
+
+    got = identify_parser().parse_args(["x.csv", "--noise", "50um", "--max-offset", "5cm"])
+    assert (got.noise, got.max_offset) == pytest.approx((5e-5, 0.05), rel=1e-12)
+    assert acquire_parser().parse_args(["--noise", "0.05mm"]).noise == pytest.approx(5e-5, rel=1e-12)

@@ -1,0 +1,42 @@
+"""Mistakes an operator makes, refused in one line before any fitting: an impossible --parallel-tol or
+--max-offset, a file compared with itself, a semicolon-separated CSV (with the hint it needs)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from identify.cli import main
+
+SAMPLE = Path(__file__).resolve().parents[2] / "identify" / "data" / "sample_ur5e.csv"
+
+
+def _one_line(capsys, *words: str) -> None:
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1, err
+    for word in words:
+        assert word in err, err
+
+
+@pytest.mark.parametrize(("option", "value"), [("--parallel-tol", "-1"), ("--parallel-tol", "2"),
+                                               ("--max-offset", "-5mm")])
+def test_impossible_tolerances_are_refused(option, value, capsys):
+    assert main([str(SAMPLE), f"{option}={value}"]) == 2
+    _one_line(capsys, option)
+
+
+def test_a_file_compared_with_itself_is_refused(tmp_path, capsys):
+    result = tmp_path / "a.yaml"
+    result.write_text("{}")
+    assert main(["compare", str(result), str(tmp_path / ".." / tmp_path.name / "a.yaml")]) == 2
+    _one_line(capsys, "the same file")
+
+
+def test_a_semicolon_separated_csv_gets_the_hint_it_needs(tmp_path, capsys):
+    lines = SAMPLE.read_text().splitlines()
+    header = next(k for k, line in enumerate(lines) if not line.startswith("#"))
+    path = tmp_path / "semi.csv"
+    path.write_text("\n".join(lines[:header] + [line.replace(",", ";") for line in lines[header:header + 5]]) + "\n")
+    assert main([str(path)]) == 2
+    _one_line(capsys, str(path), "missing column(s)", "semicolons", "comma-separated")

@@ -1,0 +1,70 @@
+"""The commands answer ``--help``, ``--version`` and one-line refusals before importing the heavy parts: measured
+as what is imported (robust on a loaded machine), not as time. A fresh interpreter per case."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+HEAVY = ("numpy", "scipy", "cv2", "matplotlib", "yaml", "identify.refine", "identify.pipeline", "acquire.cli",
+         "identify.cli", "tqdm")
+
+PROBE = """
+import json, sys
+from {module} import main
+try:
+    code = main({argv!r})
+except SystemExit as exc:
+    code = exc.code
+print(json.dumps([code, sorted(sys.modules)]))
+"""
+
+
+@pytest.mark.parametrize(("module", "argv", "code"), [
+    ("acquire.launch", ["--help"], 0),
+    ("acquire.launch", ["--version"], 0),
+    ("acquire.launch", ["--robot", "moc:ur5e"], 2),
+    ("acquire.launch", ["--noise", "0.05xx"], 2),
+    ("acquire.launch", ["--tracker", "serial"], 2),
+    ("identify.launch", ["--help"], 0),
+    ("identify.launch", ["--version"], 0),
+    ("identify.launch", ["missing.csv"], 2),
+    ("identify.launch", ["x.csv", "--noise", "-1mm"], 2),
+])
+def test_help_version_and_refusals_import_nothing_heavy(module, argv, code, tmp_path):
+    out = subprocess.run([sys.executable, "-c", PROBE.format(module=module, argv=argv)], capture_output=True,
+                         text=True, timeout=60, cwd=tmp_path)
+    got, modules = json.loads(out.stdout.splitlines()[-1])
+    assert got == code, out.stderr
+    assert sorted(m for m in modules if m.split(".")[0] in HEAVY or m in HEAVY) == []
+    if code == 2:
+        assert len(out.stderr.splitlines()) == 1, out.stderr
+
+
+def test_the_light_parsers_defaults_are_the_estimators():
+    from identify import options
+    from identify.cpa import DEFAULT_PARALLEL_TOL
+    from identify.io.csvio import UNITS
+    from identify.pipeline import identify
+
+    assert options.DEFAULT_PARALLEL_TOL == DEFAULT_PARALLEL_TOL
+    # --max-offset's default is the estimator's: None (the robot's size)
+    assert options.build_parser().parse_args(["x.csv"]).max_offset is None
+    assert identify.__defaults__[2] is None  # (nominal, parallel_tol, robust, max_offset, ...)
+    assert sorted(options.UNITS) == sorted(UNITS)
+
+
+def test_a_pipe_closed_by_its_reader_stops_the_command_quietly():
+    """``acquire --dry-run | head -1``: no traceback, the exit status a shell gives a command its pipe stopped (the
+    dry run prints again after seconds of computing, when the reader is gone)."""
+    from pathlib import Path
+
+    argv = [str(Path(sys.executable).with_name("acquire")), "--robot", "ur5e", "--tracker", "mock", "--dry-run"]
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0)
+    proc.stdout.read(10)
+    proc.stdout.close()  # the reader goes away after its first bytes
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141 and "Traceback" not in err and "Error" not in err, err
