@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from common import __version__
+from common import __version__, fit_width
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from config.robots import RobotModel
@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--holdout must be in [0, 1), got {args.holdout}")
     if not 0.0 <= args.parallel_tol < math.pi / 2:
         raise InputError(f"--parallel-tol must be an angle in [0, pi/2) rad, got {args.parallel_tol}")
-    if not args.max_offset >= 0.0:
+    if args.max_offset is not None and not args.max_offset >= 0.0:
         raise InputError(f"--max-offset must be a length >= 0, got {args.max_offset} m")
     _check_outputs(args)
     header = None
@@ -214,24 +214,27 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         _write_atomic(Path(args.out), yaml.safe_dump(doc, sort_keys=False, width=120))
     reference, note = _factory_reference(header, meas.joint_types) if header is not None else (None, "")
     written = _write_exports(args, ident, meas, doc, robot, reference, note)
-    announce = sys.stderr if args.json else sys.stdout
+    models = [f"{path}: {carries}" for path, carries in written]  # each model file with what it carries
     if args.json:
         print(json.dumps(doc, allow_nan=False))
-    else:
-        print(format_report(ident, nominal, nominal_name))
-        if reference is not None or note:
-            print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
-        if args.out:
-            used = ident.validation
-            figure = f", held-out {used.rms * 1e3:.4f} mm" if used is not None else ", not validated"
-            print(f"{args.out}: the result (use: its {ident.use} model{figure})")
-        models = {path for path, _ in written}
-        for option, what in WRITTEN:  # every other file written
-            path = getattr(args, option)
-            if path and option != "out" and path not in models:
-                print(f"{what} written to {path}")
-    for path, carries in written:
-        print(f"{path}: {carries}", file=announce)
+        if models:
+            print("\n".join(models), file=sys.stderr)
+        return doc
+    print(format_report(ident, nominal, nominal_name))
+    if reference is not None or note:
+        print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
+    said = []
+    if args.out:
+        used = ident.validation
+        figure = f", held-out {used.rms * 1e3:.4f} mm" if used is not None else ", not validated"
+        said.append(f"{args.out}: the result (use: its {ident.use} model{figure})")
+    announced = {path for path, _ in written}
+    for option, what in WRITTEN:  # every other file written
+        path = getattr(args, option)
+        if path and option != "out" and path not in announced:
+            said.append(f"{what} written to {path}")
+    if said or models:
+        print("\n".join(fit_width.wrap_lines(said + models)))
     return doc
 
 

@@ -45,6 +45,8 @@ def test_help_version_and_refusals_import_nothing_heavy(module, argv, code, tmp_
 
 
 def test_the_light_parsers_defaults_are_the_estimators():
+    import inspect
+
     from identify import options
     from identify.cpa import DEFAULT_PARALLEL_TOL
     from identify.io.csvio import UNITS
@@ -53,7 +55,7 @@ def test_the_light_parsers_defaults_are_the_estimators():
     assert options.DEFAULT_PARALLEL_TOL == DEFAULT_PARALLEL_TOL
     # --max-offset's default is the estimator's: None (the robot's size)
     assert options.build_parser().parse_args(["x.csv"]).max_offset is None
-    assert identify.__defaults__[2] is None  # (nominal, parallel_tol, robust, max_offset, ...)
+    assert inspect.signature(identify).parameters["max_offset"].default is None
     assert sorted(options.UNITS) == sorted(UNITS)
 
 

@@ -14,9 +14,17 @@ def test_every_written_file_is_announced(tmp_path, capsys):
     files = {"--out": "r.yaml", "--urdf": "r.urdf", "--rtb": "r.py", "--json-out": "r.json", "--csv": "m.csv"}
     argv = [str(SAMPLE)] + [x for option, name in files.items() for x in (option, str(tmp_path / name))]
     assert main(argv) == 0
-    out = capsys.readouterr().out
-    for what, name in zip(("result", "URDF", "Robotics Toolbox script", "JSON result", "measurement CSV"),
-                          files.values(), strict=True):
-        assert f"{what} written to {tmp_path / name}" in out and (tmp_path / name).is_file()
+    out = capsys.readouterr().out.splitlines()
+    # the model files say which model they carry and its held-out figure; the others that they were written
+    expected = {"r.yaml": "the result (use: its plain model, held-out ",
+                "r.urdf": "plain model (exact axes), held-out ", "r.py": "plain model (DH table), held-out ",
+                "r.json": None, "m.csv": None}
+    for name, carries in expected.items():
+        path = tmp_path / name
+        said = f"{path}: {carries}" if carries else f"written to {path}"
+        assert any(said in line for line in out), (name, out[-6:])
+        assert path.is_file()
     assert main([*argv, "--json", "--force"]) == 0
-    json.loads(capsys.readouterr().out)  # nothing but the document
+    streams = capsys.readouterr()
+    json.loads(streams.out)  # nothing but the document; the model files are announced on stderr
+    assert f"{tmp_path / 'r.urdf'}: plain model (exact axes)" in streams.err
