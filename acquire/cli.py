@@ -309,7 +309,9 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         first = 0 if session is None else session.next_index()
         if first is not None:
             _check_start(robot, plan, robot_model, site, first, session)
-            check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before anything moves
+            note = check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before any move
+            if note:
+                print(f"tracker: {note}")
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv)}
