@@ -304,7 +304,10 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if session is None:
         path = args.session or _default_session_path(robot_model.name)
     _confirm(robot_spec, args, plan)
+    opening = time.monotonic()
     robot, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
+    connected = clock.now() - (time.monotonic() - opening)  # the connect's wall time, on the run's clock
+    released = False
     try:
         first = 0 if session is None else session.next_index()
         if first is not None:
@@ -319,10 +322,16 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         elif changes:
             session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))
         print(f"session: {path}")
-        return finish(run_session(robot, tracker, session, clock, site, args.quiet), session, path, robot_model)
-    finally:
-        robot.close()
+        result = run_session(robot, tracker, session, clock, site, args.quiet)
+        robot.close()  # released before the identification: it needs neither device
         tracker.close()
+        released = True
+        print(f"robot released: held {clock.now() - connected:.1f} s from connect to release")
+        return finish(result, session, path, robot_model)
+    finally:
+        if not released:
+            robot.close()
+            tracker.close()
         if session is not None:
             session.close()
 

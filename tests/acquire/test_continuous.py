@@ -275,6 +275,14 @@ def test_cli_continuous_session_end_to_end_and_export(tmp_path: Path, capsys) ->
     out = capsys.readouterr().out
     assert code == 0, out
     assert "holdout" in out and "cont." in out
+    # the robot is released, and the time it was held printed, before the identification starts
+    released = next(line for line in out.splitlines() if line.startswith("robot released: held "))
+    assert out.index(released) < out.index("result written to")
+    with Session.open(path) as session:
+        steps = session.steps()
+    recorded = max(s.t_end for s in steps) - min(s.t_start for s in steps)  # s of the run's (virtual) clock
+    held = float(released.split()[3])
+    assert recorded <= held + 0.05 < recorded + 5.0, (held, recorded)
     csv = tmp_path / "c.csv"
     assert main(["export", str(path), "--csv", str(csv)]) == 0
     out = capsys.readouterr().out
