@@ -125,6 +125,8 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
     plan's sweep ranges, the stop-and-go part (range starts, home checks, free and check poses) around them.
     Raises PlanError as :func:`acquire.plan.build_plan` does."""
     base = build_plan(robot, site, rng_seed)
+    transfer = transfer_speed(robot, site, base)
+    base = replace(base, speed=tuple(float(v) for v in transfer))
     model = tp_model(robot, site.tp_guess)
     cell = cell_from_config(robot, site)
     home = np.asarray(base.home, dtype=float)
@@ -148,7 +150,10 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
         speed, acceleration = stream_speed(robot, site, base, j)
         start, end = home.copy(), home.copy()
         start[j - 1], end[j - 1] = lo, hi
-        if poses[-1][0] == "stream" and not _clear(cell, np.asarray(poses[-1][2]), start):
+        here = np.asarray(poses[-1][2])
+        if _transfer(here, end, transfer) < _transfer(here, start, transfer):  # sweep from the nearer end
+            start, end = end, start
+        if poses[-1][0] == "stream" and not _clear(cell, here, start):
             poses.append(("home", 0, tuple(home), "fit", None, None))  # the direct move would come too close
         poses.append(("free", 0, tuple(start), "fit", None, None))
         poses.append(("stream", j, tuple(end), "fit", tuple(start), (speed, acceleration)))
@@ -172,6 +177,24 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
                     f"from the model, plan.stream_speed and a deflection below {DEFLECTION_SHARE:g} x the tracker "
                     "noise: acquire/plan_continuous.py)")
     return replace(base, steps=tuple(steps), notes=tuple(notes))
+
+
+def transfer_speed(robot: RobotModel, site: SiteConfig, plan: Plan) -> Array:
+    """Per joint, the speed (rad/s or m/s) of the moves between the sweeps of a continuous plan: the stop-and-go
+    ``plan``'s, raised to the sweeps' own cap (:data:`STREAM_SPEED_CAP`, :data:`DEFAULT_STREAM_SPEED` for a
+    prismatic joint, never above ``max_speed`` times ``robot.speed_fraction``): the arm already sweeps that fast
+    through the same cell, the path (and so its collision check) does not depend on the speed, and every
+    stop-and-go pose is measured after the settle time. A site that sets ``robot.speed`` keeps its speeds."""
+    speed = np.asarray(plan.speed, dtype=float)
+    if site.speed is not None:
+        return speed
+    cap = np.where(np.array([t == "R" for t in robot.joint_types]), STREAM_SPEED_CAP, DEFAULT_STREAM_SPEED)
+    return np.maximum(speed, np.minimum(np.asarray(robot.max_speed, dtype=float) * site.speed_fraction, cap))
+
+
+def _transfer(a: Array, b: Array, speed: Array) -> float:
+    """Seconds of the slowest joint's move from ``a`` to ``b`` at ``speed`` (no ramps: for comparing moves)."""
+    return float(np.max(np.abs(np.asarray(b) - np.asarray(a)) / speed))
 
 
 def _speed_text(speed: float, kind: str) -> str:
