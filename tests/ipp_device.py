@@ -45,7 +45,8 @@ class IppServer(_Served):
     ``Ennnn`` (a plain tag: error 0502; a second daemon: error 0515): after ``Ennnn &`` a daemon thread sends
     ``Ennnn # X(..), Y(..), Z(..)`` (mm) every ``s`` s; while the active tool is hidden it sends ``Ennnn !
     Error(2, 0511, OnMoveReportE, "Target not visible")`` instead, once per report. ``StopDaemon(Ennnn)`` or
-    ``StopAllDaemons()`` ends it (``Ennnn %``). ``reports`` counts the reports sent.
+    ``StopAllDaemons()`` ends it (``Ennnn %``). ``reports`` counts the reports sent, ``sent`` holds the host
+    time each one's point was taken.
 
     ``standard=True``: the daemon as the I++ DME standard has it (drivers/trackers/ipp_stream.py says what is
     confirmed): a ``Time`` below 0.1 s is refused after the ``&`` with error 0510 (severity 3, "Bad property"),
@@ -74,6 +75,7 @@ class IppServer(_Served):
         self.commands: list[str] = []
         self.gets = 0  # Get(X(),Y(),Z()) commands answered with a point
         self.move_reports, self.reports, self.standard = move_reports, 0, standard
+        self.sent: list[float] = []  # host time (time.time()) at which each report's point was taken
         self._daemon: tuple[str, threading.Event] | None = None  # (event tag, stop flag) of OnMoveReportE
         self._send_lock = threading.Lock()  # the daemon thread and the command handler share the socket
         self._start()
@@ -208,6 +210,7 @@ class IppServer(_Served):
                 if self.standard and not moved:
                     continue
                 x, y, z = (np.asarray(true) + self.rng.normal(0.0, self.noise, 3)) * 1000.0
+                self.sent.append(time.time())
                 send(f"# X({x:.6f}), Y({y:.6f}), Z({z:.6f})")
                 self.reports += 1
             except OSError:

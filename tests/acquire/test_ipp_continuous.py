@@ -8,6 +8,7 @@ the held-out error is checked against the truth at poses inside the swept ranges
 
 from __future__ import annotations
 
+import sqlite3
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +55,9 @@ def test_continuous_session_against_a_standard_ipp_server(tmp_path: Path) -> Non
         finally:
             tracker.close()
         asked = [c.partition(" ")[2] for c in server.commands if "OnMoveReportE" in c]
+        taken = np.array(server.sent)
+    with sqlite3.connect(tmp_path / "ipp.session") as db:
+        stamped = np.array([t for (t,) in db.execute("SELECT t FROM tracker_samples ORDER BY t")])
     assert result.outcome == "complete" and result.missing == 0
     assert "0510" in note and "10 reports/s" in note
     assert asked[0].startswith("OnMoveReportE(Time(0.004)") and all("Time(0.1)" in a for a in asked[1:])
@@ -68,6 +72,16 @@ def test_continuous_session_against_a_standard_ipp_server(tmp_path: Path) -> Non
     q_check = home + rng.uniform(-HALF, HALF, (200, 6))
     err = points_from_joints(ident.model, q_check) - points_from_joints(rig.truth, q_check)
     rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
-    bound = prediction_rms_bound(rig.truth, meas.q[~meas.check], q_check, NOISE)  # the noise alone, no timing
-    # 0.021 mm against a bound of 0.016 mm when written: host receive stamps add their jitter to the noise
-    assert rms < 3 * bound, (rms, bound)
+    # the noise the rows carry: the tracker's, and the spread of the host's receive stamps (the scheduler's delay
+    # between the server taking a point and the client stamping it) times the TP's speed, spread over 3 axes
+    assert len(stamped) == len(taken)
+    delay = stamped - taken
+    spread = float(np.std(delay))  # s: every row's, the scheduler's hiccups included
+    rows = meas.subset(streamed)
+    step = np.linalg.norm(np.diff(rows.points, axis=0), axis=1) / np.maximum(np.diff(rows.t), 1e-3)
+    same = np.diff(rows.sweep) == 0
+    speed = float(np.sqrt(np.mean(step[same] ** 2)))  # m/s, RMS over the streamed rows
+    noise = float(np.hypot(NOISE, speed * spread / np.sqrt(3)))
+    bound = prediction_rms_bound(rig.truth, meas.q[~meas.check], q_check, noise)
+    # when written: 0.016-0.028 mm for a bound of 0.016-0.070 mm (stamp spread 0.03-0.8 ms with the machine's load)
+    assert rms < 3 * bound, (rms, bound, spread)
