@@ -251,12 +251,17 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if session is None:
         path = args.session or _default_session_path(robot_model.name)
     _confirm(robot_spec, args, plan)
+    opening = time.monotonic()
     robot, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
+    connected = clock.now() - (time.monotonic() - opening)  # the connect's wall time, on the run's clock
+    released = False
     try:
         first = 0 if session is None else session.next_index()
         if first is not None:
             _check_start(robot, plan, robot_model, site, first, session)
-            check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before anything moves
+            note = check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before any move
+            if note:
+                print(f"tracker: {note}")
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv)}
@@ -264,10 +269,16 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         elif changes:
             session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))
         print(f"session: {path}")
-        return finish(run_session(robot, tracker, session, clock, site, args.quiet), session, path, robot_model)
-    finally:
-        robot.close()
+        result = run_session(robot, tracker, session, clock, site, args.quiet)
+        robot.close()  # released before the identification: it needs neither device
         tracker.close()
+        released = True
+        print(f"robot released: held {clock.now() - connected:.1f} s from connect to release")
+        return finish(result, session, path, robot_model)
+    finally:
+        if not released:
+            robot.close()
+            tracker.close()
         if session is not None:
             session.close()
 

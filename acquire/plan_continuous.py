@@ -13,7 +13,8 @@ for none of the fitted free poses unless ``--free-poses`` is given: the streamed
 smaller held-out error than the whole stop-and-go plan (the dry run shows both). The move of a stream step is a
 joint-space line like every other move, so :func:`acquire.plan.plan_clearance` checks it the same way (sampled
 so that no body point travels more than 1 cm between checks); :func:`build_continuous_plan` also checks the TP's
-distance to every revolute axis along it (1° steps) and keeps the longest clear stretch.
+distance to every revolute axis along it (1° steps) and, in a camera cell, that the camera sees the target
+there (acquire/camera_view.py), and keeps the longest stretch where both hold.
 
 **Speed of a sweep** (rad/s or m/s of the swept joint): the model's ``max_speed`` times ``robot.speed_fraction``,
 capped by :data:`STREAM_SPEED_CAP` (a conservative 1 rad/s, UR's default joint speed), by the site's
@@ -34,6 +35,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from acquire.camera_view import visible
 from acquire.cell import cell_from_config, first_contact
 from acquire.collision import Cell
 from acquire.design import SUBSPACE_TOL, gram, whitened
@@ -86,14 +88,18 @@ def stream_speed(robot: RobotModel, site: SiteConfig, plan: Plan, j: int) -> tup
     return speed, min(plan.acceleration[j - 1], a_max)
 
 
-def _clear_stretch(model: DHModel, home: Array, j: int, lo: float, hi: float, minimum: float) -> tuple[float, float]:
-    """The longest stretch of [lo, hi] (joint ``j``, the others at home) where the TP stays ``minimum`` m off every
-    revolute axis, checked every :data:`AXIS_CHECK_STEP`."""
+def _clear_stretch(model: DHModel, home: Array, j: int, lo: float, hi: float, site: SiteConfig) -> tuple[float, float]:
+    """The longest stretch of [lo, hi] (joint ``j``, the others at home) where the TP stays ``site.min_axis_distance``
+    m off every revolute axis and, in a camera cell (``site.camera_pose``), the camera sees the target
+    (:func:`acquire.camera_view.visible`), checked every :data:`AXIS_CHECK_STEP`."""
     count = max(2, math.ceil((hi - lo) / AXIS_CHECK_STEP) + 1)
     values = np.linspace(lo, hi, count)
     q = np.tile(home, (count, 1))
     q[:, j - 1] = values
-    ok = np.all(axis_distances_many(model, q) >= minimum, axis=1)
+    ok = np.all(axis_distances_many(model, q) >= site.min_axis_distance, axis=1)
+    if site.camera_pose is not None:
+        ok &= visible(model, q, np.array(site.camera_pose), np.array(site.target_normal), site.camera_half_fov,
+                      site.camera_max_tilt)[0]
     best, run = (0, -1), None
     for i, good in enumerate(ok):
         if good and run is None:
@@ -119,6 +125,8 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
     plan's sweep ranges, the stop-and-go part (range starts, home checks, free and check poses) around them.
     Raises PlanError as :func:`acquire.plan.build_plan` does."""
     base = build_plan(robot, site, rng_seed)
+    transfer = transfer_speed(robot, site, base)
+    base = replace(base, speed=tuple(float(v) for v in transfer))
     model = tp_model(robot, site.tp_guess)
     cell = cell_from_config(robot, site)
     home = np.asarray(base.home, dtype=float)
@@ -132,16 +140,20 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
     for steps in sweeps.values():
         j = steps[0].joint
         values = [s.q[j - 1] for s in steps]
-        lo, hi = _clear_stretch(model, home, j, min(values), max(values), site.min_axis_distance)
+        lo, hi = _clear_stretch(model, home, j, min(values), max(values), site)
+        where = "the TP stays off every axis" + (" and the camera sees the target" if site.camera_pose else "")
         if hi - lo < 1e-6:
-            notes.append(f"joint {j} continuous sweep left out: no stretch keeps the TP off the axes")
+            notes.append(f"joint {j} continuous sweep left out: no stretch where {where}")
             continue
         if (lo, hi) != (min(values), max(values)):
-            notes.append(f"joint {j} continuous sweep narrowed to where the TP stays off every axis")
+            notes.append(f"joint {j} continuous sweep narrowed to the longest stretch where {where}")
         speed, acceleration = stream_speed(robot, site, base, j)
         start, end = home.copy(), home.copy()
         start[j - 1], end[j - 1] = lo, hi
-        if poses[-1][0] == "stream" and not _clear(cell, np.asarray(poses[-1][2]), start):
+        here = np.asarray(poses[-1][2])
+        if _transfer(here, end, transfer) < _transfer(here, start, transfer):  # sweep from the nearer end
+            start, end = end, start
+        if poses[-1][0] == "stream" and not _clear(cell, here, start):
             poses.append(("home", 0, tuple(home), "fit", None, None))  # the direct move would come too close
         poses.append(("free", 0, tuple(start), "fit", None, None))
         poses.append(("stream", j, tuple(end), "fit", tuple(start), (speed, acceleration)))
@@ -166,6 +178,24 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
                     f"from the model, plan.stream_speed and a deflection below {DEFLECTION_SHARE:g} x the tracker "
                     "noise: acquire/plan_continuous.py)")
     return replace(base, steps=tuple(steps), notes=tuple(notes))
+
+
+def transfer_speed(robot: RobotModel, site: SiteConfig, plan: Plan) -> Array:
+    """Per joint, the speed (rad/s or m/s) of the moves between the sweeps of a continuous plan: the stop-and-go
+    ``plan``'s, raised to the sweeps' own cap (:data:`STREAM_SPEED_CAP`, :data:`DEFAULT_STREAM_SPEED` for a
+    prismatic joint, never above ``max_speed`` times ``robot.speed_fraction``): the arm already sweeps that fast
+    through the same cell, the path (and so its collision check) does not depend on the speed, and every
+    stop-and-go pose is measured after the settle time. A site that sets ``robot.speed`` keeps its speeds."""
+    speed = np.asarray(plan.speed, dtype=float)
+    if site.speed is not None:
+        return speed
+    cap = np.where(np.array([t == "R" for t in robot.joint_types]), STREAM_SPEED_CAP, DEFAULT_STREAM_SPEED)
+    return np.maximum(speed, np.minimum(np.asarray(robot.max_speed, dtype=float) * site.speed_fraction, cap))
+
+
+def _transfer(a: Array, b: Array, speed: Array) -> float:
+    """Seconds of the slowest joint's move from ``a`` to ``b`` at ``speed`` (no ramps: for comparing moves)."""
+    return float(np.max(np.abs(np.asarray(b) - np.asarray(a)) / speed))
 
 
 def _speed_text(speed: float, kind: str) -> str:

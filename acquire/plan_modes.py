@@ -99,7 +99,7 @@ def build_both_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> P
     notes += [n for n in cont.notes if n not in notes]
     notes.insert(0, "both modes: per joint the stop-and-go sweep, then the continuous sweep of the same range, then "
                     "home; the stop-and-go sweeps need no clock and check the streams' timing (acquire/plan_modes.py)")
-    return replace(cont, steps=tuple(steps), notes=tuple(notes))
+    return replace(cont, steps=tuple(steps), notes=tuple(notes), speed=step.speed)  # stop-and-go sweeps' speed
 
 
 def format_modes(robot: RobotModel, site: SiteConfig, shown: Plan, free_poses: int | None = None) -> str:

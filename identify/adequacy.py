@@ -8,15 +8,21 @@ Three estimates of the per-axis noise (weighted units: metres when no sigma is g
   (``E|D r|² = σ² tr(D (I - H) Dᵀ)``): smooth systematic residuals cancel in it, so it sees the noise;
 - ``declared``: the tracker's (the ``sigma`` column, ``--noise``, or the session's tracker).
 
-Model error is called when the residual noise exceeds the declared one (chi-square test), or, without a
-declaration, its own difference estimate (F test), at a false-alarm rate of ``ALARM``. Its size is
-``sqrt(residual² - noise²)`` per axis. The residual is two components: the tracker's white noise,
-uncorrelated from sample to sample, and the model error, correlated along each arc. The model error's lag-1
-correlation is the residuals' lag-1 autocovariance over its own variance (the noise adds variance, not
-autocovariance); under AR(1) a sweep of n samples holds only ``n_eff = n (1 - rho) / (1 + rho)`` independent
-values of it, never fewer than one. The parameters' covariance is scaled to ``noise² + model_error² · n / n_eff``
-(the ``inflation`` factor relative to the residual variance): the model-error part is inflated at most by the
-samples per sweep, when each sweep's error is one shared offset, and the noise part not at all.
+Excess residual is called when the residual noise exceeds the declared one (chi-square test), or, without a
+declaration, its own difference estimate (F test), at a false-alarm rate of ``ALARM``. The excess,
+``residual² - noise²`` per axis, has two parts: one white, uncorrelated from sample to sample (the tracker
+noisier than declared, or a streamed sample's timestamp jitter times the TP's speed), and the model error,
+correlated along each arc. White parts add variance but no autocovariance, so the residuals' lag-1 and lag-2
+autocovariances (``g1``, ``g2``) see only the correlated part: under AR(1) its correlation is ``rho_c = g2 / g1``
+and its variance ``g1 / rho_c`` (``rho_c`` kept in [:data:`MIN_RHO`, :data:`MAX_RHO`], the variance at most the
+excess), counted only when the lag-1 correlation exceeds what white residuals give at the false-alarm rate
+(``z / sqrt(3 pairs)``). ``model_error`` is that correlated part, the one that reaches every prediction; the
+white rest is noise. Under AR(1) a sweep of n samples holds only ``n_eff = n (1 - rho_c) / (1 + rho_c)``
+independent values of the model error, never fewer than one. The parameters' covariance is scaled to
+``residual² - model_error² + model_error² · n / n_eff`` (the ``inflation`` factor relative to the residual
+variance): the model error is inflated at most by the samples per sweep, when each sweep's error is one shared
+offset; the noise, white excess included, not at all. ``detected`` says the excess is significant,
+``model_error`` how much of it is correlated (0 when none).
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
+from scipy.stats import chi2, norm
 from scipy.stats import f as f_dist
 
 from identify.linalg import column_basis
@@ -34,12 +40,14 @@ Array = NDArray[np.float64]
 
 ALARM = 1e-3  # false-alarm rate of the model-error tests
 MAX_RHO = 0.999  # lag-1 correlation used for inflation stays below 1
+MIN_RHO = 0.5  # the correlated part's lag-1 correlation is taken as at least this (bounds g1 / rho_c by 2 g1)
 
 
 @dataclass(frozen=True)
 class Adequacy:
-    """Noise estimates per axis (m), the model error they imply (m per axis, 0 when not detected), the
-    variance inflation applied to the parameters' covariance, and the test that decided."""
+    """Noise estimates per axis (m), the model error they imply (m per axis: the correlated part of the excess, 0
+    when none is detected), ``white`` the uncorrelated rest of the excess (m per axis), the variance inflation
+    applied to the parameters' covariance, and the test that decided."""
 
     residual: float
     difference: float | None
@@ -51,6 +59,7 @@ class Adequacy:
     statistic: float
     limit: float
     test: str
+    white: float = 0.0
 
     @property
     def noise(self) -> float:
@@ -75,8 +84,9 @@ def assess(res_w: Array, jac_red: Array, unknown: NDArray[np.int64], runs: list[
     u = column_basis(jac_red)
     pairs = [(r[:-1], r[1:]) for r in runs if len(r) > 1]
     s2_diff = None
-    rho = 0.0
+    rho = rho2 = 0.0
     n_pairs = 0
+    mean_square = max(s2_res * dof / m, 1e-300)
     if pairs:
         a = np.concatenate([x for x, _ in pairs])
         b = np.concatenate([y for _, y in pairs])
@@ -87,7 +97,11 @@ def assess(res_w: Array, jac_red: Array, unknown: NDArray[np.int64], runs: list[
         expected = 6.0 * n_pairs - hat - float(np.sum(counts[unknown >= 0]))
         if expected > 0.5:
             s2_diff = d2 / expected
-        rho = float(np.sum(res_w[a] * res_w[b]) / n_pairs / max(s2_res * dof / m, 1e-300))
+        rho = float(np.sum(res_w[a] * res_w[b]) / n_pairs / mean_square)
+        lag2 = [(r[:-2], r[2:]) for r in runs if len(r) > 2]
+        if lag2:
+            a2, b2 = np.concatenate([x for x, _ in lag2]), np.concatenate([y for _, y in lag2])
+            rho2 = float(np.sum(res_w[a2] * res_w[b2]) / len(a2) / mean_square)
     residual = float(np.sqrt(s2_res)) * unit_scale
     difference = None if s2_diff is None else float(np.sqrt(s2_diff)) * unit_scale
     if declared is not None:
@@ -103,12 +117,15 @@ def assess(res_w: Array, jac_red: Array, unknown: NDArray[np.int64], runs: list[
     else:
         statistic, limit, test, reference = 1.0, float("inf"), "no reference noise (no sweep to difference)", residual
     detected = statistic > limit
-    model_error = float(np.sqrt(max(residual**2 - reference**2, 0.0))) if detected else 0.0
+    excess = max(residual**2 - reference**2, 0.0) if detected else 0.0
+    rho_model = min(max(rho2 / rho, MIN_RHO), MAX_RHO) if rho > 0 else MAX_RHO  # the correlated part's lag-1
+    correlated = rho > float(norm.isf(ALARM)) / np.sqrt(3.0 * max(n_pairs, 1))  # beyond white residuals' spread
+    model_error = float(np.sqrt(min(rho * residual**2 / rho_model, excess))) if correlated else 0.0
     inflation = 1.0
-    if detected and model_error > 0.0:
-        rho_model = min(max(rho * residual**2 / model_error**2, 0.0), MAX_RHO)  # the model error's own lag-1
+    if model_error > 0.0:
         per_sweep = float(np.mean([len(r) for r in runs])) if runs else 1.0
         model_inflation = min((1.0 + rho_model) / (1.0 - rho_model), max(per_sweep, 1.0))
         inflation = (residual**2 - model_error**2 + model_error**2 * model_inflation) / residual**2
+    white = float(np.sqrt(max(excess - model_error**2, 0.0)))
     return Adequacy(residual, difference, declared, model_error, bool(detected), rho, inflation, statistic, limit,
-                    test)
+                    test, white)

@@ -252,6 +252,15 @@ def _rows(meas: Measurements, rows: str) -> Measurements:
     if not np.any(fitted & ~meas.check):
         raise InputError(f"--rows {rows}: the data hold no {'stop-and-go' if rows == 'step' else 'streamed'} rows "
                          "to fit")
+    fit = fitted & ~meas.check
+    if rows == "step" and not np.any(fit & (meas.joint > 0)):  # free poses only, e.g. a continuous session's
+        points = len(np.unique(meas.tp[fit]))
+        poses = len(np.unique(np.round(meas.q[fit], 9), axis=0))
+        unknowns = 4 * meas.n_joints + 6 + 3 * points  # the DH table, the base and each tracked point
+        if 3 * poses * points <= unknowns:
+            raise InputError(f"--rows step: the stop-and-go rows are {poses} poses and no sweep (a continuous "
+                             f"session's range starts and home): too few for the {unknowns} parameters of a fit "
+                             "from free poses; use --rows all or --rows streamed")
     return meas.subset(fitted | meas.check)
 
 

@@ -14,6 +14,7 @@ import numpy as np
 from drivers.sim.rig import SimulatedRig
 from tests._served import _Served
 
+STILL = 1e-6  # m: a standard server reports when the point moved more than this since the last tick
 IPP_FAULTS = ("error", "fatal", "warning", "info", "event_warning", "outlier", "silence", "drop", "no_ack")
 IPP_TOOL_PROPERTIES = ("PtMeasPar.Speed", "PtMeasPar.Accel", "PtMeasPar.Approach", "PtMeasPar.Search",
                        "PtMeasPar.Retract", "GoToPar.Speed", "GoToPar.Accel")
@@ -44,12 +45,19 @@ class IppServer(_Served):
     ``Ennnn`` (a plain tag: error 0502; a second daemon: error 0515): after ``Ennnn &`` a daemon thread sends
     ``Ennnn # X(..), Y(..), Z(..)`` (mm) every ``s`` s; while the active tool is hidden it sends ``Ennnn !
     Error(2, 0511, OnMoveReportE, "Target not visible")`` instead, once per report. ``StopDaemon(Ennnn)`` or
-    ``StopAllDaemons()`` ends it (``Ennnn %``). ``reports`` counts the reports sent.
+    ``StopAllDaemons()`` ends it (``Ennnn %``). ``reports`` counts the reports sent, ``sent`` holds the host
+    time each one's point was taken.
+
+    ``standard=True``: the daemon as the I++ DME standard has it (drivers/trackers/ipp_stream.py says what is
+    confirmed): a ``Time`` below 0.1 s is refused after the ``&`` with error 0510 (severity 3, "Bad property"),
+    so at most 10 reports per second, and a report is sent only when the point moved more than :data:`STILL`
+    since the last tick (the machine in motion: none at rest).
     """
 
     def __init__(self, rig: SimulatedRig | None = None, *, noise: float = 2e-5, seed: int = 0,
                  events: bool = False, averaging: str | None = None, max_average: int = 64,
-                 enum_props: bool = True, tools: tuple[str, ...] = (), move_reports: bool = False) -> None:
+                 enum_props: bool = True, tools: tuple[str, ...] = (), move_reports: bool = False,
+                 standard: bool = False) -> None:
         super().__init__()
         self.rig = rig if rig is not None else SimulatedRig("ur5e", seed=seed)
         self.noise, self.events = noise, events
@@ -66,7 +74,8 @@ class IppServer(_Served):
             self.properties[averaging] = 1.0
         self.commands: list[str] = []
         self.gets = 0  # Get(X(),Y(),Z()) commands answered with a point
-        self.move_reports, self.reports = move_reports, 0
+        self.move_reports, self.reports, self.standard = move_reports, 0, standard
+        self.sent: list[float] = []  # host time (time.time()) at which each report's point was taken
         self._daemon: tuple[str, threading.Event] | None = None  # (event tag, stop flag) of OnMoveReportE
         self._send_lock = threading.Lock()  # the daemon thread and the command handler share the socket
         self._start()
@@ -176,6 +185,8 @@ class IppServer(_Served):
         interval = float(match.group(1)) if match else 0.0
         if not interval > 0:
             return error(3, "0509", "Bad argument")
+        if self.standard and interval < 0.1:
+            return error(3, "0510", "Bad property")
         stop = threading.Event()
         self._daemon = (tag, stop)
         threading.Thread(target=self._report_loop, args=(conn, tag, interval, stop, send), daemon=True).start()
@@ -183,6 +194,7 @@ class IppServer(_Served):
 
     def _report_loop(self, conn: socket.socket, tag: str, interval: float, stop: threading.Event, send: Any) -> None:
         next_time = time.monotonic()
+        last: np.ndarray | None = None  # the true point at the previous tick (standard: report only if it moved)
         while not stop.is_set() and not self._stop.is_set():
             next_time += interval
             stop.wait(max(0.0, next_time - time.monotonic()))
@@ -193,7 +205,12 @@ class IppServer(_Served):
                     send('! Error(2, 0511, OnMoveReportE, "Target not visible")')
                     continue
                 true = self.rig.true_points()[self.tools.index(self.active)] if self.tools else self.rig.true_point()
+                moved = last is not None and float(np.abs(np.asarray(true) - last).max()) > STILL
+                last = np.asarray(true, dtype=float)
+                if self.standard and not moved:
+                    continue
                 x, y, z = (np.asarray(true) + self.rng.normal(0.0, self.noise, 3)) * 1000.0
+                self.sent.append(time.time())
                 send(f"# X({x:.6f}), Y({y:.6f}), Z({z:.6f})")
                 self.reports += 1
             except OSError:

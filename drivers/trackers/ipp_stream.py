@@ -1,30 +1,47 @@
 """Streaming for the I++ DME client: ``OnMoveReportE`` event reports of the current position (implements
 :class:`drivers.base.StreamingTracker` for :class:`drivers.trackers.ipp.IppTracker`, which inherits this mixin).
 
-What could be verified (the I++ DME 1.4 specification text itself was not available here; these points come
-from independent client/server implementations and their tests, which cite VDMA 8722 section 6.7.1, table 68):
-``OnMoveReportE`` is sent with an EVENT tag (``E`` + four digits; a plain tag is refused, error 0502 in one
-server), e.g. ``E0001 OnMoveReportE(Time(0.004), X(), Y(), Z())``; it starts a "daemon" that reports the
-position as ``E0001 # X(..), Y(..), Z(..)`` lines until ``StopDaemon(E0001)`` (or ``StopAllDaemons()``);
-only one such daemon runs at a time (a second one: error 0515); its arguments also take ``Dis(d)`` (a distance
-criterion). Not verified, so not relied on: how ``Time`` and ``Dis`` combine, and whether a server reports
-while the machine stands still. This client sends only ``Time`` (the interval, s = 1 / the rate asked for).
+The exchange: ``E0001 OnMoveReportE(Time(s), X(), Y(), Z())`` (an EVENT tag, ``E`` + four digits) starts a daemon
+that reports the position as ``E0001 # X(..), Y(..), Z(..)`` (mm) until ``StopDaemon(E0001)``. This client sends
+only ``Time`` (the interval, s = 1 / the rate asked for), never ``Dis``.
+
+What is confirmed, and where from. The I++ DME specification text itself (VDMA 8722 / I++ DME 1.4) was not
+available; these points were checked against the NIST I++ DME test suite (its command checker, its error table
+and its simulated server), and against independent client/server implementations that cite section 6.7.1:
+
+- confirmed: ``OnMoveReportE`` takes an event tag; the checker refuses ``Time`` below 0.1 s with "Bad property",
+  error 0510 (severity 3), so a server that keeps to the standard reports at most 10 times per second; a second
+  daemon is refused (0515 "Daemon already exists", severity 2), ``StopDaemon`` of a tag that has none too (0513
+  "Daemon does not exist"); an error of severity >= 2 leaves the server refusing everything (0514 "Use
+  ClearAllErrors to continue") until ``ClearAllErrors()``.
+- confirmed for the test suite's server only: reports come from its motion (trajectory) loop, so a machine at
+  rest sends none; a report is due when ``Time`` s (or ``Dis`` mm) have passed since the last one.
+- not confirmed: whether a given tracker's server refuses ``Time`` below 0.1 (several are faster, a vendor
+  matter) or reports at rest; whether the refusal comes before or after the ``&``.
+
+So the client does not rely on either: :meth:`EventStreaming.start_stream` does not wait for a report (a stream
+is started with the arm still, before each sweep); it asks the rate wanted (``Time(1/rate)``) and, when the
+server refuses it with error 0510, clears the error, asks the standard's ``Time(0.1)`` (10 reports/s), says so in
+one line (the log and :attr:`EventStreaming.rate_note`) and keeps that interval for the connection. A refusal is
+recognised whether it comes before the ``&`` or after it (the first time, the client waits up to
+:data:`REFUSAL_WAIT` s after the ``&`` for one). A refused daemon never ran: no ``StopDaemon`` is sent for it.
 
 Timestamps: a report carries no device time (I++ has none in general), so each reading is stamped with the HOST's
 receive time (``time.time()``, the same for the lines of one TCP segment). The host clock is then the tracker
 clock of the stream, and the latency of the server and the network is a time offset that the synchronisation
 fit absorbs (its jitter is noise in time). Gaps (host seconds): a report whose step from the previous one exceeds
 1.5 × the interval plus :data:`JITTER`, and any error line of the daemon's tag or an unsolicited one (``E0000 !``,
-e.g. target not visible) between two reports.
+e.g. target not visible) between two reports. The time before the first report and after the last one (the arm
+at rest) is no gap.
 
 While a stream runs a reader thread owns the socket and ``measure`` is refused; ``stop_stream`` stops the reader,
-then sends ``StopDaemon``. A server without the command (error 0501 or similar) makes ``start_stream`` raise
-IppError with the server's message.
+then sends ``StopDaemon``.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import re
 import threading
@@ -32,18 +49,24 @@ import time
 from typing import Any
 
 from drivers.base import TrackerStreamBatch
-from drivers.errors import ConnectionFailed, DeviceTimeout
+from drivers.errors import ConnectionFailed
 from drivers.stream_buffer import BufferedStreaming
 from drivers.trace import one_line
 from drivers.trackers.ipp_protocol import IppError, _error_fields
 
 GAP_FACTOR = 1.5  # a step above this many intervals (plus JITTER) between reports is a gap
 JITTER = 0.02  # s: host receive times of reports jitter by the network and the scheduler
+STANDARD_INTERVAL = 0.1  # s: the least OnMoveReportE Time the standard allows (at most 10 reports/s)
+RATE_REFUSED = "0510"  # the error ("Bad property") of a Time below what the server allows
+REFUSAL_WAIT = 0.25  # s: how long a first start waits after the & for a refusal (none comes at a good rate)
 _AXIS = re.compile(r"\b(?P<axis>[XYZ])\(\s*(?P<value>[-+0-9.eE]+)\s*\)")
+
+log = logging.getLogger("drivers.trackers.ipp")
 
 
 class EventStreaming(BufferedStreaming):
-    """The streaming half of IppTracker (see the module docstring)."""
+    """The streaming half of IppTracker (see the module docstring). ``rate_note``: one line saying why the
+    stream runs slower than asked ("" when it does not)."""
 
     where: str
     _sock: Any
@@ -56,48 +79,77 @@ class EventStreaming(BufferedStreaming):
     def _init_stream(self) -> None:
         self._init_buffer()
         self._daemon_tag: str | None = None
-        self._event_tag = 0
+        self._event_tag = getattr(self, "_event_tag", 0)
         self._interval = 0.0
+        self._least_interval = getattr(self, "_least_interval", 0.0)  # s: raised to the standard's after a 0510
+        self._accepted = getattr(self, "_accepted", set())  # intervals the server took on this connection
+        self.rate_note = getattr(self, "rate_note", "")
         self.stream_counts = {"reports": 0, "errors": 0, "gaps": 0}
 
     def start_stream(self, rate: float, timeout: float) -> float:
-        """Start the OnMoveReportE daemon at ``rate`` Hz (interval 1 / rate s); returns ``rate`` once the first
-        report is in (DeviceTimeout if none comes within ``timeout`` s; IppError if the server refuses)."""
+        """Start the OnMoveReportE daemon at ``rate`` Hz (interval 1 / rate s), or at the standard's 10 Hz when the
+        server refuses the rate with error 0510; returns the rate asked of the server (Hz) without waiting for a
+        report. IppError (one line, with what to change) when the server refuses the daemon."""
         if not (rate > 0 and timeout > 0):
             raise ValueError(f"rate and timeout must be > 0, got {rate!r} Hz and {timeout!r} s")
         if self._sock is None:
             raise ConnectionFailed(f"I++ tracker {self.where} is not connected (call connect())")
         self.stop_stream(timeout)
+        interval = max(1.0 / rate, self._least_interval)
+        try:
+            self._start_daemon(interval, timeout)
+        except IppError as exc:
+            if exc.code != RATE_REFUSED:
+                raise IppError(f"{exc} (the server cannot stream OnMoveReportE: use --mode step)", exc.severity,
+                               exc.code, exc.text) from None
+            if interval >= STANDARD_INTERVAL:
+                raise IppError(f"{exc} (the server refuses {1 / interval:g} reports/s: set a lower rate in the site "
+                               "file, plan: {stream_rate: N})", exc.severity, exc.code, exc.text) from None
+            self._least_interval = STANDARD_INTERVAL
+            self.rate_note = (f"{self.where} refused OnMoveReportE Time({interval:.6g}) (error {exc.code}: "
+                              f"{exc.text}); streaming at the I++ standard's {1 / STANDARD_INTERVAL:g} reports/s "
+                              f"instead of {rate:g} (set plan: {{stream_rate: {1 / STANDARD_INTERVAL:g}}})")
+            log.warning("%s", self.rate_note)
+            self._trace.event(self.rate_note)
+            return self.start_stream(rate, timeout)
+        return 1.0 / interval
+
+    def _start_daemon(self, interval: float, timeout: float) -> None:
+        """Send OnMoveReportE at ``interval`` s and start the reader; IppError when the server refuses it (before the
+        ``&``, or after it within :data:`REFUSAL_WAIT` s the first time an interval is asked): the error is
+        cleared and no StopDaemon is sent."""
         self._init_stream()
         self._event_tag = self._event_tag % 9999 + 1
         tag = f"E{self._event_tag:04d}"
-        self._interval = 1.0 / rate
+        self._interval = interval
         deadline = time.monotonic() + timeout
-        self._await_ack(tag, f"OnMoveReportE(Time({self._interval:.6g}), X(), Y(), Z())", deadline)
-        self._daemon_tag = tag
+        try:
+            self.command(f"OnMoveReportE(Time({interval:.6g}), X(), Y(), Z())", deadline, tag=tag, until="&")
+        except IppError:
+            self._stopped_tags.add(tag)  # its "%" may still come
+            raise
         self._reader = threading.Thread(target=self._read_loop, args=(tag,), daemon=True, name="ipp-stream")
         self._reader.start()
-        while True:
-            with self._stream_lock:
-                got, failure = len(self._rows), self._failure
-            if failure is not None:
-                self.stop_stream(timeout)
-                with contextlib.suppress(Exception):  # the standard wants errors of severity >= 2 cleared
-                    self.command("ClearAllErrors()", time.monotonic() + max(timeout, 0.1))
-                raise failure
-            if got:
-                return float(rate)
-            if time.monotonic() > deadline:
-                self.stop_stream(timeout)
-                raise DeviceTimeout(f"{self.where}: no OnMoveReportE report within {timeout:g} s")
-            time.sleep(0.005)
-
-    def _await_ack(self, tag: str, text: str, deadline: float) -> None:
-        """Send ``text`` with event tag ``tag`` and wait for its ``&`` (an error raises as in ``command``)."""
-        self.command(text, deadline, tag=tag, until="&")
+        if interval not in self._accepted:
+            wait_until = time.monotonic() + min(REFUSAL_WAIT, timeout)
+            while time.monotonic() < wait_until:
+                with self._stream_lock:
+                    got, failure = len(self._rows), self._failure
+                if failure is not None:
+                    self._stop_reader(timeout)
+                    self._stopped_tags.add(tag)
+                    with contextlib.suppress(Exception):  # the standard wants errors of severity >= 2 cleared
+                        self.command("ClearAllErrors()", time.monotonic() + max(timeout, 0.1))
+                    raise failure
+                if got:
+                    break
+                time.sleep(0.005)
+            self._accepted.add(interval)
+        self._daemon_tag = tag
 
     def stop_stream(self, timeout: float) -> TrackerStreamBatch:
-        """Stop the reader, then the daemon (``StopDaemon``); returns the reports since the last read."""
+        """Stop the reader, then the daemon (``StopDaemon``, only for one the server took); returns the reports since
+        the last read."""
         unread = self._stop_reader(timeout)
         tag, self._daemon_tag = getattr(self, "_daemon_tag", None), None
         if tag is not None:

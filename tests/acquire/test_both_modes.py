@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import shutil
 import sqlite3
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,7 @@ from config.site import SiteConfig
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.stream import robot_time_of_stamps
 from identify.cli import main as identify_main
-from identify.io.csvio import read_measurements
+from identify.io.csvio import format_measurements, read_measurements
 from identify.io.result_io import load_result, validation_of
 from identify.simulate import random_poses
 from kinematics.dh import points_from_joints
@@ -284,3 +285,22 @@ def test_a_mixed_session_resumes_after_stops_in_either_kind_of_sweep(tmp_path: P
     assert old and rows and rows <= current and not rows & old  # only the redo is read
     stepped = {s.sweep for s in session.plan.steps if s.kind == "sweep" and s.joint == 6}
     assert int(np.isin(meas.sweep, list(stepped)).sum()) == 12  # the stopped step measured once, on the resume
+
+
+def test_rows_step_of_a_continuous_session_without_enough_poses_is_one_line(tmp_path: Path, capsys) -> None:
+    """A continuous session's stop-and-go rows are its range starts and home: too few poses for any fit, refused
+    in one line (exit 2) rather than fitted into a failed verdict; with enough free poses the fit goes ahead."""
+    sample = read_measurements(Path(__file__).resolve().parents[2] / "identify" / "data" / "sample_ur5e.csv")
+    meas = sample.measurements
+    t = np.where(meas.joint > 0, np.arange(len(meas)) * 0.01, np.nan)
+    free = np.flatnonzero(meas.joint == 0)
+    for kept, code in ((7, 2), (30, 0)):
+        keep = (meas.joint > 0) | np.isin(np.arange(len(meas)), free[:kept])
+        rows = replace(meas, t=t, streamed=meas.joint > 0).subset(keep)
+        path = tmp_path / f"continuous{kept}.csv"
+        path.write_text(format_measurements(rows))
+        capsys.readouterr()
+        assert identify_main([str(path), "--robot", "ur5e", "--rows", "step", "--holdout", "0"]) == code
+        err = capsys.readouterr().err
+        if code == 2:
+            assert "--rows step: the stop-and-go rows are 7 poses and no sweep" in _one_line(err)

@@ -14,7 +14,14 @@ from acquire.cli import main
 from acquire.collision import moves_samples
 from acquire.orchestrator import Orchestrator, StopRequest, Timeouts
 from acquire.plan import build_plan, check_plan, plan_clearance, tp_model
-from acquire.plan_continuous import STREAM_SPEED_CAP, build_continuous_plan, deflection_limits, stream_speed
+from acquire.plan_continuous import (
+    STREAM_SPEED_CAP,
+    build_continuous_plan,
+    deflection_limits,
+    estimate_continuous_duration,
+    stream_speed,
+)
+from acquire.plan_modes import build_both_plan
 from acquire.session import Session
 from acquire.stream_loop import COMMIT_PERIOD
 from config.robots import load_robot
@@ -74,7 +81,8 @@ def test_continuous_plan_is_checked_and_respects_its_speed_caps() -> None:
     step_plan = build_plan(UR5E, site)
     for s in streams:
         values = [t.q[s.joint - 1] for t in step_plan.steps if t.kind == "sweep" and t.joint == s.joint]
-        assert min(values) - 1e-9 <= s.start[s.joint - 1] < s.q[s.joint - 1] <= max(values) + 1e-9
+        lo, hi = sorted((s.start[s.joint - 1], s.q[s.joint - 1]))  # either way: from the end nearer the arm
+        assert min(values) - 1e-9 <= lo < hi <= max(values) + 1e-9
     # every move, the streamed ones included, is checked at fine interpolation and clear
     clearance = plan_clearance(plan, UR5E, site)
     assert clearance is not None and clearance.slack >= clearance.guard
@@ -275,6 +283,14 @@ def test_cli_continuous_session_end_to_end_and_export(tmp_path: Path, capsys) ->
     out = capsys.readouterr().out
     assert code == 0, out
     assert "holdout" in out and "cont." in out
+    # the robot is released, and the time it was held printed, before the identification starts
+    released = next(line for line in out.splitlines() if line.startswith("robot released: held "))
+    assert out.index(released) < out.index("result written to")
+    with Session.open(path) as session:
+        steps = session.steps()
+    recorded = max(s.t_end for s in steps) - min(s.t_start for s in steps)  # s of the run's (virtual) clock
+    held = float(released.split()[3])
+    assert recorded <= held + 0.05 < recorded + 5.0, (held, recorded)
     csv = tmp_path / "c.csv"
     assert main(["export", str(path), "--csv", str(csv)]) == 0
     out = capsys.readouterr().out
@@ -322,3 +338,24 @@ def test_ctrl_c_mid_sweep_stops_the_motion_and_the_run_is_aborted(tmp_path: Path
     move = rig._path
     assert not rig._moving and move.t_stop < move.t0 + move.duration  # stopped short of the range end
     assert [s[3] for s in _streams(tmp_path / "c.session")] == ["interrupted"]
+
+
+def test_moves_between_sweeps_go_at_the_sweeps_speed_and_each_sweep_starts_at_its_nearer_end() -> None:
+    """Between the sweeps the arm moves at the sweeps' own cap (1 rad/s on a UR5e, not the stop-and-go plan's
+    0.5 rad/s) unless the site sets robot.speed; each sweep starts at the end of its range nearer the previous
+    pose; both make the plan shorter, the swept ranges and the stop-and-go sweeps of --mode both unchanged."""
+    site = SiteConfig.default().with_overrides(free_poses=0)
+    plan, step = build_continuous_plan(UR5E, site), build_plan(UR5E, site)
+    assert plan.speed == (1.0,) * 6 and step.speed == (0.5,) * 6
+    slow = build_continuous_plan(UR5E, site.with_overrides(speed=(0.5,) * 6))
+    assert slow.speed == (0.5,) * 6
+    assert check_plan(plan, UR5E) == []
+    here = np.asarray(plan.home)
+    for s in plan.steps:
+        if s.kind == "stream":
+            j = s.joint - 1
+            assert abs(s.start[j] - here[j]) <= abs(s.q[j] - here[j]) + 1e-9
+        here = np.asarray(s.q)
+    assert estimate_continuous_duration(plan, site.measure_time) < 0.8 * estimate_continuous_duration(
+        slow, site.measure_time)
+    assert build_both_plan(UR5E, site).speed == step.speed

@@ -24,6 +24,7 @@ import pytest
 from acquire.cli import main as acquire
 from acquire.collision import STEP, segment_box_distances, segment_distances
 from acquire.plan import PlanError, build_plan, plan_clearance
+from acquire.plan_continuous import build_continuous_plan
 from config.geometry import TOOL
 from config.robots import RobotModel, load_robot, robot_names
 from config.site import SiteConfig
@@ -337,10 +338,9 @@ def test_a_run_starts_only_when_the_move_from_where_the_arm_stands_is_clear() ->
         _check_start(Arm(folded), plan, ur, SITE, 0)
 
 
-def test_a_camera_cell_leaves_out_the_steps_it_cannot_see(tmp_path) -> None:
-    """A camera 1.5 m in front of the target at home (given as the result of an earlier session with it):
-    sweep steps and free poses where the target faces away or leaves the view are left out, with the reason,
-    and every step kept is seen (checked here with the forward model and plain angles)."""
+def _camera_site(tmp_path):
+    """A camera 1.5 m in front of the target at home, given as the result of an earlier session with it: (the site,
+    the camera's pose in the base frame, the target's normal in the flange frame)."""
     import yaml
 
     from config.site import load_site
@@ -357,7 +357,25 @@ def test_a_camera_cell_leaves_out_the_steps_it_cannot_see(tmp_path) -> None:
     (tmp_path / "first.result.yaml").write_text(yaml.safe_dump({"base": base.tolist()}))
     (tmp_path / "site.yaml").write_text("schema: 1\ncell: {camera_pose: first.result.yaml, target_normal: [0, 1, 0], "
                                         "camera_half_fov: 0.4, camera_max_tilt: 1.0}\n")
-    site = load_site(tmp_path / "site.yaml")
+    return load_site(tmp_path / "site.yaml"), camera, normal_flange
+
+
+def _seen_by(camera, normal_flange, q, half_fov=0.4, max_tilt=1.0):
+    """Whether the camera of :func:`_camera_site` sees the target at ``q``, with the forward model and plain angles."""
+    model = replace(load_robot("ur5e").nominal, tool=np.array(SITE.tp_guess))
+    f = frames_from_joints(model, q)[:, -1]
+    sight = points_from_joints(model, q) - camera[:3, 3]
+    sight /= np.linalg.norm(sight, axis=1, keepdims=True)
+    facing = np.einsum("mi,mi->m", f[:, :3, :3] @ normal_flange, -sight)
+    return (np.arccos(np.clip(sight @ camera[:3, 2], -1, 1)) <= half_fov + 1e-9) & \
+        (np.arccos(np.clip(facing, -1, 1)) <= max_tilt + 1e-9)
+
+
+def test_a_camera_cell_leaves_out_the_steps_it_cannot_see(tmp_path) -> None:
+    """Sweep steps and free poses where the target faces away or leaves the view are left out, with the reason,
+    and every step kept is seen (checked here with the forward model and plain angles)."""
+    ur = load_robot("ur5e")
+    site, camera, normal_flange = _camera_site(tmp_path)
     np.testing.assert_allclose(np.array(site.camera_pose), camera, atol=1e-12)
     plan = build_plan(ur, site)
     assert any(n.startswith("joint 1 sweep: ") and "left out for the camera" in n
@@ -365,13 +383,20 @@ def test_a_camera_cell_leaves_out_the_steps_it_cannot_see(tmp_path) -> None:
     joint1 = [s for s in plan.steps if s.kind == "sweep" and s.joint == 1]
     assert 3 <= len(joint1) < SITE.steps_per_sweep
     q = np.array([s.q for s in plan.steps if s.kind != "home"])
-    model = replace(ur.nominal, tool=np.array(SITE.tp_guess))
-    f = frames_from_joints(model, q)[:, -1]
-    centre = points_from_joints(model, q)
-    sight = centre - camera[:3, 3]
-    sight /= np.linalg.norm(sight, axis=1, keepdims=True)
-    assert np.all(np.degrees(np.arccos(sight @ camera[:3, 2])) <= np.degrees(0.4) + 1e-9)
-    facing = np.einsum("mi,mi->m", f[:, :3, :3] @ normal_flange, -sight)
-    assert np.all(np.degrees(np.arccos(np.clip(facing, -1, 1))) <= np.degrees(1.0) + 1e-9)
+    assert _seen_by(camera, normal_flange, q).all()
     assert sum(s.kind == "free" for s in plan.steps) == SITE.free_poses + SITE.check_poses
     assert_safe(plan, ur, site)
+
+
+def test_a_camera_cell_keeps_continuous_sweeps_where_the_camera_sees_the_target(tmp_path) -> None:
+    """Each continuous sweep stays where the camera sees the target all along it, not only at the stop-and-go plan's
+    step poses: checked every 0.5° along each sweep with the forward model and plain angles."""
+    site, camera, normal_flange = _camera_site(tmp_path)
+    plan = build_continuous_plan(load_robot("ur5e"), site)
+    streams = [s for s in plan.steps if s.kind == "stream"]
+    assert len(streams) == 6
+    for s in streams:
+        values = np.arange(s.start[s.joint - 1], s.q[s.joint - 1], np.radians(0.5))
+        q = np.tile(s.start, (len(values), 1))
+        q[:, s.joint - 1] = values
+        assert _seen_by(camera, normal_flange, q).all(), s.joint

@@ -145,11 +145,12 @@ def joint6_sweep(site: Path) -> tuple[float, float]:
 
 class MidSweep(threading.Thread):
     """Watches the emulated arm; once joint 6 has come to its sweep's ``start`` (the stop-and-go move there) and
-    then swept ``into`` rad of it, calls ``action(emu)`` once (its result in ``result``)."""
+    then swept ``into`` rad of it towards ``end``, calls ``action(emu)`` once (its result in ``result``)."""
 
-    def __init__(self, emu: EmulatorProcess, start: float, into: float, action) -> None:
+    def __init__(self, emu: EmulatorProcess, start: float, end: float, into: float, action) -> None:
         super().__init__(daemon=True)
         self.emu, self.start_q, self.into, self.action = emu, start, into, action
+        self.sign = 1.0 if end > start else -1.0  # a sweep runs from the end of its range nearer the arm
         self.done = threading.Event()
         self.result = None
 
@@ -158,7 +159,7 @@ class MidSweep(threading.Thread):
         while not self.done.is_set():
             q6 = float(self.emu.actual_q()[5])
             at_start = at_start or abs(q6 - self.start_q) < 0.01
-            if at_start and q6 > self.start_q + self.into:
+            if at_start and (q6 - self.start_q) * self.sign > self.into:
                 self.result = self.action(self.emu)
                 return
             time.sleep(0.005)
@@ -173,11 +174,11 @@ def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_
     site = tmp_path / "site.yaml"
     site.write_text(SITE)
     path = tmp_path / "ur.session"
-    start, _ = joint6_sweep(site)
+    start, end = joint6_sweep(site)
     with EmulatorProcess(time_scale=SCALE, native_rate=True, rate=RATE) as emu:
         url = emu.serve_tracker(str(profile), NOISE, 2, latency=LATENCY)
         truth = emu.truth()
-        faults = MidSweep(emu, start, 2.5, lambda e: (e.drop_packets(DROPPED), e.lose_tracker_target(LOST)))
+        faults = MidSweep(emu, start, end, 2.5, lambda e: (e.drop_packets(DROPPED), e.lose_tracker_target(LOST)))
         faults.start()
         try:
             code = acquire(["--robot", f"ur5e@{emu.host}?rtde_frequency={RATE:g}", "--tracker",
@@ -258,7 +259,7 @@ def test_ctrl_c_mid_sweep_stops_the_arm_and_the_run_ends_aborted(tmp_path: Path)
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         proc = subprocess.Popen(command, cwd=ROOT, env=env, start_new_session=True, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True)
-        press = MidSweep(emu, start, 2.5, lambda e: os.killpg(proc.pid, signal.SIGINT) or float(e.actual_q()[5]))
+        press = MidSweep(emu, start, end, 2.5, lambda e: os.killpg(proc.pid, signal.SIGINT) or float(e.actual_q()[5]))
         press.start()
         try:
             _, err = proc.communicate(timeout=90.0)
@@ -273,7 +274,8 @@ def test_ctrl_c_mid_sweep_stops_the_arm_and_the_run_ends_aborted(tmp_path: Path)
         here = float(emu.actual_q()[5])
         time.sleep(0.2)
         assert float(emu.actual_q()[5]) == pytest.approx(here, abs=1e-4)  # standing still...
-        assert press.result < here < end - 1.0  # ...well short of the range end (stopJ at 2 rad/s²: 0.25 rad)
+        sign = press.sign  # ...well short of the range end (stopJ at 2 rad/s²: 0.25 rad)
+        assert (here - press.result) * sign > 0 and (end - here) * sign > 1.0
     with Session.open(path) as session:
         assert session.outcome() == "aborted"
     with sqlite3.connect(path) as db:
