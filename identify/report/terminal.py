@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from common import fit_width
-from identify.pipeline import ClockFit, Identification
+from identify.pipeline import ClockFit, Identification, SweepFit
 from kinematics.dh import DHModel
 
 _SCALE = {"theta": np.degrees(1.0), "d": 1e3, "a": 1e3, "alpha": np.degrees(1.0)}
@@ -69,8 +69,8 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     )
     worst = max(ident.sweeps, key=lambda s: s.rms if np.isfinite(s.rms) else -1.0)
     lines.append("per sweep RMS [mm]: " + ", ".join(
-        f"{'free' if s.joint == 0 else f'J{s.joint}'} {s.rms * 1e3:.4f}" for s in ident.sweeps
-    ) + f"  (worst: sweep {worst.sweep})")
+        f"{_sweep_name(s)} " + (f"{s.rms * 1e3:.4f}" if np.isfinite(s.rms) else "none kept") for s in ident.sweeps
+    ) + (f"  (worst: {_sweep_name(worst)}, sweep id {worst.sweep})" if np.isfinite(worst.rms) else ""))
     if ident.rejected_rows:
         lines.append(f"rejected outliers (CSV lines): {ident.rejected_rows}")
     if ident.geometric is not None:
@@ -93,6 +93,11 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
 
 _EXT_SCALE = {"scale": (1e6, "ppm"), "ecc_sin": (np.degrees(1.0) * 3600, "arcsec"),
               "ecc_cos": (np.degrees(1.0) * 3600, "arcsec"), "compliance": (np.degrees(1.0) * 3600, "arcsec/(N m)")}
+
+
+def _sweep_name(sweep: SweepFit) -> str:
+    """``J2`` for a sweep of joint 2, ``free`` for the free poses."""
+    return "free" if sweep.joint == 0 else f"J{sweep.joint}"
 
 
 def format_models(ident: Identification) -> list[str]:

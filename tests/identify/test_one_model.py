@@ -175,3 +175,21 @@ def test_the_same_arm_gives_the_same_table_from_one_noise_draw_to_the_next():
     tables = np.array(tables)
     spread = np.ptp(np.angle(np.exp(1j * (tables[:, :, [0, 3]] - tables[0, :, [0, 3]].T))), axis=0)
     assert spread.max() < 0.05, np.degrees(tables[:, :, [0, 3]])
+
+
+def test_the_terminal_names_the_worst_sweeps_joint_and_prints_no_nan():
+    """Issue 25, item 9 (terminal content): "(worst: sweep 8)" named a sweep id, not a joint; a group whose samples
+    were all rejected printed "free nan"."""
+    from identify.pipeline import SweepFit
+    from identify.report.terminal import format_report
+
+    robot = load_robot("ur5e")
+    arm, rng = _arm(robot, 2307)
+    q, sweep, joint, held = sweeps_and_poses(robot.joint_types, robot.home, robot.limits, rng, 8, 10, 5)
+    ident = identify(measure(arm, q, sweep, joint, NOISE, rng, held), robot.nominal, extensions=False)
+    text = format_report(ident)
+    worst = max(ident.sweeps, key=lambda s: s.rms)
+    assert f"(worst: {'free' if worst.joint == 0 else f'J{worst.joint}'}, sweep id {worst.sweep})" in text
+    lost = replace(ident, sweeps=[*ident.sweeps[:-1], SweepFit(0, 0, 10, 10, float("nan"))])
+    text = format_report(lost)
+    assert "nan" not in text.lower() and "free none kept" in text
