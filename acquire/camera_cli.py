@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from acquire.options import _Parser
+from common.arguments import OneLineParser
 from common.outputs import check_outputs, commit_file, write_output
 from common.units import positive_length
 from drivers.camera.intrinsics import CameraIntrinsics, write_intrinsics
@@ -41,7 +41,7 @@ class CameraToolError(Exception):
 
 
 def _parser(prog: str, description: str) -> argparse.ArgumentParser:
-    p = _Parser(prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = OneLineParser(prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter,
                 epilog=__doc__.split("\n\n", 1)[1].replace("``", ""))
     p.add_argument("--dict", default="4X4_50", help="ArUco dictionary (4X4_50)")
     p.add_argument("--cols", type=int, help="board columns (markers of a grid, squares of a ChArUco)")

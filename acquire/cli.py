@@ -16,7 +16,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from acquire.cell import Clearance
-from acquire.options import _Parser, build_parser
+from acquire.options import build_parser
 from acquire.orchestrator import RunResult, StopRequest
 from acquire.plan import check_plan, estimate_duration, plan_clearance
 from acquire.plan_continuous import estimate_continuous_duration
@@ -28,6 +28,7 @@ from acquire.session import Session
 from acquire.session_backup import backup_session
 from acquire.stream_loop import check_streams
 from common import stop_signals
+from common.arguments import OneLineParser
 from common.errors import InputError
 from common.fit_width import say
 from common.outputs import OutputError, check_outputs, check_target, same_file
@@ -48,9 +49,10 @@ class UsageError(Exception):
 
 
 def _export(argv: list[str]) -> int:
-    p = _Parser(prog="acquire export", description="Write a session's measurements as a measurement CSV (the file "
-                "identify reads; its columns: README.md, File contracts). A session being written can be exported.",
-                epilog="exit codes: 0 written, 2 bad input (one line)")
+    p = OneLineParser(prog="acquire export",
+                      description="Write a session's measurements as a measurement CSV (the file identify reads; "
+                      "its columns: README.md, File contracts). A session being written can be exported.",
+                      epilog="exit codes: 0 written, 2 bad input (one line)")
     p.add_argument("session", type=Path, help="the session file to read (never changed)")
     p.add_argument("--csv", type=Path, required=True, metavar="OUT.csv", help="the CSV to write")
     p.add_argument("--force", action="store_true", help="replace the CSV if it exists")
@@ -66,8 +68,8 @@ def _export(argv: list[str]) -> int:
 
 
 def _backup(argv: list[str]) -> int:
-    p = _Parser(prog="acquire backup", description="Copy a session safely, even while it is being written "
-                "(SQLite's online backup API).", epilog="exit codes: 0 copied, 2 bad input (one line)")
+    p = OneLineParser(prog="acquire backup", description="Copy a session safely, even while it is being written "
+                      "(SQLite's online backup API).", epilog="exit codes: 0 copied, 2 bad input (one line)")
     p.add_argument("session", type=Path, help="the session file to copy (never changed)")
     p.add_argument("dest", type=Path, help="the copy (a new file; an existing one only with --force)")
     p.add_argument("--force", action="store_true", help="replace DEST if it exists")

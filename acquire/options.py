@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from common.arguments import OneLineParser, VersionAction
 from common.units import positive_length
 
 DESCRIPTION = "Plan, move, measure and record a calibration session, then identify the robot from it."
@@ -38,27 +39,8 @@ exit codes:
 """
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors in one line with exit code 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
-class _Version(argparse.Action):
-    """``--version``: the software's version, looked up only when asked (importlib.metadata is not free)."""
-
-    def __init__(self, option_strings: list[str], dest: str, **kwargs: object) -> None:
-        super().__init__(option_strings, dest, nargs=0, help="print the version of dh-calib and exit")
-
-    def __call__(self, parser: argparse.ArgumentParser, *args: object) -> None:
-        from common import __version__
-
-        parser.exit(0, f"{parser.prog} (dh-calib) {__version__}\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="acquire", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = OneLineParser(prog="acquire", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
                 epilog=EPILOG)
     p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e; the model may be a robot YAML file: "
                    "mock:my_arm.yaml, my_arm.yaml@HOST (mock:ur5e; on --resume: the session's, whose address may "
@@ -98,5 +80,5 @@ def build_parser() -> argparse.ArgumentParser:
                         "check it; --steps sets their size); the dry run compares the three")
     p.add_argument("--trace-io", type=Path, metavar="FILE",
                    help="log every byte to and from the tracker (serial and I++ trackers)")
-    p.add_argument("--version", action=_Version)
+    p.add_argument("--version", action=VersionAction)
     return p

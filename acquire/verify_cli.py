@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from acquire.cli import UsageError, _check_start, _confirm, _open_devices, _Parser, _site, _without_faults
+from acquire.cli import UsageError, _check_start, _confirm, _open_devices, _site, _without_faults
 from acquire.plan import estimate_duration, plan_clearance
 from acquire.plan_report import format_clearance
 from acquire.progress import hms
@@ -34,6 +34,7 @@ from acquire.runner import run_session
 from acquire.session import Session
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
 from common import fit_width
+from common.arguments import OneLineParser
 from common.fit_width import say
 from common.help_text import description as _description
 from common.outputs import check_outputs, check_target, write_output
@@ -48,7 +49,7 @@ MM = 1e3
 
 def build_parser() -> argparse.ArgumentParser:
     first, rest = __doc__.split("\n\n", 1)
-    p = _Parser(prog="acquire verify", description=_description(first),
+    p = OneLineParser(prog="acquire verify", description=_description(first),
                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("--result", type=Path, help="the calibration to verify (result YAML, with its covariance)")
     p.add_argument("--robot", help="robot spec (default: mock:<the result's robot>, the simulated rig)")

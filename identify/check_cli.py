@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from common.arguments import OneLineParser
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from identify.calibrated import ResultError
@@ -45,13 +46,8 @@ from session.schema import is_session_file
 PROG = "identify check"
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog=PROG, description="Does a calibration still hold on new data of the arm?",
+    p = OneLineParser(prog=PROG, description="Does a calibration still hold on new data of the arm?",
                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
     p.add_argument("result", metavar="RESULT", help="result YAML of the calibration (identify --out)")
     p.add_argument("data", metavar="DATA", help="measurement CSV or acquisition session of the arm today")

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from common import fit_width
+from common.arguments import OneLineParser
 from common.errors import InputError
 from common.help_text import description as _description
 from common.outputs import check_outputs, same_file, write_output
@@ -27,14 +28,9 @@ from identify.io.result_io import load_result
 from session.schema import is_session_file
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
     first, rest = __doc__.split("\n\n", 1)
-    p = _Parser(prog="identify compare", description=_description(first),
+    p = OneLineParser(prog="identify compare", description=_description(first),
                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("inputs", nargs="+", metavar="RESULT_OR_SESSION", help="two or more, oldest first")
     p.add_argument("--robot", metavar="MODEL", help="nominal model (joint limits of the displacement poses; default: "

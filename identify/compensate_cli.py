@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from common import __version__
+from common.arguments import OneLineParser
 from common.errors import InputError
 from common.help_text import description as _description
 from common.outputs import check_outputs, write_output
@@ -43,14 +44,9 @@ from identify.io.result_io import load_result
 MAX_COORDINATE = 10.0  # m: a target farther than this from the origin is almost surely in millimetres
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
     first, rest = __doc__.split("\n\n", 1)  # the first paragraph is the description (one sentence over two lines)
-    p = _Parser(prog="identify compensate", description=_description(first),
+    p = OneLineParser(prog="identify compensate", description=_description(first),
                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("result", help="result YAML of identify --out (with its covariance)")
     p.add_argument("--targets", required=True, metavar="FILE", help="targets CSV (see above)")

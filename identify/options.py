@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 
+from common.arguments import OneLineParser, VersionAction
 from common.units import length, positive_length
 
 DEFAULT_PARALLEL_TOL = 0.01  # rad: identify.cpa.DEFAULT_PARALLEL_TOL
@@ -39,27 +40,8 @@ exit codes:
 """
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors in one line with exit code 2."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
-
-
-class _Version(argparse.Action):
-    """``--version``: the software's version, looked up only when asked."""
-
-    def __init__(self, option_strings: list[str], dest: str, **kwargs: object) -> None:
-        super().__init__(option_strings, dest, nargs=0, help="print the version of dh-calib and exit")
-
-    def __call__(self, parser: argparse.ArgumentParser, *args: object) -> None:
-        from common import __version__
-
-        parser.exit(0, f"{parser.prog} (dh-calib) {__version__}\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="identify", description=DESCRIPTION, epilog=EPILOG,
+    parser = OneLineParser(prog="identify", description=DESCRIPTION, epilog=EPILOG,
                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("input", help="measurement CSV (sweep,joint,q1..qN,x,y,z) or an acquisition session file")
     parser.add_argument("--out", metavar="FILE", help="write the result YAML to FILE (README.md: File contracts)")
@@ -103,5 +85,5 @@ def build_parser() -> argparse.ArgumentParser:
                         help="fit only the stop-and-go rows or only the streamed ones (held-out rows validate either); "
                         "two such results of one session, compared with identify compare, check the streams' timing")
     parser.add_argument("--force", action="store_true", help="replace output files that already exist")
-    parser.add_argument("--version", action=_Version)
+    parser.add_argument("--version", action=VersionAction)
     return parser
