@@ -275,7 +275,10 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         robot.close()  # released before the identification: it needs neither device
         tracker.close()
         released = True
-        print(f"robot released: held {clock.now() - connected:.1f} s from connect to release")
+        held = f"{clock.now() - connected:.1f} s"
+        if isinstance(clock, VirtualClock):  # mock devices: their time is simulated, and says so
+            held += f" of simulated time ({time.monotonic() - opening:.1f} s of wall time)"
+        print(f"robot released: held {held} from connect to release")
         return finish(result, session, path, robot_model)
     finally:
         if not released:
