@@ -277,8 +277,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         released = True
         held = f"{clock.now() - connected:.1f} s"
         if isinstance(clock, VirtualClock):  # mock devices: their time is simulated, and says so
-            held += f" of simulated time ({time.monotonic() - opening:.1f} s of wall time)"
-        print(f"robot released: held {held} from connect to release")
+            held += f" simulated ({time.monotonic() - opening:.1f} s wall)"
+        print(f"robot released: held {held} since connecting")
         return finish(result, session, path, robot_model)
     finally:
         if not released:
