@@ -10,7 +10,7 @@ measured (the ``dh_table`` check). Frames: tracker; units: m, rad.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,7 +66,6 @@ class WrittenModel:
     expected: float
     problem: LineProblem
     jacobian_blocks: Array
-    notes: list[str] = field(default_factory=list)
 
     @property
     def lines(self) -> AxisLines:
