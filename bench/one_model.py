@@ -12,7 +12,7 @@ YAML. Every figure below is computed here, with the shared forward model, from t
 - caps: the largest |a| or |d| of every default table against the robot's size.
 
 - false rejection (``--false-rejection``): data sets without a gross outlier that still lose a row to the outlier
-  test, at 4, 6, 8 and 36 samples per sweep, 1 or 3 reflectors, with and without joint errors.
+  test, at 4, 6, 8, 12 and 36 samples per sweep, 1 or 3 reflectors, with and without joint errors.
 
 Run: ``python -m bench.one_model [--arms 50] [--seed 0] [--false-rejection [--draws 20]]``. Exit status 1 when a
 target is missed.
@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.false_rejection:
         worst = 0.0
         print("samples/sweep  reflectors  joint errors  data sets with a rejected row")
-        for steps in (4, 6, 8, 36):
+        for steps in (4, 6, 8, 12, 36):
             for reflectors in (1, 3):
                 for with_errors in (False, True):
                     k = false_rejections(robot, steps, reflectors, with_errors, args.draws)

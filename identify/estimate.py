@@ -229,6 +229,25 @@ def fit_kept(start: AxisLines, data: FitData, inliers: NDArray[np.bool_], label:
                     terms, data.timing)
 
 
+def readmit(fitted: LinesFit, data: FitData) -> LinesFit:
+    """``fitted`` (fit on its ``inliers`` with its joint errors) refitted with the rows it left out that its own
+    model explains: the outlier test of :func:`fit` on its residuals. Rows kept stay kept, so a richer model than
+    the one that chose the outliers never makes one; it only re-admits the rows whose error it holds."""
+    for _ in range(2):
+        rows = data.timed(fitted.timing)
+        problem = rows.problem(fitted.lines, fitted.terms)
+        zero = np.zeros(problem.size)
+        res = problem.residuals(zero).reshape(-1, 3)
+        lev = leverages(problem.jacobian_blocks(zero), rows.unknown)
+        poses = pose_ids(rows) if len(np.unique(rows.tp_index)) > 1 else None
+        test = outlier_free(res, lev, rows.group, along_arc(fitted.q, rows.joint), rows.unknown, poses, rows.points)
+        keep = fitted.inliers | test
+        if np.array_equal(keep, fitted.inliers):
+            break
+        fitted = fit_kept(fitted.lines, rows, keep, fitted.start, fitted.terms)
+    return fitted
+
+
 def along_arc(q: Array, joint: NDArray[np.int64]) -> Array:
     """Each sweep row's position along its arc: the value of the joint it moves (free poses: 0)."""
     swept = joint > 0

@@ -20,19 +20,20 @@ from identify import verdict as checks
 from identify.adequacy import Adequacy, assess
 from identify.clock_split import ClockSplit, split_clock
 from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, home_from_measurements
-from identify.estimate import FitData, LinesFit, along_arc, fit, fit_kept, place_nominal
+from identify.estimate import FitData, LinesFit, along_arc, fit, fit_kept, place_nominal, readmit
 from identify.extend import select_terms
 from identify.extensions import Decision, TermSet, candidates
+from identify.identifiability import Identifiability, identifiability
 from identify.measurements import Measurements, in_dh_joints, prepared_joints, validate
 from identify.outliers import sweep_neighbours
 from identify.poe import AxisLines, LineProblem, points_from_lines
 from identify.predict import Predictor
-from identify.refine import Refinement
+from identify.refine import Refinement, full_jacobian, parameter_names
 from identify.starts import starts
 from identify.sync import Retiming, retiming
 from identify.validation import Validation
 from identify.validation import validate as validate_model
-from identify.written import FixedParameter, WrittenModel, robot_size, written_model
+from identify.written import UNDETERMINED, FixedParameter, WrittenModel, robot_size, written_model
 from kinematics.dh import DHModel, points_from_joints
 from kinematics.joint_errors import Coupling, LinkMasses, gravity_torques
 
@@ -289,8 +290,11 @@ def identify(
         variance = max(adequacy.noise, declared or 0.0) ** 2 / unit**2
         terms, _, decisions = select_terms(best, data.timed(best.timing), empty, pool, variance)
         if terms.candidates:  # refitted on the plain model's inliers: joint errors never make outliers
-            extended = fit_kept(best.lines, data.timed(best.timing), best.inliers, best.start,
-                                terms.terms(q, None, best.q))
+            extended = readmit(fit_kept(best.lines, data.timed(best.timing), best.inliers, best.start,
+                                        terms.terms(q, None, best.q)), data)
+            if not np.array_equal(extended.inliers, best.inliers):  # rows the joint errors explain are not gross
+                best = fit_kept(best.lines, data.timed(best.timing), extended.inliers, best.start, best.terms)
+                models["plain"] = write("plain", best, data, _adequacy(best, data, unit, declared), empty)
             models["extended"] = write("extended", extended, data, _adequacy(extended, data, unit, declared), terms)
     use = "extended" if "extended" in models else "plain"
     used = models[use]
@@ -312,7 +316,7 @@ def identify(
         used.fit.timing, used.covariance[used.problem.n_terms:, used.problem.n_terms:], meas.clock_offset, clock_test)
     found = [
         checks.model_fit(used.fit_rms, used.adequacy, _cause(models, decisions)),
-        checks.conditioning(used.condition),
+        checks.conditioning(used.condition, _identifiability(used, robot_size(best.lines, fitm.points))),
         checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
         models["plain"].dh_check,
     ]
@@ -359,6 +363,17 @@ def identify(
 def _written_points(model: WrittenModel, tp_ids: NDArray[np.int64], q: Array, tp: NDArray[np.int64]) -> Array:
     """What ``model``'s written numbers predict at DH joint values ``q`` for tracked point ids ``tp``."""
     return model.dh_points(q, np.searchsorted(tp_ids, tp))
+
+
+def _identifiability(model: WrittenModel, size: float) -> Identifiability:
+    """What the data determine of ``model``'s free parameters, for the robot's ``size`` (m)."""
+    ref, a = model.refinement, model.adequacy
+    names = [name for name, free in zip(parameter_names(model.model.n_joints), ref.free, strict=False) if free]
+    scale = max(a.residual, a.declared or 0.0) * np.sqrt(a.inflation)
+    held = tuple(f.name for f in model.fixed if f.reason == UNDETERMINED)
+    _, jac = full_jacobian(model.model, ref.q[ref.inliers])
+    lever = np.sqrt(np.mean(np.sum(jac[:, :, ref.free] ** 2, axis=1), axis=0))
+    return identifiability(names, ref.covariance, lever, size, a.model_error, scale, int(ref.inliers.sum()), held)
 
 
 def _cause(models: dict[str, WrittenModel], decisions: list[Decision]) -> str | None:

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 from scipy.stats import chi2
 
 from identify.adequacy import Adequacy
+from identify.identifiability import LEVEL, Identifiability
 
 if TYPE_CHECKING:
     from identify.clock_split import ClockSplit
@@ -100,17 +101,46 @@ def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None) -> Ch
                      f"model error {mm(a.model_error)} per axis against tracker noise {mm(a.noise)}: residuals "
                      f"{mm(a.residual)} per axis vs {reference} ({a.statistic:.3g} > {a.limit:.3g}); uncertainties "
                      f"inflated {a.inflation:.3g}x in variance to cover it{found}")
+    if a.declared is None and a.difference is None:
+        return Check("model_fit", "pass", a.statistic, a.limit,
+                     f"residuals {mm(a.residual)} per axis; {reference}, no declared noise (--noise): model error "
+                     "cannot be told from tracker noise")
     return Check("model_fit", "pass", a.statistic, a.limit,
                  f"residuals {mm(a.residual)} per axis, consistent with {reference}")
 
 
-def conditioning(condition: float) -> Check:
-    status = "fail" if not condition < CONDITION_FAIL else "warn" if condition > CONDITION_WARN else "pass"
-    text = {"fail": "the data do not determine every parameter (near-singular)",
-            "warn": "some parameter combinations are barely determined",
-            "pass": "every parameter is determined"}[status]
-    return Check("conditioning", status, condition, CONDITION_WARN if status == "pass" else CONDITION_FAIL,
-                 f"condition number {condition:.3g}: {text}")
+def conditioning(condition: float, found: Identifiability | None = None) -> Check:
+    """Whether the data determine the written parameters. ``found`` speaks of each parameter (its σ against its
+    own scale, near redundancies, parameters held because the data do not separate them, a model error's reach);
+    the condition number of the scaled axis-line fit only fails a numerically singular problem (and decides alone
+    when ``found`` is None)."""
+    if not condition < CONDITION_FAIL:
+        return Check("conditioning", "fail", condition, CONDITION_FAIL,
+                     f"condition number {condition:.3g}: the data do not determine every parameter (near-singular)")
+    number = f" (condition number {condition:.3g} of the axis-line fit)"
+    if found is None:
+        status = "warn" if condition > CONDITION_WARN else "pass"
+        text = ("some parameter combinations are barely determined" if status == "warn" else
+                "every parameter is determined")
+        return Check("conditioning", status, condition, CONDITION_WARN, text + number)
+    parts = []
+    poor = found.poor
+    if poor:
+        parts.append(f"{len(poor)} parameter(s) not determined (3 sigma moves the tracked point beyond "
+                     f"{100 * LEVEL:g} % of the robot's size): " + ", ".join(p.text() for p in poor[:3])
+                     + (", ..." if len(poor) > 3 else ""))
+    parts.extend(f"only a combination of {', '.join(group)} is determined (near redundancy)"
+                 for group in found.redundant)
+    if found.held:
+        parts.append(f"{', '.join(found.held)} not separated by the data from other parameters: held at their "
+                     "conventional values")
+    if parts:
+        return Check("conditioning", "warn", condition, CONDITION_FAIL, "; ".join(parts) + number)
+    w = found.worst
+    text = "every parameter is determined" + ("" if w is None else
+                                              f"; the least, {w.text()}, moves the tracked point "
+                                              f"{100 * w.reach:.2g} % of the robot's size at 3 sigma")
+    return Check("conditioning", "pass", condition, CONDITION_FAIL, text + number)
 
 
 MODEL_NAMES = {"plain": "plain model (DH)", "extended": "extended model (DH + joint errors)"}

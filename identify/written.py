@@ -229,6 +229,10 @@ def _expected_accuracy(predictor: Predictor, q: Array, tp: NDArray[np.int64], ad
     return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) + 3 * adequacy.model_error**2))
 
 
+UNDETERMINED = ("not determined by these data (redundant with other parameters, e.g. joints that always move together):"
+                " held at its conventional value")
+
+
 def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
     joint = int("".join(ch for ch in name if ch.isdigit()) or 0)
     if joint in capped and name.startswith("d"):
@@ -240,4 +244,4 @@ def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
         return "redundant with the tool: frame n is placed by convention and the tool carries the TP"
     if types[joint - 1] == "P" and name[:-1] in ("a", "d"):
         return "a prismatic axis has no position; it is placed to meet the next axis"
-    return "placed by convention"
+    return UNDETERMINED

@@ -62,11 +62,12 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
     if ident.parallel:
         lines.append(f"parallel axes (within tolerance) at links {ident.parallel}: their d is conventional")
     lines.append(f"fixed (undetermined by the data): {', '.join(f.name for f in ident.fixed) or 'none'}")
-    lines.append(
-        f"fit: {int(ref.inliers.sum())} samples, residual RMS {ident.rms * 1e3:.4f} mm (3D), tracker noise "
-        f"{ref.noise * 1e3:.4f} mm per axis, model error {ident.adequacy.model_error * 1e3:.4f} mm per axis, "
-        f"condition number {ref.condition:.3g}"
-    )
+    a = ident.adequacy
+    split = (f"tracker noise {ref.noise * 1e3:.4f} mm per axis, model error {a.model_error * 1e3:.4f} mm per axis"
+             if a.declared is not None or a.difference is not None else
+             "noise and model error not separable (no sweeps, no --noise)")
+    lines.append(f"fit: {int(ref.inliers.sum())} samples, residual RMS {ident.rms * 1e3:.4f} mm (3D), {split}, "
+                 f"condition number {ref.condition:.3g}")
     worst = max(ident.sweeps, key=lambda s: s.rms if np.isfinite(s.rms) else -1.0)
     lines.append("per sweep RMS [mm]: " + ", ".join(
         f"{_sweep_name(s)} " + (f"{s.rms * 1e3:.4f}" if np.isfinite(s.rms) else "none kept") for s in ident.sweeps
