@@ -3,7 +3,8 @@
 Candidates, per joint the data move (:mod:`kinematics.joint_errors` for the equations): reading scale,
 once-per-turn error (revolute joints; sin and cos together) and, when the robot model gives link masses,
 compliance under gravity (joints whose gravity torque varies). Each acts on the joint value as
-``Δq_i = Σ coefficient · (f(q) - f(home))``; the constant ``f(home)`` is a zero offset the lines absorb.
+``Δq_i = Σ coefficient · (f(q) - f(home))``; the constant ``f(home)`` is a zero offset the lines absorb. The
+identification takes the readings' zero as ``home`` for every data set, so the offsets mean the same across them.
 
 Forward selection: at each step every remaining candidate is scored by the Lagrange-multiplier (score)
 test at the current fit, ``s = rᵀ G⊥ (G⊥ᵀ G⊥)⁻¹ G⊥ᵀ r / σ²`` with ``G⊥`` the candidate's columns projected
@@ -82,7 +83,8 @@ class Candidate:
 
 @dataclass(frozen=True)
 class TermSet:
-    """Selected terms with what computes their regressors: ``home`` (n,) joint values, ``torques`` the
+    """Selected terms with what computes their regressors: ``home`` (n,) the reference joint values (where every
+    term is zero; also the value of unread joints without ``filled``), ``torques`` the
     gravity torques (m, n) at joint values (m, n), or None without link masses."""
 
     candidates: tuple[Candidate, ...]

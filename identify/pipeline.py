@@ -279,7 +279,9 @@ def identify(
     if clock_test is not None and clock_test.split:
         adequacy = _adequacy(best, data, unit, declared)
     torques = None if links is None or nominal is None else (lambda x: gravity_torques(nominal, links, x))
-    empty = TermSet((), home, torques)
+    # joint errors referenced to the readings' zero, not to this data set's home: the extended model's DH offsets
+    # then mean the same on every data set of the arm (a home that moved with the split moved them by c·τ(home))
+    empty = TermSet((), np.zeros(n), torques)
     cap = robot_size(best.lines, fitm.points) if max_offset is None else max_offset
     write = partial(written_model, tp_ids=tuple(tp_ids), conventional=conventional, nominal=nominal,
                     parallel_tol=parallel_tol, max_offset=cap, unit=unit, declared=declared, sigma=fitm.sigma)
