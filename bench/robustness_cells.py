@@ -7,6 +7,9 @@
   rest of the arm rigid), cut into sweeps (one joint-2 sweep per even A1 level, one joint-1 sweep per A2 level of
   the odd A1 levels) and identified with the two-joint nominal ``bench/realdata/robots/iiwa7_a1a2.yaml``, whose
   file has no tool (the TP is ~1 m off A2).
+- ``zero90`` (:data:`FANUC_SIM`): an arm the size of the boby2021 set's, 6-sample sweeps, heavy-tailed tracker
+  noise, and a nominal whose joint-2 zero is 90 deg off: the fit from the nominal stalls ~100 mm off and can be
+  kept over the geometric step's, as ``identify --robot`` did on the real set with such a nominal.
 
 Tracker frame, metres, radians.
 """
@@ -30,6 +33,7 @@ from kinematics.truth import perturbed_model, random_base
 Array = NDArray[np.float64]
 
 GRID_ROBOT = str(Path(__file__).parent / "realdata" / "robots" / "iiwa7_a1a2.yaml")
+FANUC_SIM = str(Path(__file__).parent / "robots" / "fanuc_large_sim.yaml")  # an arm the size of boby2021's
 GRID_A1 = np.radians(np.linspace(-90, 90, 18))  # the zhang2016 grid's levels
 GRID_A2 = np.radians(np.linspace(5.3, 79.4, 8))
 GRID_TOOL = np.array([0.005, -0.988, 0.0003])  # m in frame 2: the links beyond A2 (0.4 + 0.4 + 0.126 m) and a tool

@@ -17,7 +17,7 @@ def identified(robot: str, case: str, k: int) -> tuple[pipeline.Identification, 
     those poses and the bound (m)."""
     scen, q_check = robustness.draw(robot, case, k)
     spec = next(c for c in robustness.CASES if c.key == case)
-    nominal = robustness.load_robot(robustness.case_robot(spec, robot)).nominal if spec.nominal else None
+    nominal = robustness.case_nominal(spec, robustness.load_robot(robustness.case_robot(spec, robot)))
     ident = pipeline.identify(scen.meas, nominal=nominal, noise=scen.noise)
     readings = scen.predictor_readings(q_check)
     err = robustness._rms(ident.predict(readings) - scen.truth_points(q_check))
@@ -61,7 +61,19 @@ def test_an_elastic_arm_is_neither_rejected_as_outliers_nor_passed_beyond_its_st
         assert ident.verdict.status == "fail" or err < 1.5 * stated, (k, err, stated)
 
 
+@pytest.mark.xfail(strict=True, reason="defect: each start's robust cost is scaled by that fit's own residuals, so "
+                   "the start selection keeps a fit stalled at 77 mm RMS (cost 23.9) over the geometric step's at "
+                   "0.18 mm (cost 39.6); held-out 225 mm. See docs/benchmarks.md, section 10a")
+def test_a_wrong_nominal_zero_does_not_win_over_a_good_geometric_start() -> None:
+    _, err, _, bound = identified("ur5e", "zero90", 3)
+    assert err < 10 * bound  # the geometric step's fit predicts to ~0.2 mm; the nominal's stalled one to 225 mm
+
+
 def test_the_grid_case_runs_on_its_own_robot_once() -> None:
     grid = next(c for c in robustness.CASES if c.key == "grid2")
     assert [r for r in robustness.ROBOTS if robustness.applicable(grid, r)] == ["iiwa7"]
     assert robustness.case_robot(grid, "iiwa7") == GRID_ROBOT
+    zero = next(c for c in robustness.CASES if c.key == "zero90")
+    assert [r for r in robustness.ROBOTS if robustness.applicable(zero, r)] == ["ur5e"]
+    robot = robustness.load_robot(robustness.case_robot(zero, "ur5e"))
+    assert robustness.case_nominal(zero, robot).theta[1] == pytest.approx(robot.nominal.theta[1] - np.pi / 2)
