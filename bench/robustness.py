@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import binom
 
+from bench.robustness_cells import FANUC_SIM, GRID_ROBOT, gravity_sag, grid_scenario
 from config.robots import RobotModel
 from config.robots import load_robot as _load_robot
 from identify import pipeline
@@ -57,6 +58,7 @@ from identify.simulate import (
     tilted_truth,
     wrist_joints,
 )
+from kinematics.dh import DHModel
 
 Array = NDArray[np.float64]
 
@@ -168,11 +170,17 @@ class Case:
     reading_error: bool = False
     last_radius: float | None = None
     nominal: bool = False
+    compliance: float = 0.0  # rad/(N m) on joints 2 and 3 under gravity (bench.robustness_cells.GravitySag)
+    grid: bool = False  # the zhang2016 A1 x A2 grid on the two-joint iiwa nominal (bench.robustness_cells)
+    robot: str | None = None  # a robot file of the case's own, drawn once in the slot of ``slot``
+    slot: str = "ur5e"
+    heavy: float = 0.0  # > 0: Student-t noise of that many degrees of freedom, scale ``noise`` (0: Gaussian)
+    zero_off: float = 0.0  # deg added to the nominal's theta of joint 2 (a nominal with the wrong zero)
 
     @property
     def correct_model(self) -> bool:
         """Gaussian noise and a model that can explain the data: the ratio target applies."""
-        return self.model_error is None and not self.reading_error
+        return self.model_error is None and not self.reading_error and not self.compliance and not self.heavy
 
     @property
     def clean_well_posed(self) -> bool:
@@ -196,27 +204,60 @@ CASES = (
     Case("nongeo", "reading scale 1e-4 + 0.01°/turn", noise=1e-5, reading_error=True),
     Case("wrist6", "wrist 6 at 144°, 2 held out", steps=12, wrist=True, holdout_in_sweep=2),
     Case("gap20", "36 s., 20 in a row lost in 1 sweep", missing_in_sweep=20),
+    # from the real sets (bench/realdata, issue 27)
+    Case("elastic", "J2/J3 sag 3e-5 rad/Nm, 6 s.", steps=6, compliance=3e-5),
+    Case("grid2", "A1 x A2 grid in sweeps, nominal", noise=2e-5, nominal=True, grid=True, robot=GRID_ROBOT,
+         slot="iiwa7"),
+    Case("zero90", "nominal J2 -90°, t(2) noise, 6 s.", noise=2e-5, steps=6, nominal=True, robot=FANUC_SIM,
+         heavy=2.0, zero_off=-90.0),
 )
+
+
+def case_robot(case: Case, robot_name: str) -> str:
+    """The robot a draw of ``case`` runs on: ``robot_name``, or the case's own."""
+    return case.robot or robot_name
 
 
 def scenario(case: Case, robot_name: str, rng: np.random.Generator) -> Scenario:
     """One data set of ``case`` on a fresh true ``robot_name`` cell."""
-    robot = load_robot(robot_name)
+    robot = load_robot(case_robot(case, robot_name))
+    if case.grid:
+        return grid_scenario(robot, rng, case.noise)
     if case.truth == "tilted":
         truth = tilted_truth(robot.nominal, robot.home, rng, last_radius=case.last_radius)
     else:
         truth = dh_truth(robot.nominal, robot.home, rng, last_radius=case.last_radius)
     errors = reading_error(robot.joint_types, rng) if case.reading_error else None
-    return make_scenario(truth, robot.home, robot.limits, rng, noise=case.noise, steps=case.steps, arc=case.arc,
-                         wrist=case.wrist, free_poses=case.free_poses, free_only=case.free_only,
-                         check_poses=case.check_poses, holdout_in_sweep=case.holdout_in_sweep,
-                         missing_in_sweep=case.missing_in_sweep,
+    if case.compliance:
+        errors = gravity_sag(robot, robot.nominal, case.compliance)  # type: ignore[assignment]  # the same interface
+    scen = make_scenario(truth, robot.home, robot.limits, rng, noise=0.0 if case.heavy else case.noise,
+                         steps=case.steps, arc=case.arc, wrist=case.wrist, free_poses=case.free_poses,
+                         free_only=case.free_only, check_poses=case.check_poses,
+                         holdout_in_sweep=case.holdout_in_sweep, missing_in_sweep=case.missing_in_sweep,
                          outlier_fraction=case.outliers, readings=case.readings, model_error=case.model_error,
                          errors=errors)
+    if case.heavy:
+        scen.meas.points[:] += case.noise * rng.standard_t(case.heavy, scen.meas.points.shape)
+        scen = replace(scen, noise=case.noise)  # the scale declared to identify and used by the bound
+    return scen
+
+
+def case_nominal(case: Case, robot: RobotModel) -> DHModel | None:
+    """The nominal model ``identify`` is given in ``case`` (None: none), with its joint-2 zero moved by
+    ``case.zero_off``."""
+    if not case.nominal:
+        return None
+    theta = robot.nominal.theta.copy()
+    theta[1] += np.radians(case.zero_off)
+    return replace(robot.nominal, theta=theta)
 
 
 def applicable(case: Case, robot_name: str) -> bool:
     robot = load_robot(robot_name)
+    if case.robot:
+        return robot_name == case.slot  # once: the case has its own robot
+    if case.compliance and robot.links is None:
+        return False
     return not case.wrist or bool(wrist_joints(robot.joint_types, robot.limits))
 
 
@@ -296,15 +337,15 @@ def draw(robot_name: str, case_key: str, k: int) -> tuple[Scenario, Array]:
     case_index = [c.key for c in CASES].index(case_key)
     rng = np.random.default_rng((SEED, ROBOTS.index(robot_name), case_index, k))
     scen = scenario(CASES[case_index], robot_name, rng)
-    return scen, random_poses(load_robot(robot_name).limits, CHECK_POSES, rng)
+    return scen, random_poses(load_robot(case_robot(CASES[case_index], robot_name)).limits, CHECK_POSES, rng)
 
 
 def run_case(robot_name: str, case_key: str, draws: int, oracle: bool = False) -> CaseResult:
     """``draws`` data sets of the case keyed ``case_key`` (:func:`draw` 0 .. draws-1) on ``robot_name``.
     With ``oracle`` the :class:`Oracle` replaces the estimator."""
     case = next(c for c in CASES if c.key == case_key)
-    robot = load_robot(robot_name)
-    nominal = robot.nominal if case.nominal else None
+    robot = load_robot(case_robot(case, robot_name))
+    nominal = case_nominal(case, robot)
     result = CaseResult(robot_name, case)
     for k in range(draws):
         scen, q_check = draw(robot_name, case.key, k)

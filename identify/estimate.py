@@ -8,6 +8,7 @@ Frames: tracker; units: metres and radians.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -51,28 +52,48 @@ def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[n
     """``nominal`` with the base (tracker <- frame 0) and tool (TP in frame n) that best fit ``points``
     (m, 3) at readings ``q`` (m, n): alternately a point-set fit of the base (Kabsch) and a linear fit of
     the TP, from the flange, on the first tracked point's rows; then every tracked point's tool (k, 3)
-    with the base jointly (``tp_index`` (m,), 0-based; default all the first)."""
+    with the base jointly (``tp_index`` (m,), 0-based; default all the first).
+
+    A robot file carries no tool, and where the flange origin barely moves (an arm of two intersecting
+    axes) a zero tool gives the base fit nothing to align; the fit therefore also starts from a tool of
+    the points' spread along each flange axis, and keeps the start that fits best."""
     tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index
     count = int(tp_index.max()) + 1 if len(tp_index) else 1
-    first = tp_index == 0
     flange_rot, flange_origin = flange_frames(replace(nominal, base=np.eye(4)), q)  # frame n in frame 0
+    spread = float(np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1))))
+    best: tuple[float, Array, Array] | None = None
+    for tool in (np.zeros(3), *(sign * spread * axis for axis in np.eye(3) for sign in (1.0, -1.0))):
+        cost, base, tools = _placed(flange_rot, flange_origin, points, tp_index, count, tool)
+        if best is None or cost < best[0] * (1.0 - 1e-9):
+            best = (cost, base, tools)
+    assert best is not None
+    _, base, tools = best
+    return replace(nominal, base=base.copy(), tool=tools[0].copy()), tools.copy()
+
+
+def _placed(flange_rot: Array, flange_origin: Array, points: Array, tp_index: NDArray[np.int64], count: int,
+            tool: Array) -> tuple[float, Array, Array]:
+    """One placement of :func:`place_nominal` from the first point's ``tool`` (m, frame n): its sum of squared
+    residuals (m^2), base (4, 4) and tools (count, 3)."""
+    first = tp_index == 0
     rots, origins, points_first = flange_rot[first], flange_origin[first], points[first]
-    tool = np.zeros(3)
     base = np.eye(4)
-    for _ in range(PLACE_ITERATIONS):
-        local = np.einsum("kij,j->ki", rots, tool) + origins  # TP in frame 0
-        centre_l, centre_p = local.mean(axis=0), points_first.mean(axis=0)
-        rot, _ = Rotation.align_vectors(points_first - centre_p, local - centre_l)
-        base[:3, :3] = rot.as_matrix()
-        base[:3, 3] = centre_p - base[:3, :3] @ centre_l
-        # TP: points = R_b (R_k t + o_k) + t_b  ->  linear least squares in t
-        a = np.einsum("ij,kjl->kil", base[:3, :3], rots).reshape(-1, 3)
-        rhs = (points_first - (origins @ base[:3, :3].T + base[:3, 3])).reshape(-1)
-        new_tool = np.linalg.lstsq(a, rhs, rcond=None)[0]
-        if np.linalg.norm(new_tool - tool) < 1e-12:
+    with warnings.catch_warnings():  # a start whose TP does not move leaves the rotation undefined: tried anyway
+        warnings.simplefilter("ignore", UserWarning)
+        for _ in range(PLACE_ITERATIONS):
+            local = np.einsum("kij,j->ki", rots, tool) + origins  # TP in frame 0
+            centre_l, centre_p = local.mean(axis=0), points_first.mean(axis=0)
+            rot, _ = Rotation.align_vectors(points_first - centre_p, local - centre_l)
+            base[:3, :3] = rot.as_matrix()
+            base[:3, 3] = centre_p - base[:3, :3] @ centre_l
+            # TP: points = R_b (R_k t + o_k) + t_b  ->  linear least squares in t
+            a = np.einsum("ij,kjl->kil", base[:3, :3], rots).reshape(-1, 3)
+            rhs = (points_first - (origins @ base[:3, :3].T + base[:3, 3])).reshape(-1)
+            new_tool = np.linalg.lstsq(a, rhs, rcond=None)[0]
+            if np.linalg.norm(new_tool - tool) < 1e-12:
+                tool = new_tool
+                break
             tool = new_tool
-            break
-        tool = new_tool
 
     # the other tracked points: linear least squares with the base found
     tools = np.tile(tool, (count, 1))
@@ -92,7 +113,7 @@ def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[n
 
     def jacobian(x: Array) -> Array:
         local, rot = placed(x)
-        jac = np.zeros((len(q), 3, 6 + 3 * count))
+        jac = np.zeros((len(points), 3, 6 + 3 * count))
         jac[:, :, 0:3] = -skew(local @ rot.T) @ left_jacobian(x[:3])
         jac[:, :, 3:6] = np.eye(3)
         turned = np.einsum("ij,kjl->kil", rot, flange_rot)
@@ -101,12 +122,12 @@ def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[n
             jac[rows, :, 6 + 3 * p:9 + 3 * p] = turned[rows]
         return jac.reshape(-1, jac.shape[2])
 
-    x = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), jac=jacobian,
-                      method="lm", xtol=1e-12, ftol=1e-12).x
+    solved = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), jac=jacobian,
+                           method="lm", xtol=1e-12, ftol=1e-12)
+    x = solved.x
     base[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
     base[:3, 3] = x[3:6]
-    tools = x[6:].reshape(-1, 3)
-    return replace(nominal, base=base.copy(), tool=tools[0].copy()), tools.copy()
+    return float(np.sum(solved.fun**2)), base, x[6:].reshape(-1, 3)
 
 
 def nominal_start(nominal: DHModel, q: Array, points: Array, unknown: NDArray[np.int64], home: Array,

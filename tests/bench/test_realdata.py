@@ -282,9 +282,6 @@ def test_bench_on_zhang_layout_matches_the_baseline(tmp_path: Path) -> None:
     assert plain.check <= run.BASELINE_TARGET * base.check
 
 
-@pytest.mark.xfail(strict=True, reason="defect: a grid cut into sweeps (one joint-2 sweep per A1 level, one joint-1 "
-                   "sweep per A2 level) identifies to 0.03 mm without a nominal but to ~100 mm with --robot, though "
-                   "the geometric step alone reaches 0.07 mm")
 def test_a_grid_of_sweeps_identifies_with_the_nominal_as_without(tmp_path: Path) -> None:
     from identify.cli import main
 
