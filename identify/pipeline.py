@@ -327,7 +327,7 @@ def identify(
                                    used.adequacy.noise, clock.test, [o for _, o, _ in clock.sweeps]))
     if validations:
         v = validations[use]
-        others = {k: w.rms for k, w in validations.items() if k != use}
+        others = {k: (w.rms, w.expected) for k, w in validations.items() if k != use}
         found.append(checks.holdout(v.samples, v.rms, v.expected, use, others))
     if nominal is not None and np.sum(unknown < 0) >= 3:
         known = unknown < 0
