@@ -85,7 +85,7 @@ def cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:
     """The mounting surface and the plan's swept envelope (DH frame 0) for the report's 3D view."""
     import numpy as np
 
-    from acquire.cell import cell_from_config, envelope
+    from config.cell import cell_from_config, envelope
 
     try:
         site = SiteConfig.from_dict(session.header["config"]["site"])
