@@ -78,6 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tool", metavar="X,Y,Z[,RX,RY,RZ]",
                    help="tool centre point in the flange frame, m and UR axis-angle rad (default: the identified TP)")
     p.add_argument("--language", choices=("urscript",), default="urscript", help="language of --program")
+    p.add_argument("--config", metavar="SITE",
+                   help="site file whose cell the compensated program targets are checked against (default: the "
+                        "robot alone on its mounting surface)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     return p
@@ -138,7 +141,8 @@ def _need(columns: dict[str, np.ndarray], names: list[str], path: str, why: str)
 def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     """Compensate per ``args``; returns the summary and the exit code. InputError for bad input."""
     robot_file = args.robot if args.robot and Path(args.robot).is_file() else None
-    check_outputs([args.result, args.targets or args.program, robot_file], [("--out", args.out)], args.force)
+    check_outputs([args.result, args.targets or args.program, robot_file, args.config], [("--out", args.out)],
+                  args.force)
     try:
         identified, doc = load_result(args.result)
     except ResultError as exc:

@@ -8,6 +8,7 @@ targets stay as they were.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -66,10 +67,38 @@ def run_program(args: argparse.Namespace, identified: CalibratedModel, doc: dict
         raise InputError(f"{args.program}: no movej, movel, movep or servoj target: nothing to filter")
     tcp, tcp_rot, given, tool_source = _tool(args, parsed.tcp, identified)
     controller, before = controller_model(doc, robot)
+    check, cell_note = _cell_check(args.config, robot)
     outcomes = filter_targets(parsed, identified.with_base(np.eye(4)), controller, tcp, tcp_rot, robot.home,
-                              robot.limits, given, language)
+                              robot.limits, given, language, check)
     write_output(args.out, filtered_text(parsed, outcomes, language).encode("utf-8"), force=args.force)
-    return _summary(args, parsed, outcomes, before, tool_source, verdict)
+    summary, code = _summary(args, parsed, outcomes, before, tool_source, verdict)
+    summary["cell"] = cell_note
+    return summary, code
+
+
+def _cell_check(config: str | None, robot: Any) -> tuple[Callable[[np.ndarray], str] | None, str]:
+    """The check of compensated joints against the cell of the plan checks (the site file ``config``, else the
+    robot alone on its mounting surface), and what it checks."""
+    from config.cell import cell_from_config, contact_at
+    from config.robots import ConfigError
+    from config.site import load_site, site_from_dict
+
+    try:
+        site = load_site(config) if config else site_from_dict({"schema": 1})
+    except (ConfigError, OSError) as exc:
+        raise InputError(str(exc)) from None
+    cell = cell_from_config(robot, site)
+    if cell is None:
+        return None, f"not checked ({robot.name} has no collision geometry)"
+
+    def check(q_dh: np.ndarray) -> str:
+        contact = contact_at(cell, q_dh)
+        if contact is None:
+            return ""
+        return (f"the compensated joints come too close: {contact.what} {contact.distance * 1e3:.1f} mm apart "
+                f"(needs {contact.required * 1e3:.0f} mm)")
+
+    return check, f"the cell of {config}" if config else "the robot on its mounting surface (no --config)"
 
 
 def _summary(args: argparse.Namespace, parsed, outcomes: list[Outcome], before: str, tool_source: str,
@@ -99,7 +128,8 @@ def _line(text: str, number: int) -> str:
 def format_program_summary(s: dict[str, Any]) -> str:
     """The lines the command prints for a filtered program."""
     lines = [f"{s['program']}: {s['targets']} targets, {s['rewritten']} rewritten; result verdict {s['verdict']}",
-             f"before (what the controller runs today): {s['before']}; TCP: {s['tool']}"]
+             f"before (what the controller runs today): {s['before']}; TCP: {s['tool']}",
+             f"compensated joints checked against the joint limits and {s.get('cell', 'no cell')}"]
     if s["rewritten"]:
         lines.append(f"largest change: {s['largest_change_mm']:.3f} mm at the TCP, "
                      f"{s['largest_joint_change_mrad']:.3f} mrad in a joint; expected accuracy (1 sigma, 3D, base "

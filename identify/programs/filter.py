@@ -11,6 +11,7 @@ on them). Frames: the robot's base frame (DH frame 0) of both models. Units: m, 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -23,12 +24,12 @@ from kinematics.dh import DHModel
 
 @dataclass(frozen=True)
 class Outcome:
-    """One target after filtering: ``status`` (``ok``/``singular``: rewritten; ``limit``/``unreachable``: kept as
-    written, ``reason`` says why); the controller's joints for it as written (``q_before``, (n,)) and the
-    compensated ones (``q_after``, NaN when not reached); the written target's change (``position_change`` m,
-    ``rotation_change`` rad: of the pose; of the TCP on the controller's model for joints) and largest joint
-    change (``joint_change`` rad); ``expected`` the 1-sigma 3D error of the reached TCP (m, base frame); the new
-    ``literal`` (None when not rewritten)."""
+    """One target after filtering: ``status`` (``ok``/``singular``: rewritten; ``limit``/``unreachable``/``cell``
+    (the compensated joints fail the cell check): kept as written, ``reason`` says why); the controller's joints
+    for it as written (``q_before``, (n,)) and the compensated ones (``q_after``, NaN when not reached); the
+    written target's change (``position_change`` m, ``rotation_change`` rad: of the pose; of the TCP on the
+    controller's model for joints) and largest joint change (``joint_change`` rad); ``expected`` the 1-sigma 3D
+    error of the reached TCP (m, base frame); the new ``literal`` (None when not rewritten)."""
 
     target: Target
     status: str
@@ -49,11 +50,12 @@ def _angle(a: Array, b: Array) -> float:
 
 def filter_targets(parsed: Parsed, identified: CalibratedModel, controller: DHModel, tcp: Array, tcp_rotation: Array,
                    start: Array, limits: Array | None = None, tcp_given: bool = True,
-                   language: Language | None = None) -> list[Outcome]:
+                   language: Language | None = None, check: Callable[[Array], str] | None = None) -> list[Outcome]:
     """Compensate every target of ``parsed``. ``identified``: the calibrated arm in its base frame (base
     identity); ``controller``: the controller's model (base identity); ``tcp`` (3,) m and ``tcp_rotation``
     (3, 3) the TCP in the flange frame (``tcp_given`` False: it is the identified TP, with its uncertainty);
-    ``start`` (n,) the joints the program starts from; ``limits`` (n, 2) of the DH joint values."""
+    ``start`` (n,) the joints the program starts from; ``limits`` (n, 2) of the DH joint values; ``check``: why
+    the compensated DH joint values (n,) must not be used ("" when they may: e.g. the cell's collision check)."""
     n = identified.n_joints
     ctrl = CalibratedModel.exact(replace(controller, base=np.eye(4), tool=np.asarray(tcp, dtype=float)), "controller")
     six = n >= 6
@@ -95,6 +97,10 @@ def filter_targets(parsed: Parsed, identified: CalibratedModel, controller: DHMo
                                     np.nan, None, _reason(str(sol.status[j]))))
             continue
         q = sol.q[j]
+        refused = check(identified.dh_values(q[None])[0]) if check is not None else ""
+        if refused:
+            outcomes.append(Outcome(target, "cell", q_c[i], q, np.nan, np.nan, np.nan, np.nan, None, refused))
+            continue
         after = controller_poses(ctrl, identified.dh_values(q[None]), tcp, tcp_rotation)[0]
         before = controller_poses(ctrl, identified.dh_values(q_c[i][None]), tcp, tcp_rotation)[0]
         literal = None

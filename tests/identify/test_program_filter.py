@@ -195,3 +195,27 @@ def test_the_readme_s_program_filter_runs_as_written(tmp_path) -> None:
         codes.append(done.returncode)
     assert codes == [0, 3], done.stderr
     assert "kept as written (NOT compensated)" in done.stdout and "pose_trans" in done.stdout
+
+
+def test_compensated_targets_are_checked_against_the_cell_of_the_plan_checks(result, tmp_path, capsys) -> None:
+    """The example program's pick pose, 89 mm above the table, is rewritten in an empty cell and kept (listed, with
+    the contact) when the site file puts a fixture under it; a target through the mounting surface is kept too."""
+    program = ROOT / "identify" / "data" / "example_ur5e.script"
+    site = tmp_path / "site.yaml"
+    site.write_text("schema: 1\ncell:\n  boxes:\n    - {name: fixture, min: [-0.6, -0.55, -0.05], "
+                    "max: [-0.3, -0.25, 0.05]}\n")
+    out = tmp_path / "out.script"
+    assert main(["compensate", str(result), "--program", str(program), "--out", str(out)]) == 3
+    free = capsys.readouterr().out
+    assert "5 targets, 5 rewritten" in free and "fixture" not in free
+    assert main(["compensate", str(result), "--program", str(program), "--out", str(out), "--force", "--config",
+                 str(site)]) == 3
+    boxed = capsys.readouterr().out
+    assert re.search(r"^  line 7: the compensated joints come too close: .*fixture", boxed, re.M), boxed
+    assert f"checked against the joint limits and the cell of {site}" in boxed
+    assert "  pick = p[-0.4558, -0.4011, 0.0889, 2.2207, 2.2207, 0.0008]\n" in out.read_text()  # as written
+    through = tmp_path / "through.script"
+    through.write_text("movej([0.0, 0.3, 1.6, -1.97, -1.57, 0.0])\n")
+    assert main(["compensate", str(result), "--program", str(through), "--out", str(out), "--force"]) == 3
+    assert "mounting surface" in capsys.readouterr().out
+    assert out.read_text() == through.read_text()
