@@ -197,7 +197,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
                              "are metres (millimetres?)")
         if args.frame == "base" and any(c in columns for c in ("rx", "ry", "rz")):
             rotations = pose_matrices(points, _need(columns, ["rx", "ry", "rz"], args.targets, "an orientation"))[
-                :, :3, :3] @ tcp_rot.T
+                :, :3, :3]  # the tool's orientation: solve_ik matches flange x tool rotation to it
     limits = robot.limits if robot is not None else None
     frame = "base" if in_base else "tracker"
     tool = tcp if args.tool else None  # the identified TP keeps its own uncertainty; a given tool is exact

@@ -219,3 +219,25 @@ def test_compensated_targets_are_checked_against_the_cell_of_the_plan_checks(res
     assert main(["compensate", str(result), "--program", str(through), "--out", str(out), "--force"]) == 3
     assert "mounting surface" in capsys.readouterr().out
     assert out.read_text() == through.read_text()
+
+
+def test_a_pose_target_with_a_rotated_tool_is_the_tool_s_orientation(result, tmp_path, capsys) -> None:
+    """``--frame base`` targets with rx,ry,rz and ``--tool X,Y,Z,RX,RY,RZ``: the tool's pose at known joints comes
+    back as those joints (the tool rotation was applied twice: joint 6 came back 0.5 rad off)."""
+    from identify.compensate import pose_matrices, rotvecs
+    from identify.io.result_io import load_result
+
+    model = load_result(str(result))[0].with_base(np.eye(4))
+    q = np.array([[0.3, -1.2, 1.6, -1.97, -1.57, 0.2]])
+    tool_rotation = pose_matrices(np.zeros(3), np.array([0.0, 0.0, 0.5]))[0, :3, :3]
+    flange = model.flanges(q)[0]
+    position = flange[:3, :3] @ np.array([0.0, 0.0, 0.1]) + flange[:3, 3]
+    rotation = rotvecs((flange[:3, :3] @ tool_rotation)[None])[0]
+    targets = tmp_path / "pose.csv"
+    targets.write_text("x,y,z,rx,ry,rz," + ",".join(f"q{i}" for i in range(1, 7)) + "\n"
+                       + ",".join(f"{float(v):.17g}" for v in [*position, *rotation, *q[0]]) + "\n")
+    out = tmp_path / "o.csv"
+    assert main(["compensate", str(result), "--targets", str(targets), "--frame", "base", "--tool",
+                 "0,0,0.1,0,0,0.5", "--out", str(out)]) == 0
+    row = [r.split(",") for r in out.read_text().splitlines() if not r.startswith("#")][1]
+    np.testing.assert_allclose([float(v) for v in row[2:8]], q[0], atol=1e-9)
