@@ -39,7 +39,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from config.cell import cell_from_config, contact_at
 from config.robots import load_robot
+from config.site import site_from_dict
 from identify.calibrated import CalibratedModel
 from identify.cli import main as identify_main
 from identify.compensate import controller_poses, solve_ik
@@ -58,11 +60,19 @@ START = np.array([0.0, -1.2, 1.6, -1.97, -1.57, 0.0])  # rad: a working pose awa
 BOX = np.array([[-1.2, 1.2], [-1.8, -0.8], [1.0, 2.4], [-2.8, -1.0], [-2.2, -0.9], [-1.5, 1.5]])
 
 
+#: the cell a program's targets keep clear of: the robot on its mounting surface, 10 mm more clearance than the
+#: filter's check asks (a compensated target moves by a few mm)
+CELL = cell_from_config(ROBOT, site_from_dict({"schema": 1, "cell": {"mounting_clearance": 0.06}}))
+
+
 def walk(rng: np.random.Generator, k: int = TARGETS) -> np.ndarray:
-    """``k`` joint configurations (k, 6), rad: a random walk from :data:`START`, steps up to 0.3 rad per joint."""
+    """``k`` joint configurations (k, 6), rad: a random walk from :data:`START`, steps up to 0.3 rad per joint,
+    each configuration clear of :data:`CELL` (a program that does not drive the tool into the table)."""
     q = [START]
-    for _ in range(k - 1):
-        q.append(np.clip(q[-1] + rng.uniform(-0.3, 0.3, 6), BOX[:, 0], BOX[:, 1]))
+    while len(q) < k:
+        step = np.clip(q[-1] + rng.uniform(-0.3, 0.3, 6), BOX[:, 0], BOX[:, 1])
+        if contact_at(CELL, step) is None:
+            q.append(step)
     return np.array(q)
 
 

@@ -12,19 +12,20 @@ Targets (CSV, one header row, ``#`` comment lines; metres and radians):
 Joint values (``q1..qN`` seeds, rows of ``--joints-from nominal``, and the output) are the controller's readings
 (for a coupled robot, as its controller reports them). Optional ``q1..qN`` columns seed the solution (default:
 the robot's home); an ``id`` column is copied through.
-Each target is solved with the nominal model first and the identified model from there (the branch of the
-seed). ``--as controller-pose`` also writes the pose the controller (nominal model) must be given so that the
-real arm reaches the target, as UR's ``p[x, y, z, rx, ry, rz]``.
+Each target is solved with the controller's model first and the identified model from there (the branch of the
+seed). ``--as controller-pose`` also writes the pose the controller must be given so that the real arm reaches
+the target, as UR's ``p[x, y, z, rx, ry, rz]``. The controller's model ("before", what the arm runs today) is
+its factory calibration when the result records one (``controller:``), else the nominal model of ``--robot``.
 
 ``--program FILE`` filters a robot program instead (URScript): every target of ``movej``, ``movel``, ``movep``
 and ``servoj`` (joint lists, rad; ``p[x, y, z, rx, ry, rz]`` poses, m and axis-angle rad, base frame; named
 poses assigned once) is rewritten so that the real arm goes where the program meant on the controller's model,
 each changed line commented with its change in mm and mrad; everything else is kept byte for byte, and what
 cannot be rewritten (targets computed at run time, pose_trans chains, values read from the controller) is listed
-line by line. The controller's model ("before") is its factory calibration when the result records one, else
-the nominal model of ``--robot``. The TCP: ``--tool``, else the program's ``set_tcp(p[...])``, else the
-identified TP. Pose targets are solved from the previous target's joints (the first from home), as the
-controller runs them.
+line by line. The TCP: ``--tool``, else the program's ``set_tcp(p[...])``, else the identified TP. Pose targets
+are solved from the previous target's joints (the first from home), as the controller runs them. The
+compensated joints are checked against the joint limits and the cell of ``--config SITE`` (default: the robot
+alone on its mounting surface); a target that fails is kept as written and listed.
 
 Another robot model than the result's is refused. Exit codes: 0 every target reached (with --program: every
 target rewritten and every motion line understood), 3 some not (each row or listed line says why), 2 bad input
@@ -276,6 +277,8 @@ def format_summary(s: dict[str, Any]) -> str:
     """The summary as the lines the command prints."""
     counts = ", ".join(f"{v} {k}" for k, v in s["status"].items() if v or k == "ok")
     lines = [f"{s['targets']} targets: {counts}; result verdict {s['verdict']}"]
+    if s.get("before") and s["before"] != "none":
+        lines.append(f"before (what the controller runs today): {s['before']}")
     if s["expected_median"] is not None:
         lines.append(f"expected accuracy of the reached targets (1 sigma, 3D): median {s['expected_median'] * 1e3:.4f} "
                      f"mm, max {s['expected_max'] * 1e3:.4f} mm")

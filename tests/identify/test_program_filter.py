@@ -157,7 +157,7 @@ def test_before_is_the_controller_s_factory_calibration_when_the_result_records_
     np.testing.assert_allclose(model.dh_table(), table)
     assert controller_model({}, ROBOT)[1] == "nominal ur5e"
     program = tmp_path / "p.script"
-    program.write_text("movej([0, -1.2, 1.6, -1.97, -1.57, 0])\nmovel(p[-0.4402, -0.3925, 0.2196, 2.2207, 2.2207, "
+    program.write_text("movej([0, -1.2, 1.6, -1.97, -1.57, 0])\nmovel(p[-0.4402, -0.3925, 0.4196, 2.2207, 2.2207, "
                        "0.0008])\n")
     out = tmp_path / "p.filtered.script"
     assert main(["compensate", str(with_factory), "--program", str(program), "--out", str(out), "--json"]) == 0
