@@ -6,8 +6,8 @@ Per draw: a simulated UR5e (a perturbed nominal at a random base, 0.05 mm tracke
 sweeps with 20 free and 10 held-out poses), identified and written as a result YAML; a URScript program of 50
 targets along a random walk in joint space (each clear of the mounting surface by 60 mm; 20 pose literals in
 ``movel``, 15 joint lists in ``movej``, 10 named poses and 5 named joint lists assigned once at the top; the TCP is
-the identified TP) written as the nominal controller means it; ``identify compensate RESULT --program`` run in-
-process. The filtered program is then read back and run as the controller runs it: joint targets as written, pose
+the identified TP) written as the nominal controller means it; ``identify compensate RESULT --program`` run
+in-process. The filtered program is then read back and run as the controller runs it: joint targets as written, pose
 targets through the nominal model's inverse kinematics from the previous target's joints. The truth's TP at those
 joints (tracker frame) against where the program meant it (the identified base times the nominal target): its RMS
 over the 50 targets against the RMS the result's covariance predicts (``expected_errors``, tracker frame), and each
