@@ -65,6 +65,8 @@ def run_program(args: argparse.Namespace, identified: CalibratedModel, doc: dict
         raise InputError(f"{args.program}: {exc}") from None
     if not parsed.targets and not parsed.skipped:
         raise InputError(f"{args.program}: no movej, movel, movep or servoj target: nothing to filter")
+    if parsed.tcp_problem and not args.tool:
+        raise InputError(f"{args.program}: {parsed.tcp_problem}")
     tcp, tcp_rot, given, tool_source = _tool(args, parsed.tcp, identified)
     controller, before = controller_model(doc, robot)
     check, cell_note = _cell_check(args.config, robot)

@@ -56,6 +56,7 @@ class Parsed:
     targets: list[Target]
     skipped: list[Skipped]
     tcp: tuple[float, ...] | None = None  # the tool centre point the program sets, in the language's units
+    tcp_problem: str = ""  # why the program's TCP cannot be known here (set at run time, several), "" if it can
 
 
 class Language(Protocol):

@@ -94,8 +94,8 @@ def _why(expression: str) -> str:
 
 
 def parse(text: str, n_joints: int) -> Parsed:
-    """The targets of a URScript program for an arm of ``n_joints`` (see the module docstring). ValueError (one
-    line) when the program sets different literal TCPs (filter each part with its own tool)."""
+    """The targets of a URScript program for an arm of ``n_joints`` (see the module docstring), with the TCP it
+    sets (``tcp_problem`` when it sets several or computes one)."""
     code = mask(text)
     assigned: dict[str, list[tuple[int, int, int]]] = {}  # name -> (offset of the name, rhs start, rhs end)
     for m in ASSIGN.finditer(code):
@@ -143,7 +143,7 @@ def parse(text: str, n_joints: int) -> Parsed:
             targets[(ra, rb)] = Target(kind, values, ra, rb, line_of(text, ra), offset, expression,
                                        _pose(kind, values))
     return Parsed(text, sorted(targets.values(), key=lambda t: t.use), sorted(skipped, key=lambda s: s.line),
-                  _tcp(code))
+                  *_tcp(code))
 
 
 def _named(code: str, word: str, assigned: dict[str, list[tuple[int, int, int]]], as_target: set[int],
@@ -174,17 +174,22 @@ def _pose(kind: str, values: tuple[float, ...]) -> Array | None:
     return parse_ur_pose("p[" + ", ".join(repr(v) for v in values) + "]") if kind == "pose" else None
 
 
-def _tcp(code: str) -> tuple[float, ...] | None:
-    found = []
+def _tcp(code: str) -> tuple[tuple[float, ...] | None, str]:
+    """The program's literal TCP (or None), and why it cannot be used ("" when it can)."""
+    found, computed = [], []
     for m in SET_TCP.finditer(code):
         a, b = _argument(code, m.end())
         if POSE.fullmatch(code[a:b]):
             found.append(tuple(float(v) for v in re.findall(NUMBER, code[a:b][code[a:b].index("["):])))
+        else:
+            computed.append(line_of(code, m.start()))
+    if computed:
+        return None, f"the program sets its TCP at run time (set_tcp on line {computed[0]}): give it with --tool"
     if len(set(found)) > 1:
         lines = ", ".join(str(line_of(code, m.start())) for m in SET_TCP.finditer(code))
-        raise ValueError(f"the program sets {len(set(found))} different TCPs (set_tcp on lines {lines}): filter "
-                         "each part with its own --tool")
-    return found[0] if found else None
+        return None, (f"the program sets {len(set(found))} different TCPs (set_tcp on lines {lines}): filter each "
+                      "part with its own --tool")
+    return (found[0] if found else None), ""
 
 
 def joints(q: Array) -> str:

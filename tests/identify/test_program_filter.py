@@ -241,3 +241,19 @@ def test_a_pose_target_with_a_rotated_tool_is_the_tool_s_orientation(result, tmp
                  "0,0,0.1,0,0,0.5", "--out", str(out)]) == 0
     row = [r.split(",") for r in out.read_text().splitlines() if not r.startswith("#")][1]
     np.testing.assert_allclose([float(v) for v in row[2:8]], q[0], atol=1e-9)
+
+
+def test_a_tcp_the_filter_cannot_know_is_refused_unless_tool_gives_it(result, tmp_path, capsys) -> None:
+    """A TCP set at run time, or two different ones: one line, exit 2, nothing written; ``--tool`` settles it."""
+    out = tmp_path / "out.script"
+    for body, why in (("set_tcp(pose_add(tcp0, p[0, 0, 0.01, 0, 0, 0]))\n", "at run time (set_tcp on line 1)"),
+                      ("set_tcp(p[0, 0, 0.1, 0, 0, 0])\nset_tcp(p[0, 0, 0.2, 0, 0, 0])\n", "2 different TCPs")):
+        program = tmp_path / "p.script"
+        program.write_text(body + "movej([0, -1.2, 1.6, -1.97, -1.57, 0])\n")
+        assert main(["compensate", str(result), "--program", str(program), "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert why in err and err.count("\n") == 1 and not out.exists()
+        assert main(["compensate", str(result), "--program", str(program), "--out", str(out), "--tool",
+                     "0,0,0.1"]) == 0
+        assert "TCP: --tool" in capsys.readouterr().out
+        out.unlink()
