@@ -22,9 +22,9 @@ and ``servoj`` (joint lists, rad; ``p[x, y, z, rx, ry, rz]`` poses, m and axis-a
 poses assigned once) is rewritten so that the real arm goes where the program meant on the controller's model,
 each changed line commented with its change in mm and mrad; everything else is kept byte for byte, and what
 cannot be rewritten (targets computed at run time, pose_trans chains, values read from the controller) is listed
-line by line. The TCP: ``--tool``, else the program's ``set_tcp(p[...])``, else the identified TP. Pose targets
-are solved from the previous target's joints (the first from home), as the controller runs them. The
-compensated joints are checked against the joint limits and the cell of ``--config SITE`` (default: the robot
+line by line. The TCP: ``--tool``, else the program's one literal ``set_tcp(p[...])``, else the identified TP.
+Pose targets are solved from the previous target's joints (the first from home), as the controller runs them.
+The compensated joints are checked against the joint limits and the cell of ``--config SITE`` (default: the robot
 alone on its mounting surface); a target that fails is kept as written and listed.
 
 Another robot model than the result's is refused. Exit codes: 0 every target reached (with --program: every
