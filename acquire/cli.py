@@ -15,7 +15,6 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from acquire.cell import Clearance
 from acquire.options import build_parser
 from acquire.orchestrator import RunResult, StopRequest
 from acquire.plan import check_plan, estimate_duration, plan_clearance
@@ -32,6 +31,7 @@ from common.arguments import OneLineParser
 from common.errors import InputError
 from common.fit_width import say
 from common.outputs import OutputError, check_outputs, check_target, same_file
+from config.cell import Clearance
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
@@ -369,7 +369,7 @@ def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, i
     readings give DH values through the session's coupling (a new session: the model's)."""
     import numpy as np
 
-    from acquire.cell import cell_from_config, first_contact
+    from config.cell import cell_from_config, first_contact
 
     cell = cell_from_config(robot_model, site)
     if cell is None or not plan.steps:

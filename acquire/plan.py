@@ -7,7 +7,7 @@ tracker/robot drift.
 Joint values: rad (revolute) / m (prismatic).
 
 Functions (all pure): :func:`build_plan` (robot model + site configuration -> plan, free poses by a
-greedy optimal design, every step and move clear of the cell: :mod:`acquire.cell`), :func:`check_plan`
+greedy optimal design, every step and move clear of the cell: :mod:`config.cell`), :func:`check_plan`
 (every limit violation, one line each; nothing moves unless it is empty), :func:`plan_clearance` (the
 closest approach of a plan to its cell) and :func:`estimate_duration`. What the operator is told about a
 plan (accuracy, dry-run text, Plan JSON) is in :mod:`acquire.plan_report`.
@@ -24,13 +24,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acquire.camera_view import visible
-from acquire.cell import Clearance, Contact, cell_from_config, clearance_of, contact_at, first_contact, free_interval
-from acquire.collision import STEP, Cell, approach, moves_samples
 from acquire.design import greedy_design
+from config.cell import Clearance, Contact, cell_from_config, clearance_of, contact_at, first_contact, free_interval
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
 from identify.simulate import random_poses
+from kinematics.collision import STEP, Cell, approach, moves_samples
 from kinematics.dh import DHModel, frames_from_joints
 from kinematics.truth import axis_distances
 from session.plan import STEP_KINDS, Plan, Step

@@ -36,14 +36,14 @@ from dataclasses import replace
 import numpy as np
 
 from acquire.camera_view import visible
-from acquire.cell import cell_from_config, first_contact
-from acquire.collision import Cell
 from acquire.design import SUBSPACE_TOL, gram, whitened
 from acquire.plan import EVAL_POSES, HOME_SWEEP, Array, axis_distances_many, build_plan, tp_model
+from config.cell import cell_from_config, first_contact
 from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.motion import motion_time
 from identify.simulate import random_poses
+from kinematics.collision import Cell
 from kinematics.dh import DHModel, frames_from_joints
 from session.plan import Plan, Step
 

@@ -13,13 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from acquire.cell import Clearance
-from acquire.collision import STEP
 from acquire.design import SUBSPACE_TOL, gram, whitened
 from acquire.plan import EVAL_POSES, PARTIAL_ARC, Array, _fmt, tp_model
+from config.cell import Clearance
 from config.robots import RobotModel
 from config.site import SiteConfig
 from identify.simulate import random_poses
+from kinematics.collision import STEP
 from kinematics.dh import DHModel
 from session.plan import STEP_KINDS, Plan, Step
 

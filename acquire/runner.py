@@ -20,6 +20,7 @@ from common.outputs import write_output
 from config.robots import ConfigError, RobotModel
 from config.site import SiteConfig
 from drivers.clock import VirtualClock
+from identify.controller import controller_section
 from identify.factory import factory_reference
 from identify.io.result_io import result_to_dict
 from identify.pipeline import identify
@@ -84,7 +85,7 @@ def cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:
     """The mounting surface and the plan's swept envelope (DH frame 0) for the report's 3D view."""
     import numpy as np
 
-    from acquire.cell import cell_from_config, envelope
+    from config.cell import cell_from_config, envelope
 
     try:
         site = SiteConfig.from_dict(session.header["config"]["site"])
@@ -107,6 +108,8 @@ def identify_session(session: Session, session_path: Path, robot: RobotModel) ->
     if reference is not None or note:
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
     doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path))
+    if section := controller_section(calibration, robot.joint_types):  # what the arm runs today ("before")
+        doc["controller"] = section
     out = session_path.with_suffix(".result.yaml")
     # the session's own outputs: checked before a new session started (refused if they existed, without --force),
     # brought up to date by each run of the session that completes; written whole or not at all

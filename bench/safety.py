@@ -21,11 +21,11 @@ import time
 
 import numpy as np
 
-from acquire.cell import cell_from_config
-from acquire.collision import moves_samples
 from acquire.plan import build_plan, plan_clearance
+from config.cell import cell_from_config
 from config.robots import load_robot, robot_names
 from config.site import SiteConfig
+from kinematics.collision import moves_samples
 
 TARGET_S = 1.0  # the default UR5e plan's check
 

@@ -107,7 +107,7 @@ class SiteConfig:
     (None: all); ``sweep_ranges`` one ``(min, max)`` or None per joint (None: as wide as the limits
     allow); ``free_poses`` fitted free poses and ``check_poses`` held-out ones; a home check every
     ``home_check_every`` steps (0: none); ``min_axis_distance`` m, the least TP distance from a revolute
-    axis. Cell (base frame of the robot, m; see :mod:`acquire.collision`): ``cell_margin`` the least
+    axis. Cell (base frame of the robot, m; see :mod:`kinematics.collision`): ``cell_margin`` the least
     distance between two bodies (links, tool, boxes, cylinders); the mounting surface is the robot model's
     (z = 0 for an arm on a table), moved to ``mounting_offset`` when given, kept ``mounting_clearance``
     away; the tool is a capsule ``tool_a``-``tool_b`` (flange frame; ``tool_b`` None: the TP guess) of

@@ -210,6 +210,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                      noise=args.noise, links=robot.links if robot else None, extensions=args.extensions == "auto")
     ident.warnings[:0] = content.notes
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
+    if header is not None:  # the controller's own calibration: what the arm runs today ("before")
+        from identify.controller import controller_section
+        from session.rows import factory_calibration
+
+        if section := controller_section(factory_calibration(header)[0], meas.joint_types):
+            doc["controller"] = section
     if args.out:
         _write_atomic(Path(args.out), yaml.safe_dump(doc, sort_keys=False, width=120))
     reference, note = _factory_reference(header, meas.joint_types) if header is not None else (None, "")

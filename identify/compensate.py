@@ -161,6 +161,15 @@ def solve_ik(model: CalibratedModel, points: Array, seeds: Array, limits: Array 
     return Solution(q, status.astype(str), pos, rot, sigma, np.max(np.abs(q - seeds), axis=1))
 
 
+def why_not(status: str, reached: bool) -> str:
+    """One line on a target's ``status``: why it was not reached, or what to watch for a reached singular one."""
+    if reached:
+        return "near a singularity: a small target change needs a large joint motion" if status == "singular" else ""
+    return {"limit": "a joint would have to go beyond its limit",
+            "singular": "missed at a singularity (the arm's reach is folded here)"}.get(
+        status, "outside the calibrated arm's workspace or on no branch near the seed")
+
+
 @dataclass(frozen=True)
 class Compensation:
     """Joint values that reach the targets with the identified model (``solution``), the nominal model's own

@@ -9,9 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquire.cell import cell_from_config
 from acquire.cli import main
-from acquire.collision import moves_samples
 from acquire.orchestrator import Orchestrator, StopRequest, Timeouts
 from acquire.plan import build_plan, check_plan, plan_clearance, tp_model
 from acquire.plan_continuous import (
@@ -24,6 +22,7 @@ from acquire.plan_continuous import (
 from acquire.plan_modes import build_both_plan
 from acquire.session import Session
 from acquire.stream_loop import COMMIT_PERIOD
+from config.cell import cell_from_config
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.base import DeviceIdentity
@@ -34,6 +33,7 @@ from drivers.sim.rig import SimulatedRig
 from drivers.sim.robot import open_robot
 from drivers.sim.tracker import open_tracker
 from identify.io.csvio import read_measurements
+from kinematics.collision import moves_samples
 from kinematics.dh import points_from_joints
 from session.plan import Plan
 

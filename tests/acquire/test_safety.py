@@ -1,4 +1,4 @@
-"""Safe motion: every plan keeps the arm clear of its cell and of itself (acquire/collision.py, acquire/cell.py,
+"""Safe motion: every plan keeps the arm clear of its cell and of itself (kinematics/collision.py, config/cell.py,
 the planner in acquire/plan.py, the clearance and the Plan JSON in acquire/cli.py).
 
 The plans are checked here by an independent point sampling of the capsules: points every ``H`` along each
@@ -22,12 +22,12 @@ import numpy as np
 import pytest
 
 from acquire.cli import main as acquire
-from acquire.collision import STEP, segment_box_distances, segment_distances
 from acquire.plan import PlanError, build_plan, plan_clearance
 from acquire.plan_continuous import build_continuous_plan
 from config.geometry import TOOL
 from config.robots import RobotModel, load_robot, robot_names
 from config.site import SiteConfig
+from kinematics.collision import STEP, segment_box_distances, segment_distances
 from kinematics.dh import frames_from_joints, points_from_joints
 from session.plan import Plan
 

@@ -81,6 +81,8 @@ def test_acquire_against_the_emulator_identifies_its_true_robot(tmp_path, capsys
     assert "vs factory calibration" in path.with_suffix(".report.html").read_text()
 
     doc = yaml.safe_load(path.with_suffix(".result.yaml").read_text())
+    assert doc["controller"]["model"] == "factory calibration"  # "before" for compensation: what the arm runs
+    np.testing.assert_allclose(doc["controller"]["dh"]["a"], truth.a, atol=1e-12)
     model = model_from_dict(doc)
     fit_q = meas.q[~meas.check]
     q_check = random_poses(load_robot("ur5e").limits, 200, np.random.default_rng(0))

@@ -1,7 +1,7 @@
 """The robot in its cell, for the planner: build the collision model and ask it questions (pure, no devices).
 
 :func:`cell_from_config` joins a robot model's capsules (``config/robots/*.yaml``) and a site's cell
-(``cell:`` in the site file) into an :class:`acquire.collision.Cell`; :func:`free_interval` finds how far
+(``cell:`` in the site file) into an :class:`kinematics.collision.Cell`; :func:`free_interval` finds how far
 one joint may turn from home with the others at home; :func:`first_contact` the first sample of a move
 that comes too close; :func:`clearance_of` the closest approach over a whole sequence of poses and the moves
 between them; :func:`envelope` the space a plan sweeps, for showing it.
@@ -15,7 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from acquire.collision import (
+from config.geometry import TOOL
+from config.robots import RobotModel
+from config.site import SiteConfig
+from kinematics.collision import (
     STEP,
     Bodies,
     Cell,
@@ -27,9 +30,6 @@ from acquire.collision import (
     path_samples,
     reach_per_joint,
 )
-from config.geometry import TOOL
-from config.robots import RobotModel
-from config.site import SiteConfig
 
 Array = NDArray[np.float64]
 
