@@ -33,9 +33,10 @@ ROBUST_PASSES = 2
 @dataclass(frozen=True)
 class LinesFit:
     """A fitted lines model. ``q`` (m, n): joint values with joint errors applied and the unread values
-    solved; ``inliers`` (m,); ``residuals`` (m, 3) measured minus predicted, metres; ``robust_cost``
-    compares starts; ``terms`` the joint errors fitted with the lines; ``timing`` the streamed rows' clock
-    correction (None without streamed rows)."""
+    solved; ``inliers`` (m,); ``residuals`` (m, 3) measured minus predicted, metres; ``robust_cost`` its
+    soft-L1 cost on its own noise scale (starts are compared on a common one: :func:`best_start`); ``terms``
+    the joint errors fitted with the lines; ``timing`` the streamed rows' clock correction (None without
+    streamed rows)."""
 
     lines: AxisLines
     q: Array
@@ -248,6 +249,21 @@ def fit_kept(start: AxisLines, data: FitData, inliers: NDArray[np.bool_], label:
     cost = float(np.sum(2.0 * (np.sqrt(1.0 + np.sum(res**2, axis=1) / (ROBUST_WIDTH * scale) ** 2) - 1.0)))
     return LinesFit(kept.lines, problem.joints(kept.lines), inliers.copy(), -res / data.weights[:, None], cost, label,
                     terms, data.timing)
+
+
+def best_start(fits: list[LinesFit], data: FitData) -> LinesFit:
+    """The fit, among those from several starts, of least soft-L1 cost on one scale for all: the smallest robust
+    noise scale among them (weighted units). Each fit's own ``robust_cost`` is scaled by its own residuals, so a
+    fit stalled with uniformly large residuals could cost less than a good one with heavier tails."""
+    if len(fits) == 1:
+        return fits[0]
+    weighted = [-f.residuals * data.timed(f.timing).weights[:, None] for f in fits]
+    scale = max(min(robust_scale(r[f.inliers], np.zeros(int(f.inliers.sum()))) for r, f in zip(weighted, fits,
+                                                                                              strict=True)),
+                NOISE_FLOOR)
+    costs = [float(np.sum(2.0 * (np.sqrt(1.0 + np.sum(r**2, axis=1) / (ROBUST_WIDTH * scale) ** 2) - 1.0)))
+             for r in weighted]
+    return fits[int(np.argmin(costs))]
 
 
 def readmit(fitted: LinesFit, data: FitData) -> LinesFit:

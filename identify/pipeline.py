@@ -20,7 +20,7 @@ from identify import verdict as checks
 from identify.adequacy import Adequacy, assess
 from identify.clock_split import ClockSplit, split_clock
 from identify.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, home_from_measurements
-from identify.estimate import FitData, LinesFit, along_arc, fit, fit_kept, place_nominal, readmit
+from identify.estimate import FitData, LinesFit, along_arc, best_start, fit, fit_kept, place_nominal, readmit
 from identify.extend import select_terms
 from identify.extensions import Decision, TermSet, candidates
 from identify.identifiability import Identifiability, identifiability
@@ -271,7 +271,7 @@ def identify(
     data = FitData(q, fitm.points, weights, unknown, tp_index, group, fitm.joint, timing)
     geo, found_starts = starts(fitm, q, unknown, tp_index, home, nominal, conventional, parallel_tol, warnings)
     fits = [fit(start, data, robust, label) for label, start in found_starts]
-    best: LinesFit = min(fits, key=lambda f: f.robust_cost)
+    best: LinesFit = best_start(fits, data)
     unit = 1.0 if fitm.sigma is None else float(np.median(fitm.sigma))
     declared = unit if fitm.sigma is not None else noise
     adequacy = _adequacy(best, data, unit, declared)

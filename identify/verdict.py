@@ -62,8 +62,8 @@ class Verdict:
         return {"status": self.status, "checks": [c.as_dict() for c in self.checks]}
 
     def summary(self) -> str:
-        """One line: the status and the messages of the checks that did not pass."""
-        bad = [c for c in self.checks if c.status != "pass"]
+        """One line: the status and the messages of the checks that did not pass, failures first."""
+        bad = sorted((c for c in self.checks if c.status != "pass"), key=lambda c: -STATUSES.index(c.status))
         if not bad:
             return f"verdict: pass ({len(self.checks)} checks)"
         return f"verdict: {self.status.upper()}: " + "; ".join(f"{c.name}: {c.message}" for c in bad)

@@ -61,9 +61,6 @@ def test_an_elastic_arm_is_neither_rejected_as_outliers_nor_passed_beyond_its_st
         assert ident.verdict.status == "fail" or err < 1.5 * stated, (k, err, stated)
 
 
-@pytest.mark.xfail(strict=True, reason="defect: each start's robust cost is scaled by that fit's own residuals, so "
-                   "the start selection keeps a fit stalled at 77 mm RMS (cost 23.9) over the geometric step's at "
-                   "0.18 mm (cost 39.6); held-out 225 mm. See docs/benchmarks.md, section 10a")
 def test_a_wrong_nominal_zero_does_not_win_over_a_good_geometric_start() -> None:
     _, err, _, bound = identified("ur5e", "zero90", 3)
     assert err < 10 * bound  # the geometric step's fit predicts to ~0.2 mm; the nominal's stalled one to 225 mm
