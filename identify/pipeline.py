@@ -329,6 +329,8 @@ def identify(
         v = validations[use]
         others = {k: (w.rms, w.expected) for k, w in validations.items() if k != use}
         found.append(checks.holdout(v.samples, v.rms, v.expected, use, others))
+    elif use == "extended" and not np.any(fitm.joint == 0):
+        found.append(checks.sweeps_only_extension())
     if nominal is not None and np.sum(unknown < 0) >= 3:
         known = unknown < 0
         lines = models["plain"].lines

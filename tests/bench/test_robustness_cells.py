@@ -51,9 +51,20 @@ def test_the_elastic_arm_sags_as_the_boby2021_j2_sweep_does() -> None:
     assert np.all(turned[:, [0, 3, 4, 5]] == 0) and np.all(np.abs(turned[:, 1:3]) > 0)
 
 
-@pytest.mark.xfail(strict=True, reason="defect: on an elastic arm (6-sample sweeps, no free poses) identify either "
-                   "rejects 10 of the 12 J2/J3 sweep samples as gross outliers (draw 6: fail, 827 mm) or passes while "
-                   "predicting ~0.8 mm where it states ~0.2 mm (draw 4); see docs/benchmarks.md")
+def test_joint_errors_from_sweeps_alone_are_not_vouched_for_away_from_the_sweeps() -> None:
+    """Draw 4 passed while predicting 0.84 mm where it stated 0.19 mm: its eccentricity terms, fitted on single-joint
+    sweeps, stood in for the gravity sag that depends on the other joints. Without free or held-out poses nothing
+    tests that, and the holdout check now says so."""
+    ident, err, stated, _ = identified("ur5e", "elastic", 4)
+    assert ident.use == "extended" and err > 3 * stated  # the defect's situation is still drawn
+    check = ident.verdict_check("holdout")
+    assert check.status == "warn" and "not validated away from the sweeps" in check.message
+    assert ident.verdict.status == "warn"
+
+
+@pytest.mark.xfail(strict=True, reason="defect: on an elastic arm (6-sample sweeps, no free poses) identify "
+                   "rejects 10 of the 12 J2/J3 sweep samples as gross outliers (draw 6: fail, 827 mm); draw 4 predicts "
+                   "~0.8 mm where it states ~0.2 mm (now a warning, test above); see docs/benchmarks.md")
 def test_an_elastic_arm_is_neither_rejected_as_outliers_nor_passed_beyond_its_stated_accuracy() -> None:
     for k in (4, 6):
         ident, err, stated, _ = identified("ur5e", "elastic", k)
