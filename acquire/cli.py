@@ -230,21 +230,34 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         for line in problems:
             print(f"acquire: plan refused: {line}", file=sys.stderr)
         return 2
+    camera = None
+    if tracker_spec is not None and tracker_spec.backend == "aruco" and not plan.continuous:
+        from acquire.camera_rehearsal import camera_assumptions  # OpenCV: only for a camera
+
+        camera = camera_assumptions(plan, robot_model, site, tracker_spec, args.noise)
     if plan.continuous:
         duration = estimate_continuous_duration(plan, site.measure_time)
         accuracy = None
     else:
         duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
-        accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
+        accuracy = None if rehearsal else predicted_accuracy(
+            plan if camera is None else camera.seen_plan(plan), robot_model, site.tp_guess,
+            site.tracker_noise if camera is None else camera.noise)
     if args.json:
-        print(json.dumps(plan_json(plan, clearance, duration, accuracy), allow_nan=False))
+        doc = plan_json(plan, clearance, duration, accuracy)
+        if camera is not None:
+            doc["camera"] = camera.as_dict(plan)
+        print(json.dumps(doc, allow_nan=False))
         return 0
     if session is not None:
         say(_resuming(session))
-    say(format_plan(plan, robot_model, duration, accuracy))
+    say(format_plan(plan, robot_model, duration, accuracy, "camera" if camera is not None else "tracker"))
+    if camera is not None:
+        say("\n".join(["", *camera.lines(plan)]))
     say(format_clearance(clearance, plan, site))
     if args.dry_run and not rehearsal and session is None:
-        say(format_modes(robot_model, _site(args), plan, args.free_poses))
+        say("modes: not compared for a camera (which streamed frames it would see is not modelled)" if camera
+            else format_modes(robot_model, _site(args), plan, args.free_poses))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
