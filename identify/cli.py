@@ -21,7 +21,6 @@ from common import __version__, fit_width
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from config.robots import RobotModel
-from identify import verdict as checks
 from identify.calibrated import robot_model
 from identify.io.csvio import format_measurements, read_measurements
 from identify.io.result_io import result_to_dict
@@ -211,6 +210,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                      noise=args.noise, links=robot.links if robot else None, extensions=args.extensions == "auto")
     ident.warnings[:0] = content.notes
     if header is not None:  # a session: how much of its plan was recorded is part of the verdict
+        from identify import verdict as checks
+
         ident = replace(ident, verdict=checks.with_session_check(ident.verdict,
                                                                   checks.missing_steps(*header["missing_steps"])))
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
