@@ -70,8 +70,9 @@ class CameraAssumptions:
                f"  noise: {self.noise * 1e3:.4g} mm per axis per reading ({self.noise_source})"]
         if self.pose is None:
             out.append("  steps expected to be lost: unknown: every step is attempted; a step where the target faces "
-                       "away or leaves the view is recorded missing and tried once more at the end; give "
-                       "cell.camera_pose to leave such steps out of the plan")
+                       "away or leaves the view is recorded missing and tried once more at the end, and the "
+                       "predicted accuracy above assumes every step is seen; give cell.camera_pose to leave such "
+                       "steps out of the plan and count them")
             return out
         total = len(plan.steps)
         if not self.lost:

@@ -7,6 +7,7 @@ not use the model). The verdict is the worst of its checks. Limits are stated as
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -151,7 +152,11 @@ def missing_steps(missing: int, planned: int, reasons: dict[str, int]) -> Check:
     uses the rest, so it has less data, and fewer poses, than the plan it was designed from."""
     share = missing / planned if planned else 0.0
     status = "warn" if share > MISSING_WARN else "pass"
-    why = "; ".join(f"{n}: {r}" for r, n in sorted(reasons.items(), key=lambda item: -item[1])[:3])
+    kinds: dict[str, int] = {}  # reasons that differ only in their counts ("(6 of 8 frames failed)") go together
+    for reason, n in reasons.items():
+        kind = re.sub(r" \([^()]*\d[^()]*\)", "", reason)
+        kinds[kind] = kinds.get(kind, 0) + n
+    why = "; ".join(f"{n}: {r}" for r, n in sorted(kinds.items(), key=lambda item: -item[1])[:3])
     message = (f"{missing} of {planned} plan steps ({100 * share:.0f} %) recorded missing"
                + (f" ({why})" if why else "") + ("; the fit uses the rest" if missing else ""))
     return Check("missing_steps", status, share, MISSING_WARN, message)

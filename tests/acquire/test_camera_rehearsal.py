@@ -96,7 +96,10 @@ def test_a_step_measured_again_keeps_the_total_and_the_verdict_counts_missing_st
 
 
 def test_the_missing_steps_check_warns_above_five_percent_and_says_why():
-    check = missing_steps(119, 256, {"tracker failed 4 times (TargetLost: the target is not visible)": 119})
+    check = missing_steps(119, 256, {"tracker failed 4 times (TargetLost: the target is not visible (6 of 6 frames "
+                                     "failed))": 117, "tracker failed 4 times (TargetLost: the target is not visible "
+                                     "(6 of 8 frames failed))": 2})
     assert check.status == "warn" and check.value == pytest.approx(119 / 256)
-    assert check.message.startswith("119 of 256 plan steps (46 %) recorded missing (119: tracker failed")
+    assert check.message == ("119 of 256 plan steps (46 %) recorded missing (119: tracker failed 4 times (TargetLost: "
+                             "the target is not visible)); the fit uses the rest")
     assert missing_steps(12, 256, {}).status == "pass"  # 4.7 %
