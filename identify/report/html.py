@@ -336,7 +336,8 @@ def report_html(
                          "pass the measurements it was made from")
     references = ([(nominal_name or "nominal", nominal)] if nominal is not None else []) + (
         [reference] if reference is not None else [])
-    title = title or f"DH identification report: {ident.model.joint_types}"
+    title = title or (f"DH identification report: {nominal_name} ({ident.model.joint_types})" if nominal_name
+                      else f"DH identification report: {ident.model.joint_types}")
     body = [f"<h1>{_e(title)}</h1>",
             f"<p>dh-calib {_e(__version__)}, generated {_e(_when(time.time()))}"
             + (f"; source <code>{_e(source)}</code>" if source else "") + ".</p>"]
@@ -349,8 +350,8 @@ def report_html(
                 + "</section>")
     notes = list(ident.warnings) + list(ident.refinement.notes)
     if notes:
-        body.append('<section id="warnings"><h2>Warnings</h2><ul>'
-                    + "".join(f'<li class="warn">{_e(w)}</li>' for w in notes) + "</ul></section>")
+        body.append('<section id="notes"><h2>Notes</h2><ul>'  # what the fit did; what to worry about: the checks
+                    + "".join(f"<li>{_e(w)}</li>" for w in notes) + "</ul></section>")
     body.append('<section id="dh-table"><h2>DH parameters</h2><p>Standard DH (lengths mm, angles deg, ± one '
                 "standard uncertainty).</p>" + _dh_section(ident, references)
                 + (f'<p class="warn">{_e(reference_note)}</p>' if reference_note else "") + "</section>")
