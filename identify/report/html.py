@@ -50,7 +50,7 @@ _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;
 color:#222;padding:0 1em}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.8em}
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em}td,th{border:1px solid #ddd;padding:.25em .6em;
-text-align:right;white-space:nowrap}th{background:#f4f4f4}td.l,th.l{text-align:left;white-space:normal}
+text-align:right;white-space:nowrap}th{background:#f4f4f4;white-space:normal}td.l,th.l{text-align:left;white-space:normal}
 .fixed{color:#888}figure{margin:1em 0}img{max-width:100%;height:auto}figcaption{font-size:.9em;color:#555}
 .warn{color:#a40}code{background:#f4f4f4}.scroll{overflow-x:auto}.verdict-pass h2{color:#063}
 .verdict-warn h2{color:#a40}.verdict-fail h2{color:#b00}.sides{display:flex;flex-wrap:wrap;gap:1.5em}
