@@ -15,12 +15,13 @@ $(STAMP): pyproject.toml
 
 # a mock acquisition and its identification, then an ISO 9283-style verification of that calibration on the same
 # simulated robot (5 poses x 10 cycles before and after compensation: a few seconds in mock mode)
+# (make echoes each recipe line: they stay within 80 columns, as the commands' own output does; scripts/demo_width.py)
 demo: $(STAMP)
 	mkdir -p sessions
-	stamp=$$(date +%Y%m%d-%H%M%S); \
-	$(BIN)/acquire --robot mock:ur5e --tracker mock --session sessions/demo-$$stamp.session && \
-	$(BIN)/acquire verify --result sessions/demo-$$stamp.result.yaml --robot mock:ur5e --tracker mock \
-		--session sessions/demo-$$stamp-verify.session
+	s=sessions/demo-$$(date +%Y%m%d-%H%M%S); \
+	$(BIN)/acquire --robot mock:ur5e --tracker mock --session $$s.session && \
+	$(BIN)/acquire verify --result $$s.result.yaml --robot mock:ur5e \
+	    --tracker mock --session $$s-verify.session
 
 test: $(STAMP)
 	$(BIN)/ruff check .

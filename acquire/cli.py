@@ -24,10 +24,8 @@ from acquire.plan_report import format_clearance, format_plan, plan_json, predic
 from acquire.resume import ResumeRefused, resume_settings
 from acquire.runner import finish, run_session
 from acquire.session import Session
-from acquire.session_backup import backup_session
 from acquire.stream_loop import check_streams
 from common import stop_signals
-from common.arguments import OneLineParser
 from common.errors import InputError
 from common.fit_width import say
 from common.outputs import OutputError, check_outputs, check_target, same_file
@@ -37,7 +35,6 @@ from config.site import SiteConfig, load_site
 from drivers.clock import VirtualClock, WallClock
 from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
-from identify.io.session_measurements import stream_summary
 from session.plan import Plan
 from session.schema import SessionError
 
@@ -46,37 +43,6 @@ log = logging.getLogger("acquire")
 
 class UsageError(Exception):
     """Bad input: one line, exit code 2."""
-
-
-def _export(argv: list[str]) -> int:
-    p = OneLineParser(prog="acquire export",
-                      description="Write a session's measurements as a measurement CSV (the file identify reads; "
-                      "its columns: README.md, File contracts). A session being written can be exported.",
-                      epilog="exit codes: 0 written, 2 bad input (one line)")
-    p.add_argument("session", type=Path, help="the session file to read (never changed)")
-    p.add_argument("--csv", type=Path, required=True, metavar="OUT.csv", help="the CSV to write")
-    p.add_argument("--force", action="store_true", help="replace the CSV if it exists")
-    args = p.parse_args(argv)
-    check_outputs([args.session], [("--csv", args.csv)], args.force)
-    with Session.open(args.session) as session:
-        rows = session.export_csv(args.csv, force=args.force)
-        summary = stream_summary(session) if session.plan.continuous else None
-        if summary is not None:
-            print(summary.line())
-    print(f"wrote {args.csv} ({rows} rows)")
-    return 0
-
-
-def _backup(argv: list[str]) -> int:
-    p = OneLineParser(prog="acquire backup", description="Copy a session safely, even while it is being written "
-                      "(SQLite's online backup API).", epilog="exit codes: 0 copied, 2 bad input (one line)")
-    p.add_argument("session", type=Path, help="the session file to copy (never changed)")
-    p.add_argument("dest", type=Path, help="the copy (a new file; an existing one only with --force)")
-    p.add_argument("--force", action="store_true", help="replace DEST if it exists")
-    args = p.parse_args(argv)
-    steps = backup_session(args.session, args.dest, args.force)
-    print(f"copied {args.session} to {args.dest} ({steps} steps)")
-    return 0
 
 
 REHEARSAL_SPEED = 0.25  # --tracker none: the share of the model's default speeds and accelerations
@@ -230,21 +196,34 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         for line in problems:
             print(f"acquire: plan refused: {line}", file=sys.stderr)
         return 2
+    camera = None
+    if tracker_spec is not None and tracker_spec.backend == "aruco" and not plan.continuous:
+        from acquire.camera_rehearsal import camera_assumptions  # OpenCV: only for a camera
+
+        camera = camera_assumptions(plan, robot_model, site, tracker_spec, args.noise)
     if plan.continuous:
         duration = estimate_continuous_duration(plan, site.measure_time)
         accuracy = None
     else:
         duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
-        accuracy = None if rehearsal else predicted_accuracy(plan, robot_model, site.tp_guess, site.tracker_noise)
+        accuracy = None if rehearsal else predicted_accuracy(
+            plan if camera is None else camera.seen_plan(plan), robot_model, site.tp_guess,
+            site.tracker_noise if camera is None else camera.noise)
     if args.json:
-        print(json.dumps(plan_json(plan, clearance, duration, accuracy), allow_nan=False))
+        doc = plan_json(plan, clearance, duration, accuracy)
+        if camera is not None:
+            doc["camera"] = camera.as_dict(plan)
+        print(json.dumps(doc, allow_nan=False))
         return 0
     if session is not None:
         say(_resuming(session))
-    say(format_plan(plan, robot_model, duration, accuracy))
+    say(format_plan(plan, robot_model, duration, accuracy, "camera" if camera is not None else "tracker"))
+    if camera is not None:
+        say("\n".join(["", *camera.lines(plan)]))
     say(format_clearance(clearance, plan, site))
     if args.dry_run and not rehearsal and session is None:
-        say(format_modes(robot_model, _site(args), plan, args.free_poses))
+        say("modes: not compared for a camera (which streamed frames it would see is not modelled)" if camera
+            else format_modes(robot_model, _site(args), plan, args.free_poses))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
@@ -448,10 +427,10 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str]) -> int:
     try:
-        if argv[:1] == ["export"]:
-            return _export(argv[1:])
-        if argv[:1] == ["backup"]:
-            return _backup(argv[1:])
+        if argv[:1] in (["export"], ["backup"]):  # acquire/session_commands.py
+            from acquire.session_commands import backup, export
+
+            return (export if argv[0] == "export" else backup)(argv[1:])
         if argv[:1] == ["verify"]:  # ISO 9283-style verification of a calibration: acquire/verify_cli.py
             from acquire.verify_cli import main as verify_main
 

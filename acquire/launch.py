@@ -49,6 +49,10 @@ SUBCOMMANDS = ("export", "backup", "verify", "calibrate-camera", "print-board") 
 
 
 def _main(argv: list[str]) -> int:
+    if argv[:1] in (["export"], ["backup"]):  # they need neither the lock nor the acquisition code
+        from acquire.session_commands import main as session_command
+
+        return session_command(argv)
     if not argv[:1] or argv[0] not in SUBCOMMANDS:
         refusal = _quick_refusal(argv)  # --help, --version, a bad option or device spec: before the heavy imports
         if refusal is not None:

@@ -71,6 +71,7 @@ class Progress:
     samples: int
     status: str
     residual: float | None
+    again: bool = False  # a step recorded missing, measured once more: ``done``/``total`` count that pass
 
 
 def average_readings(readings: list[TrackerReading]) -> tuple[Array, float | None, NDArray[np.bool_]]:
@@ -144,12 +145,12 @@ class Orchestrator:
         on_progress: Callable[[Progress], None] | None = None,
         stop: StopRequest | None = None,
         stream_rate: float = 250.0,
-        on_start: Callable[[Step, int, int], None] | None = None,
+        on_start: Callable[[Step, int, int, bool], None] | None = None,
     ) -> None:
         self.robot, self.tracker, self.session, self.clock = robot, tracker, session, clock
         self.timeouts, self.retries = timeouts, retries
         self.on_progress = on_progress
-        self.on_start = on_start  # (step, number in this run, steps in this run) before each step
+        self.on_start = on_start  # (step, number in its pass, steps in the pass, measured again?) before each step
         self.stop = stop or StopRequest()
         self.plan: Plan = session.plan
         self.coupling = session.coupling
@@ -158,22 +159,24 @@ class Orchestrator:
     def run(self) -> RunResult:
         """Record every remaining step of the plan, then measure once more each step recorded as missing (this
         run's or earlier runs'; the first attempt is kept in the session); returns how the run ended (the
-        session has it too). Progress counts the steps that remain in this run."""
+        session has it too). Progress counts the plan's steps that remain in this run (a total that does not
+        change), then, in a pass of their own, the steps measured again."""
         self.stop.on_request = self.robot.stop
         self.session.begin_run()
         recorded = 0
         done = self.session.recorded_indices()
         todo = [(s, False) for s in self.plan.steps if s.index not in done]
         retakes = [self.plan.steps[i] for i in self.session.missing_indices()]
-        total = len(todo) + len(retakes)
+        total = len(todo)
         started = self.clock.now()
         sweep_points: dict[int, list[Array]] = {}
         count = 0
         try:
             while todo or retakes:
-                if not todo:  # the main pass is over: every step missing now, once
+                if not todo:  # the main pass is over: every step missing now, once, counted on their own
                     todo = [(s, True) for s in retakes]
                     retakes = []
+                    count, total = 0, len(todo)
                     self.session.event("remeasure", f"measuring {len(todo)} missing step(s) again: "
                                        + ", ".join(str(s.index) for s, _ in todo))
                 step, retake = todo.pop(0)
@@ -181,7 +184,7 @@ class Orchestrator:
                 if self.stop.requested:
                     return self._end("aborted", self.stop.reason, recorded)
                 if self.on_start is not None:
-                    self.on_start(step, count, total)
+                    self.on_start(step, count, total, retake)
                 record = self._do_step(step)
                 if self.stop.requested and record.status != "ok":
                     return self._end("aborted", self.stop.reason, recorded)
@@ -192,9 +195,9 @@ class Orchestrator:
                     recorded += 1
                     if record.status != "ok":
                         retakes.append(step)
-                        total += 1
                 if self.on_progress is not None:
-                    self.on_progress(self._progress(step, record, count, total, started, sweep_points))
+                    self.on_progress(replace(self._progress(step, record, count, total, started, sweep_points),
+                                             again=retake))
         except (RobotFault, ConnectionFailed, DeviceTimeout) as exc:
             self.robot.stop()
             if self.stop.requested:  # the operator's stop interrupted the motion: not a fault

@@ -96,8 +96,10 @@ def _per_joint_text(values: tuple[float, ...], types: str, unit_r: str, unit_p: 
                      for v, t in zip(values, types, strict=False))
 
 
-def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict[str, float] | None) -> str:
-    """The dry-run summary an operator reads: one line per sweep, counts, duration, accuracy, notes."""
+def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict[str, float] | None,
+                device: str = "tracker") -> str:
+    """The dry-run summary an operator reads: one line per sweep, counts, duration, accuracy (for the noise of
+    ``device``: "tracker" or "camera"), notes."""
     types = plan.joint_types
     lines = [f"Plan for {plan.robot} ({types}), {len(plan.steps)} steps", "",
              f"{'sweep':>5}  {'joint':>5}  {'from':>10}  {'to':>10}  {'steps':>5}"]
@@ -131,7 +133,7 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
         step = accuracy["step_noise"]
         lines += ["",
                   f"predicted accuracy (Cramér-Rao bound, RMS TP error at {int(accuracy['eval_poses'])} random "
-                  f"held-out poses; tracker noise {accuracy['noise'] * 1e3:.4g} mm per axis, "
+                  f"held-out poses; {device} noise {accuracy['noise'] * 1e3:.4g} mm per axis, "
                   f"{plan.samples_per_step} samples per step: {step * 1e3:.4g} mm per step):"]
         rows = (("with_free", "this plan"), ("sweeps_only", "without its free poses"),
                 ("partial", "±20° sweeps, no free poses"), ("partial_with_free", "±20° sweeps + free poses"))

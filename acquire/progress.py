@@ -99,6 +99,7 @@ class ProgressDisplay:
         self.shown: Step | None = None  # the step the bar names: the running one, or the last one
         self.step_started = self.started
         self.count = self.total = 0
+        self.again = False  # the pass of steps measured again (recorded missing), counted on its own
         self.simulated_elapsed = 0.0
         self.last_line = -float("inf")
         self._lock = threading.Lock()
@@ -112,11 +113,10 @@ class ProgressDisplay:
         """The steps this run will do, in order (called once, before the first)."""
         self.planned += sum(self.durations.get(s.index, 0.0) for s in steps)
 
-    def start(self, step: Step, count: int, total: int) -> None:
-        """Step number ``count`` of ``total`` in this run starts."""
+    def start(self, step: Step, count: int, total: int, again: bool = False) -> None:
+        """Step number ``count`` of ``total`` in this run starts (``again``: of the steps measured again)."""
         with self._lock:
-            self._grow(step, total)
-            self.step, self.shown, self.count, self.total = step, step, count, total
+            self.step, self.shown, self.count, self.total, self.again = step, step, count, total, again
             self.step_started = self.wall()
         if self.quiet:
             return
@@ -131,13 +131,14 @@ class ProgressDisplay:
         """A step ended (:class:`acquire.orchestrator.Progress`: its status, samples, the sweep's residual so far
         and the run's own clock, simulated or not)."""
         with self._lock:
-            self._grow(p.step, p.total)
+            if p.status == "missing" and not p.again:  # measured once more at the end of the run: more time, the
+                self.planned += self.durations.get(p.step.index, 0.0)  # same step count (a pass of its own)
             self.done_planned += self.durations.get(p.step.index, 0.0)
-            self.step, self.count, self.total = None, p.done, p.total
+            self.step, self.count, self.total, self.again = None, p.done, p.total, p.again
             self.simulated_elapsed = p.elapsed
         extra = f", sweep residual {p.residual * 1e3:.3f} mm" if p.residual is not None else ""
         outcome = f"{p.samples} samples, {p.status}" if p.samples else p.status  # a rehearsal measures nothing
-        line = f"step {p.done}/{p.total} ({what(p.step)}): {outcome}; {self._times()}{extra}"
+        line = f"{self._label()} ({what(p.step)}): {outcome}; {self._times()}{extra}"
         log.info(line)
         if self.quiet:
             return
@@ -146,10 +147,9 @@ class ProgressDisplay:
         elif p.done in (1, p.total) or self.wall() - self.last_line >= LINE_PERIOD:
             self._line(line)
 
-    def _grow(self, step: Step, total: int) -> None:
-        """A step recorded missing is measured again at the end of the run: the total grows by its duration."""
-        if self.total and total > self.total:
-            self.planned += (total - self.total) * self.durations.get(step.index, 0.0)
+    def _label(self) -> str:
+        """``step 12/256``, or ``again 3/119`` in the pass of steps measured again."""
+        return f"{'again' if self.again else 'step'} {self.count}/{self.total}"
 
     def close(self) -> None:
         """End the display (the bar stays on screen, with a newline after it)."""
@@ -196,7 +196,7 @@ class ProgressDisplay:
         if self._bar is None:
             return
         with self._lock:
-            label = f"step {self.count}/{self.total}"
+            label = self._label()
             sim = f"simulated {hms(self.simulated_elapsed)}" if self.simulated else ""
             room = _columns(self.stream) - len(label) - len(sim) - BAR_FIXED  # for the bar
             if self.shown is not None and room - len(what(self.shown)) - 1 >= MIN_BAR:  # the step's kind: if it fits
@@ -229,7 +229,7 @@ class ProgressDisplay:
             self._draw()
         elif step is not None and self.wall() - self.last_line >= LINE_PERIOD:
             running = self.wall() - self.step_started
-            self._line(f"step {self.count}/{self.total} ({what(step)}): running for {running:.0f} s (planned "
+            self._line(f"{self._label()} ({what(step)}): running for {running:.0f} s (planned "
                        f"{self.durations.get(step.index, 0.0):.0f} s); {self._times()}")
 
 

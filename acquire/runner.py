@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import logging
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -23,8 +24,11 @@ from drivers.clock import VirtualClock
 from identify.controller import controller_section
 from identify.factory import factory_reference
 from identify.io.result_io import result_to_dict
+from identify.io.session_measurements import missing_steps
 from identify.pipeline import identify
 from identify.report.terminal import format_reference, format_report
+from identify.verdict import missing_steps as missing_steps_check
+from identify.verdict import with_session_check
 from session.rows import factory_calibration
 
 log = logging.getLogger("acquire")
@@ -102,6 +106,8 @@ def cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:
 def identify_session(session: Session, session_path: Path, robot: RobotModel) -> dict[str, Any]:
     meas = session.to_measurements()
     ident = identify(meas, robot.nominal, links=robot.links)
+    # how much of the plan was recorded is part of the verdict (and so of the report's first screen)
+    ident = replace(ident, verdict=with_session_check(ident.verdict, missing_steps_check(*missing_steps(session))))
     print(format_report(ident, robot.nominal, robot.name))
     calibration, why = factory_calibration(session.header)  # the controller's own, for comparison
     reference, note = factory_reference(calibration, why, robot.joint_types)

@@ -64,8 +64,9 @@ def check_outputs(inputs: Iterable[str | Path | None], outputs: Iterable[tuple[s
 
 
 def check_target(path: str | Path, force: bool = False, option: str = "output") -> None:
-    """Refuse (OutputError) one output path: an existing folder, a missing parent folder, or an existing file
-    without ``force``."""
+    """Refuse (OutputError) one output path: an existing folder, a missing parent folder, a folder where no file
+    can be made (tried: a temporary file is created and removed, which no permission bit can fake), or an existing
+    file without ``force``."""
     path = Path(path)
     parent = path.parent
     if path.is_dir():
@@ -74,6 +75,12 @@ def check_target(path: str | Path, force: bool = False, option: str = "output") 
         raise OutputError(f"{option} {path}: the folder {parent} does not exist (it is not created; make it first)")
     if (path.exists() or path.is_symlink()) and not force:
         raise OutputError(f"{option} {path} already exists; pass --force to replace it")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=parent)
+    except OSError as exc:
+        raise OutputError(f"{option} {path}: no file can be written in {parent} ({exc.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
 
 
 def write_output(path: str | Path, data: str | bytes, force: bool = False) -> None:

@@ -209,6 +209,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset,
                      noise=args.noise, links=robot.links if robot else None, extensions=args.extensions == "auto")
     ident.warnings[:0] = content.notes
+    if header is not None:  # a session: how much of its plan was recorded is part of the verdict
+        from identify import verdict as checks
+
+        ident = replace(ident, verdict=checks.with_session_check(ident.verdict,
+                                                                  checks.missing_steps(*header["missing_steps"])))
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
     if header is not None:  # the controller's own calibration: what the arm runs today ("before")
         from identify.controller import controller_section

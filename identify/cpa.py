@@ -35,6 +35,11 @@ from kinematics.dh import DHModel, transform_from_dh
 Array = NDArray[np.float64]
 
 DEFAULT_PARALLEL_TOL = 0.01  # rad: consecutive axes closer than this are treated as parallel
+class ReadingScaleError(InputError):
+    """A sweep's TP turns by another angle than its joint readings say (readings in degrees, the wrong column):
+    the data are wrong whatever model the fit starts from."""
+
+
 MIN_ARC = np.radians(2.0)  # rad: shortest arc that can define an axis
 OUTLIER_FACTOR = 6.0  # a circle residual beyond this many robust sigmas triggers a robust refit
 MIN_CHORD = 5e-4  # m: a TP moving less than this in a sweep sits on the joint's axis
@@ -133,7 +138,7 @@ def axis_from_sweep(
     if have_q:
         if not 0.5 < abs(slope) < 2.0:
             hint = " Are they in degrees? The CSV contract uses radians." if 40 < 1 / abs(slope) < 80 else ""
-            raise InputError(f"joint {joint}: the TP turns {abs(slope):.3g} rad per unit of joint reading in "
+            raise ReadingScaleError(f"joint {joint}: the TP turns {abs(slope):.3g} rad per unit of joint reading in "
                              f"sweep {sweep}, expected 1.{hint}")
         turn = home - moved
         rel = points - circle.center

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from common.errors import InputError
-from identify.cpa import GeometricResult, geometric_step
+from identify.cpa import GeometricResult, ReadingScaleError, geometric_step
 from identify.estimate import nominal_start
 from identify.measurements import Measurements
 from identify.poe import AxisLines, points_from_lines
@@ -36,7 +36,7 @@ def starts(meas: Measurements, q: Array, unknown: NDArray[np.int64], tp_index: N
                               np.array([ax.direction for ax in geo.axes]), home, geo.tp_home)
             found.append(("geometric step", other_points(lines, q, meas.points, unknown, tp_index, warnings)))
         except InputError as exc:
-            if nominal is None:
+            if nominal is None or isinstance(exc, ReadingScaleError):  # readings in degrees: no start helps
                 raise
             warnings.append(f"geometric step skipped ({exc}); started from the nominal model")
     if nominal is not None and np.sum(unknown < 0) >= 3:

@@ -7,6 +7,7 @@ not use the model). The verdict is the worst of its checks. Limits are stated as
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -28,6 +29,7 @@ CONDITION_FAIL = 1e9  # < 1e-6 / 1e-9 of the best one are barely / not determine
 HOLDOUT_ALARM = 1e-3  # false-alarm rate of the held-out test
 HOLDOUT_FAIL = 3.0  # held-out RMS over its expectation beyond which the model is wrong, not just optimistic
 REJECTED_WARN = 0.05  # share of samples rejected as outliers above which the data deserve a look
+MISSING_WARN = 0.05  # share of the plan's steps recorded missing above which the data are not what was planned
 NOMINAL_TOLERANCE = 0.01  # m RMS: an arm differs from its catalogue model by millimetres, not centimetres
 UNIT_SLIP = 10.0  # residuals this many times below the declared noise: no fit beats its tracker tenfold, a noise
 #                  declared in the wrong unit does (a value meant in mm read as metres is 1000x)
@@ -196,6 +198,26 @@ def outliers(rejected: int, samples: int, lost_sweeps: list[str]) -> Check:
     status = "warn" if share > REJECTED_WARN else "pass"
     return Check("outliers", status, share, REJECTED_WARN,
                  f"{rejected} of {samples} samples rejected as gross outliers ({share:.1%})")
+
+
+def missing_steps(missing: int, planned: int, reasons: dict[str, int]) -> Check:
+    """Steps of a session's plan recorded missing (tracker failures, a target out of a camera's view): the fit
+    uses the rest, so it has less data, and fewer poses, than the plan it was designed from."""
+    share = missing / planned if planned else 0.0
+    status = "warn" if share > MISSING_WARN else "pass"
+    kinds: dict[str, int] = {}  # reasons that differ only in their counts ("(6 of 8 frames failed)") go together
+    for reason, n in reasons.items():
+        kind = re.sub(r" \([^()]*\d[^()]*\)", "", reason)
+        kinds[kind] = kinds.get(kind, 0) + n
+    why = "; ".join(f"{n}: {r}" for r, n in sorted(kinds.items(), key=lambda item: -item[1])[:3])
+    message = (f"{missing} of {planned} plan steps ({100 * share:.0f} %) recorded missing"
+               + (f" ({why})" if why else "") + ("; the fit uses the rest" if missing else ""))
+    return Check("missing_steps", status, share, MISSING_WARN, message)
+
+
+def with_session_check(verdict: Verdict, check: Check) -> Verdict:
+    """``verdict`` with ``check`` added (a session's own check, e.g. :func:`missing_steps`)."""
+    return Verdict((*verdict.checks, check))
 
 
 def nominal(name: str, rms: float) -> Check:

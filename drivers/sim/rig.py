@@ -244,14 +244,8 @@ class SimulatedRig:
         home = true_joints(self.readings_of(self.model.home), self.coupling, self.joint_errors, self.truth,
                            self.model.links)
         at_home = frames_from_joints(replace(self.truth, base=np.eye(4)), home)[0, -1]  # base <- flange
-        cr, sr, ct, st = math.cos(roll), math.sin(roll), math.cos(tilt), math.sin(tilt)
-        facing = np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])  # flange z towards the tracker
-        rotation = np.array([[cr, -sr, 0], [sr, cr, 0], [0, 0, 1]]) @ np.array(
-            [[1, 0, 0], [0, ct, -st], [0, st, ct]]) @ facing
-        flange = np.eye(4)
-        flange[:3, :3] = rotation
-        flange[:3, 3] = np.array([0.0, 0.0, distance]) - rotation @ self.truth.tool
-        self.truth = replace(self.truth, base=flange @ np.linalg.inv(at_home))
+        facing = facing_flange(self.truth.tool, distance, tilt, roll)
+        self.truth = replace(self.truth, base=facing @ np.linalg.inv(at_home))
 
     @property
     def rest_joints(self) -> Array:
@@ -361,3 +355,17 @@ class SimulatedRig:
         if differ:
             raise ValueError(f"spec {str(spec)!r} disagrees with the simulated rig on {', '.join(differ)}; "
                              "open the devices with the specs the rig was made from")
+
+
+def facing_flange(tool: Array, distance: float, tilt: float = 0.0, roll: float = 0.0) -> Array:
+    """Tracker frame <- flange frame (4x4, m) of :meth:`SimulatedRig.face_tracker`'s placement: the TP (``tool``, m
+    in the flange frame) ``distance`` m down the tracker's z axis, the flange's z axis pointing back at the
+    tracker, turned by ``tilt`` rad about the tracker's x axis and then by ``roll`` rad about its z axis."""
+    cr, sr, ct, st = math.cos(roll), math.sin(roll), math.cos(tilt), math.sin(tilt)
+    facing = np.array([[1.0, 0, 0], [0, -1, 0], [0, 0, -1]])  # flange z towards the tracker
+    rotation = np.array([[cr, -sr, 0], [sr, cr, 0], [0, 0, 1]]) @ np.array(
+        [[1, 0, 0], [0, ct, -st], [0, st, ct]]) @ facing
+    out = np.eye(4)
+    out[:3, :3] = rotation
+    out[:3, 3] = np.array([0.0, 0.0, distance]) - rotation @ np.asarray(tool, dtype=float)
+    return out

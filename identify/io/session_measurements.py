@@ -48,8 +48,17 @@ def read_session(path: Path) -> tuple[CsvContent, dict[str, Any]]:
         if "verification" in (session.header.get("config") or {}):
             raise InputError(f"{path} is a verification session (acquire verify), not measurements to identify "
                              "from; its results are in the .verify.yaml and report beside it")
-        header = {**session.header, "robot_model": session.plan.robot}
+        header = {**session.header, "robot_model": session.plan.robot, "missing_steps": missing_steps(session)}
         return CsvContent(session_measurements(session), {"session": str(path)}, []), header
+
+
+def missing_steps(session: SessionFile) -> tuple[int, int, dict[str, int]]:
+    """(steps recorded missing, steps in the plan, how many missing for each reason) of ``session``."""
+    missing = [s for s in session.steps() if s.status == "missing"]
+    reasons: dict[str, int] = {}
+    for s in missing:
+        reasons[s.reason] = reasons.get(s.reason, 0) + 1
+    return len(missing), len(session.plan.steps), reasons
 
 
 def session_measurements(session: SessionFile) -> Measurements:

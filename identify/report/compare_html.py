@@ -47,6 +47,7 @@ def figure_trend(names: list[str], models: list[CalibratedModel], labels: list[s
         ax.set_title(dh_label(name), fontsize=9)
         ax.set_ylabel(f"change [{unit}]")
         ax.set_xticks(x, labels, rotation=30, fontsize=7)
+        ax.set_xlabel("calibration", fontsize=8)
     for ax in axes[len(names):]:
         ax.set_visible(False)
     fig.tight_layout()
@@ -68,8 +69,10 @@ def figure_displacement(models: list[CalibratedModel], labels: list[str], q: np.
     ax.plot(x, worst, "s--", label="max")
     ax.fill_between(x, 0, expected, color="#ccc", alpha=0.6, label="RMS from the uncertainties alone")
     ax.set_xticks(x, labels, rotation=20, fontsize=8)
-    ax.set_ylabel("TP displacement from the first [mm]")
-    ax.set_title("predicted TP displacement over random poses (robot base frame)", fontsize=10)
+    ax.set_xlabel("calibration")
+    ax.set_ylabel("[mm]")  # the title says what: a long label would run past the axes
+    ax.set_title("predicted TP displacement from the first calibration over random poses (robot base frame)",
+                 fontsize=10)
     ax.legend(fontsize=7)
     return fig
 
@@ -79,13 +82,14 @@ def compare_html(result: Comparison, models: list[CalibratedModel], times: list[
     labels = list(result.labels)
     title = f"Change over time: {len(models)} calibrations of one robot"
     status = "fail" if result.significant else "pass"
+    single = len(result.pairs) == 1  # two calibrations: the pair's verdict is the verdict, said once
     body = [f"<h1>{_e(title)}</h1>",
             f"<p>dh-calib {_e(__version__)}, generated {_e(_when(time.time()))}; family-wise false-alarm rate "
             f"{result.alpha:g} (a chi-square test of all DH parameters per pair, then each parameter with Holm's "
             "correction).</p>",
             f'<section id="headline" class="verdict-{status}"><h2>'
             f"{'SIGNIFICANT CHANGE' if result.significant else 'No significant change'}</h2>"
-            f"<p>{_e(result.verdict)}</p></section>"]
+            f"<p>{_e(result.pairs[0].verdict if single else result.verdict)}</p></section>"]
     rows = [[_e(lab), _e(_when(t)) if t else "", _e(m.model.joint_types)] for lab, t, m in
             zip(labels, times, models, strict=True)]
     body.append('<section id="inputs"><h2>Calibrations</h2>' + _table(["input", "time", "joints"], rows, left=2)
@@ -96,8 +100,9 @@ def compare_html(result: Comparison, models: list[CalibratedModel], times: list[
     body.append('<section id="pairs"><h2>Pairs</h2>'
                 + _table(["pair", "chi-square / dof", "p", "significant", "TP RMS [mm]", "TP max [mm]",
                           "RMS from uncertainty [mm]"], pair_rows)
-                + "".join(f"<p>{_e(p.verdict)}</p>" + "".join(f"<p>note: {_e(e)}</p>" for e in p.excluded)
-                          for p in result.pairs) + "</section>")
+                + "".join(("" if single else f"<p>{_e(p.verdict)}</p>")  # one pair: the headline says it
+                          + "".join(f"<p>note: {_e(e)}</p>" for e in p.excluded) for p in result.pairs)
+                + "</section>")
     n = models[0].n_joints
     home = np.zeros(n)
     half = np.array([math.pi if t == "R" else 0.1 for t in models[0].model.joint_types])

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from identify.measurements import Measurements
@@ -24,6 +25,9 @@ Array = NDArray[np.float64]
 
 MM = 1e3
 DEG = np.degrees(1.0)
+
+
+NORM_95 = 2.7955  # sqrt of chi-square(3 dof)'s 0.95 quantile: the 95 % level of |r| / sigma for isotropic noise
 
 
 def plane_basis(axis: Array) -> tuple[Array, Array]:
@@ -78,11 +82,13 @@ def figure_joint(ident: Identification, fit: Measurements, joint: int) -> Figure
     inl = ident.refinement.inliers[fit.joint == joint]
     noise = ident.refinement.noise * MM
     revolute = ident.model.joint_types[joint - 1] == "R"
-    fig = Figure(figsize=(10, 3.4))
+    fig = Figure(figsize=(10, 4.0), layout="constrained")
     ax1, ax2 = fig.subplots(1, 2, sharex=True)
     for ax in (ax1, ax2):
-        ax.axhspan(-2 * noise, 2 * noise, color="#ddd", alpha=0.6, lw=0, label="±2 sigma tracker noise")
+        ax.axhspan(-2 * noise, 2 * noise, color="#ddd", alpha=0.6, lw=0, label="±2 sigma tracker noise (per axis)")
         ax.axhline(0, color="#999", lw=0.8)
+    # |r| is a 3D norm: with noise alone it lies below NORM_95 sigma 95 % of the time, not below the ±2 sigma band
+    ax2.axhline(NORM_95 * noise, color="k", ls=":", lw=1, label="|r|: 95 % below with noise alone")
     for k, name in enumerate(names[:2]):
         ax1.plot(x[inl], parts[inl, k], ".-" if revolute else ".", ms=4, lw=0.6, color=f"C{k}", label=name)
         if np.any(~inl):
@@ -104,8 +110,9 @@ def figure_joint(ident: Identification, fit: Measurements, joint: int) -> Figure
     ax1.set_ylabel("[mm]")
     ax2.set_title("along the arc and in total" if revolute else "in total", fontsize=10)
     ax2.set_xlabel(f"q{joint} [{unit}]")
-    for ax in (ax1, ax2):
-        ax.legend(fontsize=7, loc="best", ncol=2)
+    ax2.set_ylabel("[mm]")
+    for ax in (ax1, ax2):  # below the plot: a legend inside would cover points
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, frameon=False)
     return fig
 
 
@@ -141,13 +148,18 @@ def figure_frames(ident: Identification, fit: Measurements, cell: dict[str, Any]
         ax.plot(line[:, 0], line[:, 1], line[:, 2], "--", color=color, lw=1.5)
         top.plot(line[:, 0], line[:, 1], "--", color=color, lw=1.2)
         ax.text(*(o + z * size), f"J{i + 1}", fontsize=9, color=color)
-        top.annotate(f"J{i + 1}", o[:2], fontsize=8, color=color, xytext=(3, 3), textcoords="offset points")
+    for joints, where in _top_labels(frames[:-1, :3, 3] * MM, 0.04 * span):  # one label where origins coincide
+        top.annotate(", ".join(f"J{i + 1}" for i in joints), where, fontsize=8, color="k", xytext=(3, 3),
+                     textcoords="offset points")
     ax.scatter(*tp, color="C3", s=40, label="TP at home", depthshade=False)
     top.plot(*tp[:2], "o", color="C3")
     ax.set_xlabel("x [mm]")
     ax.set_ylabel("y [mm]")
     ax.set_zlabel("z [mm]")
     ax.set_aspect("equal")
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):  # few ticks: at the cube's corners they would run into each other
+        axis.set_major_locator(MaxNLocator(4))
+    ax.tick_params(labelsize=7)
     ax.view_init(elev=22, azim=-60)
     ax.set_title("3D, robot base frame", fontsize=10)
     ax.legend(fontsize=7, loc="upper left")
@@ -157,6 +169,20 @@ def figure_frames(ident: Identification, fit: Measurements, cell: dict[str, Any]
     top.set_title("top view (joint axes dashed: revolute orange, prismatic purple)", fontsize=10)
     top.grid(True, lw=0.3)
     return fig
+
+
+def _top_labels(origins: Array, near: float) -> list[tuple[list[int], Array]]:
+    """The frame origins (k, 3), mm, grouped where they lie within ``near`` mm of each other in the top view (x, y):
+    (joint indices, position of the group's first origin)."""
+    groups: list[tuple[list[int], Array]] = []
+    for i, o in enumerate(origins):
+        for joints, where in groups:
+            if np.hypot(*(o[:2] - where)) < near:
+                joints.append(i)
+                break
+        else:
+            groups.append(([i], o[:2]))
+    return groups
 
 
 def _draw_cell(ax: Any, cell: dict[str, Any]) -> None:

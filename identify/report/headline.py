@@ -89,7 +89,8 @@ def headline_html(status: str, checks: list[tuple[str, str, str]], accuracy: dic
     if bad:
         parts.append("<ul>" + "".join(f"<li><b>{_e(n)}</b> ({_e(s)}): {_e(m)}</li>" for n, s, m in bad) + "</ul>")
     else:
-        parts.append(f"<p>Every check of the {_e(what)} passed ({len(checks)} checks, below).</p>")
+        parts.append(f"<p>Every check of the {_e(what)} passed ({len(checks)} checks, below).</p>" if len(checks) > 1
+                     else f"<p>The {_e(what)} passed.</p>")  # one check: its message is the headline's own
     rows: list[list[str]] = []
     if accuracy is not None:
         k = accuracy["poses"]

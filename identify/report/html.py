@@ -50,7 +50,7 @@ _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;
 color:#222;padding:0 1em}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.8em}
 table{border-collapse:collapse;margin:.6em 0;font-size:.92em}td,th{border:1px solid #ddd;padding:.25em .6em;
-text-align:right;white-space:nowrap}th{background:#f4f4f4}td.l,th.l{text-align:left;white-space:normal}
+text-align:right;white-space:nowrap}th{background:#f4f4f4;white-space:normal}td.l,th.l{text-align:left;white-space:normal}
 .fixed{color:#888}figure{margin:1em 0}img{max-width:100%;height:auto}figcaption{font-size:.9em;color:#555}
 .warn{color:#a40}code{background:#f4f4f4}.scroll{overflow-x:auto}.verdict-pass h2{color:#063}
 .verdict-warn h2{color:#a40}.verdict-fail h2{color:#b00}.sides{display:flex;flex-wrap:wrap;gap:1.5em}
@@ -336,7 +336,8 @@ def report_html(
                          "pass the measurements it was made from")
     references = ([(nominal_name or "nominal", nominal)] if nominal is not None else []) + (
         [reference] if reference is not None else [])
-    title = title or f"DH identification report: {ident.model.joint_types}"
+    title = title or (f"DH identification report: {nominal_name} ({ident.model.joint_types})" if nominal_name
+                      else f"DH identification report: {ident.model.joint_types}")
     body = [f"<h1>{_e(title)}</h1>",
             f"<p>dh-calib {_e(__version__)}, generated {_e(_when(time.time()))}"
             + (f"; source <code>{_e(source)}</code>" if source else "") + ".</p>"]
@@ -349,8 +350,8 @@ def report_html(
                 + "</section>")
     notes = list(ident.warnings) + list(ident.refinement.notes)
     if notes:
-        body.append('<section id="warnings"><h2>Warnings</h2><ul>'
-                    + "".join(f'<li class="warn">{_e(w)}</li>' for w in notes) + "</ul></section>")
+        body.append('<section id="notes"><h2>Notes</h2><ul>'  # what the fit did; what to worry about: the checks
+                    + "".join(f"<li>{_e(w)}</li>" for w in notes) + "</ul></section>")
     body.append('<section id="dh-table"><h2>DH parameters</h2><p>Standard DH (lengths mm, angles deg, ± one '
                 "standard uncertainty).</p>" + _dh_section(ident, references)
                 + (f'<p class="warn">{_e(reference_note)}</p>' if reference_note else "") + "</section>")

@@ -23,9 +23,10 @@ MODES = ("before", "after")
 
 
 def figure_accuracy(summary: dict[str, Any]) -> Figure:
-    """AP and RP per pose (mm, log scale), before and after, with the result's predictions."""
+    """AP (mm, log scale: before and after differ by orders of magnitude) and RP (mm, linear from zero) per pose,
+    before and after, with the result's predictions; one legend below the plots, off the bars."""
     runs = summary.get("runs") or {}
-    fig = Figure(figsize=(10, 3.6))
+    fig = Figure(figsize=(10, 4.2), layout="constrained")
     ax1, ax2 = fig.subplots(1, 2)
     x = np.arange(1, 6)
     for offset, mode, color in ((-0.2, "before", "C3"), (0.2, "after", "C2")):
@@ -39,12 +40,18 @@ def figure_accuracy(summary: dict[str, Any]) -> Figure:
         ax1.plot(x - 0.2, np.array(predicted["before"]) * MM, "k_", ms=16, mew=2, label="predicted before")
     if summary.get("expected"):
         ax1.plot(x + 0.2, np.array(summary["expected"]) * MM, "kx", ms=8, label="uncertainty after (1 sigma, 3D)")
-    for ax, title in ((ax1, "pose accuracy AP"), (ax2, "pose repeatability RP")):
-        ax.set_yscale("log")
+    ax1.set_yscale("log")
+    ax2.set_ylim(bottom=0.0)
+    for ax, title in ((ax1, "pose accuracy AP (log scale)"), (ax2, "pose repeatability RP")):
         ax.set_xticks(x, [f"P{k}" for k in x])
+        ax.set_xlabel("pose")
         ax.set_ylabel("[mm]")
         ax.set_title(title)
-        ax.legend(fontsize=7)
+    handles = {}
+    for ax in (ax1, ax2):
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.setdefault(label, handle)
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=len(handles), fontsize=8)
     return fig
 
 

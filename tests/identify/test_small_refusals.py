@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -40,3 +41,38 @@ def test_a_semicolon_separated_csv_gets_the_hint_it_needs(tmp_path, capsys):
     path.write_text("\n".join(lines[:header] + [line.replace(",", ";") for line in lines[header:header + 5]]) + "\n")
     assert main([str(path)]) == 2
     _one_line(capsys, str(path), "missing column(s)", "semicolons", "comma-separated")
+
+
+def _in_degrees(tmp_path: Path) -> Path:
+    """The sample with every joint reading in degrees (the contract says radians)."""
+    lines = SAMPLE.read_text().splitlines()
+    header = next(k for k, line in enumerate(lines) if not line.startswith("#"))
+    names = lines[header].split(",")
+    out = lines[:header + 1]
+    for line in lines[header + 1:]:
+        fields = line.split(",")
+        out.append(",".join(str(math.degrees(float(v))) if n.startswith("q") and v else v
+                            for n, v in zip(names, fields, strict=True)))
+    path = tmp_path / "degrees.csv"
+    path.write_text("\n".join(out) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("robot", [[], ["--robot", "ur5e"]])
+def test_readings_in_degrees_are_refused_with_or_without_a_robot_model(tmp_path, capsys, robot):
+    """Before, --robot turned the check into a warning and fitted from the nominal model."""
+    assert main([str(_in_degrees(tmp_path)), *robot]) == 2
+    _one_line(capsys, "degrees", "radians")
+
+
+@pytest.mark.parametrize("option", ["--report", "--out"])
+def test_an_output_no_file_can_be_written_to_is_refused_before_fitting(monkeypatch, capsys, option):
+    """/proc is a folder, but no file can be made in it: before, the refusal came after the fit."""
+    import identify.cli
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("fitted before refusing the output")
+
+    monkeypatch.setattr(identify.cli, "identify", no_fit)
+    assert main([str(SAMPLE), option, f"/proc/out-{option[2:]}"]) == 2
+    _one_line(capsys, option, "no file can be written in /proc")

@@ -211,3 +211,14 @@ def test_report_headline_says_the_verdict_and_the_accuracy_before_and_after(tmp_
     assert f"{before['measured'] * 1e3:.4f} ± {before['measured_std'] * 1e3:.4f} mm" in head
     assert "AP, pose accuracy" in head and "1.6000 mm" in head and "0.0230 mm" in head
     assert "Verification (pass)" in head
+
+
+def test_notes_sit_under_a_neutral_heading_and_the_title_names_the_robot():
+    """Before, "joint errors selected: none" and the reduced chi-square sat under an orange "Warnings" heading below
+    a PASS, and the title named only the joint types."""
+    robot, meas, ident = _identified("ur5e")
+    text = report_html(ident, meas, robot.nominal, robot.name)
+    notes = re.search(r'<section id="notes"><h2>Notes</h2>(.*?)</section>', text, re.S)
+    assert notes is not None and "<li>" in notes.group(1) and 'class="warn"' not in notes.group(1)
+    assert "Warnings" not in text
+    assert "<title>DH identification report: ur5e (RRRRRR)</title>" in text
