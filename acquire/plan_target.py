@@ -153,5 +153,6 @@ def format_tradeoff(found: list[Candidate], chosen: Candidate | None, target: fl
 
 
 def _clock(seconds: float) -> str:
-    total = round(seconds)
+    """h:mm:ss, rounded up (a plan shown at the limit fits in it)."""
+    total = math.ceil(seconds - 1e-9)
     return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"

@@ -112,3 +112,9 @@ def test_the_chosen_plan_is_the_one_the_session_gets(capsys, continuous):
     assert len(streams) == len(expected) == 6
     for (start, end, speed), (start0, end0, speed0) in zip(streams, expected, strict=True):
         np.testing.assert_allclose(start + end + [speed], start0 + end0 + [speed0], atol=1e-12)
+
+
+def test_a_plan_just_over_the_limit_is_not_shown_at_the_limit():
+    found = [_fake(90.4, 1e-5), _fake(80, 1.5e-5)]
+    text = format_tradeoff(found, found[1], 2e-5, 90)
+    assert "0:01:31    0.0100 mm too long" in text and "0:01:20    0.0150 mm <- chosen" in text
