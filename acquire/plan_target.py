@@ -9,7 +9,8 @@ and keeps the quickest one whose prediction reaches the target within the time a
 - continuous plans: the sweep ranges, the clear range of every swept joint (the default plan's) or that range
   shrunk towards home to :data:`RANGE_FRACTIONS` of it (a shrunk range stays inside the clear one, so it is
   clear too); and the sweep speed, the plan's own (deflection-capped) speed or a cap of :data:`SLOW_SPEEDS`
-  rad/s (slower: more samples per radian); no fitted free poses (the streams carry the fit);
+  rad/s (slower: more samples per radian; a cap no slower than the plan's fastest sweep is not considered);
+  no fitted free poses (the streams carry the fit);
 - stop-and-go plans: the steps per sweep (:data:`STEP_COUNTS`) and the fitted free poses (none or the site's),
   over the clear ranges.
 
@@ -99,11 +100,16 @@ def candidates(modes: tuple[str, ...], robot: RobotModel, site: SiteConfig, step
                 knobs = [(cap, None, f) for cap, f in product((None, *SLOW_SPEEDS), dict.fromkeys(frees))]
             else:
                 knobs = [(None, n, f) for n, f in product((steps,) if steps else STEP_COUNTS, dict.fromkeys(frees))]
+            fastest = math.inf  # the uncapped plan's fastest sweep: a cap at or above it changes nothing
             for cap, n, f in knobs:
+                if cap is not None and cap >= fastest:
+                    continue
                 chosen = ranged.with_overrides(free_poses=f, steps_per_sweep=n)
                 if cap is not None:
                     chosen = chosen.with_overrides(stream_speed=min(cap, site.stream_speed or math.inf))
                 plan, seconds, accuracy = _evaluate(mode, robot, chosen)
+                if cap is None and mode == "continuous":
+                    fastest = max((s.speed or 0.0 for s in plan.steps if s.kind == "stream"), default=0.0)
                 out.append(Candidate(mode, fraction, cap, n, f, chosen, plan, seconds, accuracy))
     return sorted(out, key=lambda c: (c.seconds, c.accuracy))
 

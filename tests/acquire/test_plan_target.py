@@ -118,3 +118,11 @@ def test_a_plan_just_over_the_limit_is_not_shown_at_the_limit():
     found = [_fake(90.4, 1e-5), _fake(80, 1.5e-5)]
     text = format_tradeoff(found, found[1], 2e-5, 90)
     assert "0:01:31    0.0100 mm too long" in text and "0:01:20    0.0150 mm <- chosen" in text
+
+
+def test_a_speed_cap_that_slows_no_sweep_is_not_a_candidate():
+    """A SCARA without link masses sweeps at 0.25 rad/s already: capping it at 0.5 or 0.25 rad/s changes nothing,
+    so each sweep range is one candidate, not three equal ones."""
+    found = candidates(("continuous",), load_robot("scara"), SiteConfig.default())
+    assert [c.speed_cap for c in found] == [None, None, None]
+    assert len({round(c.seconds, 6) for c in found}) == 3
