@@ -12,9 +12,10 @@ within the limits of the distance between the identified model's TP and the trut
 
 The data of a plan: every stop-and-go pose of its fit (sweep steps, fitted free poses, continuous sweeps' start
 poses) one row with the tracker noise over the square root of the samples per step; every continuous sweep its
-tracker samples at the site's stream rate along the plan's trapezoid move, each with the tracker noise; the
-check poses held out. The streams' timing is exact here (the planner's bound leaves the timing error out too;
-bench/continuous.py measures it on full mock sessions).
+tracker samples at the site's stream rate along the plan's trapezoid move and for the 0.5 s the streams run before
+and after it (the arm at rest at the range ends), each with the tracker noise; the check poses held out. The
+streams' timing is exact here (the planner's bound leaves the timing error out too; bench/continuous.py measures
+it on full mock sessions).
 
 Reported per case: the plan's robot time, the prediction, the achieved error (RMS over draws) and their ratio.
 Target (issue 26): achieved within ±20 % of the prediction; exit 1 when a case misses it.
@@ -37,6 +38,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from acquire.plan import tp_model
+from acquire.plan_continuous import STREAM_START_SLACK
 from acquire.plan_target import Candidate, candidates, choose
 from config.robots import RobotModel, load_robot
 from config.site import SiteConfig
@@ -93,7 +95,8 @@ def plan_data(plan: Plan, site: SiteConfig, truth: DHModel, rng: np.random.Gener
             assert s.start is not None and s.speed is not None and s.acceleration is not None
             j = s.joint - 1
             lo, hi = s.start[j], s.q[j]
-            t = np.arange(0.0, move_duration(lo, hi, s.speed, s.acceleration), 1.0 / site.stream_rate)
+            duration = move_duration(lo, hi, s.speed, s.acceleration)  # the streams run STREAM_START_SLACK s longer
+            t = np.arange(-STREAM_START_SLACK, duration + STREAM_START_SLACK, 1.0 / site.stream_rate)
             rows = np.tile(np.asarray(s.start), (len(t), 1))
             rows[:, j] = trapezoid(lo, hi, s.speed, s.acceleration, t)
             count = len(t)

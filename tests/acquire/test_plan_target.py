@@ -8,10 +8,16 @@ import numpy as np
 import pytest
 
 from acquire.cli import main
-from acquire.plan_continuous import estimate_continuous_duration, predicted_accuracy_continuous
+from acquire.plan_continuous import (
+    STREAM_START_SLACK,
+    estimate_continuous_duration,
+    predicted_accuracy_continuous,
+    stream_poses,
+)
 from acquire.plan_target import Candidate, TargetError, candidates, choose, clear_ranges, format_tradeoff
 from config.robots import load_robot
 from config.site import SiteConfig
+from drivers.motion import motion_time
 
 
 @pytest.fixture(scope="module")
@@ -126,3 +132,20 @@ def test_a_speed_cap_that_slows_no_sweep_is_not_a_candidate():
     found = candidates(("continuous",), load_robot("scara"), SiteConfig.default())
     assert [c.speed_cap for c in found] == [None, None, None]
     assert len({round(c.seconds, 6) for c in found}) == 3
+
+
+def test_the_bound_counts_the_samples_the_streams_take_at_rest_at_the_range_ends(continuous):
+    """The streams run 0.5 s before and after each move (the arm at rest at the range ends), and the session keeps
+    those samples: the bound counts them at the ends (the dry run once expected 8,400 samples where sessions kept
+    9,900)."""
+    site = SiteConfig.default()
+    plan = next(c for c in continuous if c.range_fraction == 1.0 and c.speed_cap is None).plan
+    q, weight = stream_poses(plan, site.stream_rate)
+    streams = [s for s in plan.steps if s.kind == "stream"]
+    moving = sum(int(site.stream_rate * float(motion_time(s.q[s.joint - 1] - s.start[s.joint - 1], s.speed,
+                                                                s.acceleration))) for s in streams)
+    rest = site.stream_rate * STREAM_START_SLACK
+    assert weight.sum() == pytest.approx(moving + 2 * rest * len(streams), rel=1e-9)
+    ends = np.array([s.start for s in streams] + [s.q for s in streams])
+    at_ends = np.array([np.any(np.all(np.isclose(row, ends), axis=1)) for row in q])
+    assert np.all(weight[at_ends] > rest)
