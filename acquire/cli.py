@@ -21,6 +21,7 @@ from acquire.plan import check_plan, estimate_duration, plan_clearance
 from acquire.plan_continuous import estimate_continuous_duration
 from acquire.plan_modes import build_mode_plan, format_modes, mode_site, plan_mode
 from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
+from acquire.plan_target import TargetError, candidates, choose, format_tradeoff
 from acquire.resume import ResumeRefused, resume_settings
 from acquire.runner import finish, run_session
 from acquire.session import Session
@@ -183,6 +184,10 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
 
         check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
     robot_model = load_robot(robot_spec.model)
+    planned = args.target_accuracy is not None or args.max_robot_time is not None
+    tradeoff = None
+    if planned:
+        site, plan, tradeoff = _plan_for_target(args, robot_model, session, rehearsal)
     if plan is None:
         plan = build_mode_plan(args.mode, robot_model, site)
     elif args.mode is not None and args.mode != plan_mode(plan):
@@ -221,7 +226,9 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if camera is not None:
         say("\n".join(["", *camera.lines(plan)]))
     say(format_clearance(clearance, plan, site))
-    if args.dry_run and not rehearsal and session is None:
+    if tradeoff is not None:
+        say(tradeoff)
+    elif args.dry_run and not rehearsal and session is None:
         say("modes: not compared for a camera (which streamed frames it would see is not modelled)" if camera
             else format_modes(robot_model, _site(args), plan, args.free_poses))
     if args.dry_run:
@@ -265,6 +272,26 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
             tracker.close()
         if session is not None:
             session.close()
+
+
+def _plan_for_target(args: argparse.Namespace, robot: RobotModel, session: Session | None,
+                     rehearsal: bool) -> tuple[SiteConfig, Plan, str]:
+    """(site, plan, trade-off table) of ``--target-accuracy`` / ``--max-robot-time`` (acquire/plan_target.py):
+    the quickest candidate predicted to reach the target, or the most accurate within the time alone."""
+    if session is not None:
+        raise UsageError("--target-accuracy and --max-robot-time plan a new session; a resume keeps its plan")
+    if rehearsal:
+        raise UsageError("--target-accuracy and --max-robot-time plan a measurement; --tracker none measures nothing")
+    if args.mode == "both":
+        raise UsageError("--target-accuracy and --max-robot-time plan step or continuous sessions, not both")
+    modes = ("step", "continuous") if args.mode is None else (args.mode,)
+    found = candidates(modes, robot, _site(args), args.steps, args.free_poses)
+    try:
+        chosen = choose(found, args.target_accuracy, args.max_robot_time)
+    except TargetError as exc:
+        say(format_tradeoff(found, None, args.target_accuracy, args.max_robot_time))
+        raise UsageError(str(exc)) from None
+    return chosen.site, chosen.plan, format_tradeoff(found, chosen, args.target_accuracy, args.max_robot_time)
 
 
 def _default_session_path(robot: str) -> Path:

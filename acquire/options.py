@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 from common.arguments import OneLineParser, VersionAction
-from common.units import positive_length
+from common.units import positive_duration, positive_length
 
 DESCRIPTION = "Plan, move, measure and record a calibration session, then identify the robot from it."
 
@@ -19,6 +19,8 @@ examples:
   acquire --robot mock:ur5e --tracker mock            rehearsal with the simulated robot and tracker
   acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
   acquire --robot ur5e --tracker mock --dry-run       the plan, its duration and accuracy; nothing moves
+  acquire --robot ur5e --dry-run --target-accuracy 0.02mm --max-robot-time 2min
+                                                      the quickest plan predicted to reach 0.02 mm
   acquire --robot ur5e@192.168.1.10 --tracker none    the plan's motion at 25 % speed, measuring nothing
   acquire --resume SESSION                            continue an interrupted session
   acquire --tracker 'serial:/dev/ttyUSB0?protocol=polled-xyz' --probe    check the tracker on site
@@ -65,6 +67,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", type=positive_length, metavar="LENGTH",
                    help="tracker noise per axis (1 sigma) for the predicted accuracy, e.g. 0.05mm or 50um (a bare "
                         "number is metres)")
+    p.add_argument("--target-accuracy", type=positive_length, metavar="LENGTH",
+                   help="plan for this predicted held-out accuracy (RMS TP error, e.g. 0.02mm) in the least robot "
+                        "time: candidate sweep ranges, speeds, steps and free poses, and the dry run prints their "
+                        "robot time against predicted accuracy (with --mode: that mode's only)")
+    p.add_argument("--max-robot-time", type=positive_duration, metavar="TIME",
+                   help="the longest robot time a planned session may take, e.g. 90s or 2min (a bare number is "
+                        "seconds); alone: the most accurate candidate plan within it")
     p.add_argument("--probe", action="store_true",
                    help="open the tracker, take --count readings, print them with their spread, and exit")
     p.add_argument("--count", type=int, default=10, help="readings taken by --probe (10)")

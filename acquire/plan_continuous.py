@@ -225,8 +225,11 @@ def estimate_continuous_duration(plan: Plan, measure_time_per_sample: float) -> 
 
 def stream_poses(plan: Plan, rate: float, most: int = 400) -> tuple[Array, Array]:
     """The joint values the streams of ``plan`` will sample at ``rate`` Hz (one tracker sample each): at most
-    ``most`` per sweep, evenly along it, and each one's weight (how many samples it stands for): (m, n), (m,)."""
+    ``most`` per sweep, evenly along it, and each one's weight (how many samples it stands for): (m, n), (m,).
+    The streams run :data:`STREAM_START_SLACK` s before and after each move, with the arm at rest at the range
+    ends: those samples are the ends' weights (a tracker that reports only in motion has none of them)."""
     rows, weights = [], []
+    rest = rate * STREAM_START_SLACK
     for s in plan.steps:
         if s.kind != "stream" or s.start is None or s.speed is None or s.acceleration is None:
             continue
@@ -236,7 +239,9 @@ def stream_poses(plan: Plan, rate: float, most: int = 400) -> tuple[Array, Array
         q = np.tile(np.asarray(s.start), (used, 1))
         q[:, s.joint - 1] += np.linspace(0.0, distance, used)
         rows.append(q)
-        weights.append(np.full(used, count / used))
+        weight = np.full(used, count / used)
+        weight[[0, -1]] += rest
+        weights.append(weight)
     n = len(plan.home)
     if not rows:
         return np.zeros((0, n)), np.zeros(0)

@@ -1,7 +1,9 @@
-"""Lengths on the command line: a number with its unit (``0.05mm``, ``50um``, ``2 cm``); a bare number is metres.
+"""Lengths and durations on the command line: a number with its unit (``0.05mm``, ``50um``, ``2 cm``; ``90s``,
+``1.5min``); a bare number is metres or seconds.
 
 Every option that takes a length (``--noise``, ``--max-offset``, a marker's ``--size``...) parses it here, so a
-tracker noise meant in millimetres can be written as such instead of being read as metres.
+tracker noise meant in millimetres can be written as such instead of being read as metres; so does every option
+that takes a duration (``--max-robot-time``).
 """
 
 from __future__ import annotations
@@ -13,6 +15,9 @@ import re
 #: metres per unit; ``um``, ``µm`` (micro sign) and ``μm`` (Greek mu) are the same micrometre
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6, "in": 0.0254}
 _SHOWN = ("m", "cm", "mm", "um", "in")  # as the error message lists them
+
+#: seconds per unit
+TIME_UNITS = {"s": 1.0, "min": 60.0, "h": 3600.0}
 
 _LENGTH = re.compile(r"\s*(?P<number>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*(?P<unit>[^\d\s.+-]*)\s*")
 
@@ -45,4 +50,29 @@ def positive_length(text: str) -> float:
     value = length(text)
     if not value > 0:
         raise argparse.ArgumentTypeError(f"{text!r}: must be a positive length")
+    return value
+
+
+def parse_duration(text: str) -> float:
+    """``text`` as seconds: ``90s`` -> 90.0, ``1.5min`` -> 90.0, ``2h`` -> 7200.0, ``90`` -> 90.0. ValueError (one
+    line, naming the accepted units) for anything else, non-finite numbers included."""
+    match = _LENGTH.fullmatch(text)
+    unit = match["unit"] if match else None
+    if match is None or unit not in ("", *TIME_UNITS):
+        raise ValueError(f"{text!r} is not a duration: write a number with a unit ({', '.join(TIME_UNITS)}), e.g. "
+                         "90s or 1.5min; a bare number is seconds")
+    value = float(match["number"]) * (TIME_UNITS[unit] if unit else 1.0)
+    if not math.isfinite(value):
+        raise ValueError(f"{text!r} is not a finite duration")
+    return value
+
+
+def positive_duration(text: str) -> float:
+    """argparse ``type=`` for a duration that must be > 0 (seconds)."""
+    try:
+        value = parse_duration(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be a positive duration")
     return value

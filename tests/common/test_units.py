@@ -1,4 +1,5 @@
-"""Lengths on the command line (common/units.py): a number with its unit, a bare number in metres."""
+"""Lengths and durations on the command line (common/units.py): a number with its unit; a bare number in metres
+or seconds."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import argparse
 
 import pytest
 
-from common.units import length, parse_length, positive_length
+from common.units import length, parse_duration, parse_length, positive_duration, positive_length
 
 
 @pytest.mark.parametrize(("text", "metres"), [
@@ -39,3 +40,17 @@ def test_every_length_option_of_the_commands_takes_units():
     got = identify_parser().parse_args(["x.csv", "--noise", "50um", "--max-offset", "5cm"])
     assert (got.noise, got.max_offset) == pytest.approx((5e-5, 0.05), rel=1e-12)
     assert acquire_parser().parse_args(["--noise", "0.05mm"]).noise == pytest.approx(5e-5, rel=1e-12)
+
+
+@pytest.mark.parametrize(("text", "seconds"), [("90s", 90.0), ("1.5min", 90.0), ("2h", 7200.0), ("90", 90.0),
+                                               (" 30 s ", 30.0)])
+def test_a_duration_is_a_number_with_a_unit_and_a_bare_number_is_seconds(text, seconds):
+    assert parse_duration(text) == pytest.approx(seconds, rel=1e-12)
+    assert positive_duration(text) == pytest.approx(seconds, rel=1e-12)
+
+
+@pytest.mark.parametrize("text", ["90mm", "s", "", "inf", "1m", "0", "-5s"])
+def test_a_positive_duration_refuses_other_units_zero_and_negatives(text):
+    with pytest.raises(argparse.ArgumentTypeError) as info:
+        positive_duration(text)
+    assert "\n" not in str(info.value)
