@@ -17,6 +17,16 @@ from kinematics.joint_errors import JointErrors
 from kinematics.truth import random_truth
 
 
+def _elastic_arm(robot, seed: int) -> tuple[RealArm, np.random.Generator]:
+    """A UR5e with compliance 5e-4 rad/(N m) on joints 2 and 3 (several mm of gravity sag), and its generator."""
+    rng = np.random.default_rng(seed)
+    compliance = np.zeros(6)
+    compliance[1:3] = 5e-4
+    arm = RealArm(random_truth(robot.nominal, robot.home, rng),
+                  errors=replace(JointErrors.none(6), compliance=compliance), links=robot.links)
+    return arm, rng
+
+
 def test_a_parameter_is_determined_by_what_three_sigma_move_the_point():
     size = 1.0
     lever = np.array([0.5, 1.0])  # m per rad, m per m
@@ -64,11 +74,7 @@ def test_an_unexplained_model_error_makes_parameters_undetermined():
     was determined; the model error's bound is what moves them, and the check names them with it. With the
     compliance selected, the same data determine every parameter."""
     robot = load_robot("ur5e")
-    rng = np.random.default_rng(7)
-    compliance = np.zeros(6)
-    compliance[1:3] = 5e-4
-    arm = RealArm(random_truth(robot.nominal, robot.home, rng),
-                  errors=replace(JointErrors.none(6), compliance=compliance), links=robot.links)
+    arm, rng = _elastic_arm(robot, 7)
     q, sweep, joint, held = sweeps_and_poses(robot.joint_types, robot.home, robot.limits, rng, 12, 40, 10)
     meas = measure(arm, q, sweep, joint, 2e-5, rng, held)
     plain = identify(meas, robot.nominal, links=robot.links, extensions=False).verdict_check("conditioning")
@@ -82,11 +88,7 @@ def test_the_extended_models_offsets_do_not_move_with_the_held_out_split():
     only, each hold-out split moved theta2 of the extended model by compliance x torque at that home, up to 370
     sigma between two splits of one data set. Referenced to the readings' zero, the offsets agree within noise."""
     robot = load_robot("ur5e")
-    rng = np.random.default_rng(10)
-    compliance = np.zeros(6)
-    compliance[1:3] = 5e-4
-    arm = RealArm(random_truth(robot.nominal, robot.home, rng),
-                  errors=replace(JointErrors.none(6), compliance=compliance), links=robot.links)
+    arm, rng = _elastic_arm(robot, 10)
     q = random_poses(robot.limits, 100, rng)
     tables = []
     for seed in (1103, 1106):
