@@ -48,8 +48,11 @@ class LinesFit:
     timing: Retiming | None = None
 
 
-def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[np.int64] | None = None
-                  ) -> tuple[DHModel, Array]:
+ALIGNED = 0.05  # of the points' spread: a placement missing by less has aligned the data (a stalled one misses by it)
+
+
+def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[np.int64] | None = None,
+                  tool: Array | None = None) -> tuple[DHModel, Array]:
     """``nominal`` with the base (tracker <- frame 0) and tool (TP in frame n) that best fit ``points``
     (m, 3) at readings ``q`` (m, n): alternately a point-set fit of the base (Kabsch) and a linear fit of
     the TP, from the flange, on the first tracked point's rows; then every tracked point's tool (k, 3)
@@ -57,16 +60,20 @@ def place_nominal(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[n
 
     A robot file carries no tool, and where the flange origin barely moves (an arm of two intersecting
     axes) a zero tool gives the base fit nothing to align; the fit therefore also starts from a tool of
-    the points' spread along each flange axis, and keeps the start that fits best."""
+    the points' spread along each flange axis, and keeps the start that fits best, unless the first start (the
+    given ``tool`` (3,), m in frame n, or zero) already misses by less than :data:`ALIGNED` of the spread."""
     tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index
     count = int(tp_index.max()) + 1 if len(tp_index) else 1
     flange_rot, flange_origin = flange_frames(replace(nominal, base=np.eye(4)), q)  # frame n in frame 0
     spread = float(np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1))))
+    first = np.zeros(3) if tool is None else np.asarray(tool, dtype=float)
     best: tuple[float, Array, Array] | None = None
-    for tool in (np.zeros(3), *(sign * spread * axis for axis in np.eye(3) for sign in (1.0, -1.0))):
-        cost, base, tools = _placed(flange_rot, flange_origin, points, tp_index, count, tool)
+    for start in (first, *(sign * spread * axis for axis in np.eye(3) for sign in (1.0, -1.0))):
+        cost, base, tools = _placed(flange_rot, flange_origin, points, tp_index, count, start)
         if best is None or cost < best[0] * (1.0 - 1e-9):
             best = (cost, base, tools)
+        if np.sqrt(best[0] / len(points)) < ALIGNED * spread:
+            break
     assert best is not None
     _, base, tools = best
     return replace(nominal, base=base.copy(), tool=tools[0].copy()), tools.copy()

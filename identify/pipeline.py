@@ -334,7 +334,8 @@ def identify(
     if nominal is not None and np.sum(unknown < 0) >= 3:
         known = unknown < 0
         lines = models["plain"].lines
-        placed, _ = place_nominal(nominal, best.q[known], points_from_lines(lines, best.q[known]))
+        placed, _ = place_nominal(nominal, best.q[known], points_from_lines(lines, best.q[known]),
+                                  tool=models["plain"].tools[0])
         gap = points_from_joints(placed, best.q[known]) - points_from_lines(lines, best.q[known])
         found.append(checks.nominal("model", float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))))
     if decisions:
