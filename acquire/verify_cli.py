@@ -41,6 +41,7 @@ from common.outputs import check_outputs, check_target, write_output
 from config.robots import RobotModel, load_robot
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.calibrated import CalibratedModel, ResultError, nominal_name
+from identify.holds import ModelCheck
 from identify.io.result_io import load_result
 from session.schema import SessionError
 
@@ -110,15 +111,29 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
     lines += fit_width.table(["pose", "x [mm]", "y [mm]", "z [mm]", "q before [deg]", "AP before / after"], rows)
     change = np.max(np.abs(np.array(info["q"]["after"]) - np.array(info["q"]["before"])))
     lines.append(f"compensation changes the joints by up to {change * 1e3:.2f} mrad")
+    if "register" in info:
+        lines.append(f"registration first: {len(info['register']['q'])} poses of its own (not the test's), "
+                     f"commanded with the {info['register']['model']} model; the tracker frame is fitted on them")
     lines += [f"note: {n}" for n in info["notes"]]
     lines.append(f"total: {len(plan.steps)} steps x {plan.samples_per_step} samples; estimated duration "
                  f"{hms(duration)}")
     return "\n".join(lines)
 
 
+def format_registration(check: ModelCheck) -> list[str]:
+    """How far the tracker moved since the calibration and how well the result's model registers (80 columns)."""
+    r = check.registration
+    return fit_width.wrap(
+        f"tracker registered on {check.heldout.samples} poses of its own ({check.name} model): moved "
+        f"{r.moved * MM:.2f} mm, turned {np.degrees(r.turned):.3f} deg since the calibration; residuals "
+        f"{check.heldout.rms * MM:.4f} mm RMS held out, {check.ratio:.2f}x the {check.expected * MM:.4f} mm the "
+        f"result predicts ({check.status})")
+
+
 def format_outcome(outcome: Outcome) -> str:
-    """AP/RP per pose and run, then the verdict line."""
-    lines = ["pose   AP before   AP after   RP before   RP after  [mm]"]
+    """The registration, AP/RP per pose and run, then the verdict line."""
+    lines = [] if outcome.registration is None else format_registration(outcome.registration)
+    lines.append("pose   AP before   AP after   RP before   RP after  [mm]")
     runs = outcome.runs
     for k in range(5):
         cells = []
@@ -174,16 +189,18 @@ def run(args: argparse.Namespace) -> int:
 
         check_pairing(robot_spec, tracker_spec)
 
-    def plan_ok(q_before: np.ndarray, q_after: np.ndarray) -> list[str]:  # two cycles hold every distinct move
-        return problems(build(robot, site, {"before": q_before, "after": q_after}, min(cycles, 2))[0], robot, site)
+    def plan_ok(q_before: np.ndarray, q_after: np.ndarray, q_register: np.ndarray) -> list[str]:
+        # two cycles hold every distinct move
+        plan = build(robot, site, {"before": q_before, "after": q_after}, min(cycles, 2), q_register)[0]
+        return problems(plan, robot, site)
 
     try:
         d = design(model, robot, site, plan_ok)
     except VerifyError as exc:
         print(f"acquire verify: test refused: {exc}", file=sys.stderr)
         return 2
-    plan, labels = build(robot, site, d.q, cycles)
-    info = header(d, labels, model, str(args.result), sha, (doc.get("verdict") or {}).get("status"), cycles)
+    plan, labels = build(robot, site, d.q, cycles, d.register)
+    info = header(d, labels, model, str(args.result), sha, (doc.get("verdict") or {}).get("status"), cycles, doc)
     say(format_design(info, robot, plan, estimate_duration(plan, robot, site.measure_time)))
     say(format_clearance(plan_clearance(plan, robot, site), plan, site))
     if args.dry_run:

@@ -82,6 +82,16 @@ def verification_html(summary: dict[str, Any], header: dict[str, Any], source: s
             f"calibration <code>{_e(summary.get('result'))}</code> (its verdict: {_e(info.get('result_verdict'))})."
             "</p>",
             headline_html(verdict["status"], checks, None, summary, what="verification")]
+    reg = summary.get("registration")
+    if reg:
+        body.append('<section id="registration"><h2>Tracker registration</h2>'
+                    f"<p>Before judging anything the tracker frame is fitted again (rigid, 6 degrees of freedom) on "
+                    f"{reg['poses']} poses of its own, none of them a test pose, with the result's {_e(reg['model'])} "
+                    f"model: the tracker moved {reg['moved'] * MM:.2f} mm and turned {reg['turned_deg']:.3f}° since "
+                    f"the calibration (its origin's displacement and rotation). Residuals held out (5 folds): "
+                    f"{reg['heldout_rms'] * MM:.4f} mm RMS, at most {reg['heldout_max'] * MM:.4f} mm; the result "
+                    f"predicts {reg['expected_rms'] * MM:.4f} mm ({reg['ratio']:.2f}x: {_e(reg['status'])}"
+                    f"{'; ' + _e('; '.join(reg['reasons'])) if reg['reasons'] else ''}).</p></section>")
     body.append('<section id="poses"><h2>Per pose</h2>'
                 f"<p>ISO 9283-style: five poses on the diagonal plane of a cube of edge {summary['edge'] * MM:.0f} mm "
                 f"centred at {', '.join(f'{v * MM:.1f}' for v in summary['centre'])} mm (robot base frame), each "

@@ -14,6 +14,7 @@ from scipy.stats import chi2
 
 from acquire.cli import main as acquire
 from acquire.session import Session
+from acquire.verify import REGISTER_POSES
 from config.robots import load_robot
 from drivers.sim.rig import SimulatedRig
 from identify.cli import main as identify_main
@@ -101,13 +102,13 @@ def test_verification_on_the_mock_rig_matches_its_truth_and_resumes(tmp_path, ca
     assert "acquire verify --resume" in err
     with Session.open(session) as s:
         done = {r.plan_index: r for r in s.steps()}
-        assert 0 < len(done) < 10 * CYCLES
+        assert 0 < len(done) < 10 * CYCLES + REGISTER_POSES
     assert acquire(["verify", "--resume", str(session), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "verdict: pass" in out
     with Session.open(session) as s:
         steps = s.steps()
-        assert [r.plan_index for r in steps] == list(range(10 * CYCLES))  # none lost, none twice
+        assert [r.plan_index for r in steps] == list(range(10 * CYCLES + REGISTER_POSES))  # none lost, none twice
         assert all(steps[i] == r for i, r in done.items())
     implied, measured = _truth_implied(session, truth)
     tol = _tolerance(NOISE, CYCLES * SAMPLES)
@@ -239,8 +240,11 @@ def test_verification_of_a_coupled_robot_commands_its_readings(tmp_path) -> None
     with Session.open(path) as s:
         assert s.coupling is not None and not s.coupling.is_identity
         first = s.steps()[0]
-    # the step records the controller's readings; the plan (and the command's record) its DH values
-    np.testing.assert_allclose(s.coupling.dh_from_readings(np.array([first.q_act])), [first.q_cmd], atol=1e-4)
+        planned = s.plan.steps[first.plan_index].q
+    # the step records the controller's readings (commanded and read); the plan holds DH values
+    assert abs(planned[1]) > 0.01  # J2 off zero: readings and DH values differ
+    np.testing.assert_allclose(s.coupling.dh_from_readings(np.array([first.q_act])), [planned], atol=1e-4)
+    assert np.max(np.abs(np.array(first.q_cmd) - first.q_act)) < 1e-4
     implied, measured = _truth_implied(Path(path), SimulatedRig("fanuc_lrmate200id", seed=0).truth)
     tol = _tolerance(NOISE, 4 * SAMPLES)
     np.testing.assert_allclose(measured["before"], implied["before"], atol=tol)
