@@ -250,3 +250,39 @@ def test_verification_of_a_coupled_robot_commands_its_readings(tmp_path) -> None
     np.testing.assert_allclose(measured["before"], implied["before"], atol=tol)
     np.testing.assert_allclose(measured["after"], implied["after"], atol=tol)
     assert implied["before"].min() > 0.5e-3 and measured["after"].max() < 2 * NOISE
+
+
+def _registration_allowance(noise: float, samples: int) -> float:
+    """How far a rigid registration on REGISTER_POSES poses (each the mean of ``samples`` readings of per-axis
+    ``noise``) can shift a point inside the cube: six parameters on 3·REGISTER_POSES values, taken at 4 sigma
+    (3D) and doubled for the cube poses lying up to twice as far out as the registration poses."""
+    return 2 * 4 * noise / np.sqrt(samples) * np.sqrt(6 / (3 * REGISTER_POSES)) * np.sqrt(3)
+
+
+def test_a_moved_tracker_gives_the_same_figures_and_another_arm_fails(tmp_path, capsys) -> None:
+    """The tracker put back elsewhere (turned 123°, shifted 2 m): the registration finds the move and AP agrees with
+    the simulated truth as without it. Another arm of the same model at the same place: exit 3, named."""
+    truth = SimulatedRig("ur5e", seed=0).truth
+    result = _result(truth, tmp_path)
+    session = tmp_path / "moved.session"
+    shift, turn = np.array([1.5, -1.2, 0.6]) * 2.0 / np.linalg.norm([1.5, -1.2, 0.6]), np.array([40.0, -100.0, 60.0])
+    tracker = f"mock?moved={','.join(map(str, shift))}&turned={','.join(map(str, turn))}"
+    assert acquire(["verify", "--result", str(result), "--robot", "mock:ur5e", "--tracker", tracker, "--session",
+                    str(session), "--cycles", str(CYCLES), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "verdict: pass" in out and "tracker registered on 8 poses" in out
+    summary = yaml.safe_load(session.with_suffix(".verify.yaml").read_text())
+    reg = summary["registration"]
+    # the registration's rotation error (noise / ~0.2 m) moves the tracker's origin, 1-2 m away, by up to ~1 mm
+    assert reg["moved"] == pytest.approx(2.0, abs=1e-3)
+    assert reg["turned_deg"] == pytest.approx(np.linalg.norm(turn), abs=0.05)
+    implied, measured = _truth_implied(session, truth)  # the truth without the move: AP is the base frame's
+    tol = _tolerance(NOISE, CYCLES * SAMPLES) + _registration_allowance(NOISE, SAMPLES)
+    np.testing.assert_allclose(measured["before"], implied["before"], atol=tol)
+    np.testing.assert_allclose(measured["after"], implied["after"], atol=tol)
+    assert implied["before"].min() > 0.5e-3
+    other = tmp_path / "other.session"
+    assert acquire(["verify", "--result", str(result), "--robot", "mock:ur5e?arm=7", "--tracker", "mock",
+                    "--session", str(other), "--cycles", "2", "--quiet"]) == 3
+    out = capsys.readouterr().out
+    assert "verdict: fail" in out and "another arm or another tool" in out
