@@ -199,16 +199,35 @@ def test_identify_report_shows_a_verification_run(tmp_path, capsys) -> None:
                        free_poses=8, check_poses=4)
     data = tmp_path / "m.csv"
     data.write_text(format_measurements(meas, {}))
-    summary = {"verdict": {"status": "pass", "message": "every pose within what the result predicts"}, "cycles": 10,
-               "runs": {"before": {"ap_max": 1.5e-3, "rp_max": 8e-5}, "after": {"ap_max": 2e-5, "rp_max": 8e-5}}}
-    verify_yaml = tmp_path / "v.verify.yaml"
-    verify_yaml.write_text(yaml.safe_dump(summary))
+    import hashlib
+
+    def verified(name: str, source: Path) -> Path:  # a result of ``source`` and the summary of its verification
+        result = tmp_path / f"{name}.result.yaml"
+        result.write_text(yaml.safe_dump({"source": str(source)}))
+        summary = {"verdict": {"status": "pass", "message": "every pose within what the result predicts"},
+                   "cycles": 10, "result": str(result),
+                   "result_sha256": hashlib.sha256(result.read_bytes()).hexdigest(),
+                   "runs": {"before": {"ap_max": 1.5e-3, "rp_max": 8e-5}, "after": {"ap_max": 2e-5, "rp_max": 8e-5}}}
+        out = tmp_path / f"{name}.verify.yaml"
+        out.write_text(yaml.safe_dump(summary))
+        return out
+
+    verify_yaml = verified("v", data)
     report = tmp_path / "r.html"
     args = [str(data), "--robot", "ur5e", "--report", str(report)]
     assert identify_main([*args, "--verification", str(verify_yaml)]) == 0
     text = report.read_text()
     assert "AP, pose accuracy" in text and "1.5000 mm" in text and "every pose within what the result predicts" in text
     capsys.readouterr()
+    # a verification of another calibration, or of a result file changed since, is refused before any computing
+    other_data = tmp_path / "other.csv"
+    other_data.write_text(data.read_text())
+    for summary, says in ((verified("w", other_data), "w.result.yaml (a calibration of"), (verify_yaml, "has changed")):
+        if summary == verify_yaml:
+            (tmp_path / "v.result.yaml").write_text(yaml.safe_dump({"source": str(data), "edited": True}))
+        assert identify_main([*args, "--force", "--verification", str(summary)]) == 2
+        err = capsys.readouterr().err
+        assert says in err and str(data) in err and len(err.strip().splitlines()) == 1
     assert identify_main([*args, "--force", "--verification", str(data)]) == 2
     assert "not the .verify.yaml" in capsys.readouterr().err
     assert identify_main([str(data), "--verification", str(verify_yaml)]) == 2
