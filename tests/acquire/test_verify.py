@@ -305,3 +305,30 @@ def test_a_moved_tracker_gives_the_same_figures_and_another_arm_fails(tmp_path, 
                     "--session", str(other), "--cycles", "2", "--quiet"]) == 3
     out = capsys.readouterr().out
     assert "verdict: fail" in out and "another arm or another tool" in out
+
+
+def test_distance_drift_and_multi_directional_follow_iso_9283_by_hand() -> None:
+    """ISO 9283 7.3, 7.6 and 7.2 on numbers worked out by hand (mm written as 1e-3 m)."""
+    from identify.iso9283 import distance_result, drift, multi_directional
+
+    mm = 1e-3
+    a = np.zeros((3, 3))
+    b = np.array([[1.001, 0, 0], [1.002, 0, 0], [1.003, 0, 0]])  # D_j = 1.001, 1.002, 1.003 m
+    d = distance_result(2, 4, [0, 0, 0], [1, 0, 0], a, b)
+    assert d.commanded == 1.0 and d.mean == pytest.approx(1.002, abs=1e-15)
+    assert d.ad == pytest.approx(2 * mm, abs=1e-15)  # D̄ - D_c
+    assert d.rd == pytest.approx(3 * mm, rel=1e-9)  # 3 S_D, S_D = 1 mm
+    assert d.ad_std == pytest.approx(mm / np.sqrt(3), rel=1e-9) and d.rd_std == pytest.approx(1.5 * mm, rel=1e-9)
+    # P1 at the origin: first third (2 visits) at (1, 0, 0) mm, last third at (0, 2, 0) and (0, 2, 0.002) mm
+    visits = np.array([[1, 0, 0], [1, 0, 0], [5, 5, 5], [5, 5, 5], [0, 2, 0], [0, 2, 0.002]]) * mm
+    dr = drift(1, np.zeros(3), visits)
+    assert dr.first.ap == pytest.approx(mm) and dr.first.rp == pytest.approx(0.0, abs=1e-15)
+    assert dr.last.ap == pytest.approx(np.hypot(2, 0.001) * mm, rel=1e-12)
+    assert dr.dap == pytest.approx((np.hypot(2, 0.001) - 1) * mm, rel=1e-12)
+    assert dr.drp == pytest.approx(0.001 * mm, rel=1e-9)  # l_j = 0.001 mm both: l̄ = 0.001 mm, S_l = 0
+    # barycentres from three directions: pairwise 5, 1 and sqrt(26) mm
+    assert multi_directional(np.array([[0, 0, 0], [3, 4, 0], [0, 0, 1]]) * mm) == pytest.approx(np.sqrt(26) * mm)
+    with pytest.raises(ValueError, match="at least 4 visits"):
+        drift(1, np.zeros(3), visits[:3])
+    with pytest.raises(ValueError, match="same 2 or more cycles"):
+        distance_result(2, 4, [0, 0, 0], [1, 0, 0], a, b[:2])
