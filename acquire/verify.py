@@ -43,7 +43,7 @@ from config.site import SiteConfig
 from identify.calibrated import CalibratedModel
 from identify.compensate import solve_ik
 from identify.holds import MIN_POSES, ModelCheck, check_models, tabulated
-from identify.iso9283 import Accuracy, accuracy, cube_poses, visit_order
+from identify.iso9283 import Accuracy, Distance, Drift, accuracy, cube_poses, distance_result, drift, visit_order
 from identify.result_models import result_models
 from session.plan import Plan, Step
 
@@ -55,6 +55,7 @@ MAX_EDGE = 0.3  # m: the default cube's edge at most ...
 REACH_SHARE = 0.25  # ... and this share of the robot's reach (sum of its link lengths)
 SHRINK = (1.0, 0.5, 0.25)  # a default cube that does not fit is tried at these shares of its edge
 AFTER_ALARM = 1e-3  # false-alarm rate of the test of "after" AP against what the result predicts
+DISTANCE_POSES = (2, 4)  # ISO 9283 7.3 measures distance accuracy between P2 and P4
 REGISTER = "register"  # the label of the registration steps
 REGISTER_POSES = 8
 REGISTER_SHARE = 0.7  # the registration poses: the corners of a cube of this share of the test cube's edge ...
@@ -285,14 +286,16 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
     targets = np.array(info["targets"], dtype=float)
     attained: dict[str, dict[int, list[Array]]] = {m: {} for m in MODES}
     sigmas: dict[str, dict[int, list[float]]] = {m: {} for m in MODES}
+    cycles: dict[str, dict[int, list[int]]] = {m: {} for m in MODES}
     for record in records:
-        mode, _, pose = info["steps"][record.plan_index]
+        mode, cycle, pose = info["steps"][record.plan_index]
         if record.status != "ok" or mode not in MODES:
             continue
         position = np.array(record.position, dtype=float)
         if check is not None:  # new tracker frame -> the calibration's
             position = check.registration.to_calibration(position)
         attained[mode].setdefault(int(pose), []).append(inv_r @ (position - shift))
+        cycles[mode].setdefault(int(pose), []).append(int(cycle))
         if record.sigma is not None:
             sigmas[mode].setdefault(int(pose), []).append(record.sigma)
     runs = {}
@@ -300,7 +303,8 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
         known = {p: np.array(v) for p, v in sigmas[mode].items() if len(v) == len(attained[mode][p])}
         acc = accuracy(mode, targets, {p: np.array(v) for p, v in attained[mode].items()}, known)
         if acc.poses:
-            runs[mode] = acc
+            runs[mode] = replace(acc, distance=_distance(targets, attained[mode], cycles[mode]),
+                                 drift=_drift(targets, attained[mode], known))
     status, message = _verdict(runs, info)
     if check is not None and check.status == "fail":
         status, message = "fail", (
@@ -308,6 +312,22 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
             f"by {check.heldout.rms * 1e3:.3f} mm RMS (held out), {check.ratio:.1f}x the {check.expected * 1e3:.3f} "
             "mm it predicts: another arm or another tool than the calibration's; do not use this model here")
     return Outcome(runs, status, message, _missing(info, records), check)
+
+
+def _distance(targets: Array, attained: dict[int, list[Array]], cycles: dict[int, list[int]]) -> Distance | None:
+    """AD and RD between P2 and P4 (ISO 9283's pair for 7.3) over the cycles that measured both."""
+    a, b = (dict(zip(cycles.get(p, []), attained.get(p, []), strict=True)) for p in DISTANCE_POSES)
+    common = sorted(set(a) & set(b))
+    if len(common) < 2:
+        return None
+    return distance_result(*DISTANCE_POSES, targets[DISTANCE_POSES[0] - 1], targets[DISTANCE_POSES[1] - 1],
+                           np.array([a[c] for c in common]), np.array([b[c] for c in common]))
+
+
+def _drift(targets: Array, attained: dict[int, list[Array]], sigma: dict[int, Array]) -> Drift | None:
+    """dAP and dRP of P1 over the run (first against last third of its visits), when it has 4 visits or more."""
+    visits = attained.get(1, [])
+    return drift(1, targets[0], np.array(visits), sigma.get(1)) if len(visits) >= 4 else None
 
 
 def _missing(info: dict[str, Any], records: list[Any]) -> int:

@@ -43,6 +43,7 @@ from drivers.spec import RobotSpec, TrackerSpec
 from identify.calibrated import CalibratedModel, ResultError, nominal_name
 from identify.holds import ModelCheck
 from identify.io.result_io import load_result
+from identify.report.verify_rows import iso_rows
 from session.schema import SessionError
 
 MM = 1e3
@@ -130,6 +131,12 @@ def format_registration(check: ModelCheck) -> list[str]:
         f"result predicts ({check.status})")
 
 
+def format_iso_extras(outcome: Outcome) -> list[str]:
+    """Distance accuracy and repeatability, drift within the run: a table of 80 columns or fewer."""
+    rows = iso_rows({m: a.as_dict() for m, a in outcome.runs.items()})
+    return fit_width.table(["ISO 9283 [mm]", "before", "after"], rows) if rows else []
+
+
 def format_outcome(outcome: Outcome) -> str:
     """The registration, AP/RP per pose and run, then the verdict line."""
     lines = [] if outcome.registration is None else format_registration(outcome.registration)
@@ -142,6 +149,7 @@ def format_outcome(outcome: Outcome) -> str:
                 pose = next((p for p in runs[mode].poses if p.pose == k + 1), None) if mode in runs else None
                 cells.append("       -" if pose is None else f"{getattr(pose, key) * MM:9.4f}")
         lines.append(f"P{k + 1}   " + "  ".join([cells[0], cells[1], cells[2], cells[3]]))
+    lines += format_iso_extras(outcome)
     lines.append(f"verdict: {outcome.status}: {outcome.message}")
     return "\n".join(lines)
 

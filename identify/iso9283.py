@@ -98,10 +98,13 @@ def pose_result(pose: int, commanded: Array, attained: Array, sigma: Array | Non
 
 @dataclass(frozen=True)
 class Accuracy:
-    """AP/RP of the five poses (``poses``, P1..P5 in order) of one run (``label``, e.g. before / after)."""
+    """AP/RP of the five poses (``poses``, P1..P5 in order) of one run (``label``, e.g. before / after), with its
+    distance accuracy (``distance``) and drift (``drift``) when the run has the visits for them."""
 
     label: str
     poses: tuple[PoseResult, ...]
+    distance: Distance | None = None
+    drift: Drift | None = None
 
     @property
     def ap(self) -> float:
@@ -123,7 +126,9 @@ class Accuracy:
                 "poses": [{"pose": f"P{p.pose}", "n": p.n, "commanded": p.commanded.tolist(),
                            "barycentre": p.barycentre.tolist(), "ap": p.ap, "ap_std": p.ap_std,
                            "ap_xyz": p.ap_xyz.tolist(), "rp": p.rp, "l_mean": p.l_mean, "s_l": p.s_l}
-                          for p in self.poses]}
+                          for p in self.poses],
+                "distance": None if self.distance is None else self.distance.as_dict(),
+                "drift": None if self.drift is None else self.drift.as_dict()}
 
 
 def accuracy(label: str, commanded: Array, attained: dict[int, Array], sigma: dict[int, Array] | None = None
@@ -166,8 +171,8 @@ def distance_result(a: int, b: int, commanded_a: Array, commanded_b: Array, atta
     d_c = float(np.linalg.norm(np.asarray(commanded_a, dtype=float) - np.asarray(commanded_b, dtype=float)))
     d = np.linalg.norm(xa - xb, axis=1)
     s_d = float(np.std(d, ddof=1))
-    return Distance(a, b, n, d_c, float(d.mean()), float(d.mean()) - d_c, s_d / np.sqrt(n), 3 * s_d,
-                    3 * s_d / np.sqrt(2 * (n - 1)))
+    return Distance(a, b, n, d_c, float(d.mean()), float(d.mean()) - d_c, float(s_d / np.sqrt(n)), 3 * s_d,
+                    float(3 * s_d / np.sqrt(2 * (n - 1))))
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from common import __version__
 from identify.report.headline import headline_html
 from identify.report.html import _CSS, _acquisition_section, _e, _figure_html, _table, _when
+from identify.report.verify_rows import iso_rows
 
 if TYPE_CHECKING:
     from session.store import SessionFile
@@ -69,6 +70,17 @@ def _pose_rows(summary: dict[str, Any]) -> list[list[str]]:
     return rows
 
 
+def _iso_extras(summary: dict[str, Any]) -> str:
+    """Distance accuracy and repeatability (P2-P4) and the drift of P1 within the run, before and after."""
+    rows = iso_rows(summary.get("runs") or {})
+    if not rows:
+        return ""
+    return ("<p>Beyond AP and RP (ISO 9283, ± standard uncertainty from the spread of the cycles): distance accuracy "
+            "AD = D̄ - D_c and repeatability RD = 3 S_D between P2 and P4 in each cycle (7.3); the drift of P1's AP "
+            "and RP between the first and the last third of its visits (7.6, within this run; not the standard's "
+            "8-hour test).</p>" + _table(["figure [mm]", "before", "after"], rows))
+
+
 def verification_html(summary: dict[str, Any], header: dict[str, Any], source: str,
                       session: SessionFile | None = None) -> str:
     """The report as one HTML document: ``summary`` as written to ``.verify.yaml``, the session ``header``."""
@@ -103,6 +115,7 @@ def verification_html(summary: dict[str, Any], header: dict[str, Any], source: s
                 + _table(["pose", "target x, y, z [mm]", "predicted AP before [mm]", "AP before [mm]",
                           "predicted AP after [mm]", "AP after [mm]", "RP before [mm]", "RP after [mm]", "visits"],
                          _pose_rows(summary))
+                + _iso_extras(summary)
                 + _figure_html(figure_accuracy(summary), "AP and RP per pose, before and after compensation")
                 + "".join(f"<p>note: {_e(n)}</p>" for n in info.get("notes", [])) + "</section>")
     if session is not None:

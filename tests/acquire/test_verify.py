@@ -300,6 +300,19 @@ def test_a_moved_tracker_gives_the_same_figures_and_another_arm_fails(tmp_path, 
     np.testing.assert_allclose(measured["before"], implied["before"], atol=tol)
     np.testing.assert_allclose(measured["after"], implied["after"], atol=tol)
     assert implied["before"].min() > 0.5e-3
+    # distance accuracy P2-P4 (ISO 9283 7.3) against the truth's: a rigid registration leaves distances alone, so
+    # only the noise of D̄ counts: sqrt(2) x the visit's noise over sqrt(cycles), at 4 sigma, plus repeatability
+    with Session.open(session) as s:
+        info = s.header["config"]["verification"]
+    targets = np.array(info["targets"])
+    for mode in ("before", "after"):
+        reached = points_from_joints(truth, np.array(info["q"][mode]))
+        ad_true = np.linalg.norm(reached[1] - reached[3]) - np.linalg.norm(targets[1] - targets[3])
+        run = summary["runs"][mode]
+        assert run["distance"]["ad"] == pytest.approx(ad_true, abs=4 * np.sqrt(2 / CYCLES / SAMPLES) * NOISE + 5e-6)
+        assert run["distance"]["n"] == CYCLES and run["drift"]["visits_each"] == 2
+    assert abs(summary["runs"]["before"]["distance"]["ad"]) > 0.2e-3  # the nominal model's distances are off
+    assert "AD P2-P4 (7.3)" in out
     other = tmp_path / "other.session"
     assert acquire(["verify", "--result", str(result), "--robot", "mock:ur5e?arm=7", "--tracker", "mock",
                     "--session", str(other), "--cycles", "2", "--quiet"]) == 3
