@@ -5,12 +5,14 @@
     acquire verify --result cal.result.yaml --robot ur5e --dry-run             the test's poses and moves, nothing moved
     acquire verify --resume sessions/ur5e-verify-20261122-101500.session      continue an interrupted test
 
-The test (acquire/verify.py) is planned before anything moves and checked like an acquisition plan (joint limits,
+The test (acquire/verify.py) registers the tracker first, on 8 poses of its own (trackers move between sessions), and
+says how far it moved; it is planned before anything moves and checked like an acquisition plan (joint limits,
 the cell); a real robot moves only after the operator has read it and typed ``yes`` (or passed ``--yes``); Ctrl-C
 stops the motion; every wait has a timeout. The session is a session file like an acquisition's (durable,
 resumable; its header holds the test), and ``SESSION.verify.yaml`` and ``SESSION.report.html`` are written beside
-it. Exit codes: 0 complete (verdict pass or warn), 3 complete but compensation fails the test, 1 the run failed or
-left poses unmeasured (resumable), 2 bad input or a test that cannot be planned, 130 stopped by the operator.
+it. Exit codes: 0 complete (verdict pass or warn), 3 complete but compensation fails the test or the registered
+residuals say another arm or another tool, 1 the run failed or left poses unmeasured (resumable), 2 bad input or a
+test that cannot be planned, 130 stopped by the operator.
 """
 
 from __future__ import annotations
@@ -60,7 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--session", type=Path,
                    help="session file to create (default sessions/<robot>-verify-<time>.session)")
     p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this verification session")
-    p.add_argument("--cycles", type=int, help="visits of each pose per run (site verify.cycles, 10; ISO uses 30)")
+    p.add_argument("--cycles", type=int, help="visits of each pose per run (site verify.cycles; default 30, as ISO "
+                   "9283 asks; fewer for a quicker test: the dry run shows the duration)")
     p.add_argument("--samples", type=int, help="tracker samples per visit (site default)")
     p.add_argument("--dry-run", action="store_true", help="print the test and its checks; move nothing")
     p.add_argument("--yes", action="store_true", help="do not ask before moving a real robot")
