@@ -59,7 +59,7 @@ DISTANCE_POSES = (2, 4)  # ISO 9283 7.3 measures distance accuracy between P2 an
 REGISTER = "register"  # the label of the registration steps
 REGISTER_POSES = 8
 REGISTER_SHARE = 0.7  # the registration poses: the corners of a cube of this share of the test cube's edge ...
-REGISTER_TILT = math.radians(20.0)  # ... the flange tilted by this angle (six joints or more)
+REGISTER_TILT = math.radians(45.0)  # ... the flange tilted by this angle (six joints or more)
 
 
 class VerifyError(ValueError):
@@ -305,7 +305,9 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
         if acc.poses:
             runs[mode] = replace(acc, distance=_distance(targets, attained[mode], cycles[mode]),
                                  drift=_drift(targets, attained[mode], known))
-    status, message = _verdict(runs, info)
+    spread = np.zeros(5) if check is None else registration_variance(
+        np.array(info["register"]["predicted"], dtype=float), targets @ base[:3, :3].T + shift, check.expected)
+    status, message = _verdict(runs, info, spread)
     if check is not None and check.status == "fail":
         status, message = "fail", (
             f"registered on {check.heldout.samples} poses of its own, the result's {check.name} model still misses "
@@ -334,16 +336,32 @@ def _missing(info: dict[str, Any], records: list[Any]) -> int:
     return sum(1 for r in records if r.status != "ok")
 
 
-def _verdict(runs: dict[str, Accuracy], info: dict[str, Any]) -> tuple[str, str]:
-    """pass: every pose's "after" AP within what the result's uncertainty and the measurement's spread allow
-    (chi-square, 3 degrees of freedom, 0.1 % false alarms); warn: beyond that but better than "before"; fail: not
+def registration_variance(fitted: Array, at: Array, expected: float) -> Array:
+    """Variance (m², 3D) a rigid registration on the points ``fitted`` (k, 3) adds to positions ``at`` (m, 3), both
+    in one frame, when each fitted point misses by ``expected`` (3D RMS, m; isotropic): the linearised fit's
+    covariance sigma² (Σ J_iᵀ J_i)⁻¹ with J = [-[x]×, I], carried to each position."""
+    def jacobian(x: Array) -> Array:
+        skew = np.array([[0.0, x[2], -x[1]], [-x[2], 0.0, x[0]], [x[1], -x[0], 0.0]])  # -[x]x
+        return np.hstack([skew, np.eye(3)])
+
+    centre = fitted.mean(axis=0)  # any origin gives the same answer; the centroid keeps the system well scaled
+    normal = sum(jacobian(x - centre).T @ jacobian(x - centre) for x in fitted)
+    cov = expected**2 / 3.0 * np.linalg.inv(normal)
+    return np.array([np.trace(jacobian(x - centre) @ cov @ jacobian(x - centre).T) for x in at])
+
+
+def _verdict(runs: dict[str, Accuracy], info: dict[str, Any], registration: Array) -> tuple[str, str]:
+    """pass: every pose's "after" AP within what the result's uncertainty, the measurement's spread and the
+    registration (``registration``: its variance at each pose, m²) allow (chi-square, 3 degrees of freedom, 0.1 %
+    false alarms); warn: beyond that but better than "before"; fail: not
     better; incomplete: a run or a pose missing."""
     if set(runs) != set(MODES) or any(len(a.poses) < 5 for a in runs.values()):
         return "incomplete", "not every pose of both runs has 2 or more measurements: resume the session"
     before, after = runs["before"], runs["after"]
     expected = np.array(info["expected"], dtype=float)
     scale = chi2.ppf(1 - AFTER_ALARM, 3) / 3  # a 3D error's square over its mean square, at the alarm rate
-    limits = [math.sqrt(scale * (e**2 + 3 * p.ap_std**2)) for e, p in zip(expected, after.poses, strict=True)]
+    limits = [math.sqrt(scale * (e**2 + 3 * p.ap_std**2 + r))
+              for e, p, r in zip(expected, after.poses, registration, strict=True)]
     worst = max(range(5), key=lambda k: after.poses[k].ap / limits[k])
     summary = (f"AP before {before.ap * 1e3:.4f} mm, after {after.ap * 1e3:.4f} mm (worst pose); RP before "
                f"{before.rp * 1e3:.4f} mm, after {after.rp * 1e3:.4f} mm")

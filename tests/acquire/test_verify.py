@@ -345,3 +345,15 @@ def test_distance_drift_and_multi_directional_follow_iso_9283_by_hand() -> None:
         drift(1, np.zeros(3), visits[:3])
     with pytest.raises(ValueError, match="same 2 or more cycles"):
         distance_result(2, 4, [0, 0, 0], [1, 0, 0], a, b[:2])
+
+
+def test_registration_variance_is_that_of_a_mean_at_the_centroid_and_grows_outside() -> None:
+    """At the centroid of the fitted points the rotation does not count: the 3D variance is expected² / k (a mean of
+    k points); beyond them it grows with the distance (the rotation's lever arm)."""
+    from acquire.verify import registration_variance
+
+    corners = 0.1 * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    var = registration_variance(corners + 5.0, np.array([[5.0, 5.0, 5.0], [5.3, 5.0, 5.0]]), 1e-4)
+    assert var[0] == pytest.approx(1e-8 / 8, rel=1e-9)
+    # 0.3 m out along x: the rotations about y and z (variance sigma² / (8 · 0.02 m²) each) add 2 · 0.09 m² of it
+    assert var[1] == pytest.approx(1e-8 / 8 + 2 * 0.09 * (1e-8 / 3) / (8 * 0.02), rel=1e-9)
