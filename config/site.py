@@ -162,7 +162,7 @@ class SiteConfig:
     retries: int = 3
     verify_centre: tuple[float, float, float] | None = None
     verify_edge: float | None = None
-    verify_cycles: int = 10
+    verify_cycles: int = 30  # ISO 9283 (identify.iso9283.ISO_CYCLES)
     source: str = field(default="<defaults>", compare=False)
 
     @classmethod

@@ -71,6 +71,8 @@ MOCK_ROBOT_OPTIONS: dict[str, tuple[str, object, str]] = {
                      "random phase per joint)"),
     "compliance": ("float", 0.0, "joint compliance under gravity, rad/(N m) (m/N), every joint; needs the "
                    "model's dynamics"),
+    "arm": ("int", None, "seed of the true arm's DH errors alone (default: seed): another arm of the same model at "
+            "the same placement, with the same reflectors"),
     "points": ("points", 1, _POINTS),
     "occlusion": ("probability", 0.0, _OCCLUSION),
     "rate": ("rate", 500.0, "joint stream rate, Hz (continuous motion; drivers/sim/stream.py)"),
@@ -84,6 +86,10 @@ MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
     "seed": ("int", None, "seed of the tracker's noise and dropouts (default: the robot's seed)"),
     "fault": ("faults", (), "simulated faults, " + "|".join(TRACKER_FAULTS) + "[@MEASUREMENT][xCOUNT],..."),
     "points": ("points", None, _POINTS + " (default: the robot spec's, 1)"),
+    "moved": ("vector", (0.0, 0.0, 0.0), "the tracker stands elsewhere: what it sees is shifted by X,Y,Z m "
+              "(after turned)"),
+    "turned": ("vector", (0.0, 0.0, 0.0), "the tracker stands turned: what it sees is rotated by the rotation "
+               "vector X,Y,Z, degrees (its length is the angle)"),
     "occlusion": ("probability", None, _OCCLUSION + " (default: the robot spec's, 0)"),
     "rate": ("rate", 250.0, "stream rate, Hz (continuous motion; drivers/sim/stream.py)"),
     "clock_offset": ("signed", 0.0, "the tracker clock's offset from the robot's, s"),
@@ -177,6 +183,17 @@ def parse_interval(key: str, value: str) -> tuple[float, float]:
     return out
 
 
+def parse_vector(key: str, value: str) -> tuple[float, float, float]:
+    """``X,Y,Z`` (three finite numbers) of option ``key``; ValueError in one line."""
+    try:
+        out = tuple(float(v) for v in value.split(","))
+    except ValueError:
+        out = ()
+    if len(out) != 3 or not all(math.isfinite(v) for v in out):
+        raise ValueError(f"option {key}={value} must be X,Y,Z: three finite numbers")
+    return out  # type: ignore[return-value]
+
+
 def _typed(kind: str, key: str, value: str, device: str) -> object:
     """Convert one mock option value; ValueError with a one-line reason."""
     if kind == "faults":
@@ -187,6 +204,8 @@ def _typed(kind: str, key: str, value: str, device: str) -> object:
         return int(value)
     if kind == "interval":
         return parse_interval(key, value)
+    if kind == "vector":
+        return parse_vector(key, value)
     if kind == "points":
         if not value.isdigit() or not 1 <= int(value) <= MAX_POINTS:
             raise ValueError(f"option {key}={value} must be an integer in 1..{MAX_POINTS}")

@@ -149,6 +149,6 @@ def compare(results: list[Result], labels: list[str] | None = None, alpha: float
 
 def load_verification(path: str | Path) -> dict[str, Any]:
     """The summary of an ``acquire verify`` run (``SESSION.verify.yaml``): AP/RP per pose before and after (m)."""
-    from identify.cli import _verification
+    from identify.io.verification_io import read_verification
 
-    return _verification(str(path)) or {}
+    return read_verification(str(path))

@@ -25,6 +25,7 @@ from identify.calibrated import robot_model
 from identify.io.csvio import format_measurements, read_measurements
 from identify.io.result_io import result_to_dict
 from identify.io.session_measurements import open_session, read_session
+from identify.io.verification_io import load_verification
 from identify.measurements import Measurements
 from identify.options import SUBCOMMANDS, build_parser
 from identify.pipeline import Identification, identify, split_holdout
@@ -40,8 +41,8 @@ def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
         raise InputError(f"--ur-calibration needs a 6R UR arm; the data have joints {joint_types}")
     if args.verification and not args.report:
         raise InputError("--verification goes with --report (it is shown in the report's headline)")
-    if args.report:
-        _verification(args.verification)
+    if args.report and args.verification:
+        load_verification(args.verification, str(args.input))
         try:
             import identify.report.html  # noqa: F401
         except ImportError:
@@ -100,7 +101,8 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
         try:
             page = report_html(ident, meas, robot.nominal if robot else None, robot.name if robot else None,
                                session=session, source=str(args.input), reference=reference,
-                               reference_note=note or None, verification=_verification(args.verification))
+                               reference_note=note or None, verification=None if args.verification is None else
+                               load_verification(args.verification, str(args.input)))
         finally:
             if session is not None:
                 session.close()
@@ -125,19 +127,6 @@ def export_figure(ident: Identification, meas: Measurements, carried: str) -> st
     if ident.use == "extended":
         text += " (joint errors not carried: extended model" + (f" {ext.rms * 1e3:.4f} mm)" if ext else ")")
     return text
-
-
-def _verification(path: str | None) -> dict[str, Any] | None:
-    """The summary an ``acquire verify`` run wrote (``SESSION.verify.yaml``), or None; InputError if it is not one."""
-    if path is None:
-        return None
-    try:
-        doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(f"--verification {path}: cannot be read ({type(exc).__name__})") from None
-    if not isinstance(doc, dict) or not {"runs", "verdict"} <= set(doc):
-        raise InputError(f"--verification {path}: not the .verify.yaml of an acquire verify run")
-    return doc
 
 
 def export_notes(ident: Identification) -> list[str]:

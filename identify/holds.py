@@ -74,6 +74,10 @@ class Registration:
     def turned(self) -> float:
         return float(Rotation.from_matrix(self.rotation).magnitude())
 
+    def to_calibration(self, points: Array) -> Array:
+        """``points`` (..., 3) of the new tracker frame in the calibration's tracker frame, m."""
+        return (np.asarray(points, dtype=float) - self.translation) @ self.rotation
+
 
 @dataclass(frozen=True)
 class Errors:
@@ -129,6 +133,19 @@ class Check:
     @property
     def status(self) -> str:
         return self.chosen.status
+
+
+def tabulated(name: str, predicted: Array, expected: float) -> Model:
+    """A :class:`Model` whose predictions were made beforehand: ``predicted`` (m, 3), calibration's tracker frame,
+    one per row of the data it will be checked on (in that order); ``expected`` its 3D RMS error, m."""
+    table = np.asarray(predicted, dtype=float)
+
+    def points(q: Array, tp: NDArray[np.int64]) -> Array:
+        if len(q) != len(table):
+            raise ValueError(f"{len(table)} tabulated predictions for {len(q)} rows")
+        return table
+
+    return Model(name, points, float(expected))
 
 
 def pose_groups(q: Array) -> NDArray[np.int64]:

@@ -11,7 +11,19 @@ For one pose commanded at ``x_c`` and attained at ``x_j`` (j = 1..N, measured):
 - AP = |x̄ - x_c|, the distance of the barycentre of the attained positions from the commanded one;
 - RP = l̄ + 3 S_l, with l_j = |x_j - x̄| and S_l = sqrt(Σ(l_j - l̄)² / (N - 1)).
 
-Only positions are measured here (one tracked point), so the orientation terms of ISO 9283 are not reported.
+Beyond AP and RP, from the same visits:
+
+- distance accuracy and repeatability (7.3) between two poses visited in each cycle (P2 and P4 here): with
+  D_c = |x_c,a - x_c,b| and D_j = |x_a,j - x_b,j| in cycle j, AD = D̄ - D_c and RD = 3 S_D,
+  S_D = sqrt(Σ(D_j - D̄)² / (n - 1));
+- drift of the pose characteristics (7.6) over the run: dAP = |AP_first - AP_last| and dRP = |RP_first - RP_last|,
+  AP and RP of one pose over the first and the last third of its visits (the standard's 8-hour drift test is not
+  run: this is the drift within the test);
+- multi-directional pose accuracy variation (7.2): vAP = max |x̄_h - x̄_k| over the barycentres reached from
+  different approach directions (:func:`multi_directional`; the test plan approaches each pose one way only).
+
+Each figure carries its standard uncertainty from the spread of the visits. Only positions are measured here (one
+tracked point), so the orientation terms of ISO 9283 are not reported.
 Units: metres; frame: whatever the positions are given in (the robot's base frame in ``acquire verify``).
 """
 
@@ -86,10 +98,13 @@ def pose_result(pose: int, commanded: Array, attained: Array, sigma: Array | Non
 
 @dataclass(frozen=True)
 class Accuracy:
-    """AP/RP of the five poses (``poses``, P1..P5 in order) of one run (``label``, e.g. before / after)."""
+    """AP/RP of the five poses (``poses``, P1..P5 in order) of one run (``label``, e.g. before / after), with its
+    distance accuracy (``distance``) and drift (``drift``) when the run has the visits for them."""
 
     label: str
     poses: tuple[PoseResult, ...]
+    distance: Distance | None = None
+    drift: Drift | None = None
 
     @property
     def ap(self) -> float:
@@ -111,7 +126,9 @@ class Accuracy:
                 "poses": [{"pose": f"P{p.pose}", "n": p.n, "commanded": p.commanded.tolist(),
                            "barycentre": p.barycentre.tolist(), "ap": p.ap, "ap_std": p.ap_std,
                            "ap_xyz": p.ap_xyz.tolist(), "rp": p.rp, "l_mean": p.l_mean, "s_l": p.s_l}
-                          for p in self.poses]}
+                          for p in self.poses],
+                "distance": None if self.distance is None else self.distance.as_dict(),
+                "drift": None if self.drift is None else self.drift.as_dict()}
 
 
 def accuracy(label: str, commanded: Array, attained: dict[int, Array], sigma: dict[int, Array] | None = None
@@ -121,3 +138,81 @@ def accuracy(label: str, commanded: Array, attained: dict[int, Array], sigma: di
     sigma = sigma or {}
     return Accuracy(label, tuple(pose_result(p, commanded[p - 1], attained[p], sigma.get(p)) for p in sorted(attained)
                                  if len(attained[p]) >= 2))
+
+
+@dataclass(frozen=True)
+class Distance:
+    """ISO 9283 distance accuracy ``ad`` and repeatability ``rd`` (7.3) between poses ``a`` and ``b`` over ``n``
+    cycles: ``commanded`` D_c and ``mean`` D̄ (m); ``ad_std``, ``rd_std`` their standard uncertainties (m)."""
+
+    a: int
+    b: int
+    n: int
+    commanded: float
+    mean: float
+    ad: float
+    ad_std: float
+    rd: float
+    rd_std: float
+
+    def as_dict(self) -> dict[str, object]:
+        return {"poses": f"P{self.a}-P{self.b}", "n": self.n, "commanded": self.commanded, "mean": self.mean,
+                "ad": self.ad, "ad_std": self.ad_std, "rd": self.rd, "rd_std": self.rd_std}
+
+
+def distance_result(a: int, b: int, commanded_a: Array, commanded_b: Array, attained_a: Array, attained_b: Array
+                    ) -> Distance:
+    """AD and RD from the positions of poses ``a`` and ``b`` attained in the same cycles (n, 3) each, n >= 2,
+    row j of both from cycle j. Uncertainties: S_D / sqrt(n) for AD, RD / sqrt(2 (n - 1)) for RD (Gaussian)."""
+    xa, xb = np.atleast_2d(np.asarray(attained_a, dtype=float)), np.atleast_2d(np.asarray(attained_b, dtype=float))
+    n = len(xa)
+    if n < 2 or xb.shape != xa.shape:
+        raise ValueError(f"P{a}-P{b}: distance accuracy needs both poses in the same 2 or more cycles")
+    d_c = float(np.linalg.norm(np.asarray(commanded_a, dtype=float) - np.asarray(commanded_b, dtype=float)))
+    d = np.linalg.norm(xa - xb, axis=1)
+    s_d = float(np.std(d, ddof=1))
+    return Distance(a, b, n, d_c, float(d.mean()), float(d.mean()) - d_c, float(s_d / np.sqrt(n)), 3 * s_d,
+                    float(3 * s_d / np.sqrt(2 * (n - 1))))
+
+
+@dataclass(frozen=True)
+class Drift:
+    """Drift of pose ``pose``'s characteristics over a run (7.6): AP and RP of its ``first`` and ``last`` visits
+    (each a :class:`PoseResult`), ``dap`` = |AP_first - AP_last| and ``drp`` = |RP_first - RP_last| (m), with
+    ``dap_std`` (the two APs' uncertainties combined, m)."""
+
+    pose: int
+    first: PoseResult
+    last: PoseResult
+    dap: float
+    dap_std: float
+    drp: float
+
+    def as_dict(self) -> dict[str, object]:
+        return {"pose": f"P{self.pose}", "visits_each": self.first.n, "ap_first": self.first.ap,
+                "ap_last": self.last.ap, "dap": self.dap, "dap_std": self.dap_std, "rp_first": self.first.rp,
+                "rp_last": self.last.rp, "drp": self.drp}
+
+
+def drift(pose: int, commanded: Array, attained: Array, sigma: Array | None = None) -> Drift:
+    """dAP and dRP of one pose from its ``attained`` positions (N, 3) in visit order, N >= 4: AP and RP over the
+    first and the last third of the visits (at least 2 each); ``sigma`` (N,) as in :func:`pose_result`."""
+    attained = np.atleast_2d(np.asarray(attained, dtype=float))
+    n = len(attained)
+    if n < 4:
+        raise ValueError(f"pose P{pose}: drift needs at least 4 visits, got {n}")
+    k = max(2, n // 3)
+    sig = None if sigma is None or not len(sigma) else np.asarray(sigma, dtype=float)
+    first = pose_result(pose, commanded, attained[:k], None if sig is None else sig[:k])
+    last = pose_result(pose, commanded, attained[-k:], None if sig is None else sig[-k:])
+    return Drift(pose, first, last, abs(first.ap - last.ap), float(np.hypot(first.ap_std, last.ap_std)),
+                 abs(first.rp - last.rp))
+
+
+def multi_directional(barycentres: Array) -> float:
+    """vAP (7.2): the largest distance between the barycentres (k, 3), k >= 2, of one pose reached from k
+    approach directions, m."""
+    b = np.atleast_2d(np.asarray(barycentres, dtype=float))
+    if len(b) < 2:
+        raise ValueError("vAP needs the barycentres of at least 2 approach directions")
+    return float(np.max(np.linalg.norm(b[:, None, :] - b[None, :, :], axis=2)))

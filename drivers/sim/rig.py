@@ -10,6 +10,10 @@ The world (:class:`SimulatedRig`):
 - the true robot: ``random_truth(nominal, home, default_rng(seed))`` of the model's nominal DH table (seeded
   perturbations, a random base pose in the tracker frame, a random TP off every axis); the tracker sees
   ``kinematics.dh.points_from_joints(truth, q)`` at the joints' true DH values ``q``, never its own model;
+- ``arm=N`` swaps the arm: the DH table of ``random_truth`` with seed N, at the placement and with the TP of
+  ``seed`` (another arm of the same model, where the first one stood); ``moved``/``turned`` (tracker options) move
+  the tracker: the base is placed at ``T @ base``, T the rotation vector ``turned`` (degrees) then the shift
+  ``moved`` (m), as a tracker put back on its tripod elsewhere sees it;
 - the robot's readings are the controller's: with a coupled model (``coupling:`` in its YAML, e.g. FANUC J2/J3)
   ``move_joints`` takes and ``read_joints`` gives readings, and the true DH values are
   ``coupling.dh_from_readings(readings)``; joint limits are checked on those DH values;
@@ -50,6 +54,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from config.robots import ConfigError, RobotModel, load_robot
 from drivers.base import Array, RobotState
@@ -81,6 +86,13 @@ class _Fault:
     started: bool = False
 
 
+def _vector(name: str, value: Iterable[float]) -> tuple[float, float, float]:
+    out = tuple(float(v) for v in value)
+    if len(out) != 3 or not all(math.isfinite(v) for v in out):
+        raise ValueError(f"simulated rig: {name} must be three finite numbers")
+    return out  # type: ignore[return-value]
+
+
 def _setting(name: str, value: float, upper: float = math.inf) -> float:
     if not (math.isfinite(value := float(value)) and 0 <= value < upper):
         raise ValueError(f"simulated rig: {name} must be a finite number in [0, {upper:g})")
@@ -103,7 +115,8 @@ class SimulatedRig:
                  noise: float = 5e-5, latency: float = 0.002, dropout: float = 0.0, tracker_seed: int | None = None,
                  robot_faults: Iterable[FaultSpec] = (), tracker_faults: Iterable[FaultSpec] = (),
                  points: int = 1, occlusion: float = 0.0, scale: float = 0.0, eccentricity: float = 0.0,
-                 compliance: float = 0.0, stream: StreamSettings | None = None) -> None:
+                 compliance: float = 0.0, stream: StreamSettings | None = None, arm: int | None = None,
+                 moved: Iterable[float] = (0.0, 0.0, 0.0), turned: Iterable[float] = (0.0, 0.0, 0.0)) -> None:
         self.model = model if isinstance(model, RobotModel) else load_robot(model)
         self.clock: Clock = VirtualClock() if clock is None else clock
         self.seed = int(seed)
@@ -122,6 +135,15 @@ class SimulatedRig:
         self.points = int(points)
         home = np.array(self.model.home, dtype=float)
         self.truth = random_truth(self.model.nominal, home, np.random.default_rng(self.seed))
+        self.arm = self.seed if arm is None else int(arm)
+        if self.arm != self.seed:  # another arm of the model, where the first one stood, with its TP
+            other = random_truth(self.model.nominal, home, np.random.default_rng(self.arm))
+            self.truth = replace(other, base=self.truth.base, tool=self.truth.tool)
+        self.moved, self.turned = _vector("moved", moved), _vector("turned", turned)
+        move = np.eye(4)
+        move[:3, :3] = Rotation.from_rotvec(np.radians(self.turned)).as_matrix()
+        move[:3, 3] = self.moved
+        self.truth = replace(self.truth, base=move @ self.truth.base)
         self.coupling = self.model.coupling
         # the world's extras have generators of their own: a rig without them is the rig of before
         self.joint_errors = joint_errors_for(self.model, self.scale, math.radians(self.eccentricity),
@@ -181,7 +203,8 @@ class SimulatedRig:
                       ring_tau=r["ring_tau"], noise=t["noise"], latency=t["latency"], dropout=t["dropout"],
                       tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"], scale=r["scale"],
                       eccentricity=r["eccentricity"], compliance=r["compliance"],
-                      stream=StreamSettings.from_settings(r, t), **world)
+                      stream=StreamSettings.from_settings(r, t), arm=r["arm"], moved=t["moved"],
+                      turned=t["turned"], **world)
         except ValueError as exc:
             raise SpecError(f"robot spec {str(robot)!r}: {exc}") from None
         rig.robot_spec, rig.tracker_spec = robot, tracker

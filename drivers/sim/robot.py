@@ -52,6 +52,8 @@ class SimulatedRobot(JointStreaming):
         rig = self.rig
         details = {"truth_seed": str(rig.seed), "repeatability": f"{rig.repeatability:g}", "ring": f"{rig.ring:g}",
                    "ring_tau": f"{rig.ring_tau:g}"}
+        if rig.arm != rig.seed:
+            details["arm_seed"] = str(rig.arm)
         if has_errors(rig.joint_errors):  # the truth of the joint errors, for benchmarks to compare with
             details["joint_errors"] = json.dumps(errors_as_dict(rig.joint_errors))
         if rig.points > 1:
@@ -171,5 +173,7 @@ def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock:
                                                 "compliance")}
     ours.update({key: getattr(rig, key) for key in ("points", "occlusion") if key in spec.options})
     ours.update(rig.stream.robot_options())
-    rig._check_settings(spec, ours, spec.mock_settings(), rig.robot_spec)
+    given = spec.mock_settings()
+    ours["arm"], given["arm"] = rig.arm, rig.seed if given["arm"] is None else given["arm"]
+    rig._check_settings(spec, ours, given, rig.robot_spec)
     return SimulatedRobot(rig)

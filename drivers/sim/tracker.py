@@ -48,6 +48,8 @@ class SimulatedTracker(TrackerStreaming):
         details = {"noise": f"{rig.noise:g}", "latency": f"{rig.latency:g}", "dropout": f"{rig.dropout:g}"}
         if rig.points > 1 or rig.occlusion > 0:
             details.update(points=str(rig.points), occlusion=f"{rig.occlusion:g}")
+        if any(rig.moved) or any(rig.turned):
+            details.update(moved=",".join(f"{v:g}" for v in rig.moved), turned=",".join(f"{v:g}" for v in rig.turned))
         s = rig.stream  # its streams' clock (drivers/sim/stream.py): what a session's clock fit should find
         details.update(clock_offset=f"{s.clock_offset!r}", drift=f"{s.drift!r}", stamp_jitter=f"{s.jitter!r}",
                        clock_epoch=f"{rig.stream_epoch!r}")
@@ -110,7 +112,8 @@ def open_tracker(spec: TrackerSpec | str, *, rig: SimulatedRig | None = None, si
                          "rig=SimulatedRig.from_spec(robot_spec, tracker_spec, clock)")
     given = spec.mock_settings()
     given["seed"] = rig.seed if given["seed"] is None else given["seed"]
-    ours = {"noise": rig.noise, "latency": rig.latency, "dropout": rig.dropout, "seed": rig.tracker_seed}
+    ours = {"noise": rig.noise, "latency": rig.latency, "dropout": rig.dropout, "seed": rig.tracker_seed,
+            "moved": rig.moved, "turned": rig.turned}
     ours.update({key: getattr(rig, key) for key in ("points", "occlusion") if given[key] is not None})
     ours.update(rig.stream.tracker_options())
     rig._check_settings(spec, ours, given, rig.tracker_spec)

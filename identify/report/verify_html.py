@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from common import __version__
 from identify.report.headline import headline_html
 from identify.report.html import _CSS, _acquisition_section, _e, _figure_html, _table, _when
+from identify.report.verify_rows import iso_rows
 
 if TYPE_CHECKING:
     from session.store import SessionFile
@@ -76,6 +77,17 @@ def _pose_rows(summary: dict[str, Any]) -> list[list[str]]:
     return rows
 
 
+def _iso_extras(summary: dict[str, Any]) -> str:
+    """Distance accuracy and repeatability (P2-P4) and the drift of P1 within the run, before and after."""
+    rows = iso_rows(summary.get("runs") or {})
+    if not rows:
+        return ""
+    return ("<p>Beyond AP and RP (ISO 9283, ± standard uncertainty from the spread of the cycles): distance accuracy "
+            "AD = D̄ - D_c and repeatability RD = 3 S_D between P2 and P4 in each cycle (7.3); the drift of P1's AP "
+            "and RP between the first and the last third of its visits (7.6, within this run; not the standard's "
+            "8-hour test).</p>" + _table(["figure [mm]", "before", "after"], rows))
+
+
 def verification_html(summary: dict[str, Any], header: dict[str, Any], source: str,
                       session: SessionFile | None = None) -> str:
     """The report as one HTML document: ``summary`` as written to ``.verify.yaml``, the session ``header``."""
@@ -89,6 +101,16 @@ def verification_html(summary: dict[str, Any], header: dict[str, Any], source: s
             f"calibration <code>{_e(summary.get('result'))}</code> (its verdict: {_e(info.get('result_verdict'))})."
             "</p>",
             headline_html(verdict["status"], checks, None, summary, what="verification")]
+    reg = summary.get("registration")
+    if reg:
+        body.append('<section id="registration"><h2>Tracker registration</h2>'
+                    f"<p>Before judging anything the tracker frame is fitted again (rigid, 6 degrees of freedom) on "
+                    f"{reg['poses']} poses of its own, none of them a test pose, with the result's {_e(reg['model'])} "
+                    f"model: the tracker moved {reg['moved'] * MM:.2f} mm and turned {reg['turned_deg']:.3f}° since "
+                    f"the calibration (its origin's displacement and rotation). Residuals held out (5 folds): "
+                    f"{reg['heldout_rms'] * MM:.4f} mm RMS, at most {reg['heldout_max'] * MM:.4f} mm; the result "
+                    f"predicts {reg['expected_rms'] * MM:.4f} mm ({reg['ratio']:.2f}x: {_e(reg['status'])}"
+                    f"{'; ' + _e('; '.join(reg['reasons'])) if reg['reasons'] else ''}).</p></section>")
     body.append('<section id="poses"><h2>Per pose</h2>'
                 f"<p>ISO 9283-style: five poses on the diagonal plane of a cube of edge {summary['edge'] * MM:.0f} mm "
                 f"centred at {', '.join(f'{v * MM:.1f}' for v in summary['centre'])} mm (robot base frame), each "
@@ -100,6 +122,7 @@ def verification_html(summary: dict[str, Any], header: dict[str, Any], source: s
                 + _table(["pose", "target x, y, z [mm]", "predicted AP before [mm]", "AP before [mm]",
                           "predicted AP after [mm]", "AP after [mm]", "RP before [mm]", "RP after [mm]", "visits"],
                          _pose_rows(summary))
+                + _iso_extras(summary)
                 + _figure_html(figure_accuracy(summary), "AP and RP per pose, before and after compensation")
                 + "".join(f"<p>note: {_e(n)}</p>" for n in info.get("notes", [])) + "</section>")
     if session is not None:

@@ -14,6 +14,7 @@ from scipy.stats import chi2
 
 from acquire.cli import main as acquire
 from acquire.session import Session
+from acquire.verify import REGISTER_POSES
 from config.robots import load_robot
 from drivers.sim.rig import SimulatedRig
 from identify.cli import main as identify_main
@@ -101,13 +102,13 @@ def test_verification_on_the_mock_rig_matches_its_truth_and_resumes(tmp_path, ca
     assert "acquire verify --resume" in err
     with Session.open(session) as s:
         done = {r.plan_index: r for r in s.steps()}
-        assert 0 < len(done) < 10 * CYCLES
+        assert 0 < len(done) < 10 * CYCLES + REGISTER_POSES
     assert acquire(["verify", "--resume", str(session), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "verdict: pass" in out
     with Session.open(session) as s:
         steps = s.steps()
-        assert [r.plan_index for r in steps] == list(range(10 * CYCLES))  # none lost, none twice
+        assert [r.plan_index for r in steps] == list(range(10 * CYCLES + REGISTER_POSES))  # none lost, none twice
         assert all(steps[i] == r for i, r in done.items())
     implied, measured = _truth_implied(session, truth)
     tol = _tolerance(NOISE, CYCLES * SAMPLES)
@@ -198,16 +199,35 @@ def test_identify_report_shows_a_verification_run(tmp_path, capsys) -> None:
                        free_poses=8, check_poses=4)
     data = tmp_path / "m.csv"
     data.write_text(format_measurements(meas, {}))
-    summary = {"verdict": {"status": "pass", "message": "every pose within what the result predicts"}, "cycles": 10,
-               "runs": {"before": {"ap_max": 1.5e-3, "rp_max": 8e-5}, "after": {"ap_max": 2e-5, "rp_max": 8e-5}}}
-    verify_yaml = tmp_path / "v.verify.yaml"
-    verify_yaml.write_text(yaml.safe_dump(summary))
+    import hashlib
+
+    def verified(name: str, source: Path) -> Path:  # a result of ``source`` and the summary of its verification
+        result = tmp_path / f"{name}.result.yaml"
+        result.write_text(yaml.safe_dump({"source": str(source)}))
+        summary = {"verdict": {"status": "pass", "message": "every pose within what the result predicts"},
+                   "cycles": 10, "result": str(result),
+                   "result_sha256": hashlib.sha256(result.read_bytes()).hexdigest(),
+                   "runs": {"before": {"ap_max": 1.5e-3, "rp_max": 8e-5}, "after": {"ap_max": 2e-5, "rp_max": 8e-5}}}
+        out = tmp_path / f"{name}.verify.yaml"
+        out.write_text(yaml.safe_dump(summary))
+        return out
+
+    verify_yaml = verified("v", data)
     report = tmp_path / "r.html"
     args = [str(data), "--robot", "ur5e", "--report", str(report)]
     assert identify_main([*args, "--verification", str(verify_yaml)]) == 0
     text = report.read_text()
     assert "AP, pose accuracy" in text and "1.5000 mm" in text and "every pose within what the result predicts" in text
     capsys.readouterr()
+    # a verification of another calibration, or of a result file changed since, is refused before any computing
+    other_data = tmp_path / "other.csv"
+    other_data.write_text(data.read_text())
+    for summary, says in ((verified("w", other_data), "w.result.yaml (a calibration of"), (verify_yaml, "has changed")):
+        if summary == verify_yaml:
+            (tmp_path / "v.result.yaml").write_text(yaml.safe_dump({"source": str(data), "edited": True}))
+        assert identify_main([*args, "--force", "--verification", str(summary)]) == 2
+        err = capsys.readouterr().err
+        assert says in err and str(data) in err and len(err.strip().splitlines()) == 1
     assert identify_main([*args, "--force", "--verification", str(data)]) == 2
     assert "not the .verify.yaml" in capsys.readouterr().err
     assert identify_main([str(data), "--verification", str(verify_yaml)]) == 2
@@ -239,10 +259,101 @@ def test_verification_of_a_coupled_robot_commands_its_readings(tmp_path) -> None
     with Session.open(path) as s:
         assert s.coupling is not None and not s.coupling.is_identity
         first = s.steps()[0]
-    # the step records the controller's readings; the plan (and the command's record) its DH values
-    np.testing.assert_allclose(s.coupling.dh_from_readings(np.array([first.q_act])), [first.q_cmd], atol=1e-4)
+        planned = s.plan.steps[first.plan_index].q
+    # the step records the controller's readings (commanded and read); the plan holds DH values
+    assert abs(planned[1]) > 0.01  # J2 off zero: readings and DH values differ
+    np.testing.assert_allclose(s.coupling.dh_from_readings(np.array([first.q_act])), [planned], atol=1e-4)
+    assert np.max(np.abs(np.array(first.q_cmd) - first.q_act)) < 1e-4
     implied, measured = _truth_implied(Path(path), SimulatedRig("fanuc_lrmate200id", seed=0).truth)
     tol = _tolerance(NOISE, 4 * SAMPLES)
     np.testing.assert_allclose(measured["before"], implied["before"], atol=tol)
     np.testing.assert_allclose(measured["after"], implied["after"], atol=tol)
     assert implied["before"].min() > 0.5e-3 and measured["after"].max() < 2 * NOISE
+
+
+def _registration_allowance(noise: float, samples: int) -> float:
+    """How far a rigid registration on REGISTER_POSES poses (each the mean of ``samples`` readings of per-axis
+    ``noise``) can shift a point inside the cube: six parameters on 3·REGISTER_POSES values, taken at 4 sigma
+    (3D) and doubled for the cube poses lying up to twice as far out as the registration poses."""
+    return 2 * 4 * noise / np.sqrt(samples) * np.sqrt(6 / (3 * REGISTER_POSES)) * np.sqrt(3)
+
+
+def test_a_moved_tracker_gives_the_same_figures_and_another_arm_fails(tmp_path, capsys) -> None:
+    """The tracker put back elsewhere (turned 123°, shifted 2 m): the registration finds the move and AP agrees with
+    the simulated truth as without it. Another arm of the same model at the same place: exit 3, named."""
+    truth = SimulatedRig("ur5e", seed=0).truth
+    result = _result(truth, tmp_path)
+    session = tmp_path / "moved.session"
+    shift, turn = np.array([1.5, -1.2, 0.6]) * 2.0 / np.linalg.norm([1.5, -1.2, 0.6]), np.array([40.0, -100.0, 60.0])
+    tracker = f"mock?moved={','.join(map(str, shift))}&turned={','.join(map(str, turn))}"
+    assert acquire(["verify", "--result", str(result), "--robot", "mock:ur5e", "--tracker", tracker, "--session",
+                    str(session), "--cycles", str(CYCLES), "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "verdict: pass" in out and "tracker registered on 8 poses" in out
+    summary = yaml.safe_load(session.with_suffix(".verify.yaml").read_text())
+    reg = summary["registration"]
+    # the registration's rotation error (noise / ~0.2 m) moves the tracker's origin, 1-2 m away, by up to ~1 mm
+    assert reg["moved"] == pytest.approx(2.0, abs=1e-3)
+    assert reg["turned_deg"] == pytest.approx(np.linalg.norm(turn), abs=0.05)
+    implied, measured = _truth_implied(session, truth)  # the truth without the move: AP is the base frame's
+    tol = _tolerance(NOISE, CYCLES * SAMPLES) + _registration_allowance(NOISE, SAMPLES)
+    np.testing.assert_allclose(measured["before"], implied["before"], atol=tol)
+    np.testing.assert_allclose(measured["after"], implied["after"], atol=tol)
+    assert implied["before"].min() > 0.5e-3
+    # distance accuracy P2-P4 (ISO 9283 7.3) against the truth's: a rigid registration leaves distances alone, so
+    # only the noise of D̄ counts: sqrt(2) x the visit's noise over sqrt(cycles), at 4 sigma, plus repeatability
+    with Session.open(session) as s:
+        info = s.header["config"]["verification"]
+    targets = np.array(info["targets"])
+    for mode in ("before", "after"):
+        reached = points_from_joints(truth, np.array(info["q"][mode]))
+        ad_true = np.linalg.norm(reached[1] - reached[3]) - np.linalg.norm(targets[1] - targets[3])
+        run = summary["runs"][mode]
+        assert run["distance"]["ad"] == pytest.approx(ad_true, abs=4 * np.sqrt(2 / CYCLES / SAMPLES) * NOISE + 5e-6)
+        assert run["distance"]["n"] == CYCLES and run["drift"]["visits_each"] == 2
+    assert abs(summary["runs"]["before"]["distance"]["ad"]) > 0.2e-3  # the nominal model's distances are off
+    assert "AD P2-P4 (7.3)" in out
+    other = tmp_path / "other.session"
+    assert acquire(["verify", "--result", str(result), "--robot", "mock:ur5e?arm=7", "--tracker", "mock",
+                    "--session", str(other), "--cycles", "2", "--quiet"]) == 3
+    out = capsys.readouterr().out
+    assert "verdict: fail" in out and "another arm or another tool" in out
+
+
+def test_distance_drift_and_multi_directional_follow_iso_9283_by_hand() -> None:
+    """ISO 9283 7.3, 7.6 and 7.2 on numbers worked out by hand (mm written as 1e-3 m)."""
+    from identify.iso9283 import distance_result, drift, multi_directional
+
+    mm = 1e-3
+    a = np.zeros((3, 3))
+    b = np.array([[1.001, 0, 0], [1.002, 0, 0], [1.003, 0, 0]])  # D_j = 1.001, 1.002, 1.003 m
+    d = distance_result(2, 4, [0, 0, 0], [1, 0, 0], a, b)
+    assert d.commanded == 1.0 and d.mean == pytest.approx(1.002, abs=1e-15)
+    assert d.ad == pytest.approx(2 * mm, abs=1e-15)  # D̄ - D_c
+    assert d.rd == pytest.approx(3 * mm, rel=1e-9)  # 3 S_D, S_D = 1 mm
+    assert d.ad_std == pytest.approx(mm / np.sqrt(3), rel=1e-9) and d.rd_std == pytest.approx(1.5 * mm, rel=1e-9)
+    # P1 at the origin: first third (2 visits) at (1, 0, 0) mm, last third at (0, 2, 0) and (0, 2, 0.002) mm
+    visits = np.array([[1, 0, 0], [1, 0, 0], [5, 5, 5], [5, 5, 5], [0, 2, 0], [0, 2, 0.002]]) * mm
+    dr = drift(1, np.zeros(3), visits)
+    assert dr.first.ap == pytest.approx(mm) and dr.first.rp == pytest.approx(0.0, abs=1e-15)
+    assert dr.last.ap == pytest.approx(np.hypot(2, 0.001) * mm, rel=1e-12)
+    assert dr.dap == pytest.approx((np.hypot(2, 0.001) - 1) * mm, rel=1e-12)
+    assert dr.drp == pytest.approx(0.001 * mm, rel=1e-9)  # l_j = 0.001 mm both: l̄ = 0.001 mm, S_l = 0
+    # barycentres from three directions: pairwise 5, 1 and sqrt(26) mm
+    assert multi_directional(np.array([[0, 0, 0], [3, 4, 0], [0, 0, 1]]) * mm) == pytest.approx(np.sqrt(26) * mm)
+    with pytest.raises(ValueError, match="at least 4 visits"):
+        drift(1, np.zeros(3), visits[:3])
+    with pytest.raises(ValueError, match="same 2 or more cycles"):
+        distance_result(2, 4, [0, 0, 0], [1, 0, 0], a, b[:2])
+
+
+def test_registration_variance_is_that_of_a_mean_at_the_centroid_and_grows_outside() -> None:
+    """At the centroid of the fitted points the rotation does not count: the 3D variance is expected² / k (a mean of
+    k points); beyond them it grows with the distance (the rotation's lever arm)."""
+    from acquire.verify import registration_variance
+
+    corners = 0.1 * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    var = registration_variance(corners + 5.0, np.array([[5.0, 5.0, 5.0], [5.3, 5.0, 5.0]]), 1e-4)
+    assert var[0] == pytest.approx(1e-8 / 8, rel=1e-9)
+    # 0.3 m out along x: the rotations about y and z (variance sigma² / (8 · 0.02 m²) each) add 2 · 0.09 m² of it
+    assert var[1] == pytest.approx(1e-8 / 8 + 2 * 0.09 * (1e-8 / 3) / (8 * 0.02), rel=1e-9)

@@ -157,12 +157,17 @@ def test_mock_settings_are_typed_with_defaults() -> None:
     robot = RobotSpec.parse("mock:ur5e?seed=3&fault=protective_stop@40,slow@5x2,unsettled").mock_settings()
     assert robot == {"seed": 3, "repeatability": 2e-6, "ring": 1e-5, "ring_tau": 0.1,
                      "fault": (FaultSpec("protective_stop", 40), FaultSpec("slow", 5, 2), FaultSpec("unsettled")),
-                     "scale": 0.0, "eccentricity": 0.0, "compliance": 0.0, "points": 1, "occlusion": 0.0,
-                     "rate": 500.0, "drop": 0.0}
-    tracker = TrackerSpec.parse("mock?noise=1e-4&dropout=0.02&fault=target_lost@10x3").mock_settings()
+                     "scale": 0.0, "eccentricity": 0.0, "compliance": 0.0, "arm": None, "points": 1,
+                     "occlusion": 0.0, "rate": 500.0, "drop": 0.0}
+    tracker = TrackerSpec.parse("mock?noise=1e-4&dropout=0.02&fault=target_lost@10x3&turned=0,-90,1e1"
+                                ).mock_settings()
     assert tracker == {"noise": 1e-4, "latency": 0.002, "dropout": 0.02, "seed": None,
-                       "fault": (FaultSpec("target_lost", 10, 3),), "points": None, "occlusion": None,
+                       "fault": (FaultSpec("target_lost", 10, 3),), "points": None, "moved": (0.0, 0.0, 0.0),
+                       "turned": (0.0, -90.0, 10.0), "occlusion": None,
                        "rate": 250.0, "clock_offset": 0.0, "drift": 0.0, "stamp_jitter": 0.0, "lost": (0.0, 2.0)}
+    for bad in ("1,2", "1,2,x", "1,2,nan", "1,2,3,4"):
+        with pytest.raises(SpecError, match="must be X,Y,Z: three finite numbers"):
+            TrackerSpec.parse(f"mock?moved={bad}").mock_settings()
     assert str(FaultSpec("target_lost", 10, 3)) == "target_lost@10x3"
     assert str(FaultSpec("slow")) == "slow"
 

@@ -430,3 +430,23 @@ def test_wall_clock_plays_at_real_speed() -> None:
     robot.move_joints(pose(j6=0.004), SPEED, ACC, timeout=5)  # triangular: 2·sqrt(0.004) = 0.126 s
     assert 0.12 < time.perf_counter() - t < 1.0
     assert len(tracker.measure(3, 1.0)) == 3
+
+
+def test_rig_swaps_the_arm_and_moves_the_tracker() -> None:
+    """arm=N: another DH table of the model, at the same placement with the same TP; moved/turned: the tracker
+    sees every point through the rigid move (rotation vector in degrees, then the shift), nothing else changes."""
+    from scipy.spatial.transform import Rotation
+
+    first = SimulatedRig.from_spec("mock:ur5e", "mock").truth
+    other = SimulatedRig.from_spec("mock:ur5e?arm=7", "mock").truth
+    np.testing.assert_array_equal(other.base, first.base)
+    np.testing.assert_array_equal(other.tool, first.tool)
+    assert np.max(np.abs(other.a - first.a)) > 1e-4  # another arm: its lengths differ by a tenth of a mm or more
+    moved = SimulatedRig.from_spec("mock:ur5e", "mock?moved=1.2,-1.5,0.4&turned=100,0,-40")
+    move = np.eye(4)
+    move[:3, :3] = Rotation.from_rotvec(np.radians([100.0, 0.0, -40.0])).as_matrix()
+    move[:3, 3] = [1.2, -1.5, 0.4]
+    np.testing.assert_allclose(moved.truth.base, move @ first.base, atol=1e-15)
+    np.testing.assert_array_equal(moved.truth.a, first.a)
+    with pytest.raises(ValueError, match="disagrees with the simulated rig on moved, turned"):
+        open_tracker("mock", rig=moved)
