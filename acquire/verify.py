@@ -45,6 +45,7 @@ from identify.compensate import solve_ik
 from identify.holds import MIN_POSES, ModelCheck, check_models, tabulated
 from identify.iso9283 import Accuracy, Distance, Drift, accuracy, cube_poses, distance_result, drift, visit_order
 from identify.result_models import result_models
+from kinematics.dh import DHModel
 from session.plan import Plan, Step
 
 Array = NDArray[np.float64]
@@ -93,13 +94,16 @@ def reach(robot: RobotModel) -> float:
     return float(np.sum(np.hypot(m.a, m.d)) + np.sum(strokes))
 
 
-def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, plan_ok: Any = None) -> Design:
+def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, plan_ok: Any = None,
+           before: DHModel | None = None) -> Design:
     """The test's poses and commands for ``identified`` (a result) on ``robot`` in ``site``; VerifyError (one
     line) when the poses cannot be reached or planned. ``plan_ok(q_before, q_after, q_register)`` returns the
     reasons a candidate cannot run (none: it can); a default cube that fails is tried lower, higher, then smaller
-    (noted)."""
+    (noted). ``before``: the model the controller moves with today (:func:`identify.controller.controller_model`;
+    default the nominal), which commands the "before" visits."""
     ident = identified.with_base(np.eye(4))
-    nominal = CalibratedModel.exact(replace(robot.nominal, tool=ident.tool()), robot.name)
+    nominal = CalibratedModel.exact(replace(robot.nominal if before is None else before, tool=ident.tool()),
+                                    robot.name)
     home = np.array(robot.home, dtype=float)
     at_home = nominal.points(home)[0]
     given_centre = site.verify_centre is not None
@@ -222,9 +226,11 @@ def problems(plan: Plan, robot: RobotModel, site: SiteConfig) -> list[str]:
 
 
 def header(d: Design, labels: list[list[Any]], identified: CalibratedModel, result: str, sha256: str,
-           verdict: str | None, cycles: int, doc: dict[str, Any]) -> dict[str, Any]:
-    """What the session keeps to be analysed alone (JSON-able; m, rad); ``doc`` the result document."""
+           verdict: str | None, cycles: int, doc: dict[str, Any], before: str = "nominal model") -> dict[str, Any]:
+    """What the session keeps to be analysed alone (JSON-able; m, rad); ``doc`` the result document, ``before``
+    the name of the model that commands the "before" visits."""
     return {"register": register_header(doc, identified, d.register), "result": result, "result_sha256": sha256,
+            "before_model": before,
             "result_verdict": verdict, "cycles": cycles,
             "centre": d.centre.tolist(), "edge": d.edge, "targets": d.targets.tolist(),
             "rotation": None if d.rotation is None else d.rotation.tolist(),
@@ -256,7 +262,8 @@ class Outcome:
         return {**out, "runs": {m: a.as_dict() for m, a in self.runs.items()}, "missing_steps": self.missing,
                 "predicted": info["predicted"], "expected": info["expected"], "targets": info["targets"],
                 "result": info["result"], "result_sha256": info.get("result_sha256"), "cycles": info["cycles"],
-                "edge": info["edge"], "centre": info["centre"]}
+                "edge": info["edge"], "centre": info["centre"],
+                "before_model": info.get("before_model", "nominal model")}
 
 
 def register(info: dict[str, Any], records: list[Any]) -> ModelCheck | str:

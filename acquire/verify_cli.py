@@ -37,12 +37,14 @@ from acquire.session import Session
 from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
 from common import fit_width
 from common.arguments import OneLineParser
+from common.errors import InputError
 from common.fit_width import say
 from common.help_text import description as _description
 from common.outputs import check_outputs, check_target, write_output
 from config.robots import RobotModel, load_robot
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.calibrated import CalibratedModel, ResultError, nominal_name
+from identify.controller import check_same_robot, controller_model
 from identify.holds import ModelCheck
 from identify.io.result_io import load_result
 from identify.report.verify_rows import iso_rows
@@ -94,10 +96,10 @@ def _robot_for(args: argparse.Namespace, doc: dict[str, Any], model: CalibratedM
     name = nominal_name(doc)
     spec = RobotSpec.parse(args.robot if args.robot is not None else f"mock:{name or 'ur5e'}").resolved()
     robot = load_robot(spec.model)
-    if name is not None and name.lower() != robot.name.lower():
-        raise UsageError(f"{args.result} is a calibration of {name}; --robot {spec} is a {robot.name}")
-    if robot.joint_types != model.model.joint_types:
-        raise UsageError(f"{args.result} has joints {model.model.joint_types}, {robot.name} {robot.joint_types}")
+    try:
+        check_same_robot(doc, model.model.joint_types, robot, result=str(args.result))
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
     return spec, robot
 
 
@@ -105,7 +107,8 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
     """The test as the operator reads it before anything moves."""
     targets = np.array(info["targets"]) * MM
     lines = [f"verification of {info['result']} (verdict {info['result_verdict']}) on {robot.name}: ISO 9283-style, "
-             f"5 poses x {info['cycles']} cycles, before (nominal model) then after (identified model)",
+             f"5 poses x {info['cycles']} cycles, before ({info.get('before_model', 'nominal model')}) then after "
+             "(identified model)",
              f"test cube: centre {', '.join(f'{v * MM:.1f}' for v in info['centre'])} mm, edge {info['edge'] * MM:.0f} "
              "mm (base frame); per pose: its target, the joints commanded before compensation, and the AP "
              "predicted before / after [mm]"]
@@ -206,12 +209,17 @@ def run(args: argparse.Namespace) -> int:
         return problems(plan, robot, site)
 
     try:
-        d = design(model, robot, site, plan_ok)
+        before, before_name = controller_model(doc, robot)
+    except InputError as exc:
+        raise UsageError(str(exc)) from None
+    try:
+        d = design(model, robot, site, plan_ok, before)
     except VerifyError as exc:
         print(f"acquire verify: test refused: {exc}", file=sys.stderr)
         return 2
     plan, labels = build(robot, site, d.q, cycles, d.register)
-    info = header(d, labels, model, str(args.result), sha, (doc.get("verdict") or {}).get("status"), cycles, doc)
+    info = header(d, labels, model, str(args.result), sha, (doc.get("verdict") or {}).get("status"), cycles, doc,
+                  before_name)
     say(format_design(info, robot, plan, estimate_duration(plan, robot, site.measure_time)))
     say(format_clearance(plan_clearance(plan, robot, site), plan, site))
     if args.dry_run:

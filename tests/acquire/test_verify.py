@@ -357,3 +357,28 @@ def test_registration_variance_is_that_of_a_mean_at_the_centroid_and_grows_outsi
     assert var[0] == pytest.approx(1e-8 / 8, rel=1e-9)
     # 0.3 m out along x: the rotations about y and z (variance sigma² / (8 · 0.02 m²) each) add 2 · 0.09 m² of it
     assert var[1] == pytest.approx(1e-8 / 8 + 2 * 0.09 * (1e-8 / 3) / (8 * 0.02), rel=1e-9)
+
+
+def test_before_is_what_the_controller_runs_today(tmp_path, capsys) -> None:
+    """Issue 24, item 4: "before" was always the nominal model; a result that records the controller's own
+    calibration (a UR's factory DH values) is commanded "before" with that, and the dry run names it."""
+    truth = SimulatedRig("ur5e", seed=0).truth
+    result = _result(truth, tmp_path, seed=5)
+    assert acquire(["verify", "--result", str(result), "--dry-run"]) == 0
+    nominal_run = capsys.readouterr().out
+    assert "before (nominal ur5e)" in nominal_run
+    doc = yaml.safe_load(result.read_text())
+    table = ROBOT.nominal.dh_table()
+    dh = {key: table[:, k].tolist() for k, key in enumerate(("theta", "d", "a", "alpha"))}
+    dh["theta"][1] += 0.01  # a factory calibration 10 mrad off the nominal on joint 2
+    doc["controller"] = {"model": "factory calibration", "dh": dh}
+    factory = tmp_path / "factory.result.yaml"
+    factory.write_text(yaml.safe_dump(doc))
+    assert acquire(["verify", "--result", str(factory), "--dry-run"]) == 0
+    factory_run = capsys.readouterr().out
+    assert "before (factory calibration of the ur5e's controller)" in factory_run
+
+    def before_joints(text: str) -> list[str]:
+        return [line for line in text.splitlines() if line.lstrip().startswith(("P1", "P2", "P3", "P4", "P5"))]
+
+    assert before_joints(factory_run) != before_joints(nominal_run)
