@@ -53,6 +53,10 @@ def _main(argv: list[str]) -> int:
         from acquire.session_commands import main as session_command
 
         return session_command(argv)
+    if argv[:1] == ["verify"] and {"-h", "--help"} & set(argv[1:]):  # help without the estimator's imports
+        from acquire.verify_options import build_parser
+
+        build_parser().parse_args(argv[1:])  # prints the help and exits 0
     if not argv[:1] or argv[0] not in SUBCOMMANDS:
         refusal = _quick_refusal(argv)  # --help, --version, a bad option or device spec: before the heavy imports
         if refusal is not None:

@@ -21,6 +21,7 @@ import numpy as np
 TARGET = 0.3  # s of CPU: an answer that feels immediate, even on a loaded controller PC
 CASES = (("acquire", "--help"), ("acquire", "--version"), ("acquire", "--robot", "moc:ur5e"),
          ("acquire", "--noise", "0.05xx"), ("acquire", "export", "--help"), ("acquire", "backup", "--help"),
+         ("acquire", "verify", "--help"),
          ("identify", "--help"), ("identify", "--version"),
          ("identify", "missing.csv"), ("identify", "x.csv", "--noise", "0.05xx"))
 

@@ -31,6 +31,7 @@ print(json.dumps([code, sorted(sys.modules)]))
     ("acquire.launch", ["--tracker", "serial"], 2),
     ("acquire.launch", ["export", "--help"], 0),  # before, these two imported everything (1 s of CPU)
     ("acquire.launch", ["backup", "--help"], 0),
+    ("acquire.launch", ["verify", "--help"], 0),  # before: the estimator and the drivers (about 1 s of CPU)
     ("acquire.launch", ["export", "s.session"], 2),
     ("identify.launch", ["--help"], 0),
     ("identify.launch", ["--version"], 0),
