@@ -162,7 +162,7 @@ def figure_frames(ident: Identification, fit: Measurements, cell: dict[str, Any]
     ax.tick_params(labelsize=7)
     ax.view_init(elev=22, azim=-60)
     ax.set_title("3D, robot base frame", fontsize=10)
-    ax.legend(fontsize=7, loc="upper left")
+    fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower left", ncol=3, frameon=False)  # off the data
     top.set_aspect("equal", adjustable="datalim")
     top.set_xlabel("x [mm]")
     top.set_ylabel("y [mm]")
