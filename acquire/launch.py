@@ -10,9 +10,10 @@ writers started together, one is refused within milliseconds). Every other comma
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
+
+from common.stop_signals import guarded
 
 
 def resume_target(argv: list[str]) -> Path | None:
@@ -32,17 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     (Ctrl-C, SIGTERM, SIGHUP) while the command starts up stops it with one line and exit code 130: this module
     imports nothing else before its handlers are set."""
     argv = sys.argv[1:] if argv is None else argv
-    try:
-        from common import stop_signals
-
-        with stop_signals.raising():
-            return _main(argv)
-    except KeyboardInterrupt as exc:  # a Stopped says which signal; Python's own KeyboardInterrupt is Ctrl-C
-        print(f"acquire: {str(exc) or 'stopped by the operator (Ctrl-C)'}", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # the reader of stdout went away (``| head``): stop quietly, as a pipeline expects
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes it
-        return 141  # 128 + SIGPIPE, what a shell reports for a command its pipe stopped
+    return guarded("acquire", lambda: _main(argv))
 
 
 SUBCOMMANDS = ("export", "backup", "verify", "calibrate-camera", "print-board")  # parsed by their own modules

@@ -8,7 +8,9 @@ KeyboardInterrupt that remembers its signal, so every ``except KeyboardInterrupt
 
 from __future__ import annotations
 
+import os
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -64,3 +66,18 @@ def raising() -> Iterator[None]:
     """Inside the block SIGTERM and SIGHUP raise :class:`Stopped` (SIGINT keeps Python's KeyboardInterrupt)."""
     with routed(lambda signum: _raise(signum, None), tuple(s for s in SIGNALS if s != signal.SIGINT)):
         yield
+
+
+def guarded(prog: str, body: Callable[[], int]) -> int:
+    """A command's entry point: ``body()`` with SIGTERM and SIGHUP raising as Ctrl-C does; a stop at any moment
+    (start-up imports included) is one line on stderr and exit code 130, a closed stdout (``| head``) a quiet
+    exit 141 (128 + SIGPIPE, what a shell reports for a command its pipe stopped)."""
+    try:
+        with raising():
+            return body()
+    except KeyboardInterrupt as exc:  # a Stopped says which signal; Python's own KeyboardInterrupt is Ctrl-C
+        print(f"{prog}: {str(exc) or reason(None)}", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # the reader of stdout went away: stop quietly, as a pipeline expects
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes it
+        return 141

@@ -7,34 +7,29 @@ start-up, imports included, or during the run stops the command with one line an
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
+
+from common.stop_signals import guarded
 
 
 def main(argv: list[str] | None = None) -> int:
     """``identify``; see :func:`identify.cli.main`."""
     argv = sys.argv[1:] if argv is None else argv
-    try:
-        from common import stop_signals
+    return guarded("identify", lambda: _main(argv))
 
-        with stop_signals.raising():
-            from identify.options import SUBCOMMANDS, build_parser
 
-            if not argv[:1] or argv[0] not in SUBCOMMANDS:
-                args = build_parser().parse_args(argv)  # --help, --version and usage errors exit here
-                if not Path(args.input).exists():
-                    print(f"identify: error: {args.input}: no such file", file=sys.stderr)
-                    return 2
-            from identify.cli import main as full_main
+def _main(argv: list[str]) -> int:
+    from identify.options import SUBCOMMANDS, build_parser
 
-            return full_main(argv)
-    except KeyboardInterrupt as exc:  # a Stopped says which signal; Python's own KeyboardInterrupt is Ctrl-C
-        print(f"identify: {str(exc) or 'stopped by the operator (Ctrl-C)'}", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # the reader of stdout went away (``| head``): stop quietly, as a pipeline expects
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes it
-        return 141  # 128 + SIGPIPE, what a shell reports for a command its pipe stopped
+    if not argv[:1] or argv[0] not in SUBCOMMANDS:
+        args = build_parser().parse_args(argv)  # --help, --version and usage errors exit here
+        if not Path(args.input).exists():
+            print(f"identify: error: {args.input}: no such file", file=sys.stderr)
+            return 2
+    from identify.cli import main as full_main
+
+    return full_main(argv)
 
 
 if __name__ == "__main__":
