@@ -24,6 +24,7 @@ from drivers.spec import RobotSpec, TrackerSpec
 from identify.bounds import prediction_rms_bound
 from identify.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
+from tests._session_steps import recorded_steps
 
 ROBOT = "mock:ur5e?seed=3"
 SMALL = ["--steps", "12", "--samples", "3", "--free-poses", "6", "--quiet"]
@@ -150,17 +151,6 @@ def test_bad_specs_and_sessions_give_one_line_and_exit_2(tmp_path, capsys):
     assert len(lines) == 3 and all(line.startswith("acquire: error:") for line in lines)
 
 
-def _recorded(path: Path) -> int:
-    """Steps recorded so far, read without disturbing the writer (0 before the file exists)."""
-    if not path.exists():
-        return 0
-    try:
-        with sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=1) as db:
-            return int(db.execute("SELECT count(*) FROM steps").fetchone()[0])
-    except sqlite3.Error:
-        return 0
-
-
 def _logged_steps(log: Path) -> int:
     """Steps a run has recorded so far, from its --log file (0 before the file exists)."""
     try:
@@ -220,7 +210,7 @@ def test_ctrl_c_stops_motion_closes_the_session_and_prints_the_resume_command(tm
                              "--realtime", "--session", str(path)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
-    while _recorded(path) < 1 and time.monotonic() < deadline and proc.poll() is None:
+    while recorded_steps(path) < 1 and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.01)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=30)

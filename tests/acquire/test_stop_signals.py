@@ -5,7 +5,6 @@ caught inside an import's ``exec`` as death by SIGINT, whatever the code returns
 from __future__ import annotations
 
 import signal
-import sqlite3
 import subprocess
 import sys
 import time
@@ -15,6 +14,7 @@ import pytest
 
 from acquire.cli import main
 from acquire.session import Session
+from tests._session_steps import recorded_steps
 
 ROBOT = "mock:ur5e?seed=3"
 SMALL = ["--steps", "12", "--samples", "3", "--free-poses", "6", "--quiet"]
@@ -33,17 +33,6 @@ def _handler_installed(pid: int, signum: int, timeout: float = 20.0) -> None:
         time.sleep(0.005)
 
 
-def _recorded(path: Path) -> int:
-    """Steps recorded so far, read without disturbing the writer (0 before the file exists)."""
-    if not path.exists():
-        return 0
-    try:
-        with sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=1) as db:
-            return int(db.execute("SELECT count(*) FROM steps").fetchone()[0])
-    except sqlite3.Error:
-        return 0
-
-
 @pytest.mark.parametrize(("signum", "said"), [(signal.SIGTERM, "stopped by SIGTERM"),
                                               (signal.SIGHUP, "stopped by SIGHUP")])
 def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, capsys, signum, said):
@@ -53,7 +42,7 @@ def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, capsys, signum, s
     proc = subprocess.Popen([*COMMAND, "--robot", ROBOT, "--tracker", "mock", *SMALL, "--realtime",
                              "--session", str(path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
-    while _recorded(path) < 2 and time.monotonic() < deadline and proc.poll() is None:
+    while recorded_steps(path) < 2 and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.01)
     proc.send_signal(signum)
     _, err = proc.communicate(timeout=30)
