@@ -19,22 +19,29 @@ _SHOWN = ("m", "cm", "mm", "um", "in")  # as the error message lists them
 #: seconds per unit
 TIME_UNITS = {"s": 1.0, "min": 60.0, "h": 3600.0}
 
-_LENGTH = re.compile(r"\s*(?P<number>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*(?P<unit>[^\d\s.+-]*)\s*")
+_QUANTITY = re.compile(r"\s*(?P<number>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*(?P<unit>[^\d\s.+-]*)\s*")
+
+
+def _quantity(text: str, units: dict[str, float], kind: str, shown: tuple[str, ...] | list[str], examples: str,
+              bare: str) -> float:
+    """``text``, a number with one of ``units`` (or none: the base unit, named ``bare``), in the base unit.
+    ValueError (one line naming the accepted units and ``examples``) for anything else, non-finite numbers
+    included."""
+    match = _QUANTITY.fullmatch(text)
+    unit = match["unit"] if match else None
+    if match is None or unit not in ("", *units):
+        raise ValueError(f"{text!r} is not a {kind}: write a number with a unit ({', '.join(shown)}), e.g. {examples}; "
+                         f"a bare number is {bare}")
+    value = float(match["number"]) * (units[unit] if unit else 1.0)
+    if not math.isfinite(value):
+        raise ValueError(f"{text!r} is not a finite {kind}")
+    return value
 
 
 def parse_length(text: str) -> float:
     """``text`` as metres: ``0.05mm`` -> 5e-05, ``50um`` -> 5e-05, ``5e-5`` -> 5e-05. ValueError (one line, naming
     the accepted units) for anything else, non-finite numbers included."""
-    match = _LENGTH.fullmatch(text)
-    unit = match["unit"] if match else None
-    if match is None or unit not in ("", *LENGTH_UNITS):
-        raise ValueError(f"{text!r} is not a length: write a number with a unit ({', '.join(_SHOWN)}), e.g. 0.05mm "
-                         "or 50um; a bare number is metres")
-    value = float(match["number"]) * (LENGTH_UNITS[unit] if unit else 1.0)
-    if not math.isfinite(value):
-        raise ValueError(f"{text!r} is not a finite length")
-    return value
-
+    return _quantity(text, LENGTH_UNITS, "length", _SHOWN, "0.05mm or 50um", "metres")
 
 
 def length(text: str) -> float:
@@ -56,15 +63,7 @@ def positive_length(text: str) -> float:
 def parse_duration(text: str) -> float:
     """``text`` as seconds: ``90s`` -> 90.0, ``1.5min`` -> 90.0, ``2h`` -> 7200.0, ``90`` -> 90.0. ValueError (one
     line, naming the accepted units) for anything else, non-finite numbers included."""
-    match = _LENGTH.fullmatch(text)
-    unit = match["unit"] if match else None
-    if match is None or unit not in ("", *TIME_UNITS):
-        raise ValueError(f"{text!r} is not a duration: write a number with a unit ({', '.join(TIME_UNITS)}), e.g. "
-                         "90s or 1.5min; a bare number is seconds")
-    value = float(match["number"]) * (TIME_UNITS[unit] if unit else 1.0)
-    if not math.isfinite(value):
-        raise ValueError(f"{text!r} is not a finite duration")
-    return value
+    return _quantity(text, TIME_UNITS, "duration", list(TIME_UNITS), "90s or 1.5min", "seconds")
 
 
 def positive_duration(text: str) -> float:
