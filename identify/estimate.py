@@ -205,6 +205,18 @@ def pose_ids(data: FitData) -> NDArray[np.int64]:
     return out
 
 
+def _poses(data: FitData) -> NDArray[np.int64] | None:
+    """The rows' poses for the outlier test's rigid-motion rescue; None with one tracked point (nothing to compare)."""
+    return pose_ids(data) if len(np.unique(data.tp_index)) > 1 else None
+
+
+def _outlier_test(data: FitData, res: Array, lev: Array, q: Array, poses: NDArray[np.int64] | None
+                  ) -> NDArray[np.bool_]:
+    """The rows :func:`identify.outliers.outlier_free` keeps, for weighted residuals ``res`` (m, 3) with leverages
+    ``lev`` at joint values ``q``."""
+    return outlier_free(res, lev, data.group, along_arc(q, data.joint), data.unknown, poses, data.points)
+
+
 def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointTerms | None = None) -> LinesFit:
     """Least squares from ``start`` (with the joint errors ``terms``); if any sample fails the outlier
     test, a soft-L1 fit, the test again on its residuals, and a final least-squares fit on the samples
@@ -212,17 +224,17 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
     lines, q_s, res, terms, timing = data.fit(start, terms)
     data = data.timed(timing)
     inliers = np.ones(len(data.q), dtype=bool)
-    poses = pose_ids(data) if len(np.unique(data.tp_index)) > 1 else None
+    poses = _poses(data)
     if robust:
         zero = np.zeros(data.problem(lines, terms).size)
         lev = leverages(data.problem(lines, terms).jacobian_blocks(zero), data.unknown)
-        inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown, poses, data.points)
+        inliers = _outlier_test(data, res, lev, q_s, poses)
         if not np.all(inliers):
             for _ in range(ROBUST_PASSES):  # the scale of a fit pulled by outliers is too wide: shrink it
                 scale = max(robust_scale(res, lev), NOISE_FLOOR * float(np.median(data.weights)))
                 lines, q_s, res, terms, timing = data.fit(lines, terms, "soft_l1", ROBUST_WIDTH * scale)
                 data = data.timed(timing)
-            inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown, poses, data.points)
+            inliers = _outlier_test(data, res, lev, q_s, poses)
             for _ in range(2):  # least squares on the samples kept; re-admit those it then explains
                 kept_fit = data.subset(inliers).fit(lines, terms.subset(inliers))
                 lines, terms = kept_fit.lines, replace(terms, coefs=kept_fit.terms.coefs)
@@ -233,13 +245,10 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
                 res = problem.residuals(zero).reshape(-1, 3)
                 kept = inliers
                 lev = leverages(problem.jacobian_blocks(zero), data.unknown)
-                inliers = outlier_free(res, lev, data.group, along_arc(q_s, data.joint), data.unknown, poses,
-                                       data.points)
+                inliers = _outlier_test(data, res, lev, q_s, poses)
                 if np.array_equal(inliers, kept):
                     break
-    scale = max(robust_scale(res[inliers], np.zeros(int(inliers.sum()))), NOISE_FLOOR)
-    r2 = np.sum(res**2, axis=1) / (ROBUST_WIDTH * scale) ** 2
-    cost = float(np.sum(2.0 * (np.sqrt(1.0 + r2) - 1.0)))
+    cost = _soft_l1(res, _inlier_scale(res, inliers))
     return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms, data.timing)
 
 
@@ -252,8 +261,7 @@ def fit_kept(start: AxisLines, data: FitData, inliers: NDArray[np.bool_], label:
     terms = replace(terms, coefs=kept.terms.coefs)
     problem = data.problem(kept.lines, terms)
     res = problem.residuals(np.zeros(problem.size)).reshape(-1, 3)
-    scale = max(robust_scale(res[inliers], np.zeros(int(inliers.sum()))), NOISE_FLOOR)
-    cost = float(np.sum(2.0 * (np.sqrt(1.0 + np.sum(res**2, axis=1) / (ROBUST_WIDTH * scale) ** 2) - 1.0)))
+    cost = _soft_l1(res, _inlier_scale(res, inliers))
     return LinesFit(kept.lines, problem.joints(kept.lines), inliers.copy(), -res / data.weights[:, None], cost, label,
                     terms, data.timing)
 
@@ -265,12 +273,18 @@ def best_start(fits: list[LinesFit], data: FitData) -> LinesFit:
     if len(fits) == 1:
         return fits[0]
     weighted = [-f.residuals * data.timed(f.timing).weights[:, None] for f in fits]
-    scale = max(min(robust_scale(r[f.inliers], np.zeros(int(f.inliers.sum()))) for r, f in zip(weighted, fits,
-                                                                                              strict=True)),
-                NOISE_FLOOR)
-    costs = [float(np.sum(2.0 * (np.sqrt(1.0 + np.sum(r**2, axis=1) / (ROBUST_WIDTH * scale) ** 2) - 1.0)))
-             for r in weighted]
-    return fits[int(np.argmin(costs))]
+    scale = min(_inlier_scale(r, f.inliers) for r, f in zip(weighted, fits, strict=True))
+    return fits[int(np.argmin([_soft_l1(r, scale) for r in weighted]))]
+
+
+def _inlier_scale(res: Array, inliers: NDArray[np.bool_]) -> float:
+    """Robust per-axis noise of the weighted residuals ``res`` (m, 3) of the ``inliers``, at least the floor."""
+    return max(robust_scale(res[inliers], np.zeros(int(inliers.sum()))), NOISE_FLOOR)
+
+
+def _soft_l1(res: Array, scale: float) -> float:
+    """Soft-L1 cost of weighted residuals ``res`` (m, 3) on noise ``scale`` (the loss of the robust pass)."""
+    return float(np.sum(2.0 * (np.sqrt(1.0 + np.sum(res**2, axis=1) / (ROBUST_WIDTH * scale) ** 2) - 1.0)))
 
 
 def readmit(fitted: LinesFit, data: FitData) -> LinesFit:
@@ -283,9 +297,7 @@ def readmit(fitted: LinesFit, data: FitData) -> LinesFit:
         zero = np.zeros(problem.size)
         res = problem.residuals(zero).reshape(-1, 3)
         lev = leverages(problem.jacobian_blocks(zero), rows.unknown)
-        poses = pose_ids(rows) if len(np.unique(rows.tp_index)) > 1 else None
-        test = outlier_free(res, lev, rows.group, along_arc(fitted.q, rows.joint), rows.unknown, poses, rows.points)
-        keep = fitted.inliers | test
+        keep = fitted.inliers | _outlier_test(rows, res, lev, fitted.q, _poses(rows))
         if np.array_equal(keep, fitted.inliers):
             break
         fitted = fit_kept(fitted.lines, rows, keep, fitted.start, fitted.terms)
