@@ -78,7 +78,7 @@ CASES = (
 
 
 def acquisition(case: Case, robot: RobotModel, rng: np.random.Generator) -> tuple:
-    """Readings, sweep ids, moved joints and held-out mask of one run of ``case`` (the split drawn by ``rng``)."""
+    """DH joint readings (m, n), sweep ids and moved joints (1-based, 0 free) of ``case``'s acquisition design."""
     if case.free_only:
         q = random_poses(robot.limits, case.free + case.check, rng)
         sweep, joint = 1000 + np.arange(len(q)), np.zeros(len(q), dtype=np.int64)
