@@ -285,19 +285,23 @@ def identify(
     cap = robot_size(best.lines, fitm.points) if max_offset is None else max_offset
     write = partial(written_model, tp_ids=tuple(tp_ids), conventional=conventional, nominal=nominal,
                     parallel_tol=parallel_tol, max_offset=cap, unit=unit, declared=declared, sigma=fitm.sigma)
-    models = {"plain": write("plain", best, data, adequacy, empty)}
     decisions: list[Decision] = []
+    extended: tuple[LinesFit, TermSet] | None = None
     if extensions:
         pool = candidates(meas.joint_types, q[best.inliers], torques)
         variance = max(adequacy.noise, declared or 0.0) ** 2 / unit**2
         terms, _, decisions = select_terms(best, data.timed(best.timing), empty, pool, variance)
         if terms.candidates:  # refitted on the plain model's inliers: joint errors never make outliers
-            extended = readmit(fit_kept(best.lines, data.timed(best.timing), best.inliers, best.start,
-                                        terms.terms(q, None, best.q)), data)
-            if not np.array_equal(extended.inliers, best.inliers):  # rows the joint errors explain are not gross
-                best = fit_kept(best.lines, data.timed(best.timing), extended.inliers, best.start, best.terms)
-                models["plain"] = write("plain", best, data, _adequacy(best, data, unit, declared), empty)
-            models["extended"] = write("extended", extended, data, _adequacy(extended, data, unit, declared), terms)
+            joint_errors = readmit(fit_kept(best.lines, data.timed(best.timing), best.inliers, best.start,
+                                            terms.terms(q, None, best.q)), data)
+            if not np.array_equal(joint_errors.inliers, best.inliers):  # rows the joint errors explain are not gross
+                best = fit_kept(best.lines, data.timed(best.timing), joint_errors.inliers, best.start, best.terms)
+                adequacy = _adequacy(best, data, unit, declared)
+            extended = joint_errors, terms
+    models = {"plain": write("plain", best, data, adequacy, empty)}
+    if extended is not None:
+        fitted, terms = extended
+        models["extended"] = write("extended", fitted, data, _adequacy(fitted, data, unit, declared), terms)
     use = "extended" if "extended" in models else "plain"
     used = models[use]
     inl = used.fit.inliers
