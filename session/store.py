@@ -11,7 +11,9 @@ Durability: a step and all its readings are written in one transaction, committe
 With the rollback journal the session file itself holds every committed step after each commit: copying the
 ``.session`` file alone between steps copies them all, and a closed (finished, stopped or killed between
 steps) session is one file with no ``-wal``/``-shm``/``-journal`` beside it. Only while SQLite writes a
-step's pages (microseconds) is the file alone in flux; ``acquire backup`` copies a live session safely.
+step's pages (microseconds) is the file alone in flux; ``acquire backup`` copies a live session safely. A writer
+killed while SQLite created its journal can leave an empty one beside the file: SQLite ignores it (it is not a
+step in flight) and the next writer removes it.
 Creation is atomic too: the file is built under a temporary name and linked into place complete.
 
 One writer: opening for writing (:meth:`SessionFile.create`, ``SessionFile.open(path, write=True)``) takes an

@@ -54,6 +54,14 @@ def _complete(path: Path) -> bool:
         return session.next_index() is None
 
 
+JOURNAL_MAGIC = bytes.fromhex("d9d505f920a163d7")  # the first bytes of a rollback journal SQLite will replay
+
+
+def _hot_journal(path: Path) -> bool:
+    with path.open("rb") as journal:
+        return journal.read(len(JOURNAL_MAGIC)) == JOURNAL_MAGIC
+
+
 def test_sigkill_then_copy_the_session_file_alone_and_resume_the_copy(tmp_path: Path) -> None:
     site = tmp_path / "fast.yaml"
     site.write_text(FAST_SITE)
@@ -116,7 +124,12 @@ def test_sigkill_then_copy_the_session_file_alone_and_resume_the_copy(tmp_path: 
         assert all(finals[original][i] == record for i, record in held.items()), copy
     assert kills >= 80, kills
     assert sum(len(held) for _, _, held in copies) > 0
-    assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(("-journal", "-wal", "-shm"))]
+    assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(("-wal", "-shm"))]
+    # a journal may stay beside a session killed while SQLite created it and never written again: SQLite leaves
+    # such a cold journal (empty, or its header not yet written) in place and ignores it; a hot one would be a
+    # step that no reader rolled back
+    hot = [p.name for p in tmp_path.iterdir() if p.name.endswith("-journal") and _hot_journal(p)]
+    assert not hot
     print(f"{kills} kills, {len(copies)} copies, {in_flight} held the step in flight, "
           f"{len(originals)} original sessions, {time.monotonic() - t0:.1f} s")
 
