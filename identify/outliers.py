@@ -19,7 +19,11 @@ shared by neighbouring samples. Only the first are outliers. So a sample is reje
 4. and, in any case, only when it stands out from the errors the data set already accepts: its studentised
    residual beyond GROSS_FACTOR times the largest kept in its scale group. Systematic errors of thin sweeps
    (four to six samples over a turn, too far apart for the neighbour test) and of free poses far from home
-   reach a size of their own; a sample within it is not gross, whatever the bulk's scale.
+   reach a size of their own; a sample within it is not gross, whatever the bulk's scale;
+5. and never as the greater part of one sweep: a beam break or a wrong reflector spoils a sample or a few, while
+   an error that follows the joints (an elastic joint under the gravity torque, a gear) moves a whole sweep. A
+   sweep whose samples would mostly be rejected keeps them all, and its error is the model's to show (the
+   ``model_fit`` check), not a loss of that joint's data.
 """
 
 from __future__ import annotations
@@ -164,6 +168,10 @@ def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Arr
         kept = rows[keep[rows]]
         if len(kept):
             keep[rows[size[rows] <= GROSS_FACTOR * size[kept].max()]] = True
+    for g in np.unique(group[group > 0]):  # test 5
+        rows = group == g
+        if 2 * np.count_nonzero(~keep[rows]) > np.count_nonzero(rows):
+            keep[rows] = True
     return keep
 
 

@@ -97,6 +97,12 @@ def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None) -> Ch
                      f"residuals {mm(a.residual)} per axis are {a.declared / a.residual:.3g}x below {reference}: "
                      "a unit slip? (--noise 0.05 is metres; write 0.05mm); the uncertainties, and the limits "
                      "compensation and verification take from them, are that much too loose")
+    if a.detected and a.model_error == 0.0:  # the excess does not follow the arcs: nothing the predictions share
+        found = f"; {cause}" if cause else ""
+        return Check("model_fit", "warn", a.white, None,
+                     f"residuals {mm(a.residual)} per axis vs {reference} ({a.statistic:.3g} > {a.limit:.3g}): an "
+                     f"excess of {mm(a.white)} per axis that does not follow the arcs (noise above the declared, or "
+                     f"an error too thinly sampled to show along them); uncertainties scaled to the residuals{found}")
     if a.detected:
         found = f"; {cause}" if cause else ""
         return Check("model_fit", "warn", a.model_error, None,

@@ -62,14 +62,15 @@ def test_joint_errors_from_sweeps_alone_are_not_vouched_for_away_from_the_sweeps
     assert ident.verdict.status == "warn"
 
 
-@pytest.mark.xfail(strict=True, reason="defect: on an elastic arm (6-sample sweeps, no free poses) identify "
-                   "rejects 10 of the 12 J2/J3 sweep samples as gross outliers (draw 6: fail, 827 mm); draw 4 predicts "
-                   "~0.8 mm where it states ~0.2 mm (now a warning, test above); see docs/benchmarks.md")
-def test_an_elastic_arm_is_neither_rejected_as_outliers_nor_passed_beyond_its_stated_accuracy() -> None:
+def test_an_elastic_arm_keeps_its_sweeps_and_does_not_pass_beyond_its_stated_accuracy() -> None:
+    """Draw 6 rejected 10 of the 12 J2/J3 sweep samples as gross outliers and failed at 827 mm: a sweep the model
+    misses as a whole is now kept (identify/outliers.py, test 5), and the joint errors fitted on sweeps alone are not
+    vouched for (the holdout check warns)."""
     for k in (4, 6):
         ident, err, stated, _ = identified("ur5e", "elastic", k)
         assert len(ident.rejected_rows) == 0, k
-        assert ident.verdict.status == "fail" or err < 1.5 * stated, (k, err, stated)
+        assert ident.verdict.status != "pass" or err < 1.5 * stated, (k, err, stated)
+        assert err < 2e-3, (k, err)  # the sag is 0.3-0.9 mm at the TP: the fit keeps the arm, it does not lose it
 
 
 def test_a_wrong_nominal_zero_does_not_win_over_a_good_geometric_start() -> None:
