@@ -21,7 +21,7 @@ from acquire.plan import check_plan, estimate_duration, plan_clearance
 from acquire.plan_continuous import estimate_continuous_duration
 from acquire.plan_modes import build_mode_plan, format_modes, mode_site, plan_mode
 from acquire.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
-from acquire.plan_target import TargetError, candidates, choose, format_tradeoff
+from acquire.plan_target import TargetError, candidates, choose, format_tradeoff, replan_for_rate
 from acquire.resume import ResumeRefused, resume_settings
 from acquire.runner import finish, run_session
 from acquire.session import Session
@@ -247,9 +247,15 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         first = 0 if session is None else session.next_index()
         if first is not None:
             _check_start(robot, plan, robot_model, site, first, session)
-            note = check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before any move
+            note, rate = check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before a move
             if note:
                 print(f"tracker: {note}")
+                plan, line, refused = replan_for_rate(plan, robot_model, site, rate, args.target_accuracy,
+                                                      session is not None)
+                if refused:
+                    print(f"acquire: plan refused: {line}", file=sys.stderr)
+                    return 2
+                print(f"plan: {line}")
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv)}

@@ -25,7 +25,11 @@ axis at home, ``I_j = Σ_k m_k d_k²`` (kg·m², ``d_k`` the distance of link k'
 a joint compliance :data:`JOINT_COMPLIANCE` (rad/(N·m)) and the TP's distance ``r_j`` from the axis give a TP
 deflection ``δ = c · I_j · r_j · max(ω², α)`` under the acceleration α of the ramps and, conservatively, the
 same for the centripetal load ω² at cruise. So ``ω ≤ sqrt(share·σ / (c·I_j·r_j))`` and α is capped the same
-way. A model without link masses, or a prismatic joint, sweeps at :data:`DEFAULT_STREAM_SPEED` at most.
+way. A model without link masses, or a prismatic joint, sweeps at :data:`DEFAULT_STREAM_SPEED` at most, and so
+does every sweep of a stream at :data:`SPARSE_STREAM_RATE` or less (an I++ DME server at the standard's 10 reports
+per second): such a stream's points are stamped by the host when they arrive, whose scheduling delay varies by
+tenths of a millisecond and more, an error of that delay times the TP's speed (about 0.8 m/s at 1 rad/s on a UR5e);
+a slower sweep makes it smaller and takes more reports per radian.
 """
 
 from __future__ import annotations
@@ -53,6 +57,7 @@ DEFAULT_STREAM_SPEED = 0.25  # rad/s (m/s): the cap without link masses, and for
 STREAM_SPEED_CAP = 1.0  # rad/s (m/s): no sweep is faster, whatever the model allows
 AXIS_CHECK_STEP = math.radians(1.0)  # rad (or 1 mm): the TP's axis distance is checked this finely along a sweep
 STREAM_START_SLACK = 0.5  # s: streams start this long before the move and stop this long after it
+SPARSE_STREAM_RATE = 10.0  # Hz: streams this slow (host-stamped) sweep at DEFAULT_STREAM_SPEED at most
 
 
 def deflection_limits(robot: RobotModel, model: DHModel, j: int, noise: float) -> tuple[float, float]:
@@ -81,7 +86,7 @@ def stream_speed(robot: RobotModel, site: SiteConfig, plan: Plan, j: int) -> tup
     model = tp_model(robot, site.tp_guess)
     v_max, a_max = deflection_limits(robot, model, j, site.tracker_noise)
     speed = min(float(robot.max_speed[j - 1]) * site.speed_fraction, STREAM_SPEED_CAP, v_max)
-    if math.isinf(v_max):
+    if math.isinf(v_max) or site.stream_rate <= SPARSE_STREAM_RATE:
         speed = min(speed, DEFAULT_STREAM_SPEED)
     if site.stream_speed is not None:
         speed = min(speed, site.stream_speed)

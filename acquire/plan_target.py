@@ -29,7 +29,7 @@ from itertools import product
 
 from acquire.plan import estimate_duration
 from acquire.plan_continuous import estimate_continuous_duration, predicted_accuracy_continuous
-from acquire.plan_modes import build_mode_plan
+from acquire.plan_modes import build_mode_plan, plan_mode
 from acquire.plan_report import predicted_accuracy
 from config.robots import RobotModel
 from config.site import SiteConfig
@@ -162,3 +162,39 @@ def _clock(seconds: float) -> str:
     """h:mm:ss, rounded up (a plan shown at the limit fits in it)."""
     total = math.ceil(seconds - 1e-9)
     return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
+
+
+
+def replan_for_rate(plan: Plan, robot: RobotModel, site: SiteConfig, rate: float, target: float | None,
+                    resumed: bool) -> tuple[Plan, str, bool]:
+    """The plan to run when the tracker streams at ``rate`` Hz instead of the site's ``stream_rate`` (an I++ server
+    that refused the rate asked and took the standard's 10 reports/s): one line saying what changed, and whether to
+    refuse the run (before anything moves).
+
+    A new session's continuous ``plan`` is built again at ``rate`` (sweeps at most :data:`DEFAULT_STREAM_SPEED`
+    at :data:`SPARSE_STREAM_RATE` or less, acquire/plan_continuous.py): the same poses and the same joint-space
+    paths, the checks of the shown plan hold, only slower. A plan that would differ in a pose, or that misses
+    ``target`` (m) at the new rate, is refused with what to do; a resumed session keeps its plan (only the
+    prediction line)."""
+    before = predicted_accuracy_continuous(plan, robot, site.tp_guess, site.tracker_noise, site.stream_rate)
+    slower = plan
+    if not resumed:
+        slower = build_mode_plan(plan_mode(plan), robot, site.with_overrides(stream_rate=rate))
+        if [(s.kind, s.joint, s.q, s.start) for s in slower.steps] != [(s.kind, s.joint, s.q, s.start)
+                                                                      for s in plan.steps]:
+            return plan, (f"at {rate:g} samples/s the plan would change its poses; set plan: "
+                          f"{{stream_rate: {rate:g}}} in the site file and check it with --dry-run"), True
+    after = predicted_accuracy_continuous(slower, robot, site.tp_guess, site.tracker_noise, rate)
+    seconds = (estimate_continuous_duration(plan, site.measure_time),
+               estimate_continuous_duration(slower, site.measure_time))
+    line = (f"at {rate:g} samples/s the plan predicts {after['with_free'] * 1e3:.4g} mm held-out "
+            f"({before['with_free'] * 1e3:.4g} mm planned at {site.stream_rate:g})")
+    if slower is not plan:
+        fastest = max(s.speed for s in slower.steps if s.kind == "stream" and s.speed is not None)
+        line += (f"; sweeps slowed to {fastest:.3g} rad/s at most, same poses and paths: robot time "
+                 f"{_clock(seconds[0])} -> {_clock(seconds[1])}")
+    missed = target is not None and after["with_free"] > target
+    if missed:
+        line += (f"; the target {target * 1e3:g} mm is out of reach: set plan: {{stream_rate: {rate:g}}} in the "
+                 "site file and plan again (--dry-run shows the plan it chooses)")
+    return slower, line, missed

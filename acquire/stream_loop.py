@@ -42,16 +42,19 @@ def _require_streams(robot, tracker) -> None:
                                        f"{type(device).__name__} does not (use --mode step)")
 
 
-def check_streams(robot, tracker, plan: Plan, timeout: float, rate: float) -> str:
+def check_streams(robot, tracker, plan: Plan, timeout: float, rate: float) -> tuple[str, float]:
     """Before anything moves: when ``plan`` has stream steps, start and stop both devices' streams once (``rate``
     Hz asked of the tracker, ``timeout`` s per call); StreamingUnsupported (one line) when either cannot stream,
     e.g. a polled serial profile or an I++ server without event reports. Returns the tracker's one line on the rate
-    it took instead of ``rate`` ("" if none: ``rate_note`` of drivers/trackers/ipp_stream.py)."""
+    it took instead of ``rate`` ("" if none: ``rate_note`` of drivers/trackers/ipp_stream.py) and the rate it runs at
+    (Hz; ``rate`` for a plan without streams)."""
     if not plan.continuous:
-        return ""
+        return "", rate
     _require_streams(robot, tracker)
+    taken = [rate]
     for device, start, stop in ((robot, lambda: robot.start_joint_stream(timeout), robot.stop_joint_stream),
-                                (tracker, lambda: tracker.start_stream(rate, timeout), tracker.stop_stream)):
+                                (tracker, lambda: taken.append(tracker.start_stream(rate, timeout)),
+                                 tracker.stop_stream)):
         try:
             start()
             stop(timeout)
@@ -59,7 +62,7 @@ def check_streams(robot, tracker, plan: Plan, timeout: float, rate: float) -> st
             advice = "" if "--mode step" in str(exc) or "stream_rate" in str(exc) else " (use --mode step)"
             raise StreamingUnsupported(f"this plan streams, and {type(device).__name__} cannot: {exc}{advice}") \
                 from None
-    return str(getattr(tracker, "rate_note", "") or "")
+    return str(getattr(tracker, "rate_note", "") or ""), float(taken[-1])
 
 
 def run_stream(robot, tracker, session: Session, clock: Clock, step: Step, plan: Plan, timeouts,

@@ -15,6 +15,7 @@ import numpy as np
 
 from acquire.orchestrator import Orchestrator, Timeouts
 from acquire.plan_continuous import build_continuous_plan
+from acquire.plan_target import replan_for_rate
 from acquire.session import Session
 from acquire.stream_loop import check_streams
 from config.robots import load_robot
@@ -28,6 +29,7 @@ from identify.bounds import prediction_rms_bound
 from identify.pipeline import identify
 from kinematics.dh import points_from_joints
 from tests.ipp_device import IppServer
+from tests.ur_emulator import EmulatorProcess
 
 NOISE = 2e-5  # m per axis per report
 HALF = 0.5  # rad: each joint swept over home ± HALF
@@ -46,7 +48,7 @@ def test_continuous_session_against_a_standard_ipp_server(tmp_path: Path) -> Non
         tracker = open_tracker(f"ipp://{server.host}:{server.port}?timeout=0.5")
         tracker.connect(3.0)
         try:
-            note = check_streams(robot, tracker, plan, 2.0, site.stream_rate)
+            note, rate = check_streams(robot, tracker, plan, 2.0, site.stream_rate)
             with Session.create(tmp_path / "ipp.session", plan, {"robot_spec": "mock:ur5e", "tracker_spec": "ipp"},
                                 robot.identity(), tracker.identity()) as session:
                 result = Orchestrator(robot, tracker, session, rig.clock, Timeouts(measure=5.0),
@@ -59,7 +61,7 @@ def test_continuous_session_against_a_standard_ipp_server(tmp_path: Path) -> Non
     with sqlite3.connect(tmp_path / "ipp.session") as db:
         stamped = np.array([t for (t,) in db.execute("SELECT t FROM tracker_samples ORDER BY t")])
     assert result.outcome == "complete" and result.missing == 0
-    assert "0510" in note and "10 reports/s" in note
+    assert "0510" in note and "10 reports/s" in note and rate == 10.0
     assert asked[0].startswith("OnMoveReportE(Time(0.004)") and all("Time(0.1)" in a for a in asked[1:])
     streamed = meas.streamed
     # 10 reports per second of motion, none at rest (the streams run 0.5 s before and after each move)
@@ -85,3 +87,38 @@ def test_continuous_session_against_a_standard_ipp_server(tmp_path: Path) -> Non
     bound = prediction_rms_bound(rig.truth, meas.q[~meas.check], q_check, noise)
     # when written: 0.016-0.028 mm for a bound of 0.016-0.070 mm (stamp spread 0.03-0.8 ms with the machine's load)
     assert rms < 3 * bound, (rms, bound, spread)
+
+
+def test_a_target_the_standard_rate_cannot_reach_is_refused_before_anything_moves(tmp_path: Path, capsys) -> None:
+    """``--target-accuracy`` plans at the site's 250 Hz; a standard I++ server then streams 10 reports/s, and the
+    confirmed plan no longer reaches the target: one line, exit 2, no session, the arm never commanded. The real
+    ur_rtde client against the controller emulator, the real I++ client against the simulated server."""
+    from acquire.cli import main
+
+    rig = SimulatedRig(load_robot("ur5e"), seed=3)
+    with EmulatorProcess(time_scale=4.0) as emu, IppServer(rig, move_reports=True, standard=True) as server:
+        code = main(["--robot", f"ur5e@{emu.host}", "--tracker", f"ipp://{server.host}:{server.port}?timeout=0.5",
+                     "--mode", "continuous", "--target-accuracy", "0.012mm", "--yes",
+                     "--session", str(tmp_path / "s.session")])
+        moved = emu.last_motion()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert err[0].startswith("acquire: plan refused: at 10 samples/s the plan predicts") and "stream_rate: 10" in err[0]
+    assert not (tmp_path / "s.session").exists() and moved is None
+
+
+def test_at_the_standard_rate_a_new_plan_keeps_its_poses_and_sweeps_slower() -> None:
+    """The plan shown at 250 Hz, built again for the 10 reports/s a standard server takes: the same poses and
+    joint-space paths (so the checks shown hold), sweeps at 0.25 rad/s at most, a longer robot time said in the
+    line; a target the slower plan cannot reach refuses the run."""
+    robot = load_robot("ur5e")
+    site = SiteConfig.default()
+    plan = build_continuous_plan(robot, site)
+    slower, line, refused = replan_for_rate(plan, robot, site, 10.0, None, resumed=False)
+    assert not refused and "sweeps slowed to 0.25 rad/s" in line
+    assert [(s.kind, s.q, s.start) for s in slower.steps] == [(s.kind, s.q, s.start) for s in plan.steps]
+    streams = [s for s in slower.steps if s.kind == "stream"]
+    assert streams and max(s.speed for s in streams) <= 0.25 < max(s.speed for s in plan.steps if s.kind == "stream")
+    assert replan_for_rate(plan, robot, site, 10.0, 1e-6, resumed=False)[2]  # a target out of reach: refused
+    resumed, line, refused = replan_for_rate(plan, robot, site, 10.0, None, resumed=True)
+    assert resumed is plan and not refused and "slowed" not in line

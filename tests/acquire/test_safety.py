@@ -193,14 +193,16 @@ def test_the_issue_plan_is_now_clipped() -> None:
 
 
 def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
-    """1,000 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
+    """400 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
     robot: each plan is clear by the independent check (every step exactly, the moves at 8 samples per rad to
-    keep the test near a minute), or refused with one line; a refusal naming a joint and angle is a real contact."""
+    keep the test near half a minute), or refused with one line; a refusal naming a joint and angle is a real
+    contact. About 30 site files per bundled robot (1,000 cost 90 s of the suite; when written: 235 accepted, 165
+    refused)."""
     rng = np.random.default_rng(2026)
     names = robot_names()
     robots = {name: load_robot(name) for name in names}
     accepted = refused = 0
-    for trial in range(1000):
+    for trial in range(400):
         robot = robots[names[trial % len(names)]]
         n = robot.n_joints
         ranges = []
@@ -251,6 +253,7 @@ def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
             continue
         accepted += 1
         assert_safe(plan, robot, site, per_rad=8.0)
+    print(f"{accepted} plans accepted, {refused} refused")
     assert accepted >= 70 and refused >= 40, (accepted, refused)
 
 

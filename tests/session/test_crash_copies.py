@@ -1,6 +1,6 @@
 """Sessions under SIGKILL and concurrent writers, through the real ``acquire`` command (tests/_acquire_writer.py):
 
-- 100 cycles: a real-time mock session is killed at a random moment, its ``.session`` file alone is copied, the
+- 60 cycles: a real-time mock session is killed at a random moment, its ``.session`` file alone is copied, the
   copy is resumed to the end: every copy holds every step committed before the kill, equal to the original's
   record after the original's own resume, with no duplicate and no gap.
 - Two writers started together: exactly one runs, the other exits 2 within 1 s having opened no device.
@@ -73,7 +73,7 @@ def test_sigkill_then_copy_the_session_file_alone_and_resume_the_copy(tmp_path: 
     kills = in_flight = 0
     t0 = time.monotonic()
     try:
-        for cycle in range(100):
+        for cycle in range(60):
             if not originals or _complete(originals[-1]):
                 originals.append(tmp_path / f"original-{len(originals)}.session")
                 args = [*base, "--session", originals[-1], "--realtime"]
@@ -122,7 +122,7 @@ def test_sigkill_then_copy_the_session_file_alone_and_resume_the_copy(tmp_path: 
     finals = {original: _steps(original) for original in originals}
     for copy, original, held in copies:
         assert all(finals[original][i] == record for i, record in held.items()), copy
-    assert kills >= 80, kills
+    assert kills >= 45, kills
     assert sum(len(held) for _, _, held in copies) > 0
     assert not [p.name for p in tmp_path.iterdir() if p.name.endswith(("-wal", "-shm"))]
     # a journal may stay beside a session killed while SQLite created it and never written again: SQLite leaves
