@@ -23,9 +23,10 @@ demo: $(STAMP)
 	$(BIN)/acquire verify --result $$s.result.yaml --robot mock:ur5e \
 	    --tracker mock --session $$s-verify.session
 
+# the 15 slowest tests are listed at the end, so that the suite's cost stays visible where it runs (CI included)
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/pytest
+	$(BIN)/pytest --durations=15
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
