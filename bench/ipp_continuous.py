@@ -99,7 +99,8 @@ def session(mode: str, run: int, noise: float, folder: Path, stream_speed: float
     return {"mode": mode, "run": run, "outcome": result.outcome, "robot_time": robot_time, "wall": wall,
             "rows": len(meas), "streamed": int(meas.streamed.sum()) if meas.streamed is not None else 0,
             "held": held.rms, "expected": held.expected, "held_samples": held.samples, "truth": truth,
-            "predicted": predicted, "rate": rate, "verdict": ident.verdict.status, "use": ident.use, "note": note}
+            "predicted": predicted, "rate": rate, "verdict": ident.verdict.status, "use": ident.use, "note": note,
+            "checks": " ".join(f"{c.name}:{c.status}" for c in ident.verdict.checks if c.status != "pass")}
 
 
 def main() -> int:
@@ -121,7 +122,7 @@ def main() -> int:
                 print(f"run {run} {mode:<10} {r['outcome']:<8} robot {r['robot_time']:7.1f} s  wall {r['wall']:6.1f} s"
                       f"  rows {r['rows']:5d}  held-out {r['held'] * 1e3:.4f} mm (expected {r['expected'] * 1e3:.4f})"
                       f"  truth {r['truth'] * 1e3:.4f}  predicted {r['predicted'] * 1e3:.4f}  {r['verdict']} "
-                      f"({r['use']})", flush=True)
+                      f"({r['use']}) {r['checks']}", flush=True)
             if rows[-1]["note"]:
                 print(f"  tracker: {rows[-1]['note']}")
     by = {m: [r for r in rows if r["mode"] == m] for m in ("step", "continuous")}

@@ -27,7 +27,8 @@ recognised whether it comes before the ``&`` or after it (the first time, the cl
 :data:`REFUSAL_WAIT` s after the ``&`` for one). A refused daemon never ran: no ``StopDaemon`` is sent for it.
 
 Timestamps: a report carries no device time (I++ has none in general), so each reading is stamped with the HOST's
-receive time (``time.time()``, the same for the lines of one TCP segment). The host clock is then the tracker
+receive time: the kernel's, where it gives one (Linux; drivers/receive_time.py), else the reader's ``time.time()``;
+the same for the lines read together. The host clock is then the tracker
 clock of the stream, and the latency of the server and the network is a time offset that the synchronisation
 fit absorbs (its jitter is noise in time). Gaps (host seconds): a report whose step from the previous one exceeds
 1.5 × the interval plus :data:`JITTER`, and any error line of the daemon's tag or an unsolicited one (``E0000 !``,
@@ -50,6 +51,7 @@ from typing import Any
 
 from drivers.base import TrackerStreamBatch
 from drivers.errors import ConnectionFailed
+from drivers.receive_time import enable_receive_times, receive
 from drivers.stream_buffer import BufferedStreaming
 from drivers.trace import one_line
 from drivers.trackers.ipp_protocol import IppError, _error_fields
@@ -166,12 +168,13 @@ class EventStreaming(BufferedStreaming):
         broken = False
         limit = GAP_FACTOR * self._interval + JITTER
         sock, received = self._sock, time.time()
+        stamped = enable_receive_times(sock)
         while not self._halt.is_set():
             head, sep, rest = self._buffer.partition(b"\n")
             if not sep:
                 try:
                     sock.settimeout(0.05)
-                    chunk = sock.recv(65536)
+                    chunk, arrived = receive(sock, 65536, stamped)
                 except TimeoutError:
                     continue
                 except OSError as exc:
@@ -185,7 +188,7 @@ class EventStreaming(BufferedStreaming):
                     return
                 self._trace.data("<", chunk)
                 self._buffer += chunk
-                received = time.time()
+                received = arrived
                 continue
             self._buffer = rest
             line = head.decode("ascii", "replace").strip()
