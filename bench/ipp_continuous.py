@@ -26,8 +26,10 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import sqlite3
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -85,9 +87,16 @@ def session(mode: str, run: int, noise: float, folder: Path, stream_speed: float
             tracker.close()
             arm.close()
         wall = time.monotonic() - wall
+        sent = np.array(server.sent)  # host time each report's point was taken (the server's)
+    with sqlite3.connect(path) as db:
+        stamped = np.array([t for (t,) in db.execute("SELECT t FROM tracker_samples ORDER BY t")])
+    delay = stamped - sent if len(stamped) == len(sent) and len(sent) else np.full(1, np.nan)
     ident = identify(meas, robot.nominal, links=robot.links)
     q = random_poses(robot.limits, 200, np.random.default_rng(1000 + run))
-    truth = float(np.sqrt(np.mean(np.sum((ident.predict(q) - points_from_joints(rig.truth, q)) ** 2, axis=1))))
+    true_points = points_from_joints(rig.truth, q)
+    truth = float(np.sqrt(np.mean(np.sum((ident.predict(q) - true_points) ** 2, axis=1))))
+    each = {name: float(np.sqrt(np.mean(np.sum((replace(m.predictor, coupling=ident.coupling).points(q, None)
+                                               - true_points) ** 2, axis=1)))) for name, m in ident.models.items()}
     held = ident.validations[ident.use]
     if mode == "continuous":
         rate = taken
@@ -100,6 +109,8 @@ def session(mode: str, run: int, noise: float, folder: Path, stream_speed: float
             "rows": len(meas), "streamed": int(meas.streamed.sum()) if meas.streamed is not None else 0,
             "held": held.rms, "expected": held.expected, "held_samples": held.samples, "truth": truth,
             "predicted": predicted, "rate": rate, "verdict": ident.verdict.status, "use": ident.use, "note": note,
+            "each": each,
+            "delay": (float(np.median(delay)), float(np.std(delay)), float(np.max(np.abs(delay - np.median(delay))))),
             "checks": " ".join(f"{c.name}:{c.status}" for c in ident.verdict.checks if c.status != "pass")}
 
 
@@ -123,6 +134,12 @@ def main() -> int:
                       f"  rows {r['rows']:5d}  held-out {r['held'] * 1e3:.4f} mm (expected {r['expected'] * 1e3:.4f})"
                       f"  truth {r['truth'] * 1e3:.4f}  predicted {r['predicted'] * 1e3:.4f}  {r['verdict']} "
                       f"({r['use']}) {r['checks']}", flush=True)
+                if len(r["each"]) > 1:
+                    print("  against the truth, each model: " + ", ".join(f"{k} {v * 1e3:.4f} mm"
+                                                                       for k, v in r["each"].items()))
+                if mode == "continuous":
+                    print("  stamp delay after the point was taken: median {:.3f} ms, std {:.3f} ms, worst {:.3f} ms"
+                          .format(*(1e3 * x for x in r["delay"])))
             if rows[-1]["note"]:
                 print(f"  tracker: {rows[-1]['note']}")
     by = {m: [r for r in rows if r["mode"] == m] for m in ("step", "continuous")}
