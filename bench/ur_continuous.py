@@ -211,7 +211,7 @@ def main(argv: list[str] | None = None) -> int:
             url = emu.serve_tracker(profile, NOISE, 1, latency=args.latency)
             tracker = f"serial:{url}?protocol={profile}"
             estimates = {m: dry_run_estimate(m, emu.host, tracker, rate) for m in runs}
-            for mode, count in (("step", args.step_runs), ("continuous", args.runs)):
+            for mode, count in (("continuous", args.runs), ("step", args.step_runs)):  # the target runs first
                 for i in range(count):
                     run = folder / f"{mode}-{i + 1}"
                     run.mkdir()
