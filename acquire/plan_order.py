@@ -52,32 +52,56 @@ def tour_time(tour: Sequence[Visit], home: Array, sweeps: Sequence[tuple[Array, 
     return total + move_time(here, home)
 
 
+class _Costs:
+    """The move times between every pair of the tour's points (home, each sweep's two ends, each pose), computed
+    once, and a tour's time from them."""
+
+    def __init__(self, home: Array, sweeps: Sequence[tuple[Array, Array]], poses: Sequence[Array],
+                 move_time: MoveTime) -> None:
+        points = [home, *(q for ends in sweeps for q in ends), *poses]
+        self.first_pose = 1 + 2 * len(sweeps)
+        self.table = np.array([[move_time(a, b) for b in points] for a in points])
+
+    def ends(self, v: Visit) -> tuple[int, int]:
+        if not v.sweep:
+            return self.first_pose + v.item, self.first_pose + v.item
+        start, end = 1 + 2 * v.item, 2 + 2 * v.item
+        return (end, start) if v.reverse else (start, end)
+
+    def time(self, tour: Sequence[Visit]) -> float:
+        here, total = 0, 0.0
+        for v in tour:
+            entry, leave = self.ends(v)
+            total += self.table[here, entry]
+            here = leave
+        return float(total + self.table[here, 0])
+
+
 def order_visits(home: Array, sweeps: Sequence[tuple[Array, Array]], poses: Sequence[Array],
                  move_time: MoveTime) -> list[Visit]:
     """The tour (module docstring) over every sweep ((start, end) joint vectors) and every pose, from and back to
     ``home``; ``move_time(a, b)`` is the time (s) of the move from ``a`` to ``b``."""
+    costs = _Costs(home, sweeps, poses, move_time)
     todo = [Visit(True, i) for i in range(len(sweeps))] + [Visit(False, i) for i in range(len(poses))]
     tour: list[Visit] = []
-    here = home
+    here = 0
     while todo:
-        options = [(v, r) for v in todo for r in ((False, True) if v.sweep else (False,))]
-        costs = [move_time(here, _ends(Visit(v.sweep, v.item, r), sweeps, poses)[0]) for v, r in options]
-        v, r = options[int(np.argmin(costs))]
-        todo.remove(v)
-        tour.append(Visit(v.sweep, v.item, r))
-        here = _ends(tour[-1], sweeps, poses)[1]
-    return _improve(tour, home, sweeps, poses, move_time)
+        options = [Visit(v.sweep, v.item, r) for v in todo for r in ((False, True) if v.sweep else (False,))]
+        best = min(options, key=lambda v: costs.table[here, costs.ends(v)[0]])
+        todo.remove(Visit(best.sweep, best.item))
+        tour.append(best)
+        here = costs.ends(best)[1]
+    return _improve(tour, costs)
 
 
-def _improve(tour: list[Visit], home: Array, sweeps: Sequence[tuple[Array, Array]], poses: Sequence[Array],
-             move_time: MoveTime) -> list[Visit]:
+def _improve(tour: list[Visit], costs: _Costs) -> list[Visit]:
     """Local moves (module docstring) while one shortens the tour by more than a millisecond."""
-    best = tour_time(tour, home, sweeps, poses, move_time)
+    best = costs.time(tour)
     improved = True
     while improved:
         improved = False
         for candidate in _neighbours(tour):
-            t = tour_time(candidate, home, sweeps, poses, move_time)
+            t = costs.time(candidate)
             if t < best - 1e-3:
                 tour, best, improved = candidate, t, True
                 break
