@@ -1,23 +1,28 @@
-"""Continuous against stop-and-go against the UR controller emulator: robot time and held-out accuracy of a full
-default UR5e session in each mode (issue 16).
+"""Continuous against stop-and-go against the UR controller emulator: robot time and held-out accuracy of full
+default UR5e sessions in each mode (issues 16 and 26).
 
-    python -m bench.ur_continuous [--time-scale 1] [--latency 0.02] [--keep DIR]
+    python -m bench.ur_continuous [--runs 10] [--step-runs 2] [--step-from DIR] [--time-scale 1] [--latency 0.02]
+                                  [--keep DIR]
 
 One emulator (tests/ur_emulator, its rig's arm at emulated real speed for ``--time-scale 1``) with RTDE at the
 e-Series native 500 Hz on its own clock (``native_rate``), and its simulated ``stream-csv`` tracker (500 lines per
 emulated s, noise 0.05 mm per axis: the profile's stated sigma; each reading stamped ``--latency`` s after it was
-taken). Both sessions run ``acquire --robot ur5e@HOST?rtde_frequency=500 --tracker serial:socket://...?protocol=
+taken). Every session runs ``acquire --robot ur5e@HOST?rtde_frequency=500 --tracker serial:socket://...?protocol=
 stream-csv --mode MODE --yes`` as a fresh process with the default plan and site (the real ur_rtde client in the
 driver's worker, the real serial driver); step mode reads the same device's lines, 5 per step. Each session is
-identified by ``acquire`` itself.
+identified by ``acquire`` itself. ``--runs`` continuous sessions run first, then ``--step-runs`` stop-and-go ones
+(about 8.5 min each; their robot time is nearly deterministic, so two show its spread), all against the one
+emulator (one true robot). ``--step-from DIR`` takes the stop-and-go runs of an earlier ``--keep DIR`` instead.
 
 Robot time: from the first step's start to the last step's end (host clock, times the time scale: the
-controller's seconds). Held-out RMS: the identification's own (check poses and home re-measurements, ``validation``
-in the result YAML), beside the expected value it states; "truth": the RMS error of the identified model against
-the emulator's true robot at 200 random poses. Targets: continuous robot time <= 1/4 of stop-and-go's, held-out
-RMS <= 1.1x. ``--time-scale K`` runs the emulated arm K times faster (RTDE and tracker at 500/K Hz emulated, so
-the wall rates stay at 500 per second) for a quick look; the robot times then include host-side waits (settle,
-stream slack) multiplied by K, so only time scale 1 measures the targets.
+controller's seconds), beside the dry run's estimate (``acquire ... --dry-run --json``). Held-out RMS: the
+identification's own (check poses and home re-measurements, ``validation`` in the result YAML), beside the expected
+value it states, pooled over the runs (sqrt of the mean square); "truth": the RMS error of the identified model
+against the emulator's true robot at 200 random poses. Targets (issue 26): every continuous run's robot time
+<= 1/6 of the stop-and-go runs' median, pooled held-out RMS <= 1.1x. ``--time-scale K`` runs the emulated arm K
+times faster (RTDE and tracker at 500/K Hz emulated, so the wall rates stay at 500 per second) for a quick look;
+the robot times then include host-side waits (settle, stream slack) multiplied by K, so only time scale 1
+measures the targets. With ``--keep`` each run's numbers are written to ``DIR/runs.json`` as it ends.
 """
 
 from __future__ import annotations
