@@ -251,11 +251,6 @@ def transfer_speed(robot: RobotModel, site: SiteConfig, plan: Plan) -> Array:
     return np.maximum(speed, np.minimum(np.asarray(robot.max_speed, dtype=float) * site.speed_fraction, cap))
 
 
-def _transfer(a: Array, b: Array, speed: Array) -> float:
-    """Seconds of the slowest joint's move from ``a`` to ``b`` at ``speed`` (no ramps: for comparing moves)."""
-    return float(np.max(np.abs(np.asarray(b) - np.asarray(a)) / speed))
-
-
 def _speed_text(speed: float, kind: str) -> str:
     return f"{math.degrees(speed):.1f}°/s" if kind == "R" else f"{speed * 1e3:.0f} mm/s"
 
