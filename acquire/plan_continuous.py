@@ -143,7 +143,8 @@ def validation_poses(tracked_points: int = 1, relative_error: float = HELD_OUT_R
     the mean square has a relative standard error sqrt(2/N), so the RMS has about sqrt(1/(2N)): N >= 1/(2e²)
     components, N / (3·tracked_points) poses (rounded up). At 20 %: 13 components, 5 poses with one reflector,
     2 with three. The home re-measurements are held out too, but are not counted: every sweep passes through
-    home, so the fit has seen that pose."""
+    home, so the fit has seen that pose. :func:`build_continuous_plan` counts one reflector: the plan is made
+    before the tracker says how many it sees."""
     components = math.ceil(1.0 / (2.0 * relative_error**2))
     return max(1, math.ceil(components / (3 * max(1, tracked_points))))
 
