@@ -3,16 +3,25 @@ stream, plus a short stop-and-go part (pure, no devices).
 
 Built from the stop-and-go plan of the same robot and site (:func:`acquire.plan.build_plan`), so that the sweep
 ranges are the same (the joint limits, the site's ``plan.sweep_ranges``, clipped to the collision-free interval
-around home) and so are the free and check poses. Per swept joint, last to first: a stop-and-go pose at the
-range start (kind ``free``, a sweep id of its own: it pins the timing down and is a stop-and-go sample), then
-a ``stream`` step that moves the joint from the start to the range end at a constant speed, then home (kind
-``home``, which checks the drift and makes every move between sweeps one from or to home: clear by
-construction) unless the direct move from the range end to the next sweep's start is clear (checked like
-every move). The free and check poses follow as in the stop-and-go plan; ``acquire --mode continuous`` asks
-for none of the fitted free poses unless ``--free-poses`` is given: the streamed sweeps alone predict a
-smaller held-out error than the whole stop-and-go plan (the dry run shows both). The move of a stream step is a
-joint-space line like every other move, so :func:`acquire.plan.plan_clearance` checks it the same way (sampled
-so that no body point travels more than 1 cm between checks); :func:`build_continuous_plan` also checks the TP's
+around home) and so are the free and check poses. Each swept joint gets a stop-and-go pose at the range start
+(kind ``free``, a sweep id of its own: it pins the timing down and is a stop-and-go sample), then a ``stream``
+step that moves the joint from the start to the range end at a constant speed. ``acquire --mode continuous`` asks
+for none of the fitted free poses unless ``--free-poses`` is given: the streamed sweeps alone predict a smaller
+held-out error than the whole stop-and-go plan (the dry run shows both).
+
+**Check poses: as many as validation needs** (:func:`validation_poses`): enough that the held-out RMS is known to
+about 20 % (5 poses with one reflector), at most the site's ``plan.check_poses``; they validate only (role
+``check``), as in every plan.
+
+**Order: the least travel.** Home first; then the sweeps and the check (and fitted free) poses in the tour of
+:func:`acquire.plan_order.order_visits`, which chooses the order of the joints, the direction of each sweep and
+where the poses fall between the sweeps to make the moves between them short (they run at the sweeps' own speed
+cap: :func:`transfer_speed`); home last, for the drift check. Home in between only where the plan needs it:
+every direct move between two visits is checked against the cell, and one that would come too close goes
+through home instead (clear by construction: the ranges are clear from home, and the poses are chosen reachable
+from it). The move of a stream step is a joint-space line like every other move, so
+:func:`acquire.plan.plan_clearance` checks it the same way (sampled so that no body point travels more than
+1 cm between checks); :func:`build_continuous_plan` also checks the TP's
 distance to every revolute axis along it (1° steps) and, in a camera cell, that the camera sees the target
 there (acquire/camera_view.py), and keeps the longest stretch where both hold.
 
@@ -42,6 +51,7 @@ import numpy as np
 from acquire.camera_view import visible
 from acquire.design import SUBSPACE_TOL, gram, whitened
 from acquire.plan import EVAL_POSES, HOME_SWEEP, Array, axis_distances_many, build_plan, tp_model
+from acquire.plan_order import order_visits
 from config.cell import cell_from_config, first_contact
 from config.robots import RobotModel
 from config.site import SiteConfig
@@ -58,6 +68,11 @@ STREAM_SPEED_CAP = 1.0  # rad/s (m/s): no sweep is faster, whatever the model al
 AXIS_CHECK_STEP = math.radians(1.0)  # rad (or 1 mm): the TP's axis distance is checked this finely along a sweep
 STREAM_START_SLACK = 0.5  # s: streams start this long before the move and stop this long after it
 SPARSE_STREAM_RATE = 10.0  # Hz: streams this slow (host-stamped) sweep at DEFAULT_STREAM_SPEED at most
+HELD_OUT_RELATIVE_ERROR = 0.2  # the relative standard error of the held-out RMS the check poses aim for
+
+
+#: one step of a plan being built: kind, joint, q, role, a stream's start, a stream's (speed, acceleration)
+_Pose = tuple[str, int, tuple[float, ...], str, tuple[float, ...] | None, tuple[float, float] | None]
 
 
 def deflection_limits(robot: RobotModel, model: DHModel, j: int, noise: float) -> tuple[float, float]:
@@ -125,23 +140,38 @@ def _clear(cell: Cell | None, a: Array, b: Array) -> bool:
     return cell is None or first_contact(cell, a, b) is None
 
 
+def validation_poses(tracked_points: int = 1, relative_error: float = HELD_OUT_RELATIVE_ERROR) -> int:
+    """How many check poses a continuous plan needs so that its held-out RMS is known to ``relative_error``
+    (relative standard error) with ``tracked_points`` reflectors seen at each pose.
+
+    The held-out RMS pools 3 residual components per pose and reflector; for N independent Gaussian components
+    the mean square has a relative standard error sqrt(2/N), so the RMS has about sqrt(1/(2N)): N >= 1/(2e²)
+    components, N / (3·tracked_points) poses (rounded up). At 20 %: 13 components, 5 poses with one reflector,
+    2 with three. The home re-measurements are held out too, but are not counted: every sweep passes through
+    home, so the fit has seen that pose. :func:`build_continuous_plan` counts one reflector: the plan is made
+    before the tracker says how many it sees."""
+    components = math.ceil(1.0 / (2.0 * relative_error**2))
+    return max(1, math.ceil(components / (3 * max(1, tracked_points))))
+
+
 def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> Plan:
     """The continuous plan of ``robot`` under ``site`` (module docstring): stream steps over the stop-and-go
-    plan's sweep ranges, the stop-and-go part (range starts, home checks, free and check poses) around them.
-    Raises PlanError as :func:`acquire.plan.build_plan` does."""
-    base = build_plan(robot, site, rng_seed)
+    plan's sweep ranges, the range starts, :func:`validation_poses` check poses (at most ``plan.check_poses``)
+    and any fitted free poses, visited in the short order of :func:`acquire.plan_order.order_visits`, home
+    first and last. Raises PlanError as :func:`acquire.plan.build_plan` does."""
+    base = build_plan(robot, replace(site, check_poses=min(site.check_poses, validation_poses())), rng_seed)
     transfer = transfer_speed(robot, site, base)
     base = replace(base, speed=tuple(float(v) for v in transfer))
     model = tp_model(robot, site.tp_guess)
     cell = cell_from_config(robot, site)
     home = np.asarray(base.home, dtype=float)
-    notes = [n for n in base.notes if "sweep:" not in n]
+    notes = [n for n in base.notes if "sweep:" not in n and "check poses at random" not in n]
     sweeps: dict[int, list[Step]] = {}
     for s in base.steps:
         if s.kind == "sweep":
             sweeps.setdefault(s.sweep, []).append(s)
-    poses: list[tuple[str, int, tuple[float, ...], str, tuple[float, ...] | None, tuple[float, float] | None]] = [
-        ("home", 0, tuple(home), "fit", None, None)]
+    ends: list[tuple[Array, Array]] = []
+    motions: list[tuple[int, float, float]] = []  # joint, speed, acceleration of each sweep in ``ends``
     for steps in sweeps.values():
         j = steps[0].joint
         values = [s.q[j - 1] for s in steps]
@@ -155,23 +185,36 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
         speed, acceleration = stream_speed(robot, site, base, j)
         start, end = home.copy(), home.copy()
         start[j - 1], end[j - 1] = lo, hi
-        here = np.asarray(poses[-1][2])
-        if _transfer(here, end, transfer) < _transfer(here, start, transfer):  # sweep from the nearer end
-            start, end = end, start
-        if poses[-1][0] == "stream" and not _clear(cell, here, start):
-            poses.append(("home", 0, tuple(home), "fit", None, None))  # the direct move would come too close
-        poses.append(("free", 0, tuple(start), "fit", None, None))
-        poses.append(("stream", j, tuple(end), "fit", tuple(start), (speed, acceleration)))
+        ends.append((start, end))
+        motions.append((j, speed, acceleration))
         notes.append(f"joint {j}: one continuous sweep at {_speed_text(speed, robot.joint_types[j - 1])} "
                      f"(acceleration {_speed_text(acceleration, robot.joint_types[j - 1])}²), "
                      f"{motion_time(hi - lo, speed, acceleration):.1f} s")
-    if poses[-1][0] != "home":
-        poses.append(("home", 0, tuple(home), "fit", None, None))
-    first_free = next((i for i, s in enumerate(base.steps) if s.kind == "free"), len(base.steps))
-    for s in base.steps[first_free:]:
-        poses.append((s.kind, s.joint, s.q, s.role, None, None))
-    if poses[-1][0] != "home":
-        poses.append(("home", 0, tuple(home), "fit", None, None))
+    visited = [s for s in base.steps if s.kind == "free"]
+    acceleration_all = np.asarray(base.acceleration, dtype=float)
+
+    def move_time(a: Array, b: Array) -> float:
+        return float(motion_time(np.asarray(b) - np.asarray(a), transfer, acceleration_all).max())
+
+    tour = order_visits(home, ends, [np.asarray(s.q) for s in visited], move_time)
+    poses: list[_Pose] = [("home", 0, tuple(home), "fit", None, None)]
+    for visit in tour:
+        if visit.sweep:
+            start, end = ends[visit.item][::-1] if visit.reverse else ends[visit.item]
+            j, speed, acceleration = motions[visit.item]
+            poses.append(("free", 0, tuple(start), "fit", None, None))
+            poses.append(("stream", j, tuple(end), "fit", tuple(start), (speed, acceleration)))
+        else:
+            s = visited[visit.item]
+            poses.append((s.kind, s.joint, s.q, s.role, None, None))
+    poses.append(("home", 0, tuple(home), "fit", None, None))
+    poses, via_home = _via_home(cell, poses)
+    if via_home:
+        notes.append(f"{via_home} move(s) go through home: the direct move would come too close")
+    n_check = sum(p[3] == "check" for p in poses)
+    if n_check:
+        notes.append(f"{n_check} check poses at random, held out: enough to know the held-out RMS to about "
+                     f"{100 / math.sqrt(6 * n_check):.0f} % (acquire/plan_continuous.py validation_poses)")
     steps: list[Step] = []
     sweep_id = 0
     for kind, joint, q, role, start, motion in poses:
@@ -181,8 +224,24 @@ def build_continuous_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0
                           start, speed, acceleration))
     notes.insert(0, "continuous motion: every sweep is one constant-speed move recorded by both streams (speed "
                     f"from the model, plan.stream_speed and a deflection below {DEFLECTION_SHARE:g} x the tracker "
-                    "noise: acquire/plan_continuous.py)")
+                    "noise), sweeps and poses in the order of least travel (acquire/plan_continuous.py)")
     return replace(base, steps=tuple(steps), notes=tuple(notes))
+
+
+def _via_home(cell: Cell | None, poses: list[_Pose]) -> tuple[list[_Pose], int]:
+    """``poses`` (home first) with a home step before every stop-and-go pose whose direct move from the pose
+    before would come too close, and how many were added. A stream step is not checked here: it starts at the
+    range-start pose before it and moves one joint inside a range checked clear. Through home is always clear:
+    range starts and ends lie in ranges clear from home, and check and free poses are chosen reachable from it."""
+    out, count = [poses[0]], 0
+    home = poses[0][2]
+    for pose in poses[1:]:
+        if pose[0] not in ("stream", "home") and out[-1][0] != "home" and not _clear(cell, np.asarray(out[-1][2]),
+                                                                                     np.asarray(pose[2])):
+            out.append(("home", 0, home, "fit", None, None))
+            count += 1
+        out.append(pose)
+    return out, count
 
 
 def transfer_speed(robot: RobotModel, site: SiteConfig, plan: Plan) -> Array:
@@ -196,11 +255,6 @@ def transfer_speed(robot: RobotModel, site: SiteConfig, plan: Plan) -> Array:
         return speed
     cap = np.where(np.array([t == "R" for t in robot.joint_types]), STREAM_SPEED_CAP, DEFAULT_STREAM_SPEED)
     return np.maximum(speed, np.minimum(np.asarray(robot.max_speed, dtype=float) * site.speed_fraction, cap))
-
-
-def _transfer(a: Array, b: Array, speed: Array) -> float:
-    """Seconds of the slowest joint's move from ``a`` to ``b`` at ``speed`` (no ramps: for comparing moves)."""
-    return float(np.max(np.abs(np.asarray(b) - np.asarray(a)) / speed))
 
 
 def _speed_text(speed: float, kind: str) -> str:

@@ -6,7 +6,7 @@ and the dry run's side-by-side comparison (pure, no devices).
   (:func:`acquire.plan_continuous.build_continuous_plan`);
 - ``both`` (:func:`build_both_plan`): per joint, last to first, the stop-and-go sweep of that joint, then its
   continuous sweep over the same range (the stop-and-go pose at the range start, then the stream), then a home
-  check; the check poses (and the fitted free poses, when asked for) last, as in the continuous plan. The
+  check; the check poses (and the fitted free poses, when asked for) last, in the continuous plan's order. The
   stop-and-go sweeps need no clock: they fix the geometry on their own, so the joint fit of the clock offset and
   drift (identify/sync.py) is anchored by samples whose timing cannot be wrong, and the session can be identified
   from its stop-and-go rows or from its streams alone to check the streams' timing independently (README,
@@ -23,9 +23,12 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import numpy as np
+
 from acquire.plan import HOME_SWEEP, build_plan, estimate_duration
 from acquire.plan_continuous import build_continuous_plan, estimate_continuous_duration, predicted_accuracy_continuous
 from acquire.plan_report import predicted_accuracy
+from config.cell import cell_from_config, first_contact
 from config.robots import RobotModel
 from config.site import SiteConfig
 from session.plan import Plan, Step
@@ -74,15 +77,19 @@ def build_both_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> P
     for k, s in enumerate(cont.steps):
         if s.kind == "stream":
             streams[s.joint] = [cont.steps[k - 1], s]
-    last_stream = max((s.index for s in cont.steps if s.kind == "stream"), default=-1)
-    tail = list(cont.steps[last_stream + 1:])  # the check (and fitted free) poses with their home checks
-    while tail and tail[0].kind == "home":  # every block below ends at home already
-        tail.pop(0)
+    starts = {id(pair[0]) for pair in streams.values()}
+    # the check (and fitted free) poses, in the continuous plan's order, from home after the last block
+    tail = [s for s in cont.steps if s.kind == "free" and id(s) not in starts]
     ordered: list[Step] = [Step(0, "home", HOME_SWEEP, 0, home)]
     for j in sorted(set(sweeps) | set(streams), reverse=True):
         ordered += sweeps.get(j, []) + streams.get(j, [])
         ordered.append(Step(0, "home", HOME_SWEEP, 0, home))
-    ordered += tail
+    cell, here = cell_from_config(robot, site), np.asarray(home)
+    for s in tail:  # every move of the tail checked; through home where the direct move would come too close
+        if cell is not None and first_contact(cell, here, np.asarray(s.q)) is not None:
+            ordered.append(Step(0, "home", HOME_SWEEP, 0, home))
+        ordered.append(s)
+        here = np.asarray(s.q)
     if ordered[-1].kind != "home":
         ordered.append(Step(0, "home", HOME_SWEEP, 0, home))
     steps: list[Step] = []

@@ -30,6 +30,7 @@ pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip instal
 
 from acquire.cli import main as acquire
 from acquire.plan_continuous import build_continuous_plan
+from acquire.plan_modes import mode_site
 from acquire.session import Session
 from config.robots import load_robot
 from config.site import load_site
@@ -136,10 +137,12 @@ DROPPED = 3  # RTDE packages lost on the network, mid-sweep
 
 
 def joint6_sweep(site: Path) -> tuple[float, float]:
-    """(start, end) of the joint 6 continuous sweep (the plan's first), rad."""
-    plan = build_continuous_plan(load_robot("ur5e"), load_site(site))
-    step = next(s for s in plan.steps if s.kind == "stream")
-    assert step.joint == 6 and step.start is not None
+    """(start, end) of the joint 6 continuous sweep, rad (where it falls in the plan's tour does not matter: the
+    watcher waits for joint 6 at its start, and no other visit of the plan holds joint 6 there)."""
+    plan = build_continuous_plan(load_robot("ur5e"), mode_site(load_site(site), "continuous", None))  # acquire's
+    step = next(s for s in plan.steps if s.kind == "stream" and s.joint == 6)
+    assert step.start is not None
+    assert all(abs(s.q[5] - step.start[5]) > 0.05 for s in plan.steps if s.index != step.index - 1)
     return step.start[5], step.q[5]
 
 
