@@ -20,25 +20,35 @@ Beyond AP and RP, from the same visits:
   AP and RP of one pose over the first and the last third of its visits (the standard's 8-hour drift test is not
   run: this is the drift within the test);
 - multi-directional pose accuracy variation (7.2): vAP = max |x̄_h - x̄_k| over the barycentres reached from
-  different approach directions (:func:`multi_directional`; the test plan approaches each pose one way only).
+  different approach directions (:func:`multi_directional`, :func:`directions_result`);
+- orientation accuracy and repeatability (7.2.1, 7.2.2) where three or more points on the tool are measured: the
+  attained orientation of each visit is the rotation of the rigid fit (:func:`fitted_rotation`) of the points the
+  commanded pose puts them at to the measured ones; its deviation from the commanded orientation, as rotations
+  a, b, c about the frame's x, y, z axes (:func:`deviation_angles`), gives AP_a = ā, RP_a = 3 S_a and so on
+  (:func:`orientation_result`).
 
-Each figure carries its standard uncertainty from the spread of the visits. Only positions are measured here (one
-tracked point), so the orientation terms of ISO 9283 are not reported.
-Units: metres; frame: whatever the positions are given in (the robot's base frame in ``acquire verify``).
+Uncertainties: :func:`monte_carlo` gives the standard uncertainty of any set of figures by recomputing them on
+synthetic repeats of the test, each visit's measurement drawn again around the barycentre of its pose with the
+spread of the visits (never below the tracker's noise).
+Units: metres, radians; frame: whatever the positions are given in (the robot's base frame in ``acquire verify``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 Array = NDArray[np.float64]
 
 ISO_ORDER = (1, 5, 4, 3, 2)  # the poses of one cycle, in the order visited
 CORNER_SHARE = 0.1  # P2..P5 lie this share of the diagonal's length from the corners
 ISO_CYCLES = 30
+DIRECTIONS = 3  # vAP: each pose approached from three orthogonal directions (7.2)
+MC_DRAWS = 400  # synthetic repeats of :func:`monte_carlo`: a standard deviation to about 3.5 %
 
 
 def cube_poses(centre: Array, edge: float) -> Array:
@@ -105,6 +115,9 @@ class Accuracy:
     poses: tuple[PoseResult, ...]
     distance: Distance | None = None
     drift: Drift | None = None
+    directions: tuple[Directions, ...] = ()
+    orientation: tuple[Orientation, ...] = ()
+    uncertainty: dict[str, float] = field(default_factory=dict)
 
     @property
     def ap(self) -> float:
@@ -128,7 +141,27 @@ class Accuracy:
                            "ap_xyz": p.ap_xyz.tolist(), "rp": p.rp, "l_mean": p.l_mean, "s_l": p.s_l}
                           for p in self.poses],
                 "distance": None if self.distance is None else self.distance.as_dict(),
-                "drift": None if self.drift is None else self.drift.as_dict()}
+                "drift": None if self.drift is None else self.drift.as_dict(),
+                "vap": [d.as_dict() for d in self.directions],
+                "orientation": [o.as_dict() for o in self.orientation],
+                "uncertainty": dict(self.uncertainty)}
+
+    def figures(self) -> dict[str, float]:
+        """Every figure of the run by name (``ap P1``, ``rp P1``, ``ad``, ``rd``, ``dap``, ``drp``, ``vap P1``,
+        ``ap_a P1``, ``rp_a P1`` ..., m or rad): what :func:`monte_carlo` gives the uncertainty of."""
+        out = {}
+        for p in self.poses:
+            out[f"ap P{p.pose}"], out[f"rp P{p.pose}"] = p.ap, p.rp
+        if self.distance is not None:
+            out["ad"], out["rd"] = self.distance.ad, self.distance.rd
+        if self.drift is not None:
+            out["dap"], out["drp"] = self.drift.dap, self.drift.drp
+        for d in self.directions:
+            out[f"vap P{d.pose}"] = d.vap
+        for o in self.orientation:
+            for k, axis in enumerate("abc"):
+                out[f"ap_{axis} P{o.pose}"], out[f"rp_{axis} P{o.pose}"] = float(o.ap[k]), float(o.rp[k])
+        return out
 
 
 def accuracy(label: str, commanded: Array, attained: dict[int, Array], sigma: dict[int, Array] | None = None
@@ -216,3 +249,87 @@ def multi_directional(barycentres: Array) -> float:
     if len(b) < 2:
         raise ValueError("vAP needs the barycentres of at least 2 approach directions")
     return float(np.max(np.linalg.norm(b[:, None, :] - b[None, :, :], axis=2)))
+
+
+@dataclass(frozen=True)
+class Directions:
+    """vAP of pose ``pose`` (7.2): the barycentres (k, 3) of its visits from k approach directions, ``n`` visits
+    each at least, and ``vap`` the largest distance between two of them (m)."""
+
+    pose: int
+    n: int
+    barycentres: Array
+    vap: float
+
+    def as_dict(self) -> dict[str, object]:
+        return {"pose": f"P{self.pose}", "visits_each": self.n, "barycentres": self.barycentres.tolist(),
+                "vap": self.vap}
+
+
+def directions_result(pose: int, attained: list[Array]) -> Directions:
+    """vAP of one pose from its attained positions per approach direction (each (N_h, 3), N_h >= 1)."""
+    sets = [np.atleast_2d(np.asarray(a, dtype=float)) for a in attained]
+    bary = np.array([a.mean(axis=0) for a in sets])
+    return Directions(pose, min(len(a) for a in sets), bary, multi_directional(bary))
+
+
+def fitted_rotation(commanded: Array, measured: Array) -> Array:
+    """The rotation R (3, 3) of the least-squares rigid fit R x + t of the points ``commanded`` (m, 3), m >= 3 not
+    on a line, onto ``measured`` (m, 3), both in one frame (Kabsch, with the determinant kept at +1)."""
+    a = np.asarray(commanded, dtype=float)
+    b = np.asarray(measured, dtype=float)
+    u, _, vt = np.linalg.svd((b - b.mean(axis=0)).T @ (a - a.mean(axis=0)))
+    flip = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)) or 1.0)])
+    return u @ flip @ vt
+
+
+def deviation_angles(commanded: Array, measured: Array) -> Array:
+    """Rotations a, b, c (rad) about the frame's x, y, z axes (in that order, fixed axes) that take the orientation
+    the points ``commanded`` (m, 3) stand in to the one the ``measured`` points (m, 3) stand in."""
+    return Rotation.from_matrix(fitted_rotation(commanded, measured)).as_euler("xyz")
+
+
+@dataclass(frozen=True)
+class Orientation:
+    """Orientation accuracy and repeatability of pose ``pose`` from ``n`` visits: ``ap`` (3,) = (ā, b̄, c̄), the
+    mean deviation of the attained orientation from the commanded one, and ``rp`` (3,) = 3 (S_a, S_b, S_c), rad."""
+
+    pose: int
+    n: int
+    ap: Array
+    rp: Array
+
+    def as_dict(self) -> dict[str, object]:
+        return {"pose": f"P{self.pose}", "n": self.n, "ap_abc": self.ap.tolist(), "rp_abc": self.rp.tolist()}
+
+
+def orientation_result(pose: int, angles: Array) -> Orientation:
+    """ISO 9283 AP_a,b,c and RP_a,b,c of one pose from the deviations (N, 3), N >= 2, of its visits (rad; from
+    :func:`deviation_angles`, so the commanded a, b, c are zero)."""
+    angles = np.atleast_2d(np.asarray(angles, dtype=float))
+    if len(angles) < 2:
+        raise ValueError(f"pose P{pose}: orientation AP and RP need at least 2 visits, got {len(angles)}")
+    return Orientation(pose, len(angles), angles.mean(axis=0), 3.0 * np.std(angles, axis=0, ddof=1))
+
+
+def monte_carlo(figures: Callable[[dict[Hashable, Array]], dict[str, float]], sets: dict[Hashable, Array],
+                floor: dict[Hashable, float], draws: int = MC_DRAWS, seed: int = 0) -> dict[str, float]:
+    """Standard uncertainty of every figure ``figures(sets)`` returns: its standard deviation over ``draws``
+    synthetic repeats of the test. In a repeat every row of each set (k: (N, d), one visit's measurement) is drawn
+    again from N(mean_k, C_k), C_k the set's sample covariance with its eigenvalues raised to ``floor[k]``² at
+    least (the measurement's own noise: a spread seen in a few visits can be far too small; sets of one row get
+    floor² I). A figure missing from a repeat is left out there. Seeded: the same data give the same answer."""
+    rng = np.random.default_rng(seed)
+    shapes = {}
+    for key, rows in sets.items():
+        rows = np.atleast_2d(np.asarray(rows, dtype=float))
+        cov = np.cov(rows.T, ddof=1).reshape(rows.shape[1], rows.shape[1]) if len(rows) > 1 else \
+            np.zeros((rows.shape[1], rows.shape[1]))
+        w, v = np.linalg.eigh(cov)
+        shapes[key] = (rows.mean(axis=0), v * np.sqrt(np.maximum(w, floor.get(key, 0.0) ** 2)), len(rows))
+    values: dict[str, list[float]] = {}
+    for _ in range(draws):
+        synthetic = {k: mean + rng.standard_normal((n, len(mean))) @ scale.T for k, (mean, scale, n) in shapes.items()}
+        for name, value in figures(synthetic).items():
+            values.setdefault(name, []).append(value)
+    return {name: float(np.std(v, ddof=1)) for name, v in values.items() if len(v) > 1}
