@@ -19,6 +19,9 @@ The world (:class:`SimulatedRig`):
   ``coupling.dh_from_readings(readings)``; joint limits are checked on those DH values;
 - joint errors (options ``scale``, ``eccentricity``, ``compliance``; drivers/sim/world.py): the joints really
   stand at ``q + Δq(q)`` of those DH values (``rig.joint_errors``, recorded in the robot's identity);
+- ``backlash`` (rad or m, every joint): lost motion at a reversal; a joint comes to rest half of it short of its
+  target, behind it in the direction of the move that brought it there (as a gear train's lash leaves the link), so
+  the same command reached from either side lands ``backlash`` apart; nothing before a joint's first move;
 - ``points=N`` reflectors on the flange (``rig.tools``, (N, 3) in the flange frame; the first is the truth's
   TP), 150-250 mm apart on a plate: the tracker reports each one (``tp`` 1..N) with its own noise; with
   ``occlusion=P`` each point is out of sight at a measurement with probability P (all out of sight: TargetLost);
@@ -115,7 +118,8 @@ class SimulatedRig:
                  noise: float = 5e-5, latency: float = 0.002, dropout: float = 0.0, tracker_seed: int | None = None,
                  robot_faults: Iterable[FaultSpec] = (), tracker_faults: Iterable[FaultSpec] = (),
                  points: int = 1, occlusion: float = 0.0, scale: float = 0.0, eccentricity: float = 0.0,
-                 compliance: float = 0.0, stream: StreamSettings | None = None, arm: int | None = None,
+                 compliance: float = 0.0, backlash: float = 0.0, stream: StreamSettings | None = None,
+                 arm: int | None = None,
                  moved: Iterable[float] = (0.0, 0.0, 0.0), turned: Iterable[float] = (0.0, 0.0, 0.0)) -> None:
         self.model = model if isinstance(model, RobotModel) else load_robot(model)
         self.clock: Clock = VirtualClock() if clock is None else clock
@@ -130,6 +134,7 @@ class SimulatedRig:
         self.occlusion = _setting("occlusion", occlusion, upper=1.0)
         self.scale, self.eccentricity = _setting("scale", scale), _setting("eccentricity", eccentricity)
         self.compliance = _setting("compliance", compliance)
+        self.backlash = _setting("backlash", backlash)
         if int(points) != points or points < 1:
             raise ValueError(f"simulated rig: points must be an integer >= 1, got {points!r}")
         self.points = int(points)
@@ -153,6 +158,7 @@ class SimulatedRig:
         self._tracker_rng = np.random.default_rng([self.tracker_seed, 2])
         self._occlusion_rng = np.random.default_rng([self.tracker_seed, 3])
         self._rest = self.readings_of(home)  # where the arm came to rest (actual readings)
+        self._lash = np.zeros(self.model.n_joints)  # each joint's lost motion after its last move (DH values)
         self._ring_amp, self._ring_start, self._ring_decays = np.zeros(self.model.n_joints), self.clock.now(), True
         self.moves = self.measurements = 0  # move_joints / measure calls so far
         self.robot_connected = self.tracker_connected = False
@@ -202,7 +208,7 @@ class SimulatedRig:
             rig = cls(model, clock=clock, seed=r["seed"], repeatability=r["repeatability"], ring=r["ring"],
                       ring_tau=r["ring_tau"], noise=t["noise"], latency=t["latency"], dropout=t["dropout"],
                       tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"], scale=r["scale"],
-                      eccentricity=r["eccentricity"], compliance=r["compliance"],
+                      eccentricity=r["eccentricity"], compliance=r["compliance"], backlash=r["backlash"],
                       stream=StreamSettings.from_settings(r, t), arm=r["arm"], moved=t["moved"],
                       turned=t["turned"], **world)
         except ValueError as exc:
@@ -240,8 +246,9 @@ class SimulatedRig:
 
     def true_joints(self, t: float | Array | None = None) -> Array:
         """Where the joints really stand at clock time ``t`` (default now), DH values: the DH values of the
-        actual readings plus the joint errors (drivers/sim/world.py): (n,), or (m, n) for m times."""
-        return true_joints(self.actual_joints(t), self.coupling, self.joint_errors, self.truth, self.model.links)
+        actual readings plus the joint errors (drivers/sim/world.py) and the backlash: (n,), or (m, n) for m times."""
+        q = true_joints(self.actual_joints(t), self.coupling, self.joint_errors, self.truth, self.model.links)
+        return q + self._lash if self.backlash else q
 
     def true_points(self, t: float | Array | None = None) -> Array:
         """The true positions of every reflector, m in the tracker frame, at clock time ``t`` (default now):
@@ -316,6 +323,8 @@ class SimulatedRig:
                 self._ring_amp = self.ring * self._robot_rng.uniform(0.5, 1.0, n) * signs
                 self._ring_start = self.clock.now()
                 self._ring_decays = True
+                turned = np.abs(reached - start) > 1e-12
+                self._lash[turned] = -0.5 * self.backlash * np.sign(target - start)[turned]
             self._path = None  # last: until now the move's profile holds the arm (no glitch for a reader)
         return self._stop_requested
 

@@ -29,7 +29,7 @@ def test_vap_and_orientation_follow_iso_9283_by_hand() -> None:
     # three points on a plate turned by 2 mrad about x then 1 mrad about z (fixed axes) and shifted
     plate = np.array([[0.0, 0, 0], [0.2, 0, 0], [0, 0.15, 0.01]])
     turn = Rotation.from_euler("xyz", [2e-3, 0, 1e-3])
-    moved = turn.apply(plate) + [0.5, -0.2, 0.3]
+    moved = turn.apply(plate) + np.array([0.5, -0.2, 0.3])
     np.testing.assert_allclose(fitted_rotation(plate, moved), turn.as_matrix(), atol=1e-12)
     np.testing.assert_allclose(deviation_angles(plate, moved), [2e-3, 0, 1e-3], atol=1e-12)
     # a reflection is not a rotation: the fit keeps det = +1
