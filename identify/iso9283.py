@@ -144,7 +144,7 @@ class Accuracy:
                 "drift": None if self.drift is None else self.drift.as_dict(),
                 "vap": [d.as_dict() for d in self.directions],
                 "orientation": [o.as_dict() for o in self.orientation],
-                "uncertainty": dict(self.uncertainty)}
+                "figures": self.figures(), "uncertainty": dict(self.uncertainty)}
 
     def figures(self) -> dict[str, float]:
         """Every figure of the run by name (``ap P1``, ``rp P1``, ``ad``, ``rd``, ``dap``, ``drp``, ``vap P1``,
