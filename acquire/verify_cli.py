@@ -78,6 +78,11 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
     lines += fit_width.table(["pose", "x [mm]", "y [mm]", "z [mm]", "q before [deg]", "AP before / after"], rows)
     change = np.max(np.abs(np.array(info["q"]["after"]) - np.array(info["q"]["before"])))
     lines.append(f"compensation changes the joints by up to {change * 1e3:.2f} mrad")
+    if "approach" in info:
+        lines.append(f"each pose visited from 3 directions (ISO 9283 vAP): first to an approach pose "
+                     f"{info['approach_share'] * info['edge'] * MM:.0f} mm away along the base's +x, +y or +z, then "
+                     "to the pose; the approach poses are measured like every step (not used), checked like them "
+                     "and counted in the duration")
     if "register" in info:
         lines.append(f"registration first: {len(info['register']['q'])} poses of its own (not the test's), "
                      f"commanded with the {info['register']['model']} model; the tracker frame is fitted on them")

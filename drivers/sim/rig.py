@@ -19,9 +19,10 @@ The world (:class:`SimulatedRig`):
   ``coupling.dh_from_readings(readings)``; joint limits are checked on those DH values;
 - joint errors (options ``scale``, ``eccentricity``, ``compliance``; drivers/sim/world.py): the joints really
   stand at ``q + Δq(q)`` of those DH values (``rig.joint_errors``, recorded in the robot's identity);
-- ``backlash`` (rad or m, every joint): lost motion at a reversal; a joint comes to rest half of it short of its
-  target, behind it in the direction of the move that brought it there (as a gear train's lash leaves the link), so
-  the same command reached from either side lands ``backlash`` apart; nothing before a joint's first move;
+- ``backlash`` (rad or m, every joint): the play of a gear train (:func:`~drivers.sim.world.backlash_play`): the
+  joint (link) follows the readings (motor) only once the gap is taken up, so after a move longer than the gap it
+  rests half of it short of its target, behind it in the direction of the move, and the same command reached from
+  either side lands ``backlash`` apart; a shorter move leaves it in the gap; centred at the start;
 - ``points=N`` reflectors on the flange (``rig.tools``, (N, 3) in the flange frame; the first is the truth's
   TP), 150-250 mm apart on a plate: the tracker reports each one (``tp`` 1..N) with its own noise; with
   ``occlusion=P`` each point is out of sight at a measurement with probability P (all out of sight: TargetLost);
@@ -70,7 +71,7 @@ from drivers.motion import joint_durations as _durations
 from drivers.motion import profile_fraction as _fraction
 from drivers.sim.pairing import _points_settings, _unpaired, check_pairing, is_simulated_camera
 from drivers.sim.stream import StreamedMove, StreamSettings
-from drivers.sim.world import joint_errors_for, reflector_tools, true_joints
+from drivers.sim.world import backlash_play, joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
 from kinematics.dh import frames_from_joints, points_from_joints
 from kinematics.truth import random_truth
@@ -158,7 +159,7 @@ class SimulatedRig:
         self._tracker_rng = np.random.default_rng([self.tracker_seed, 2])
         self._occlusion_rng = np.random.default_rng([self.tracker_seed, 3])
         self._rest = self.readings_of(home)  # where the arm came to rest (actual readings)
-        self._lash = np.zeros(self.model.n_joints)  # each joint's lost motion after its last move (DH values)
+        self._lash = np.zeros(self.model.n_joints)  # each joint's offset from its readings in the gap (backlash)
         self._ring_amp, self._ring_start, self._ring_decays = np.zeros(self.model.n_joints), self.clock.now(), True
         self.moves = self.measurements = 0  # move_joints / measure calls so far
         self.robot_connected = self.tracker_connected = False
@@ -323,8 +324,7 @@ class SimulatedRig:
                 self._ring_amp = self.ring * self._robot_rng.uniform(0.5, 1.0, n) * signs
                 self._ring_start = self.clock.now()
                 self._ring_decays = True
-                turned = np.abs(reached - start) > 1e-12
-                self._lash[turned] = -0.5 * self.backlash * np.sign(target - start)[turned]
+                self._lash = backlash_play(self._lash, reached - start, self.backlash)
             self._path = None  # last: until now the move's profile holds the arm (no glitch for a reader)
         return self._stop_requested
 

@@ -469,3 +469,8 @@ def test_backlash_leaves_a_joint_behind_its_target_in_the_direction_of_the_move(
     robot.move_joints(target, SPEED, ACC, timeout=30)  # up to the same target
     robot.wait_until_still(0.3, timeout=5)
     np.testing.assert_allclose(rig.true_joints() - target, [0, -lash / 2, 0, 0, 0, 0], atol=1e-9)
+    # a reversal shorter than the gap (a quarter of it, back down) leaves the joint where it was: the motor only
+    # crosses the gap
+    robot.move_joints(target - np.array([0, lash / 4, 0, 0, 0, 0]), SPEED, ACC, timeout=30)
+    robot.wait_until_still(0.3, timeout=5)
+    np.testing.assert_allclose(rig.true_joints() - target, [0, -lash / 2, 0, 0, 0, 0], atol=1e-9)
