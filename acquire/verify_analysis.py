@@ -14,7 +14,8 @@ Per mode (before / after) and pose:
   pose (the target's position and the flange orientation the test commands) puts them at to the measured ones.
 
 Uncertainty of every figure: Monte-Carlo (:func:`identify.iso9283.monte_carlo`, 400 synthetic repeats of the
-cycles, each visit redrawn with the spread of its pose's visits, never below the tracker's stated noise), combined
+cycles, each visit redrawn with the spread of its pose's visits pooled with the run's other poses and the tracker's
+stated noise: :func:`identify.iso9283.spread_covariances`), combined
 in quadrature with the registration's (linearised, :func:`registration_covariance`) for the figures it moves: AP
 (its 3D variance at the pose over 3, along AP's direction) and orientation AP (its rotation's variance about each
 base axis). RP, AD, RD, vAP and drift are differences within the run: a registration error cancels in them.
@@ -49,8 +50,8 @@ from identify.iso9283 import (
 
 Array = NDArray[np.float64]
 MIN_POINTS = 3  # tracked points on the tool that give an orientation
-UNCERTAINTY = ("standard uncertainty: Monte-Carlo over the cycles (400 repeats from the visits' spread and the "
-               "tracker's noise), with the registration's for AP and orientation AP")
+UNCERTAINTY = ("standard uncertainty: Monte-Carlo over the cycles (400 repeats from the visits' spread, pooled over "
+               "the poses, and the tracker's noise), with the registration's for AP and orientation AP")
 ISO_DRIFT_HOURS = 8
 
 
@@ -197,14 +198,15 @@ def _figures(mode: str, targets: Array, v: _Visits, positions: dict[Any, Array],
     if not run.poses:
         return run
     sets = {**{("x", k): x for k, x in positions.items()}, **{("abc", p): a for p, a in angles.items()}}
-    floor = {("x", k): float(np.mean(v.sigmas[k])) for k in positions if v.sigmas.get(k)}
-    floor |= {("abc", p): float(np.mean(v.angle_noise)) for p in angles if v.angle_noise}
+    noise = {("x", k): float(np.mean(v.sigmas[k])) for k in positions if v.sigmas.get(k)}
+    noise |= {("abc", p): float(np.mean(v.angle_noise)) for p in angles if v.angle_noise}
 
     def figures(s: dict[Any, Array]) -> dict[str, float]:
         return _run(mode, targets, {k[1]: x for k, x in s.items() if k[0] == "x"}, v,
                     {k[1]: a for k, a in s.items() if k[0] == "abc"}).figures()
 
-    return replace(run, uncertainty=monte_carlo(figures, sets, floor, seed=MODES.index(mode)))
+    groups = {k: k[0] for k in sets}  # the positions of all poses pooled, the orientations of all poses pooled
+    return replace(run, uncertainty=monte_carlo(figures, sets, noise, seed=MODES.index(mode), groups=groups))
 
 
 def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:

@@ -29,12 +29,14 @@ Beyond AP and RP, from the same visits:
 
 Uncertainties: :func:`monte_carlo` gives the standard uncertainty of any set of figures by recomputing them on
 synthetic repeats of the test, each visit's measurement drawn again around the barycentre of its pose with the
-spread of the visits (never below the tracker's noise).
+spread of its visits, pooled with that of the run's other poses and the tracker's stated noise
+(:func:`spread_covariances`).
 Units: metres, radians; frame: whatever the positions are given in (the robot's base frame in ``acquire verify``).
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 
@@ -49,6 +51,8 @@ CORNER_SHARE = 0.1  # P2..P5 lie this share of the diagonal's length from the co
 ISO_CYCLES = 30
 DIRECTIONS = 3  # vAP: each pose approached from three orthogonal directions (7.2)
 MC_DRAWS = 400  # synthetic repeats of :func:`monte_carlo`: a standard deviation to about 3.5 %
+NOISE_PRIOR = 2.0  # visits' worth of the tracker's stated noise pooled with a group's spread (monte_carlo) ...
+GROUP_PRIOR = 10.0  # ... and visits' worth of that group's spread pooled with each set's own
 
 
 def cube_poses(centre: Array, edge: float) -> Array:
@@ -313,23 +317,46 @@ def orientation_result(pose: int, angles: Array) -> Orientation:
 
 
 def monte_carlo(figures: Callable[[dict[Hashable, Array]], dict[str, float]], sets: dict[Hashable, Array],
-                floor: dict[Hashable, float], draws: int = MC_DRAWS, seed: int = 0) -> dict[str, float]:
+                noise: dict[Hashable, float], draws: int = MC_DRAWS, seed: int = 0,
+                groups: dict[Hashable, Hashable] | None = None) -> dict[str, float]:
     """Standard uncertainty of every figure ``figures(sets)`` returns: its standard deviation over ``draws``
     synthetic repeats of the test. In a repeat every row of each set (k: (N, d), one visit's measurement) is drawn
-    again from N(mean_k, C_k), C_k the set's sample covariance with its eigenvalues raised to ``floor[k]``² at
-    least (the measurement's own noise: a spread seen in a few visits can be far too small; sets of one row get
-    floor² I). A figure missing from a repeat is left out there. Seeded: the same data give the same answer."""
+    again from N(mean_k, C_k) (:func:`spread_covariances`: the set's sample covariance pooled with its group's and
+    the measurement's stated ``noise``). A figure missing from a repeat is left out there. Seeded: the same data
+    give the same answer."""
     rng = np.random.default_rng(seed)
+    covs = spread_covariances(sets, noise, groups)
     shapes = {}
     for key, rows in sets.items():
-        rows = np.atleast_2d(np.asarray(rows, dtype=float))
-        cov = np.cov(rows.T, ddof=1).reshape(rows.shape[1], rows.shape[1]) if len(rows) > 1 else \
-            np.zeros((rows.shape[1], rows.shape[1]))
-        w, v = np.linalg.eigh(cov)
-        shapes[key] = (rows.mean(axis=0), v * np.sqrt(np.maximum(w, floor.get(key, 0.0) ** 2)), len(rows))
+        w, v = np.linalg.eigh(covs[key])
+        shapes[key] = (np.atleast_2d(rows).mean(axis=0), v * np.sqrt(np.maximum(w, 0.0)), len(np.atleast_2d(rows)))
     values: dict[str, list[float]] = {}
     for _ in range(draws):
         synthetic = {k: mean + rng.standard_normal((n, len(mean))) @ scale.T for k, (mean, scale, n) in shapes.items()}
         for name, value in figures(synthetic).items():
             values.setdefault(name, []).append(value)
     return {name: float(np.std(v, ddof=1)) for name, v in values.items() if len(v) > 1}
+
+
+def spread_covariances(sets: dict[Hashable, Array], noise: dict[Hashable, float],
+                       groups: dict[Hashable, Hashable] | None = None) -> dict[Hashable, Array]:
+    """The covariance a visit of each set (k: (N, d)) is redrawn with: its sample covariance S_k (N - 1 degrees of
+    freedom) pooled with :data:`GROUP_PRIOR` visits' worth of its group's covariance (``groups``: key -> group,
+    default one group per set), itself the groups' sets' sample covariances pooled with :data:`NOISE_PRIOR` visits'
+    worth of the stated noise (``noise[k]``² I). A covariance estimated from a few visits is both too small and
+    too anisotropic by chance, and the spread of figures such as RP grows with anisotropy: pooling the poses of a
+    run (one tracker, one arm) keeps a handful of cycles honest, and with ISO's 30 each pose's own spread leads."""
+    groups = groups or {k: k for k in sets}
+    members = Counter(groups[k] for k in sets)
+    scatter: dict[Hashable, Array] = {}
+    dof: dict[Hashable, float] = {}
+    own = {}
+    for key, rows in sets.items():
+        rows = np.atleast_2d(np.asarray(rows, dtype=float))
+        n, d = rows.shape
+        own[key] = (np.cov(rows.T, ddof=1).reshape(d, d) * (n - 1) if n > 1 else np.zeros((d, d)), n - 1)
+        g, prior = groups[key], NOISE_PRIOR / members[groups[key]] if noise.get(key) else 0.0
+        scatter[g] = scatter.get(g, 0.0) + own[key][0] + prior * noise.get(key, 0.0) ** 2 * np.eye(d)
+        dof[g] = dof.get(g, 0.0) + (n - 1) + prior
+    group_cov = {g: scatter[g] / max(dof[g], 1.0) for g in scatter}
+    return {k: (s + GROUP_PRIOR * group_cov[groups[k]]) / (m + GROUP_PRIOR) for k, (s, m) in own.items()}

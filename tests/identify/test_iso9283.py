@@ -67,8 +67,9 @@ def test_monte_carlo_uncertainty_matches_the_spread_of_repeats() -> None:
         sets["abc"] = np.array([3e-4, 0, 0]) + rng.normal(0, 1e-4, (n, 3))
         for name, value in _figures(sets).items():
             seen.setdefault(name, []).append(value)
-        floor = {k: noise for k in centres} | {"abc": 0.0}
-        for name, value in monte_carlo(_figures, sets, floor, draws=100, seed=run).items():
+        noises = {k: noise for k in centres} | {"abc": 0.0}
+        groups = {k: 0 for k in centres} | {"abc": 1}
+        for name, value in monte_carlo(_figures, sets, noises, draws=100, seed=run, groups=groups).items():
             stated.setdefault(name, []).append(value)
     for name in seen:
         spread, claim = np.std(seen[name], ddof=1), np.mean(stated[name])
@@ -76,12 +77,27 @@ def test_monte_carlo_uncertainty_matches_the_spread_of_repeats() -> None:
 
 
 def test_monte_carlo_never_states_less_than_the_noise_allows() -> None:
-    """Two visits that happen to agree do not make AP exact: the floor (the tracker's noise) holds the spread up."""
+    """Two visits that happen to agree do not make AP exact: the stated noise, worth two visits, holds the spread up
+    (the group's covariance is (0 + 2 sigma²) / (1 + 2), the set's (0 + 10 x that) / (1 + 10))."""
     sets = {1: np.array([[1.0, 0, 0], [1.0, 0, 0]]) * MM}
 
     def figures(s: dict) -> dict[str, float]:
         return {"ap": accuracy("x", np.zeros((5, 3)), s).poses[0].ap}
 
     u = monte_carlo(figures, sets, {1: 5e-5}, draws=400)["ap"]
-    assert u == pytest.approx(5e-5 / np.sqrt(2), rel=0.15)  # the barycentre's noise along the offset
+    assert u == pytest.approx(5e-5 * np.sqrt(20 / 33) / np.sqrt(2), rel=0.15)  # the barycentre's, along the offset
     assert monte_carlo(figures, sets, {1: 0.0}, draws=50)["ap"] == 0.0
+
+
+def test_spread_covariances_pool_the_poses_of_a_group_by_hand() -> None:
+    """Two sets of one group, three visits each along x (sample variances 1 and 4 mm², 2 dof each), no noise: the
+    group's is 2.5 mm²; each set's (2 own + 10 group) / 12; a third set in a group of its own keeps its own."""
+    from identify.iso9283 import spread_covariances
+
+    sets = {"a": np.array([[-1, 0, 0], [0, 0, 0], [1, 0, 0]]) * MM,
+            "b": np.array([[-2, 0, 0], [0, 0, 0], [2, 0, 0]]) * MM,
+            "c": np.array([[0, -1, 0], [0, 1, 0], [0, 0, 0]]) * MM}
+    cov = spread_covariances(sets, {}, {"a": 1, "b": 1, "c": 2})
+    assert cov["a"][0, 0] == pytest.approx((2 * 1 + 10 * 2.5) / 12 * MM**2, rel=1e-12)
+    assert cov["b"][0, 0] == pytest.approx((2 * 4 + 10 * 2.5) / 12 * MM**2, rel=1e-12)
+    assert cov["c"][1, 1] == pytest.approx(1 * MM**2, rel=1e-12) and cov["c"][0, 0] == 0.0
