@@ -49,7 +49,6 @@ Array = NDArray[np.float64]
 ISO_ORDER = (1, 5, 4, 3, 2)  # the poses of one cycle, in the order visited
 CORNER_SHARE = 0.1  # P2..P5 lie this share of the diagonal's length from the corners
 ISO_CYCLES = 30
-DIRECTIONS = 3  # vAP: each pose approached from three orthogonal directions (7.2)
 MC_DRAWS = 400  # synthetic repeats of :func:`monte_carlo`: a standard deviation to about 3.5 %
 NOISE_PRIOR = 2.0  # visits' worth of the tracker's stated noise pooled with a group's spread (monte_carlo) ...
 GROUP_PRIOR = 10.0  # ... and visits' worth of that group's spread pooled with each set's own
