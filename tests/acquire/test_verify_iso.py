@@ -8,6 +8,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 import yaml
 
 from acquire.cli import main as acquire
@@ -113,3 +114,42 @@ def test_one_tracked_point_says_orientation_was_not_measured(tmp_path: Path, cap
     assert "Orientation was not measured" in verify.with_suffix(".report.html").read_text()
     wide = [line for line in out.splitlines() if len(line) > 80 and str(tmp_path) not in line]  # paths stay whole
     assert not wide, "the terminal must fit 80 columns"
+
+
+def test_approach_poses_are_planned_and_checked_like_every_step(tmp_path: Path) -> None:
+    """Every approach pose (three per pose and run) is a step of the plan the checks see (limits, cell), lies 20 % of
+    the edge from its pose along +x, +y, +z on the model that commands it, and a check that fails on them refuses
+    the test with its reason."""
+    from acquire.verify import APPROACH_SHARE, VerifyError, build, design, problems
+    from config.robots import load_robot
+    from config.site import SiteConfig
+    from identify.calibrated import CalibratedModel
+    from identify.io.result_io import load_result
+    from tests.acquire.test_verify import _result
+
+    robot, site = load_robot("ur5e"), SiteConfig.default()
+    model, _ = load_result(str(_result(SimulatedRig("ur5e", seed=0).truth, tmp_path)))
+    checked = []
+
+    def plan_ok(q: dict, approach: dict, register) -> list[str]:
+        plan = build(robot, site, q, 2, register, approach)[0]
+        checked.append({s.q for s in plan.steps})
+        return problems(plan, robot, site)
+
+    d = design(model, robot, site, plan_ok)
+    last = checked[-1]
+    for mode in ("before", "after"):
+        assert all(tuple(map(float, q)) in last for q in d.approach[mode].reshape(-1, 6))
+    ident = model.with_base(np.eye(4))
+    reached = ident.points(ident.readings(d.approach["after"].reshape(-1, 6))).reshape(5, 3, 3)
+    offsets = reached - d.targets[:, None, :]
+    np.testing.assert_allclose(offsets, np.broadcast_to(APPROACH_SHARE * d.edge * np.eye(3), (5, 3, 3)), atol=1e-6)
+    nominal = CalibratedModel.exact(replace(robot.nominal, tool=ident.tool()), "ur5e")
+    np.testing.assert_allclose(nominal.points(d.approach["before"][:, 2]) - d.targets,
+                               np.tile([0, 0, APPROACH_SHARE * d.edge], (5, 1)), atol=1e-6)
+
+    def no_high_approach(q: dict, approach: dict, register) -> list[str]:
+        return ["P4's approach from z meets the cell's roof"] if approach else []
+
+    with pytest.raises(VerifyError, match="approach from z meets the cell's roof"):
+        design(model, robot, site, no_high_approach)
