@@ -134,9 +134,13 @@ def _orientation_setup(info: dict[str, Any]) -> tuple[dict[int, Array] | None, s
     if info.get("rotation") is None:
         return None, "the arm has fewer than six joints: the test commands no orientation"
     if len(tools) < MIN_POINTS:
-        return None, (f"the result knows {max(len(tools), 1)} tracked point on the tool; orientation needs "
+        return None, (f"the result knows {_points(max(len(tools), 1))} on the tool; orientation needs "
                       f"{MIN_POINTS} or more (calibrate with several reflectors)")
     return tools, None
+
+
+def _points(n: int) -> str:
+    return f"{n} tracked point{'s' if n != 1 else ''}"
 
 
 def _collect(info: dict[str, Any], records: list[Any], to_base: Any, tools: dict[int, Array] | None
@@ -230,7 +234,7 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
     targets = np.array(info["targets"], dtype=float)
     visits, most = _collect(info, records, to_base, tools)
     if why is None and most < MIN_POINTS:
-        why = f"the tracker saw {max(most, 1)} tracked point per visit; orientation needs {MIN_POINTS} or more"
+        why = f"the tracker saw {_points(max(most, 1))} per visit; orientation needs {MIN_POINTS} or more"
     reg_var, reg_rot = np.zeros(5), np.zeros((3, 3))
     if check is not None:
         fitted = np.array(info["register"]["predicted"], dtype=float)

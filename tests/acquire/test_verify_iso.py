@@ -88,6 +88,12 @@ def test_vap_of_an_arm_with_backlash_and_orientation_from_three_reflectors(tmp_p
     assert np.abs(before).max() > 1e-3  # the nominal model turns the tool by about a milliradian
     report = verify.with_suffix(".report.html").read_text()
     assert "Orientation accuracy AP" in report and "vAP P5 (7.2)" in report and "AP c P5" in report
+    # the same calibration, a tracker that sees one of the reflectors: not measured, and why
+    one = tmp_path / "one.session"
+    assert acquire(["verify", "--result", str(result), "--robot", "mock:ur5e", "--tracker", "mock", "--session",
+                    str(one), "--cycles", "2", "--quiet"]) == 0
+    assert "orientation not measured: the tracker saw 1 tracked point per visit" in " ".join(
+        capsys.readouterr().out.split())
 
 
 def test_one_tracked_point_says_orientation_was_not_measured(tmp_path: Path, capsys, monkeypatch) -> None:
