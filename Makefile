@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # a mock acquisition and its identification, then an ISO 9283-style verification of that calibration on the same
-# simulated robot (5 poses x 10 cycles before and after compensation: a few seconds in mock mode)
+# simulated robot (5 poses x 30 cycles x 3 approach directions before and after compensation: seconds in mock mode)
 # (make echoes each recipe line: they stay within 80 columns, as the commands' own output does; scripts/demo_width.py)
 demo: $(STAMP)
 	mkdir -p sessions

@@ -1,11 +1,16 @@
-"""The verification run's plan and its analysis (pure): an ISO 9283-style test of a calibration on the real arm.
+"""The verification run's plan (pure): an ISO 9283-style test of a calibration on the real arm (its analysis:
+:mod:`acquire.verify_analysis`).
 
 Five poses on the diagonal plane of a test cube (:mod:`identify.iso9283`), in the robot's base frame (DH frame 0
 of the identified model), are each visited ``cycles`` times in the standard order: first commanded with the
 nominal model (what the controller does today: "before"), then with the identified model ("after",
 :mod:`identify.compensate`). A pose is the tracked point's position and, with six joints or more, the flange's
-orientation at home. The tracker measures each visit; positions are taken into the base frame through the
-identified base (tracker <- frame 0), and AP and RP follow per pose and run.
+orientation at home. Each visit of a pose is made from each of three orthogonal directions (ISO 9283 7.2, for
+vAP): the arm first goes to an approach pose :data:`APPROACH_SHARE` of the cube's edge away from the pose along
+the base's +x, +y or +z axis (the same orientation, solved with the mode's model), then to the pose. The approach
+poses are plan steps like the others (limits, cell, duration, dry run); they are measured too, as every plan step
+is, and their readings are kept in the session but not used. AP, RP, AD, RD and drift use the visits from the
+first direction (+x), as the standard's one-directional test; vAP compares the three.
 
 Before judging anything the test re-registers the tracker: trackers go back on their tripods, so the result's
 tracker <- base transform is not trusted. The plan starts with :data:`REGISTER_POSES` registration poses of its
@@ -35,15 +40,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
-from scipy.stats import chi2
 
 from acquire.plan import _per_joint, check_plan, plan_clearance
 from config.robots import RobotModel
 from config.site import SiteConfig
 from identify.calibrated import CalibratedModel
 from identify.compensate import solve_ik
-from identify.holds import MIN_POSES, ModelCheck, check_models, tabulated
-from identify.iso9283 import Accuracy, Distance, Drift, accuracy, cube_poses, distance_result, drift, visit_order
+from identify.iso9283 import cube_poses, visit_order
 from identify.result_models import result_models
 from kinematics.dh import DHModel
 from session.plan import Plan, Step
@@ -61,6 +64,9 @@ REGISTER = "register"  # the label of the registration steps
 REGISTER_POSES = 8
 REGISTER_SHARE = 0.7  # the registration poses: the corners of a cube of this share of the test cube's edge ...
 REGISTER_TILT = math.radians(45.0)  # ... the flange tilted by this angle (six joints or more)
+APPROACH = "approach"  # the label of the approach steps: ["approach", mode, cycle, pose, direction]
+APPROACH_SHARE = 0.2  # an approach pose lies this share of the cube's edge from its pose ...
+APPROACH_AXES = np.eye(3)  # ... along the base's +x, +y, +z (direction 1, 2, 3)
 
 
 class VerifyError(ValueError):
@@ -74,7 +80,8 @@ class Design:
     (5, n; DH joint values, as every plan: a coupled controller is commanded their readings), ``predicted`` per
     mode (5,): the identified model's prediction of AP (before: where the nominal command lands; after: 0),
     ``expected`` (5,): the 3D uncertainty of those predictions, m; ``notes``; ``register``: the registration
-    poses' DH joint values."""
+    poses' DH joint values; ``approach`` per mode (5, 3, n): the DH joint values of each pose's approach poses
+    (directions +x, +y, +z)."""
 
     centre: Array
     edge: float
@@ -85,6 +92,7 @@ class Design:
     expected: Array
     notes: tuple[str, ...]
     register: Array  # (REGISTER_POSES, n) DH joint values of the registration poses, commanded with the model
+    approach: dict[str, Array]
 
 
 def reach(robot: RobotModel) -> float:
@@ -97,7 +105,8 @@ def reach(robot: RobotModel) -> float:
 def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, plan_ok: Any = None,
            before: DHModel | None = None) -> Design:
     """The test's poses and commands for ``identified`` (a result) on ``robot`` in ``site``; VerifyError (one
-    line) when the poses cannot be reached or planned. ``plan_ok(q_before, q_after, q_register)`` returns the
+    line) when the poses cannot be reached or planned. ``plan_ok(q, approach, q_register)`` (``q`` and ``approach``
+    per mode, as in :class:`Design`) returns the
     reasons a candidate cannot run (none: it can); a default cube that fails is tried lower, higher, then smaller
     (noted). ``before``: the model the controller moves with today (:func:`identify.controller.controller_model`;
     default the nominal), which commands the "before" visits."""
@@ -126,11 +135,13 @@ def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, pla
             after = solve_ik(ident, targets, ident.readings(before.q), None if coupled else robot.limits, rot)
             bad = [f"P{k + 1} {s}" for k, s in enumerate(before.status) if s != "ok"]
             bad += [f"P{k + 1} {s} (identified)" for k, s in enumerate(after.status) if s != "ok"]
-            register = None
-            if not bad and plan_ok is not None:
-                bad = list(plan_ok(before.q, after.q, None))
+            register, approach, q = None, {}, {"before": before.q, "after": ident.dh_values(after.q)}
             if not bad:
-                check = None if plan_ok is None else partial(plan_ok, before.q, after.q)
+                approach, bad = _approach_poses(nominal, ident, targets, edge, rot, q, robot, coupled)
+            if not bad and plan_ok is not None:
+                bad = list(plan_ok(q, approach, None))
+            if not bad:
+                check = None if plan_ok is None else partial(plan_ok, q, approach)
                 register, bad = _register_poses(ident, centre, edge, rotation, after.q, robot, coupled, check)
             if bad:
                 last = "; ".join(bad)
@@ -143,14 +154,34 @@ def design(identified: CalibratedModel, robot: RobotModel, site: SiteConfig, pla
             # the attained positions reach the base frame through the identified base: its uncertainty counts
             expected = identified.expected_errors(after.q)
             assert register is not None
-            return Design(centre, edge, targets, rotation, {"before": before.q, "after": ident.dh_values(after.q)},
-                          predicted, expected, tuple(notes), register)
+            return Design(centre, edge, targets, rotation, q, predicted, expected, tuple(notes), register, approach)
     edge, centre = tried[-1]
     where = f"centre {', '.join(f'{v:.3f}' for v in centre)} m, edge {edge * 1e3:.0f} mm"
     if not (given and given_centre):
         where += f"; {len(tried)} default cubes tried, edges {edge0 * 1e3:.0f} mm down to {edge * 1e3:.0f} mm"
     raise VerifyError(f"the test cube ({where}) cannot be run: {last}; set verify.cube_centre and cube_edge in the "
                       "site file")
+
+
+def _approach_poses(nominal: CalibratedModel, ident: CalibratedModel, targets: Array, edge: float,
+                    rot: Array | None, q: dict[str, Array], robot: RobotModel, coupled: bool
+                    ) -> tuple[dict[str, Array], list[str]]:
+    """The approach poses (DH values, per mode (5, 3, n)): each target moved by :data:`APPROACH_SHARE` of ``edge``
+    along each of :data:`APPROACH_AXES`, solved with the mode's model (before: ``nominal``; after: ``ident``) from
+    the pose's own command. Returns them and the reasons they cannot run (limits, no solution)."""
+    out, bad = {}, []
+    rots = None if rot is None else np.repeat(rot, 3, axis=0)
+    points = (targets[:, None, :] + APPROACH_SHARE * edge * APPROACH_AXES[None, :, :]).reshape(-1, 3)
+    for mode, model in (("before", nominal), ("after", ident)):
+        seeds = np.repeat(model.readings(q[mode]), 3, axis=0)
+        solved = solve_ik(model, points, seeds, None if coupled and mode == "after" else robot.limits, rots)
+        dh = model.dh_values(solved.q)
+        inside = np.all((dh >= robot.limits[:, 0]) & (dh <= robot.limits[:, 1]), axis=1)
+        bad += [f"P{k // 3 + 1}'s approach from {'xyz'[k % 3]} {s if s != 'ok' else 'beyond the joint limits'}"
+                + (" (identified)" if mode == "after" else "")
+                for k, s in enumerate(solved.status) if s != "ok" or not inside[k]]
+        out[mode] = dh.reshape(5, 3, -1)
+    return out, bad
 
 
 def _register_poses(ident: CalibratedModel, centre: Array, edge: float, rotation: Array | None, seeds: Array,
@@ -193,23 +224,34 @@ def register_header(doc: dict[str, Any], identified: CalibratedModel, q_dh: Arra
             "expected": model.expected, "model": model.name}
 
 
-def build(robot: RobotModel, site: SiteConfig, q: dict[str, Array], cycles: int, register: Array | None = None
-          ) -> tuple[Plan, list[list[Any]]]:
-    """The plan (the registration poses, then every mode's cycles in ISO order) and its step labels
-    ``[mode, cycle, pose]`` (``["register", 1, k]`` for the registration poses, k = 1..)."""
+def build(robot: RobotModel, site: SiteConfig, q: dict[str, Array], cycles: int, register: Array | None = None,
+          approach: dict[str, Array] | None = None) -> tuple[Plan, list[list[Any]]]:
+    """The plan (the registration poses, then every mode's cycles in ISO order, each pose from each approach
+    direction: its approach pose, then the pose) and its step labels ``[mode, cycle, pose, direction]``
+    (``["register", 1, k]`` for the registration poses, k = 1..; ``["approach", mode, cycle, pose, direction]``
+    for the approach poses). Without ``approach``, one visit per pose and cycle (``[mode, cycle, pose]``)."""
     steps, labels = [], []
+
+    def add(q_step: Array, sweep: int, label: list[Any]) -> None:
+        steps.append(Step(len(steps), KIND, sweep, 0, tuple(float(v) for v in q_step), "check"))
+        labels.append(label)
+
     for k, pose in enumerate([] if register is None else register):
-        steps.append(Step(len(steps), KIND, 0, 0, tuple(float(v) for v in pose), "check"))
-        labels.append([REGISTER, 1, k + 1])
+        add(pose, 0, [REGISTER, 1, k + 1])
     for mode in MODES:
         for cycle, pose in visit_order(cycles):
-            steps.append(Step(len(steps), KIND, pose, 0, tuple(float(v) for v in q[mode][pose - 1]), "check"))
-            labels.append([mode, cycle, pose])
+            if approach is None:
+                add(q[mode][pose - 1], pose, [mode, cycle, pose])
+                continue
+            for h in range(len(APPROACH_AXES)):
+                add(approach[mode][pose - 1, h], pose, [APPROACH, mode, cycle, pose, h + 1])
+                add(q[mode][pose - 1], pose, [mode, cycle, pose, h + 1])
+    visits = f"5 poses x {cycles} cycles" + ("" if approach is None else " x 3 approach directions (+x, +y, +z)")
     plan = Plan(robot.name, robot.joint_types, tuple(float(v) for v in robot.home), tuple(steps),
                 site.samples_per_step, site.settle_time, tuple(float(v) for v in _per_joint(robot, site, "speed")),
                 tuple(float(v) for v in _per_joint(robot, site, "acceleration")),
-                (f"ISO 9283-style verification: {len(labels) - 10 * cycles} registration poses, then 5 poses x "
-                 f"{cycles} cycles, commanded with the nominal model, then with the identified one",))
+                (f"ISO 9283-style verification: {0 if register is None else len(register)} registration poses, "
+                 f"then {visits}, commanded with the nominal model, then with the identified one",))
     return plan, labels
 
 
@@ -236,148 +278,9 @@ def header(d: Design, labels: list[list[Any]], identified: CalibratedModel, resu
             "rotation": None if d.rotation is None else d.rotation.tolist(),
             "base": identified.base.tolist(), "q": {m: d.q[m].tolist() for m in MODES},
             "predicted": {m: d.predicted[m].tolist() for m in MODES}, "expected": d.expected.tolist(),
-            "noise": identified.noise, "steps": labels, "notes": list(d.notes)}
+            "noise": identified.noise, "steps": labels, "notes": list(d.notes),
+            "approach": {m: d.approach[m].tolist() for m in MODES}, "approach_share": APPROACH_SHARE,
+            "tool": identified.tool().tolist(),
+            "tools": {str(k): np.asarray(v).tolist() for k, v in (identified.tools or {}).items()}}
 
 
-@dataclass(frozen=True)
-class Outcome:
-    """The measured AP/RP per mode (``runs``; a mode with no complete pose is absent), the verdict
-    (pass | warn | fail | incomplete) and the line that says why, with numbers; ``registration``: the check that
-    registered the tracker (None for a session planned without registration poses)."""
-
-    runs: dict[str, Accuracy]
-    status: str
-    message: str
-    missing: int
-    registration: ModelCheck | None = None
-
-    def as_dict(self, info: dict[str, Any]) -> dict[str, Any]:
-        out = {"verdict": {"status": self.status, "message": self.message}}
-        if self.registration is not None:
-            r = self.registration
-            out["registration"] = {"model": r.name, "poses": r.heldout.samples, "moved": r.registration.moved,
-                                   "turned_deg": math.degrees(r.registration.turned), "heldout_rms": r.heldout.rms,
-                                   "heldout_max": r.heldout.max, "expected_rms": r.expected, "ratio": r.ratio,
-                                   "status": r.status, "reasons": r.reasons}
-        return {**out, "runs": {m: a.as_dict() for m, a in self.runs.items()}, "missing_steps": self.missing,
-                "predicted": info["predicted"], "expected": info["expected"], "targets": info["targets"],
-                "result": info["result"], "result_sha256": info.get("result_sha256"), "cycles": info["cycles"],
-                "edge": info["edge"], "centre": info["centre"],
-                "before_model": info.get("before_model", "nominal model")}
-
-
-def register(info: dict[str, Any], records: list[Any]) -> ModelCheck | str:
-    """Register the tracker on the session's registration steps (``identify check``'s fit of the recommended
-    model's predictions stored in ``info["register"]``); the check, or why it cannot be made (one line)."""
-    reg = info["register"]
-    rows = [r for r in records if r.status == "ok" and info["steps"][r.plan_index][0] == REGISTER]
-    if len(rows) < MIN_POSES:
-        return f"{len(rows)} of {len(reg['q'])} registration poses measured: at least {MIN_POSES} are needed"
-    pose = np.array([info["steps"][r.plan_index][2] - 1 for r in rows])
-    predicted = np.array(reg["predicted"], dtype=float)[pose]
-    model = tabulated(reg["model"], predicted, float(reg["expected"]))
-    points = np.array([r.position for r in rows], dtype=float)
-    q = np.array(reg["q"], dtype=float)[pose]
-    return check_models(points, q, np.ones(len(rows), dtype=np.int64), [model]).chosen
-
-
-def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
-    """AP/RP per mode from the session's step ``records`` (ok ones, positions in the tracker frame) and its
-    ``verification`` header ``info``: the tracker is registered first (:func:`register`), the positions taken into
-    the base frame; the verdict compares "after" with what the result predicts."""
-    base = np.array(info["base"], dtype=float)
-    inv_r, shift = base[:3, :3].T, base[:3, 3]
-    check = register(info, records) if "register" in info else None
-    if isinstance(check, str):
-        return Outcome({}, "incomplete", f"{check}: resume the session", _missing(info, records))
-    targets = np.array(info["targets"], dtype=float)
-    attained: dict[str, dict[int, list[Array]]] = {m: {} for m in MODES}
-    sigmas: dict[str, dict[int, list[float]]] = {m: {} for m in MODES}
-    cycles: dict[str, dict[int, list[int]]] = {m: {} for m in MODES}
-    for record in records:
-        mode, cycle, pose = info["steps"][record.plan_index]
-        if record.status != "ok" or mode not in MODES:
-            continue
-        position = np.array(record.position, dtype=float)
-        if check is not None:  # new tracker frame -> the calibration's
-            position = check.registration.to_calibration(position)
-        attained[mode].setdefault(int(pose), []).append(inv_r @ (position - shift))
-        cycles[mode].setdefault(int(pose), []).append(int(cycle))
-        if record.sigma is not None:
-            sigmas[mode].setdefault(int(pose), []).append(record.sigma)
-    runs = {}
-    for mode in MODES:
-        known = {p: np.array(v) for p, v in sigmas[mode].items() if len(v) == len(attained[mode][p])}
-        acc = accuracy(mode, targets, {p: np.array(v) for p, v in attained[mode].items()}, known)
-        if acc.poses:
-            runs[mode] = replace(acc, distance=_distance(targets, attained[mode], cycles[mode]),
-                                 drift=_drift(targets, attained[mode], known))
-    spread = np.zeros(5) if check is None else registration_variance(
-        np.array(info["register"]["predicted"], dtype=float), targets @ base[:3, :3].T + shift, check.expected)
-    status, message = _verdict(runs, info, spread)
-    if check is not None and check.status == "fail":
-        status, message = "fail", (
-            f"registered on {check.heldout.samples} poses of its own, the result's {check.name} model still misses "
-            f"by {check.heldout.rms * 1e3:.3f} mm RMS (held out), {check.ratio:.1f}x the {check.expected * 1e3:.3f} "
-            "mm it predicts: another arm or another tool than the calibration's; do not use this model here")
-    return Outcome(runs, status, message, _missing(info, records), check)
-
-
-def _distance(targets: Array, attained: dict[int, list[Array]], cycles: dict[int, list[int]]) -> Distance | None:
-    """AD and RD between P2 and P4 (ISO 9283's pair for 7.3) over the cycles that measured both."""
-    a, b = (dict(zip(cycles.get(p, []), attained.get(p, []), strict=True)) for p in DISTANCE_POSES)
-    common = sorted(set(a) & set(b))
-    if len(common) < 2:
-        return None
-    return distance_result(*DISTANCE_POSES, targets[DISTANCE_POSES[0] - 1], targets[DISTANCE_POSES[1] - 1],
-                           np.array([a[c] for c in common]), np.array([b[c] for c in common]))
-
-
-def _drift(targets: Array, attained: dict[int, list[Array]], sigma: dict[int, Array]) -> Drift | None:
-    """dAP and dRP of P1 over the run (first against last third of its visits), when it has 4 visits or more."""
-    visits = attained.get(1, [])
-    return drift(1, targets[0], np.array(visits), sigma.get(1)) if len(visits) >= 4 else None
-
-
-def _missing(info: dict[str, Any], records: list[Any]) -> int:
-    return sum(1 for r in records if r.status != "ok")
-
-
-def registration_variance(fitted: Array, at: Array, expected: float) -> Array:
-    """Variance (m², 3D) a rigid registration on the points ``fitted`` (k, 3) adds to positions ``at`` (m, 3), both
-    in one frame, when each fitted point misses by ``expected`` (3D RMS, m; isotropic): the linearised fit's
-    covariance sigma² (Σ J_iᵀ J_i)⁻¹ with J = [-[x]×, I], carried to each position."""
-    def jacobian(x: Array) -> Array:
-        skew = np.array([[0.0, x[2], -x[1]], [-x[2], 0.0, x[0]], [x[1], -x[0], 0.0]])  # -[x]x
-        return np.hstack([skew, np.eye(3)])
-
-    centre = fitted.mean(axis=0)  # any origin gives the same answer; the centroid keeps the system well scaled
-    normal = sum(jacobian(x - centre).T @ jacobian(x - centre) for x in fitted)
-    cov = expected**2 / 3.0 * np.linalg.inv(normal)
-    return np.array([np.trace(jacobian(x - centre) @ cov @ jacobian(x - centre).T) for x in at])
-
-
-def _verdict(runs: dict[str, Accuracy], info: dict[str, Any], registration: Array) -> tuple[str, str]:
-    """pass: every pose's "after" AP within what the result's uncertainty, the measurement's spread and the
-    registration (``registration``: its variance at each pose, m²) allow (chi-square, 3 degrees of freedom, 0.1 %
-    false alarms); warn: beyond that but better than "before"; fail: not
-    better; incomplete: a run or a pose missing."""
-    if set(runs) != set(MODES) or any(len(a.poses) < 5 for a in runs.values()):
-        return "incomplete", "not every pose of both runs has 2 or more measurements: resume the session"
-    before, after = runs["before"], runs["after"]
-    expected = np.array(info["expected"], dtype=float)
-    scale = chi2.ppf(1 - AFTER_ALARM, 3) / 3  # a 3D error's square over its mean square, at the alarm rate
-    limits = [math.sqrt(scale * (e**2 + 3 * p.ap_std**2 + r))
-              for e, p, r in zip(expected, after.poses, registration, strict=True)]
-    worst = max(range(5), key=lambda k: after.poses[k].ap / limits[k])
-    summary = (f"AP before {before.ap * 1e3:.4f} mm, after {after.ap * 1e3:.4f} mm (worst pose); RP before "
-               f"{before.rp * 1e3:.4f} mm, after {after.rp * 1e3:.4f} mm")
-    p = after.poses[worst]
-    if all(a.ap <= lim for a, lim in zip(after.poses, limits, strict=True)):
-        return "pass", f"{summary}: every pose within what the result predicts (P{p.pose}: {p.ap * 1e3:.4f} mm " \
-                       f"<= {limits[worst] * 1e3:.4f} mm)"
-    if after.ap < before.ap:
-        return "warn", f"{summary}: better than before, but P{p.pose} misses by {p.ap * 1e3:.4f} mm, more than the " \
-                       f"{limits[worst] * 1e3:.4f} mm the result's uncertainty allows: the model holds less than it " \
-                       "claims (recalibrate, or check the tool and the mounting)"
-    return "fail", f"{summary}: compensation does not improve the arm: do not use this model"

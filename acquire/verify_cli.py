@@ -19,7 +19,8 @@ from acquire.progress import hms
 from acquire.resume import resume_settings
 from acquire.runner import run_session
 from acquire.session import Session
-from acquire.verify import MODES, Outcome, VerifyError, analyse, build, design, header, problems
+from acquire.verify import MODES, VerifyError, build, design, header, problems
+from acquire.verify_analysis import UNCERTAINTY, Outcome, analyse
 from acquire.verify_options import build_parser
 from common import fit_width
 from common.errors import InputError
@@ -31,7 +32,7 @@ from identify.calibrated import CalibratedModel, ResultError, nominal_name
 from identify.controller import check_same_robot, controller_model
 from identify.holds import ModelCheck
 from identify.io.result_io import load_result
-from identify.report.verify_rows import iso_rows
+from identify.report.verify_rows import iso_rows, orientation_rows, pose_cells
 from session.schema import SessionError
 
 MM = 1e3
@@ -77,6 +78,11 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
     lines += fit_width.table(["pose", "x [mm]", "y [mm]", "z [mm]", "q before [deg]", "AP before / after"], rows)
     change = np.max(np.abs(np.array(info["q"]["after"]) - np.array(info["q"]["before"])))
     lines.append(f"compensation changes the joints by up to {change * 1e3:.2f} mrad")
+    if "approach" in info:
+        lines.append(f"each pose visited from 3 directions (ISO 9283 vAP): first to an approach pose "
+                     f"{info['approach_share'] * info['edge'] * MM:.0f} mm away along the base's +x, +y or +z, then "
+                     "to the pose; the approach poses are measured like every step (not used), checked like them "
+                     "and counted in the duration")
     if "register" in info:
         lines.append(f"registration first: {len(info['register']['q'])} poses of its own (not the test's), "
                      f"commanded with the {info['register']['model']} model; the tracker frame is fitted on them")
@@ -97,23 +103,28 @@ def format_registration(check: ModelCheck) -> list[str]:
 
 
 def format_iso_extras(outcome: Outcome) -> list[str]:
-    """Distance accuracy and repeatability, drift within the run: a table of 80 columns or fewer."""
-    rows = iso_rows({m: a.as_dict() for m, a in outcome.runs.items()})
-    return fit_width.table(["ISO 9283 [mm]", "before", "after"], rows) if rows else []
+    """Distance accuracy and repeatability, drift within the run, vAP per pose, orientation (worst pose of each
+    figure), each ± its uncertainty: tables of 80 columns or fewer, then what was not measured and why."""
+    runs = {m: a.as_dict() for m, a in outcome.runs.items()}
+    rows = iso_rows(runs)
+    lines = fit_width.table(["ISO 9283 [mm]", "before", "after"], rows) if rows else []
+    turns = orientation_rows(runs)
+    if turns:
+        lines += fit_width.table(["orientation [mrad]", "before", "after"], turns)
+    elif outcome.orientation:
+        lines += fit_width.wrap(f"orientation not measured: {outcome.orientation}")
+    if outcome.runs:
+        lines += fit_width.wrap(outcome.drift_note)
+        lines += fit_width.wrap(f"± {UNCERTAINTY}")
+    return lines
 
 
 def format_outcome(outcome: Outcome) -> str:
-    """The registration, AP/RP per pose and run, then the verdict line."""
+    """The registration, AP/RP per pose and run ± their uncertainties, the other figures, then the verdict line."""
     lines = [] if outcome.registration is None else format_registration(outcome.registration)
-    lines.append("pose   AP before   AP after   RP before   RP after  [mm]")
-    runs = outcome.runs
-    for k in range(5):
-        cells = []
-        for key in ("ap", "rp"):
-            for mode in MODES:
-                pose = next((p for p in runs[mode].poses if p.pose == k + 1), None) if mode in runs else None
-                cells.append("       -" if pose is None else f"{getattr(pose, key) * MM:9.4f}")
-        lines.append(f"P{k + 1}   " + "  ".join([cells[0], cells[1], cells[2], cells[3]]))
+    runs = {m: a.as_dict() for m, a in outcome.runs.items()}
+    rows = [[f"P{k}", *(pose_cells(runs.get(m), f, k) for f in ("ap", "rp") for m in MODES)] for k in range(1, 6)]
+    lines += fit_width.table(["[mm]", "AP before", "AP after", "RP before", "RP after"], rows)
     lines += format_iso_extras(outcome)
     lines.append(f"verdict: {outcome.status}: {outcome.message}")
     return "\n".join(lines)
@@ -162,10 +173,9 @@ def run(args: argparse.Namespace) -> int:
 
         check_pairing(robot_spec, tracker_spec)
 
-    def plan_ok(q_before: np.ndarray, q_after: np.ndarray, q_register: np.ndarray) -> list[str]:
+    def plan_ok(q: dict[str, np.ndarray], approach: dict[str, np.ndarray], q_register: np.ndarray) -> list[str]:
         # two cycles hold every distinct move
-        plan = build(robot, site, {"before": q_before, "after": q_after}, min(cycles, 2), q_register)[0]
-        return problems(plan, robot, site)
+        return problems(build(robot, site, q, min(cycles, 2), q_register, approach)[0], robot, site)
 
     try:
         before, before_name = controller_model(doc, robot)
@@ -176,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     except VerifyError as exc:
         print(f"acquire verify: test refused: {exc}", file=sys.stderr)
         return 2
-    plan, labels = build(robot, site, d.q, cycles, d.register)
+    plan, labels = build(robot, site, d.q, cycles, d.register, d.approach)
     info = header(d, labels, model, str(args.result), sha, (doc.get("verdict") or {}).get("status"), cycles, doc,
                   before_name)
     say(format_design(info, robot, plan, estimate_duration(plan, robot, site.measure_time)))

@@ -5,14 +5,16 @@
     acquire verify --result cal.result.yaml --robot ur5e --dry-run             the test's poses and moves, nothing moved
     acquire verify --resume sessions/ur5e-verify-20261122-101500.session      continue an interrupted test
 
-The test (acquire/verify.py) registers the tracker first, on 8 poses of its own (trackers move between sessions), and
-says how far it moved; it is planned before anything moves and checked like an acquisition plan (joint limits,
-the cell); a real robot moves only after the operator has read it and typed ``yes`` (or passed ``--yes``); Ctrl-C
-stops the motion; every wait has a timeout. The session is a session file like an acquisition's (durable,
-resumable; its header holds the test), and ``SESSION.verify.yaml`` and ``SESSION.report.html`` are written beside
-it. Exit codes: 0 complete (verdict pass or warn), 3 complete but compensation fails the test or the registered
-residuals say another arm or another tool, 1 the run failed or left poses unmeasured (resumable), 2 bad input or a
-test that cannot be planned, 130 stopped by the operator.
+The test (acquire/verify.py) registers the tracker first, on 8 poses of its own (trackers move between sessions),
+and says how far it moved; each pose is visited from three directions (an approach pose along the base's +x, +y, +z
+first) for ISO 9283's vAP, and its orientation is measured where the result knows three or more tracked points;
+every figure is shown with its uncertainty (Monte-Carlo over the cycles). The test is planned before anything moves
+and checked like an acquisition plan (joint limits, the cell); a real robot moves only after the operator has read
+it and typed ``yes`` (or passed ``--yes``); Ctrl-C stops the motion; every wait has a timeout. The session is a
+session file like an acquisition's (durable, resumable; its header holds the test), and ``SESSION.verify.yaml`` and
+``SESSION.report.html`` are written beside it. Exit codes: 0 complete (verdict pass or warn), 3 complete but
+compensation fails the test or the registered residuals say another arm or another tool, 1 the run failed or left
+poses unmeasured (resumable), 2 bad input or a test that cannot be planned, 130 stopped by the operator.
 """
 
 from __future__ import annotations

@@ -71,6 +71,8 @@ MOCK_ROBOT_OPTIONS: dict[str, tuple[str, object, str]] = {
                      "random phase per joint)"),
     "compliance": ("float", 0.0, "joint compliance under gravity, rad/(N m) (m/N), every joint; needs the "
                    "model's dynamics"),
+    "backlash": ("float", 0.0, "lost motion at a reversal, rad (m), every joint: a joint rests half of it short of "
+                 "its target, behind it in the direction of the move"),
     "arm": ("int", None, "seed of the true arm's DH errors alone (default: seed): another arm of the same model at "
             "the same placement, with the same reflectors"),
     "points": ("points", 1, _POINTS),

@@ -20,25 +20,38 @@ Beyond AP and RP, from the same visits:
   AP and RP of one pose over the first and the last third of its visits (the standard's 8-hour drift test is not
   run: this is the drift within the test);
 - multi-directional pose accuracy variation (7.2): vAP = max |x̄_h - x̄_k| over the barycentres reached from
-  different approach directions (:func:`multi_directional`; the test plan approaches each pose one way only).
+  different approach directions (:func:`multi_directional`, :func:`directions_result`);
+- orientation accuracy and repeatability (7.2.1, 7.2.2) where three or more points on the tool are measured: the
+  attained orientation of each visit is the rotation of the rigid fit (:func:`fitted_rotation`) of the points the
+  commanded pose puts them at to the measured ones; its deviation from the commanded orientation, as rotations
+  a, b, c about the frame's x, y, z axes (:func:`deviation_angles`), gives AP_a = ā, RP_a = 3 S_a and so on
+  (:func:`orientation_result`).
 
-Each figure carries its standard uncertainty from the spread of the visits. Only positions are measured here (one
-tracked point), so the orientation terms of ISO 9283 are not reported.
-Units: metres; frame: whatever the positions are given in (the robot's base frame in ``acquire verify``).
+Uncertainties: :func:`monte_carlo` gives the standard uncertainty of any set of figures by recomputing them on
+synthetic repeats of the test, each visit's measurement drawn again around the barycentre of its pose with the
+spread of its visits, pooled with that of the run's other poses and the tracker's stated noise
+(:func:`spread_covariances`).
+Units: metres, radians; frame: whatever the positions are given in (the robot's base frame in ``acquire verify``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import Counter
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 Array = NDArray[np.float64]
 
 ISO_ORDER = (1, 5, 4, 3, 2)  # the poses of one cycle, in the order visited
 CORNER_SHARE = 0.1  # P2..P5 lie this share of the diagonal's length from the corners
 ISO_CYCLES = 30
+MC_DRAWS = 400  # synthetic repeats of :func:`monte_carlo`: a standard deviation to about 3.5 %
+NOISE_PRIOR = 2.0  # visits' worth of the tracker's stated noise pooled with a group's spread (monte_carlo) ...
+GROUP_PRIOR = 10.0  # ... and visits' worth of that group's spread pooled with each set's own
 
 
 def cube_poses(centre: Array, edge: float) -> Array:
@@ -105,6 +118,9 @@ class Accuracy:
     poses: tuple[PoseResult, ...]
     distance: Distance | None = None
     drift: Drift | None = None
+    directions: tuple[Directions, ...] = ()
+    orientation: tuple[Orientation, ...] = ()
+    uncertainty: dict[str, float] = field(default_factory=dict)
 
     @property
     def ap(self) -> float:
@@ -128,7 +144,27 @@ class Accuracy:
                            "ap_xyz": p.ap_xyz.tolist(), "rp": p.rp, "l_mean": p.l_mean, "s_l": p.s_l}
                           for p in self.poses],
                 "distance": None if self.distance is None else self.distance.as_dict(),
-                "drift": None if self.drift is None else self.drift.as_dict()}
+                "drift": None if self.drift is None else self.drift.as_dict(),
+                "vap": [d.as_dict() for d in self.directions],
+                "orientation": [o.as_dict() for o in self.orientation],
+                "figures": self.figures(), "uncertainty": dict(self.uncertainty)}
+
+    def figures(self) -> dict[str, float]:
+        """Every figure of the run by name (``ap P1``, ``rp P1``, ``ad``, ``rd``, ``dap``, ``drp``, ``vap P1``,
+        ``ap_a P1``, ``rp_a P1`` ..., m or rad): what :func:`monte_carlo` gives the uncertainty of."""
+        out = {}
+        for p in self.poses:
+            out[f"ap P{p.pose}"], out[f"rp P{p.pose}"] = p.ap, p.rp
+        if self.distance is not None:
+            out["ad"], out["rd"] = self.distance.ad, self.distance.rd
+        if self.drift is not None:
+            out["dap"], out["drp"] = self.drift.dap, self.drift.drp
+        for d in self.directions:
+            out[f"vap P{d.pose}"] = d.vap
+        for o in self.orientation:
+            for k, axis in enumerate("abc"):
+                out[f"ap_{axis} P{o.pose}"], out[f"rp_{axis} P{o.pose}"] = float(o.ap[k]), float(o.rp[k])
+        return out
 
 
 def accuracy(label: str, commanded: Array, attained: dict[int, Array], sigma: dict[int, Array] | None = None
@@ -216,3 +252,110 @@ def multi_directional(barycentres: Array) -> float:
     if len(b) < 2:
         raise ValueError("vAP needs the barycentres of at least 2 approach directions")
     return float(np.max(np.linalg.norm(b[:, None, :] - b[None, :, :], axis=2)))
+
+
+@dataclass(frozen=True)
+class Directions:
+    """vAP of pose ``pose`` (7.2): the barycentres (k, 3) of its visits from k approach directions, ``n`` visits
+    each at least, and ``vap`` the largest distance between two of them (m)."""
+
+    pose: int
+    n: int
+    barycentres: Array
+    vap: float
+
+    def as_dict(self) -> dict[str, object]:
+        return {"pose": f"P{self.pose}", "visits_each": self.n, "barycentres": self.barycentres.tolist(),
+                "vap": self.vap}
+
+
+def directions_result(pose: int, attained: list[Array]) -> Directions:
+    """vAP of one pose from its attained positions per approach direction (each (N_h, 3), N_h >= 1)."""
+    sets = [np.atleast_2d(np.asarray(a, dtype=float)) for a in attained]
+    bary = np.array([a.mean(axis=0) for a in sets])
+    return Directions(pose, min(len(a) for a in sets), bary, multi_directional(bary))
+
+
+def fitted_rotation(commanded: Array, measured: Array) -> Array:
+    """The rotation R (3, 3) of the least-squares rigid fit R x + t of the points ``commanded`` (m, 3), m >= 3 not
+    on a line, onto ``measured`` (m, 3), both in one frame (Kabsch, with the determinant kept at +1)."""
+    a = np.asarray(commanded, dtype=float)
+    b = np.asarray(measured, dtype=float)
+    u, _, vt = np.linalg.svd((b - b.mean(axis=0)).T @ (a - a.mean(axis=0)))
+    flip = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)) or 1.0)])
+    return u @ flip @ vt
+
+
+def deviation_angles(commanded: Array, measured: Array) -> Array:
+    """Rotations a, b, c (rad) about the frame's x, y, z axes (in that order, fixed axes) that take the orientation
+    the points ``commanded`` (m, 3) stand in to the one the ``measured`` points (m, 3) stand in."""
+    return Rotation.from_matrix(fitted_rotation(commanded, measured)).as_euler("xyz")
+
+
+@dataclass(frozen=True)
+class Orientation:
+    """Orientation accuracy and repeatability of pose ``pose`` from ``n`` visits: ``ap`` (3,) = (ā, b̄, c̄), the
+    mean deviation of the attained orientation from the commanded one, and ``rp`` (3,) = 3 (S_a, S_b, S_c), rad."""
+
+    pose: int
+    n: int
+    ap: Array
+    rp: Array
+
+    def as_dict(self) -> dict[str, object]:
+        return {"pose": f"P{self.pose}", "n": self.n, "ap_abc": self.ap.tolist(), "rp_abc": self.rp.tolist()}
+
+
+def orientation_result(pose: int, angles: Array) -> Orientation:
+    """ISO 9283 AP_a,b,c and RP_a,b,c of one pose from the deviations (N, 3), N >= 2, of its visits (rad; from
+    :func:`deviation_angles`, so the commanded a, b, c are zero)."""
+    angles = np.atleast_2d(np.asarray(angles, dtype=float))
+    if len(angles) < 2:
+        raise ValueError(f"pose P{pose}: orientation AP and RP need at least 2 visits, got {len(angles)}")
+    return Orientation(pose, len(angles), angles.mean(axis=0), 3.0 * np.std(angles, axis=0, ddof=1))
+
+
+def monte_carlo(figures: Callable[[dict[Hashable, Array]], dict[str, float]], sets: dict[Hashable, Array],
+                noise: dict[Hashable, float], draws: int = MC_DRAWS, seed: int = 0,
+                groups: dict[Hashable, Hashable] | None = None) -> dict[str, float]:
+    """Standard uncertainty of every figure ``figures(sets)`` returns: its standard deviation over ``draws``
+    synthetic repeats of the test. In a repeat every row of each set (k: (N, d), one visit's measurement) is drawn
+    again from N(mean_k, C_k) (:func:`spread_covariances`: the set's sample covariance pooled with its group's and
+    the measurement's stated ``noise``). A figure missing from a repeat is left out there. Seeded: the same data
+    give the same answer."""
+    rng = np.random.default_rng(seed)
+    covs = spread_covariances(sets, noise, groups)
+    shapes = {}
+    for key, rows in sets.items():
+        w, v = np.linalg.eigh(covs[key])
+        shapes[key] = (np.atleast_2d(rows).mean(axis=0), v * np.sqrt(np.maximum(w, 0.0)), len(np.atleast_2d(rows)))
+    values: dict[str, list[float]] = {}
+    for _ in range(draws):
+        synthetic = {k: mean + rng.standard_normal((n, len(mean))) @ scale.T for k, (mean, scale, n) in shapes.items()}
+        for name, value in figures(synthetic).items():
+            values.setdefault(name, []).append(value)
+    return {name: float(np.std(v, ddof=1)) for name, v in values.items() if len(v) > 1}
+
+
+def spread_covariances(sets: dict[Hashable, Array], noise: dict[Hashable, float],
+                       groups: dict[Hashable, Hashable] | None = None) -> dict[Hashable, Array]:
+    """The covariance a visit of each set (k: (N, d)) is redrawn with: its sample covariance S_k (N - 1 degrees of
+    freedom) pooled with :data:`GROUP_PRIOR` visits' worth of its group's covariance (``groups``: key -> group,
+    default one group per set), itself the groups' sets' sample covariances pooled with :data:`NOISE_PRIOR` visits'
+    worth of the stated noise (``noise[k]``² I). A covariance estimated from a few visits is both too small and
+    too anisotropic by chance, and the spread of figures such as RP grows with anisotropy: pooling the poses of a
+    run (one tracker, one arm) keeps a handful of cycles honest, and with ISO's 30 each pose's own spread leads."""
+    groups = groups or {k: k for k in sets}
+    members = Counter(groups[k] for k in sets)
+    scatter: dict[Hashable, Array] = {}
+    dof: dict[Hashable, float] = {}
+    own = {}
+    for key, rows in sets.items():
+        rows = np.atleast_2d(np.asarray(rows, dtype=float))
+        n, d = rows.shape
+        own[key] = (np.cov(rows.T, ddof=1).reshape(d, d) * (n - 1) if n > 1 else np.zeros((d, d)), n - 1)
+        g, prior = groups[key], NOISE_PRIOR / members[groups[key]] if noise.get(key) else 0.0
+        scatter[g] = scatter.get(g, 0.0) + own[key][0] + prior * noise.get(key, 0.0) ** 2 * np.eye(d)
+        dof[g] = dof.get(g, 0.0) + (n - 1) + prior
+    group_cov = {g: scatter[g] / max(dof[g], 1.0) for g in scatter}
+    return {k: (s + GROUP_PRIOR * group_cov[groups[k]]) / (m + GROUP_PRIOR) for k, (s, m) in own.items()}

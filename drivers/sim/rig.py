@@ -19,6 +19,10 @@ The world (:class:`SimulatedRig`):
   ``coupling.dh_from_readings(readings)``; joint limits are checked on those DH values;
 - joint errors (options ``scale``, ``eccentricity``, ``compliance``; drivers/sim/world.py): the joints really
   stand at ``q + Δq(q)`` of those DH values (``rig.joint_errors``, recorded in the robot's identity);
+- ``backlash`` (rad or m, every joint): the play of a gear train (:func:`~drivers.sim.world.backlash_play`): the
+  joint (link) follows the readings (motor) only once the gap is taken up, so after a move longer than the gap it
+  rests half of it short of its target, behind it in the direction of the move, and the same command reached from
+  either side lands ``backlash`` apart; a shorter move leaves it in the gap; centred at the start;
 - ``points=N`` reflectors on the flange (``rig.tools``, (N, 3) in the flange frame; the first is the truth's
   TP), 150-250 mm apart on a plate: the tracker reports each one (``tp`` 1..N) with its own noise; with
   ``occlusion=P`` each point is out of sight at a measurement with probability P (all out of sight: TargetLost);
@@ -67,7 +71,7 @@ from drivers.motion import joint_durations as _durations
 from drivers.motion import profile_fraction as _fraction
 from drivers.sim.pairing import _points_settings, _unpaired, check_pairing, is_simulated_camera
 from drivers.sim.stream import StreamedMove, StreamSettings
-from drivers.sim.world import joint_errors_for, reflector_tools, true_joints
+from drivers.sim.world import backlash_play, joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
 from kinematics.dh import frames_from_joints, points_from_joints
 from kinematics.truth import random_truth
@@ -115,7 +119,8 @@ class SimulatedRig:
                  noise: float = 5e-5, latency: float = 0.002, dropout: float = 0.0, tracker_seed: int | None = None,
                  robot_faults: Iterable[FaultSpec] = (), tracker_faults: Iterable[FaultSpec] = (),
                  points: int = 1, occlusion: float = 0.0, scale: float = 0.0, eccentricity: float = 0.0,
-                 compliance: float = 0.0, stream: StreamSettings | None = None, arm: int | None = None,
+                 compliance: float = 0.0, backlash: float = 0.0, stream: StreamSettings | None = None,
+                 arm: int | None = None,
                  moved: Iterable[float] = (0.0, 0.0, 0.0), turned: Iterable[float] = (0.0, 0.0, 0.0)) -> None:
         self.model = model if isinstance(model, RobotModel) else load_robot(model)
         self.clock: Clock = VirtualClock() if clock is None else clock
@@ -130,6 +135,7 @@ class SimulatedRig:
         self.occlusion = _setting("occlusion", occlusion, upper=1.0)
         self.scale, self.eccentricity = _setting("scale", scale), _setting("eccentricity", eccentricity)
         self.compliance = _setting("compliance", compliance)
+        self.backlash = _setting("backlash", backlash)
         if int(points) != points or points < 1:
             raise ValueError(f"simulated rig: points must be an integer >= 1, got {points!r}")
         self.points = int(points)
@@ -153,6 +159,7 @@ class SimulatedRig:
         self._tracker_rng = np.random.default_rng([self.tracker_seed, 2])
         self._occlusion_rng = np.random.default_rng([self.tracker_seed, 3])
         self._rest = self.readings_of(home)  # where the arm came to rest (actual readings)
+        self._lash = np.zeros(self.model.n_joints)  # each joint's offset from its readings in the gap (backlash)
         self._ring_amp, self._ring_start, self._ring_decays = np.zeros(self.model.n_joints), self.clock.now(), True
         self.moves = self.measurements = 0  # move_joints / measure calls so far
         self.robot_connected = self.tracker_connected = False
@@ -202,7 +209,7 @@ class SimulatedRig:
             rig = cls(model, clock=clock, seed=r["seed"], repeatability=r["repeatability"], ring=r["ring"],
                       ring_tau=r["ring_tau"], noise=t["noise"], latency=t["latency"], dropout=t["dropout"],
                       tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"], scale=r["scale"],
-                      eccentricity=r["eccentricity"], compliance=r["compliance"],
+                      eccentricity=r["eccentricity"], compliance=r["compliance"], backlash=r["backlash"],
                       stream=StreamSettings.from_settings(r, t), arm=r["arm"], moved=t["moved"],
                       turned=t["turned"], **world)
         except ValueError as exc:
@@ -240,8 +247,9 @@ class SimulatedRig:
 
     def true_joints(self, t: float | Array | None = None) -> Array:
         """Where the joints really stand at clock time ``t`` (default now), DH values: the DH values of the
-        actual readings plus the joint errors (drivers/sim/world.py): (n,), or (m, n) for m times."""
-        return true_joints(self.actual_joints(t), self.coupling, self.joint_errors, self.truth, self.model.links)
+        actual readings plus the joint errors (drivers/sim/world.py) and the backlash: (n,), or (m, n) for m times."""
+        q = true_joints(self.actual_joints(t), self.coupling, self.joint_errors, self.truth, self.model.links)
+        return q + self._lash if self.backlash else q
 
     def true_points(self, t: float | Array | None = None) -> Array:
         """The true positions of every reflector, m in the tracker frame, at clock time ``t`` (default now):
@@ -316,6 +324,7 @@ class SimulatedRig:
                 self._ring_amp = self.ring * self._robot_rng.uniform(0.5, 1.0, n) * signs
                 self._ring_start = self.clock.now()
                 self._ring_decays = True
+                self._lash = backlash_play(self._lash, reached - start, self.backlash)
             self._path = None  # last: until now the move's profile holds the arm (no glitch for a reader)
         return self._stop_requested
 

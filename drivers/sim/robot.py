@@ -170,7 +170,7 @@ def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock:
     if not same:
         raise ValueError(f"spec {str(spec)!r} names model {spec.model!r} but the rig simulates {rig.model.name!r}")
     ours = {key: getattr(rig, key) for key in ("seed", "repeatability", "ring", "ring_tau", "scale", "eccentricity",
-                                                "compliance")}
+                                                "compliance", "backlash")}
     ours.update({key: getattr(rig, key) for key in ("points", "occlusion") if key in spec.options})
     ours.update(rig.stream.robot_options())
     given = spec.mock_settings()

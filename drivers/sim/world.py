@@ -7,6 +7,8 @@ newton-metres.
 - **Reflectors** (:func:`reflector_tools`): the tracked points the tracker sees, as tool vectors in the flange
   (last DH) frame. The first is the truth's TP; the others lie on a plate through it, perpendicular to the
   flange's z axis, every two of them 150-250 mm apart (:data:`PLATE_SPACING`).
+- **Backlash** (:func:`backlash_play`): the play of a gear train: the link follows the motor only once the
+  motor has taken up the gap, so it stays within half the backlash of it, behind it in the direction it last moved.
 - **Joint errors** (:func:`joint_errors_for`): reading scale ``S`` times a seeded random sign per joint,
   once-per-turn error of amplitude ``E`` with a seeded random phase per revolute joint, and the same compliance
   ``C`` for every joint (it needs the model's link masses). :func:`true_joints` gives where the joints really
@@ -102,3 +104,11 @@ def errors_as_dict(errors: JointErrors) -> dict[str, list[float]]:
     compliance (rad/(N·m) or m/N), per joint."""
     return {"scale": errors.scale.tolist(), "ecc_sin": errors.ecc_sin.tolist(), "ecc_cos": errors.ecc_cos.tolist(),
             "compliance": errors.compliance.tolist()}
+
+
+def backlash_play(lash: Array, moved: Array, backlash: float) -> Array:
+    """The link's offset from the motor (rad or m, per joint) after the motor moved by ``moved`` from where the
+    offset was ``lash``: the link stays where it was until the gap is taken up, so the offset is ``lash - moved``
+    held within ±``backlash`` / 2 (a move longer than the gap leaves it ``backlash`` / 2 behind; a shorter one,
+    or none, leaves the link in the gap)."""
+    return np.clip(np.asarray(lash, dtype=float) - np.asarray(moved, dtype=float), -0.5 * backlash, 0.5 * backlash)

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from common import __version__
 from identify.report.headline import headline_html
 from identify.report.html import _CSS, _acquisition_section, _e, _figure_html, _table, _when
-from identify.report.verify_rows import iso_rows
+from identify.report.verify_rows import iso_rows, orientation_rows, pose_cells
 
 if TYPE_CHECKING:
     from session.store import SessionFile
@@ -65,27 +65,46 @@ def _pose_rows(summary: dict[str, Any]) -> list[list[str]]:
     for k in range(1, 6):
         b, a = by_mode["before"].get(k), by_mode["after"].get(k)
 
-        def cell(p: dict[str, Any] | None, key: str, std: str | None = None) -> str:
+        def cell(mode: str, p: dict[str, Any] | None, key: str, k: int = k) -> str:
             if p is None:
                 return "-"
-            return f"{p[key] * MM:.4f}" + (f" ± {p[std] * MM:.4f}" if std else "")
+            if "figures" in (runs.get(mode) or {}):  # every figure with its uncertainty
+                return pose_cells(runs[mode], key, k)
+            return f"{p[key] * MM:.4f}" + (f" ± {p['ap_std'] * MM:.4f}" if key == "ap" else "")
 
         rows.append([f"P{k}", ", ".join(f"{v:.1f}" for v in targets[k - 1]),
                      f"{predicted['before'][k - 1] * MM:.4f}" if predicted.get("before") else "-",
-                     cell(b, "ap", "ap_std"), f"0 ± {summary['expected'][k - 1] * MM:.4f}",
-                     cell(a, "ap", "ap_std"), cell(b, "rp"), cell(a, "rp"), str(a["n"] if a else 0)])
+                     cell("before", b, "ap"), f"0 ± {summary['expected'][k - 1] * MM:.4f}",
+                     cell("after", a, "ap"), cell("before", b, "rp"), cell("after", a, "rp"), str(a["n"] if a else 0)])
     return rows
 
 
 def _iso_extras(summary: dict[str, Any]) -> str:
-    """Distance accuracy and repeatability (P2-P4) and the drift of P1 within the run, before and after."""
-    rows = iso_rows(summary.get("runs") or {})
-    if not rows:
-        return ""
-    return ("<p>Beyond AP and RP (ISO 9283, ± standard uncertainty from the spread of the cycles): distance accuracy "
-            "AD = D̄ - D_c and repeatability RD = 3 S_D between P2 and P4 in each cycle (7.3); the drift of P1's AP "
-            "and RP between the first and the last third of its visits (7.6, within this run; not the standard's "
-            "8-hour test).</p>" + _table(["figure [mm]", "before", "after"], rows))
+    """Distance accuracy and repeatability (P2-P4), the drift of P1 within the run, vAP per pose and orientation,
+    before and after, each ± its uncertainty; what was not measured and why."""
+    runs = summary.get("runs") or {}
+    rows = iso_rows(runs)
+    out = ""
+    if rows:
+        out += ("<p>Beyond AP and RP (ISO 9283): distance accuracy AD = D̄ - D_c and repeatability RD = 3 S_D "
+                "between P2 and P4 in each cycle (7.3); the drift of P1's AP and RP between the first and the last "
+                "third of its visits (7.6, within this run); vAP, the largest distance between the barycentres of a "
+                "pose's visits from the three approach directions (7.2).</p>"
+                + _table(["figure [mm]", "before", "after"], rows))
+    turns = orientation_rows(runs, per_pose=True)
+    reason = (summary.get("orientation") or {}).get("reason")
+    if turns:
+        out += ("<p>Orientation accuracy AP and repeatability RP (7.2.1, 7.2.2): a, b, c are the rotations about the "
+                "base's x, y and z axes that take the commanded orientation to the attained one; each visit's "
+                "attained orientation is the rigid fit of the points the commanded pose puts the result's tracked "
+                "points at to the measured ones. AP = the mean of a (b, c), RP = 3 S.</p>"
+                + _table(["figure [mrad]", "before", "after"], turns))
+    elif reason:
+        out += f"<p>Orientation was not measured: {_e(reason)}.</p>"
+    for key in ("drift_note", "uncertainty"):
+        if summary.get(key):
+            out += f"<p>{'± ' if key == 'uncertainty' else ''}{_e(summary[key])}.</p>"
+    return out
 
 
 def verification_html(summary: dict[str, Any], header: dict[str, Any], source: str,
@@ -117,8 +136,9 @@ def verification_html(summary: dict[str, Any], header: dict[str, Any], source: s
                 f"visited {summary['cycles']} times in the order P1, P5, P4, P3, P2; first commanded with the "
                 f"{_e(summary.get('before_model', 'nominal model'))} (before: what the controller runs today), then "
                 "with the identified one (after). AP: distance of the barycentre of the "
-                "attained positions from the commanded one (± its standard uncertainty from their spread); RP: "
-                "l̄ + 3 S_l. Positions only (one tracked point): no orientation terms. Missing steps: "
+                "attained positions from the commanded one; RP: l̄ + 3 S_l; each ± its standard uncertainty. AP, "
+                "RP, AD, RD and drift use the visits from the first approach direction (+x), as the standard's "
+                "one-directional test. Missing steps: "
                 f"{summary.get('missing_steps', 0)}.</p>"
                 + _table(["pose", "target x, y, z [mm]", "predicted AP before [mm]", "AP before [mm]",
                           "predicted AP after [mm]", "AP after [mm]", "RP before [mm]", "RP after [mm]", "visits"],

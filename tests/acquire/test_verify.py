@@ -14,7 +14,7 @@ from scipy.stats import chi2
 
 from acquire.cli import main as acquire
 from acquire.session import Session
-from acquire.verify import REGISTER_POSES
+from acquire.verify import APPROACH_AXES, REGISTER_POSES
 from config.robots import load_robot
 from drivers.sim.rig import SimulatedRig
 from identify.cli import main as identify_main
@@ -25,6 +25,7 @@ from identify.simulate import simulate
 from kinematics.dh import points_from_joints
 
 NOISE, SAMPLES, CYCLES = 5e-5, 5, 5
+STEPS = REGISTER_POSES + 2 * 5 * CYCLES * 2 * len(APPROACH_AXES)  # each visit of a pose after its approach pose
 ROBOT = load_robot("ur5e")
 
 
@@ -102,13 +103,13 @@ def test_verification_on_the_mock_rig_matches_its_truth_and_resumes(tmp_path, ca
     assert "acquire verify --resume" in err
     with Session.open(session) as s:
         done = {r.plan_index: r for r in s.steps()}
-        assert 0 < len(done) < 10 * CYCLES + REGISTER_POSES
+        assert 0 < len(done) < STEPS
     assert acquire(["verify", "--resume", str(session), "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "verdict: pass" in out
     with Session.open(session) as s:
         steps = s.steps()
-        assert [r.plan_index for r in steps] == list(range(10 * CYCLES + REGISTER_POSES))  # none lost, none twice
+        assert [r.plan_index for r in steps] == list(range(STEPS))  # none lost, none twice
         assert all(steps[i] == r for i, r in done.items())
     implied, measured = _truth_implied(session, truth)
     tol = _tolerance(NOISE, CYCLES * SAMPLES)
@@ -350,7 +351,7 @@ def test_distance_drift_and_multi_directional_follow_iso_9283_by_hand() -> None:
 def test_registration_variance_is_that_of_a_mean_at_the_centroid_and_grows_outside() -> None:
     """At the centroid of the fitted points the rotation does not count: the 3D variance is expected² / k (a mean of
     k points); beyond them it grows with the distance (the rotation's lever arm)."""
-    from acquire.verify import registration_variance
+    from acquire.verify_analysis import registration_variance
 
     corners = 0.1 * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
     var = registration_variance(corners + 5.0, np.array([[5.0, 5.0, 5.0], [5.3, 5.0, 5.0]]), 1e-4)

@@ -157,7 +157,7 @@ def test_mock_settings_are_typed_with_defaults() -> None:
     robot = RobotSpec.parse("mock:ur5e?seed=3&fault=protective_stop@40,slow@5x2,unsettled").mock_settings()
     assert robot == {"seed": 3, "repeatability": 2e-6, "ring": 1e-5, "ring_tau": 0.1,
                      "fault": (FaultSpec("protective_stop", 40), FaultSpec("slow", 5, 2), FaultSpec("unsettled")),
-                     "scale": 0.0, "eccentricity": 0.0, "compliance": 0.0, "arm": None, "points": 1,
+                     "scale": 0.0, "eccentricity": 0.0, "compliance": 0.0, "backlash": 0.0, "arm": None, "points": 1,
                      "occlusion": 0.0, "rate": 500.0, "drop": 0.0}
     tracker = TrackerSpec.parse("mock?noise=1e-4&dropout=0.02&fault=target_lost@10x3&turned=0,-90,1e1"
                                 ).mock_settings()

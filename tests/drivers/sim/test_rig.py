@@ -450,3 +450,27 @@ def test_rig_swaps_the_arm_and_moves_the_tracker() -> None:
     np.testing.assert_array_equal(moved.truth.a, first.a)
     with pytest.raises(ValueError, match="disagrees with the simulated rig on moved, turned"):
         open_tracker("mock", rig=moved)
+
+
+def test_backlash_leaves_a_joint_behind_its_target_in_the_direction_of_the_move() -> None:
+    """``backlash=B``: the readings reach the command, the joint rests B/2 short of it, behind in the direction it
+    came from; the same command reached from the other side lands B further on (where vAP comes from)."""
+    lash = 2e-3
+    rig, robot, _ = make(f"mock:ur5e?repeatability=0&ring=0&backlash={lash}")
+    assert np.array_equal(rig.true_joints(), rig.readings_of(home()))  # not moved yet: no lost motion
+    target = pose(j2=0.1)
+    robot.move_joints(pose(j2=0.3), SPEED, ACC, timeout=30)
+    robot.move_joints(target, SPEED, ACC, timeout=30)  # joint 2 comes down to the target; the others stay
+    robot.wait_until_still(0.3, timeout=5)
+    from_above = rig.true_joints() - target
+    assert np.abs(robot.read_joints() - target).max() < 1e-9
+    np.testing.assert_allclose(from_above, [0, lash / 2, 0, 0, 0, 0], atol=1e-9)
+    robot.move_joints(pose(j2=-0.1), SPEED, ACC, timeout=30)
+    robot.move_joints(target, SPEED, ACC, timeout=30)  # up to the same target
+    robot.wait_until_still(0.3, timeout=5)
+    np.testing.assert_allclose(rig.true_joints() - target, [0, -lash / 2, 0, 0, 0, 0], atol=1e-9)
+    # a reversal shorter than the gap (a quarter of it, back down) leaves the joint where it was: the motor only
+    # crosses the gap
+    robot.move_joints(target - np.array([0, lash / 4, 0, 0, 0, 0]), SPEED, ACC, timeout=30)
+    robot.wait_until_still(0.3, timeout=5)
+    np.testing.assert_allclose(rig.true_joints() - target, [0, -lash / 2, 0, 0, 0, 0], atol=1e-9)
