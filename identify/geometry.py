@@ -17,15 +17,16 @@ Array = NDArray[np.float64]
 def unit(v: ArrayLike) -> Array:
     """``v`` scaled to unit length (last axis)."""
     v = np.asarray(v, dtype=float)
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))  # np.linalg.norm's sum, without its checks
 
 
 def perpendicular_basis(normal: ArrayLike) -> tuple[Array, Array]:
     """Two unit vectors ``(e1, e2)`` with ``(e1, e2, normal)`` right-handed and orthonormal."""
     n = unit(normal)
-    helper = np.eye(3)[int(np.argmin(np.abs(n)))]
-    e1 = unit(np.cross(helper, n))
-    return e1, np.cross(n, e1)
+    helper = np.zeros(3)
+    helper[int(np.argmin(np.abs(n)))] = 1.0
+    e1 = unit(cross(helper, n))
+    return e1, cross(n, e1)
 
 
 def skew(v: ArrayLike) -> Array:
@@ -113,14 +114,11 @@ def circle_2d_algebraic(xy: ArrayLike) -> tuple[Array, float]:
 
 def cross(u: Array, v: Array) -> Array:
     """Row-wise cross product of (..., 3) arrays; faster than ``np.cross`` on small arrays."""
-    return np.stack(
-        [
-            u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1],
-            u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
-            u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0],
-        ],
-        axis=-1,
-    )
+    out = np.empty(np.broadcast_shapes(np.shape(u), np.shape(v)))
+    out[..., 0] = u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1]
+    out[..., 1] = u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2]
+    out[..., 2] = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    return out
 
 
 class _CircleProblem:
