@@ -256,44 +256,29 @@ class LineProblem:
             streamed = self.timing.rows
             dq = self.timing.derivatives(self.tau(x))  # (r, n, K)
             timing_moves = np.any(dq != 0.0, axis=(0, 2))
-        _, steps = _chain(lines, q, tp_index)
         m = len(q)
         jac = np.zeros((m, 3, self.size))
+        lefts = np.empty((len(self.types) + 1, m, 3, 3))  # rotation of T_1 … T_i, i = 0 … n
+        outputs = np.empty((len(self.types), m, 3))  # the point after T_i … T_n
+        for chunk in _chunks(m):
+            self._line_columns(lines, tangents, q[chunk], None if tp_index is None else tp_index[chunk],
+                               jac[chunk], lefts[:, chunk], outputs[:, chunk])
         nuisance = np.zeros((m, 3))
-        left = np.broadcast_to(np.eye(3), (m, 3, 3)).copy()  # rotation of T_1 … T_{i-1}
-        k = 0
         for i, t in enumerate(self.types):
-            u, w, rot, delta = steps[i]
             acting = np.flatnonzero(self.terms.joints == i)
             moves = timed and timing_moves[i]
             if (data and self.has_unknown) or len(acting) or moves:
                 if t == "R":  # dp/dq_i
-                    column = np.einsum("kij,kj->ki", left, cross(lines.directions[i], w - lines.points[i]))
+                    column = np.einsum("kij,kj->ki", lefts[i], cross(lines.directions[i], outputs[i] - lines.points[i]))
                 else:
-                    column = left @ lines.directions[i]
+                    column = lefts[i] @ lines.directions[i]
                 rows = self.unknown == i if data else np.zeros(m, dtype=bool)
                 nuisance[rows] = column[rows]
                 for c in acting:
                     jac[:, :, self.n_lines + c] = column * regressors[:, c, None]
                 if moves:
                     jac[streamed, :, self.n_terms:] += column[streamed, :, None] * dq[:, i, None, :]
-            if t == "R":
-                # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
-                # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i),
-                # evaluated as matrix-vector products per row
-                c = lines.points[i]
-                for j in range(2):  # tilting the direction turns the line about its point c: eps_v = c x eps_w
-                    eps_w = cross(lines.directions[i], tangents[i][j])
-                    ce = cross(eps_w, c)
-                    inner = np.einsum("kij,kj->ki", rot, cross(u, eps_w) + ce) - cross(w, eps_w) - ce
-                    jac[:, :, k + j] = np.einsum("kij,kj->ki", left, inner)
-                    b = self.bases[i][j]
-                    jac[:, :, k + 2 + j] = np.einsum("kij,kj->ki", left, b - rot @ b)
-                k += 4
-            else:
-                jac[:, :, k:k + 2] = (left @ tangents[i].T) * delta[:, None, None]
-                k += 2
-            left = left @ rot
+        k, left = self.start.n_line_parameters, lefts[-1]
         if tp_index is None:
             jac[:, :, k:k + 3] = left
         else:
@@ -309,6 +294,55 @@ class LineProblem:
 
     def jacobian(self, x: Array) -> Array:
         return self.jacobian_blocks(x).reshape(-1, self.size)
+
+    def _line_columns(self, lines: AxisLines, tangents: list[Array], q: Array, tp_index: NDArray[np.int64] | None,
+                      jac: Array, lefts: Array, outputs: Array) -> None:
+        """In place, for rows at joint values ``q``: the lines' columns of ``jac`` (m, 3, size), unweighted, the
+        rotations ``lefts`` (n + 1, m, 3, 3) of T_1 … T_i and the points ``outputs`` (n, m, 3) after T_i … T_n."""
+        _, steps = _chain(lines, q, tp_index)
+        lefts[0] = np.eye(3)
+        for i, (_, w, rot, _) in enumerate(steps):
+            np.matmul(lefts[i], rot, out=lefts[i + 1])
+            outputs[i] = w
+        first = np.cumsum([0] + [4 if t == "R" else 2 for t in self.types])  # each joint's first column
+        revolute = [i for i, t in enumerate(self.types) if t == "R"]
+        if revolute:
+            # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
+            # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i), for every
+            # revolute joint at once; tilting the direction turns the line about its point c: eps_v = c x eps_w
+            u = np.stack([steps[i][0] for i in revolute])[:, :, None, :]  # (r, m, 1, 3)
+            w = outputs[revolute][:, :, None, :]
+            rot = np.stack([steps[i][2] for i in revolute])  # (r, m, 3, 3)
+            eps = cross(lines.directions[revolute][:, None, :], np.array([tangents[i] for i in revolute]))  # (r, 2, 3)
+            ce = cross(eps, lines.points[revolute][:, None, :])[:, None]  # (r, 1, 2, 3)
+            eps = eps[:, None]
+            bases = np.array([self.bases[i] for i in revolute])  # (r, 2, 3)
+            moved = np.empty((len(revolute), len(q), 3, 4))  # columns: two tilts, two shifts
+            moved[..., :2] = rot @ np.swapaxes(cross(u, eps) + ce, 2, 3) - np.swapaxes(cross(w, eps) + ce, 2, 3)
+            moved[..., 2:] = np.swapaxes(bases, 1, 2)[:, None] - rot @ np.swapaxes(bases, 1, 2)[:, None]
+            columns = (first[revolute][:, None] + np.arange(4)).ravel()
+            jac[:, :, columns] = np.moveaxis(lefts[revolute] @ moved, 0, 2).reshape(len(q), 3, -1)
+        for i, t in enumerate(self.types):
+            if t == "P":
+                jac[:, :, first[i]:first[i] + 2] = (lefts[i] @ tangents[i].T) * steps[i][3][:, None, None]
+
+
+ROWS_PER_CHUNK = 16384  # rows whose Jacobian blocks are formed at once (bounds the temporaries of large sessions)
+
+
+def _chunks(m: int) -> list[slice]:
+    """Row slices of at most :data:`ROWS_PER_CHUNK` covering ``m`` rows."""
+    return [slice(a, min(a + ROWS_PER_CHUNK, m)) for a in range(0, max(m, 1), ROWS_PER_CHUNK)]
+
+
+STOP_SIGMAS = 1e-3  # a least-squares fit stops when its step moves the parameters by less than this many σ
+
+
+def converged_tolerance(residuals: int) -> float:
+    """``ftol`` (also ``xtol``, ``gtol``) of a least-squares fit of ``residuals`` noise-level residuals: a step
+    that lowers the cost (about ``residuals`` noise variances at the optimum) by less than its relative share
+    (STOP_SIGMAS²/residuals) moves the parameters by less than STOP_SIGMAS standard deviations; at most 1e-10."""
+    return min(1e-10, STOP_SIGMAS**2 / max(residuals, 1))
 
 
 class LeastSquares(NamedTuple):
@@ -339,7 +373,7 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
     n_nuisance = int(np.sum(problem.unknown >= 0))
     linear = loss == "linear"
     method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
-    tol = 1e-12 if linear else 1e-8
+    tol = converged_tolerance(3 * len(q)) if linear else 1e-8
     fit = least_squares(problem.residuals, np.zeros(problem.size), jac=problem.jacobian, method=method,
                         loss=loss, f_scale=scale, x_scale="jac", xtol=tol, ftol=tol, gtol=tol,
                         max_nfev=200 if linear else 60)

@@ -22,6 +22,7 @@ from scipy.stats import f as f_dist
 
 from identify.geometry import cross, left_jacobian, skew
 from identify.linalg import triangle
+from identify.poe import converged_tolerance
 from kinematics.dh import DH_NAMES, DHModel, points_from_joints, running_frames
 
 Array = NDArray[np.float64]
@@ -220,7 +221,7 @@ def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
     """Least-squares solve; the robust (outlier-finding) pass needs less precision than the final one."""
     linear = loss == "linear"
     method = "lm" if linear and len(problem.points) * 3 >= len(x0) else "trf"
-    tol = 1e-14 if linear else 1e-8
+    tol = converged_tolerance(len(problem.points) * 3) if linear else 1e-8
     fit = least_squares(
         problem.residuals,
         x0,
