@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.geometry import cross, perpendicular_basis, rotation_about_axis, unit
+from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, unit
 from identify.linalg import project_out
 from identify.sync import Retiming
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
@@ -264,6 +264,8 @@ class LineProblem:
             self._line_columns(lines, tangents, q[chunk], None if tp_index is None else tp_index[chunk],
                                jac[chunk], lefts[:, chunk], outputs[:, chunk])
         nuisance = np.zeros((m, 3))
+        if timed:
+            timing_columns = np.zeros((int(np.sum(streamed)), 3, self.size - self.n_terms))
         for i, t in enumerate(self.types):
             acting = np.flatnonzero(self.terms.joints == i)
             moves = timed and timing_moves[i]
@@ -277,7 +279,9 @@ class LineProblem:
                 for c in acting:
                     jac[:, :, self.n_lines + c] = column * regressors[:, c, None]
                 if moves:
-                    jac[streamed, :, self.n_terms:] += column[streamed, :, None] * dq[:, i, None, :]
+                    timing_columns += column[streamed, :, None] * dq[:, i, None, :]
+        if timed:
+            jac[streamed, :, self.n_terms:] += timing_columns
         k, left = self.start.n_line_parameters, lefts[-1]
         if tp_index is None:
             jac[:, :, k:k + 3] = left
@@ -299,33 +303,47 @@ class LineProblem:
                       jac: Array, lefts: Array, outputs: Array) -> None:
         """In place, for rows at joint values ``q``: the lines' columns of ``jac`` (m, 3, size), unweighted, the
         rotations ``lefts`` (n + 1, m, 3, 3) of T_1 … T_i and the points ``outputs`` (n, m, 3) after T_i … T_n."""
-        _, steps = _chain(lines, q, tp_index)
+        n, m = len(self.types), len(q)
+        inputs, rots = np.empty((n, m, 3)), np.empty((n, m, 3, 3))
+        x = _home_points(lines, m, tp_index)
+        for i in reversed(range(n)):  # the chain of :func:`_chain`, kept in arrays
+            delta = q[:, i] - lines.home[i]
+            inputs[i] = x
+            if self.types[i] == "R":
+                rots[i] = rotation_about_axis(lines.directions[i], delta)
+                outputs[i] = lines.points[i] + np.einsum("kij,kj->ki", rots[i], x - lines.points[i])
+            else:
+                rots[i] = np.eye(3)
+                outputs[i] = x + delta[:, None] * lines.directions[i]
+            x = outputs[i]
         lefts[0] = np.eye(3)
-        for i, (_, w, rot, _) in enumerate(steps):
-            np.matmul(lefts[i], rot, out=lefts[i + 1])
-            outputs[i] = w
+        for i in range(n):
+            np.matmul(lefts[i], rots[i], out=lefts[i + 1])
         first = np.cumsum([0] + [4 if t == "R" else 2 for t in self.types])  # each joint's first column
         revolute = [i for i, t in enumerate(self.types) if t == "R"]
+        rev = slice(None) if len(revolute) == n else revolute  # (a view when every joint is revolute)
         if revolute:
             # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
             # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i), for every
-            # revolute joint at once; tilting the direction turns the line about its point c: eps_v = c x eps_w
-            u = np.stack([steps[i][0] for i in revolute])[:, :, None, :]  # (r, m, 1, 3)
-            w = outputs[revolute][:, :, None, :]
-            rot = np.stack([steps[i][2] for i in revolute])  # (r, m, 3, 3)
+            # revolute joint at once; tilting the direction turns the line about its point c: eps_v = c x eps_w;
+            # as matrices per row: L (R A - B), the columns of A and B (3 x 4) for the two tilts and two shifts
+            r = len(revolute)
             eps = cross(lines.directions[revolute][:, None, :], np.array([tangents[i] for i in revolute]))  # (r, 2, 3)
-            ce = cross(eps, lines.points[revolute][:, None, :])[:, None]  # (r, 1, 2, 3)
-            eps = eps[:, None]
-            bases = np.array([self.bases[i] for i in revolute])  # (r, 2, 3)
-            moved = np.empty((len(revolute), len(q), 3, 4))  # columns: two tilts, two shifts
-            moved[..., :2] = rot @ np.swapaxes(cross(u, eps) + ce, 2, 3) - np.swapaxes(cross(w, eps) + ce, 2, 3)
-            moved[..., 2:] = np.swapaxes(bases, 1, 2)[:, None] - rot @ np.swapaxes(bases, 1, 2)[:, None]
-            columns = (first[revolute][:, None] + np.arange(4)).ravel()
-            jac[:, :, columns] = np.moveaxis(lefts[revolute] @ moved, 0, 2).reshape(len(q), 3, -1)
+            ce = cross(eps, lines.points[revolute][:, None, :])[:, None, :, :].swapaxes(2, 3)  # (r, 1, 3, 2)
+            turn = np.concatenate([skew(eps[:, 0]), skew(eps[:, 1])], axis=2)  # row x eps_j = row @ turn[:, :, 3j:3j+3]
+            a = np.empty((r, m, 3, 4))
+            b = np.empty_like(a)
+            a[..., :2] = (inputs[rev] @ turn).reshape(r, m, 2, 3).swapaxes(2, 3) + ce
+            b[..., :2] = (outputs[rev] @ turn).reshape(r, m, 2, 3).swapaxes(2, 3) + ce
+            a[..., 2:] = b[..., 2:] = -np.array([self.bases[i] for i in revolute]).swapaxes(1, 2)[:, None]
+            moved = np.matmul(rots[rev], a, out=a)
+            moved -= b
+            moved = np.matmul(lefts[:-1][rev], moved, out=b)  # (r, m, 3, 4)
+            for index, i in enumerate(revolute):
+                jac[:, :, first[i]:first[i] + 4] = moved[index]
         for i, t in enumerate(self.types):
             if t == "P":
-                jac[:, :, first[i]:first[i] + 2] = (lefts[i] @ tangents[i].T) * steps[i][3][:, None, None]
-
+                jac[:, :, first[i]:first[i] + 2] = (lefts[i] @ tangents[i].T) * (q[:, i] - lines.home[i])[:, None, None]
 
 ROWS_PER_CHUNK = 16384  # rows whose Jacobian blocks are formed at once (bounds the temporaries of large sessions)
 
