@@ -18,7 +18,15 @@ from scipy.spatial.transform import Rotation
 
 from identify.geometry import left_jacobian, skew
 from identify.outliers import leverages, outlier_free
-from identify.poe import AxisLines, JointTerms, LeastSquares, LineProblem, fit_lines, lines_from_model
+from identify.poe import (
+    AxisLines,
+    JointTerms,
+    LeastSquares,
+    LineProblem,
+    converged_tolerance,
+    fit_lines,
+    lines_from_model,
+)
 from identify.refine import NOISE_FLOOR
 from identify.sync import Retiming
 from kinematics.dh import DHModel, flange_frames, frames_from_joints
@@ -138,8 +146,9 @@ def _placed(flange_rot: Array, flange_origin: Array, points: Array, tp_index: ND
             jac[rows, :, 6 + 3 * p:9 + 3 * p] = turned[rows]
         return jac.reshape(-1, jac.shape[2])
 
+    tol = converged_tolerance(points.size)
     solved = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), jac=jacobian,
-                           method="lm", xtol=1e-12, ftol=1e-12)
+                           method="lm", xtol=tol, ftol=tol)
     x = solved.x
     base[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
     base[:3, 3] = x[3:6]
