@@ -252,43 +252,46 @@ class LineProblem:
             regressors = self.terms.regressors
         elif regressors is None:
             regressors = np.zeros((len(q), len(self.terms)))
-        if timed:
-            streamed = self.timing.rows
-            dq = self.timing.derivatives(self.tau(x))  # (r, n, K)
-            timing_moves = np.any(dq != 0.0, axis=(0, 2))
         m = len(q)
+        streamed = self.timing.rows if timed else np.zeros(m, dtype=bool)
+        if timed:
+            dq = self.timing.derivatives(self.tau(x))  # (r, n, K), the streamed rows in order
+            timing_moves = np.any(dq != 0.0, axis=(0, 2))
+            dq_row = np.cumsum(streamed) - 1  # each streamed row's index in dq
         jac = np.zeros((m, 3, self.size))
-        lefts = np.empty((len(self.types) + 1, m, 3, 3))  # rotation of T_1 … T_i, i = 0 … n
-        outputs = np.empty((len(self.types), m, 3))  # the point after T_i … T_n
-        for chunk in _chunks(m):
-            self._line_columns(lines, tangents, q[chunk], None if tp_index is None else tp_index[chunk],
-                               jac[chunk], lefts[:, chunk], outputs[:, chunk])
         nuisance = np.zeros((m, 3))
-        if timed:
-            timing_columns = np.zeros((int(np.sum(streamed)), 3, self.size - self.n_terms))
-        for i, t in enumerate(self.types):
-            acting = np.flatnonzero(self.terms.joints == i)
-            moves = timed and timing_moves[i]
-            if (data and self.has_unknown) or len(acting) or moves:
-                if t == "R":  # dp/dq_i
-                    column = np.einsum("kij,kj->ki", lefts[i], cross(lines.directions[i], outputs[i] - lines.points[i]))
-                else:
-                    column = lefts[i] @ lines.directions[i]
-                rows = self.unknown == i if data else np.zeros(m, dtype=bool)
-                nuisance[rows] = column[rows]
-                for c in acting:
-                    jac[:, :, self.n_lines + c] = column * regressors[:, c, None]
-                if moves:
-                    timing_columns += column[streamed, :, None] * dq[:, i, None, :]
-        if timed:
-            jac[streamed, :, self.n_terms:] += timing_columns
-        k, left = self.start.n_line_parameters, lefts[-1]
-        if tp_index is None:
-            jac[:, :, k:k + 3] = left
-        else:
-            for p in range(len(lines.tps)):
-                rows = tp_index == p
-                jac[rows, :, k + 3 * p:k + 3 * p + 3] = left[rows]
+        k = self.start.n_line_parameters
+        for chunk in _chunks(m):
+            tps = None if tp_index is None else tp_index[chunk]
+            lefts, outputs = self._line_columns(lines, tangents, q[chunk], tps, jac[chunk])
+            here = streamed[chunk]
+            if timed:
+                timing_columns = np.zeros((int(np.sum(here)), 3, self.size - self.n_terms))
+                dq_here = dq[dq_row[chunk][here]]
+            for i, t in enumerate(self.types):
+                acting = np.flatnonzero(self.terms.joints == i)
+                moves = timed and timing_moves[i]
+                if (data and self.has_unknown) or len(acting) or moves:
+                    if t == "R":  # dp/dq_i
+                        column = np.einsum("kij,kj->ki", lefts[i],
+                                           cross(lines.directions[i], outputs[i] - lines.points[i]))
+                    else:
+                        column = lefts[i] @ lines.directions[i]
+                    if data:
+                        rows = self.unknown[chunk] == i
+                        nuisance[chunk][rows] = column[rows]
+                    for c in acting:
+                        jac[chunk, :, self.n_lines + c] = column * regressors[chunk, c, None]
+                    if moves:
+                        timing_columns += column[here, :, None] * dq_here[:, i, None, :]
+            if timed:
+                jac[chunk][here, :, self.n_terms:] += timing_columns
+            if tps is None:
+                jac[chunk, :, k:k + 3] = lefts[-1]
+            else:
+                for p in range(len(lines.tps)):
+                    rows = np.flatnonzero(tps == p) + chunk.start
+                    jac[rows, :, k + 3 * p:k + 3 * p + 3] = lefts[-1][rows - chunk.start]
         if data:
             jac *= self.weights[:, None, None]
             if self.has_unknown:
@@ -300,11 +303,12 @@ class LineProblem:
         return self.jacobian_blocks(x).reshape(-1, self.size)
 
     def _line_columns(self, lines: AxisLines, tangents: list[Array], q: Array, tp_index: NDArray[np.int64] | None,
-                      jac: Array, lefts: Array, outputs: Array) -> None:
-        """In place, for rows at joint values ``q``: the lines' columns of ``jac`` (m, 3, size), unweighted, the
-        rotations ``lefts`` (n + 1, m, 3, 3) of T_1 … T_i and the points ``outputs`` (n, m, 3) after T_i … T_n."""
+                      jac: Array) -> tuple[Array, Array]:
+        """In place, for rows at joint values ``q``: the lines' columns of ``jac`` (m, 3, size), unweighted; returns
+        the rotations (n + 1, m, 3, 3) of T_1 … T_i, i = 0 … n, and the points (n, m, 3) after T_i … T_n."""
         n, m = len(self.types), len(q)
-        inputs, rots = np.empty((n, m, 3)), np.empty((n, m, 3, 3))
+        inputs, rots, outputs = np.empty((n, m, 3)), np.empty((n, m, 3, 3)), np.empty((n, m, 3))
+        lefts = np.empty((n + 1, m, 3, 3))
         x = _home_points(lines, m, tp_index)
         for i in reversed(range(n)):  # the chain of :func:`_chain`, kept in arrays
             delta = q[:, i] - lines.home[i]
@@ -344,6 +348,7 @@ class LineProblem:
         for i, t in enumerate(self.types):
             if t == "P":
                 jac[:, :, first[i]:first[i] + 2] = (lefts[i] @ tangents[i].T) * (q[:, i] - lines.home[i])[:, None, None]
+        return lefts, outputs
 
 ROWS_PER_CHUNK = 16384  # rows whose Jacobian blocks are formed at once (bounds the temporaries of large sessions)
 
