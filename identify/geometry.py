@@ -41,9 +41,29 @@ def skew(v: ArrayLike) -> Array:
 
 def rotation_about_axis(axis: ArrayLike, angle: ArrayLike) -> Array:
     """Rotation matrices (Rodrigues) about unit ``axis`` by ``angle`` radians; shape (..., 3, 3)."""
-    k = skew(unit(axis))
-    angle = np.asarray(angle, dtype=float)[..., None, None]
-    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    axis = np.asarray(axis, dtype=float)
+    angle = np.asarray(angle, dtype=float)
+    if axis.ndim > 1:
+        k = skew(unit(axis))
+        return np.eye(3) + np.sin(angle)[..., None, None] * k + (1.0 - np.cos(angle))[..., None, None] * (k @ k)
+    # one axis: I + sin K + (1 - cos) K², entry by entry (K² = k kᵀ - I)
+    kx, ky, kz = unit(axis)
+    s, c = np.sin(angle), np.cos(angle)
+    v = 1.0 - c
+    out = np.empty((*angle.shape, 3, 3))
+    out[..., 0, 0], out[..., 1, 1], out[..., 2, 2] = c + kx * kx * v, c + ky * ky * v, c + kz * kz * v
+    out[..., 0, 1], out[..., 1, 0] = kx * ky * v - kz * s, kx * ky * v + kz * s
+    out[..., 0, 2], out[..., 2, 0] = kx * kz * v + ky * s, kx * kz * v - ky * s
+    out[..., 1, 2], out[..., 2, 1] = ky * kz * v - kx * s, ky * kz * v + kx * s
+    return out
+
+
+def turned(points: Array, centre: Array, axis: Array, angle: Array) -> Array:
+    """``points`` (m, 3) turned by ``angle`` (m,) rad about the line through ``centre`` along unit ``axis`` (3,)
+    (Rodrigues' formula on the vectors, without forming the rotations)."""
+    v = points - centre
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return centre + v * c + cross(axis, v) * s + np.outer((v @ axis) * (1.0 - c[:, 0]), axis)
 
 
 @dataclass(frozen=True)

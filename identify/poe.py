@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, unit
+from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, turned, unit
 from identify.linalg import project_out
 from identify.sync import Retiming
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
@@ -75,31 +75,11 @@ def lines_from_model(model: DHModel, home: Array) -> AxisLines:
 def points_from_lines(lines: AxisLines, q: Array, tp_index: NDArray[np.int64] | None = None) -> Array:
     """Predicted TP (m, 3) at joint readings ``q`` (m, n); ``tp_index`` (m,): which tracked point (0-based
     row of ``lines.tps``; default the first)."""
-    p, _ = _chain(lines, q, tp_index)
-    return p
+    return _apply(lines, q, range(len(lines.joint_types)), _home_points(lines, len(q), tp_index))
 
 
 def _home_points(lines: AxisLines, m: int, tp_index: NDArray[np.int64] | None) -> Array:
     return np.tile(lines.tp_home, (m, 1)) if tp_index is None else lines.tps[tp_index]
-
-
-def _chain(lines: AxisLines, q: Array, tp_index: NDArray[np.int64] | None = None
-           ) -> tuple[Array, list[tuple[Array, Array, Array, Array]]]:
-    """TP and, per joint from the tip, (input point u, output point w, rotation R, angle or stroke)."""
-    m = len(q)
-    x = _home_points(lines, m, tp_index)
-    steps = []
-    for i in reversed(range(len(lines.joint_types))):
-        delta = q[:, i] - lines.home[i]
-        if lines.joint_types[i] == "R":
-            rot = rotation_about_axis(lines.directions[i], delta)
-            y = lines.points[i] + np.einsum("kij,kj->ki", rot, x - lines.points[i])
-        else:
-            rot = np.broadcast_to(np.eye(3), (m, 3, 3))
-            y = x + delta[:, None] * lines.directions[i]
-        steps.append((x, y, rot, delta))
-        x = y
-    return x, steps[::-1]
 
 
 def _apply(lines: AxisLines, q: Array, joints: range, x: Array) -> Array:
@@ -107,8 +87,7 @@ def _apply(lines: AxisLines, q: Array, joints: range, x: Array) -> Array:
     for i in reversed(joints):
         delta = q[:, i] - lines.home[i]
         if lines.joint_types[i] == "R":
-            x = lines.points[i] + np.einsum("kij,kj->ki", rotation_about_axis(lines.directions[i], delta),
-                                            x - lines.points[i])
+            x = turned(x, lines.points[i], lines.directions[i], delta)
         else:
             x = x + delta[:, None] * lines.directions[i]
     return x
@@ -310,7 +289,7 @@ class LineProblem:
         inputs, rots, outputs = np.empty((n, m, 3)), np.empty((n, m, 3, 3)), np.empty((n, m, 3))
         lefts = np.empty((n + 1, m, 3, 3))
         x = _home_points(lines, m, tp_index)
-        for i in reversed(range(n)):  # the chain of :func:`_chain`, kept in arrays
+        for i in reversed(range(n)):  # the chain of :func:`_apply`, with its rotations kept
             delta = q[:, i] - lines.home[i]
             inputs[i] = x
             if self.types[i] == "R":
