@@ -61,7 +61,7 @@ class LinesFit:
         """The Jacobian blocks of ``problem`` at zero, where ``problem`` is this fit's on its inliers."""
         if self.jacobian is None:
             return problem.jacobian_blocks(np.zeros(problem.size))
-        return self.jacobian[self.inliers]
+        return self.jacobian if np.all(self.inliers) else self.jacobian[self.inliers]
 
 
 ALIGNED = 0.05  # of the points' spread: a placement missing by less has aligned the data (a stalled one misses by it)

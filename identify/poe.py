@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.geometry import cross, perpendicular_basis, rotation_about_axis, skew, turned, unit
+from identify.geometry import cross, perpendicular_basis, rotation_about_axis, turned, unit
 from identify.linalg import project_out
 from identify.sync import Retiming
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
@@ -312,12 +312,12 @@ class LineProblem:
             # as matrices per row: L (R A - B), the columns of A and B (3 x 4) for the two tilts and two shifts
             r = len(revolute)
             eps = cross(lines.directions[revolute][:, None, :], np.array([tangents[i] for i in revolute]))  # (r, 2, 3)
-            ce = cross(eps, lines.points[revolute][:, None, :])[:, None, :, :].swapaxes(2, 3)  # (r, 1, 3, 2)
-            turn = np.concatenate([skew(eps[:, 0]), skew(eps[:, 1])], axis=2)  # row x eps_j = row @ turn[:, :, 3j:3j+3]
+            ce = cross(eps, lines.points[revolute][:, None, :])  # (r, 2, 3)
             a = np.empty((r, m, 3, 4))
             b = np.empty_like(a)
-            a[..., :2] = (inputs[rev] @ turn).reshape(r, m, 2, 3).swapaxes(2, 3) + ce
-            b[..., :2] = (outputs[rev] @ turn).reshape(r, m, 2, 3).swapaxes(2, 3) + ce
+            for j in range(2):
+                a[..., j] = cross(inputs[rev], eps[:, None, j]) + ce[:, None, j]
+                b[..., j] = cross(outputs[rev], eps[:, None, j]) + ce[:, None, j]
             a[..., 2:] = b[..., 2:] = -np.array([self.bases[i] for i in revolute]).swapaxes(1, 2)[:, None]
             moved = np.matmul(rots[rev], a, out=a)
             moved -= b

@@ -205,6 +205,10 @@ class _Problem:
         v = self.full(x)
         model, tools = model_from_vector(self.start, v), self.tools(x)
         n_free, n_extra = int(self.free.sum()), 3 * (len(tools) - 1)
+        if not n_extra:  # one tracked point: its columns as they come (no second (m, 3, p) copy)
+            out = full_jacobian(replace(model, tool=tools[0]), self.q, omega=v[:3])[1][:, :, self.free]
+            out *= self.weights[:, None, None]
+            return out.reshape(-1, out.shape[2])
         out = np.zeros((len(self.q), 3, n_free + n_extra))
         for k, tool in enumerate(tools):
             rows = self.tp_index == k
