@@ -14,7 +14,8 @@ RANK_RCOND = 1e-12  # relative singular value below which a column direction cou
 
 
 def _column_scale(a: Array) -> Array:
-    return np.maximum(np.linalg.norm(a, axis=0), 1e-300)
+    """Euclidean norm of each column of ``a`` (N, p), at least 1e-300 (summed without an (N, p) temporary)."""
+    return np.maximum(np.sqrt(np.einsum("ij,ij->j", a, a)), 1e-300)
 
 
 GRAM_CONDITION = 1e10  # below this condition number of JᵀJ (1e5 of J) the Gram matrix loses < 1e-6 relative

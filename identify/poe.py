@@ -272,7 +272,8 @@ class LineProblem:
                     rows = np.flatnonzero(tps == p) + chunk.start
                     jac[rows, :, k + 3 * p:k + 3 * p + 3] = lefts[-1][rows - chunk.start]
         if data:
-            jac *= self.weights[:, None, None]
+            if np.any(self.weights != 1.0):
+                jac *= self.weights[:, None, None]
             if self.has_unknown:
                 rows = np.flatnonzero(self.unknown >= 0)
                 project_out(jac, rows, nuisance[rows] * self.weights[rows, None])
