@@ -211,7 +211,8 @@ def test_compensate_command_rows_statuses_and_exit_codes(case, result_file, tmp_
     assert main(["compensate", str(result_file), "--targets", str(targets), "--out", str(out)]) == 3
     text = capsys.readouterr().out
     # the far target is not reached; whether the solver stops at a joint limit or short of it ("limit" or
-    # "unreachable") turns on the model's last bits there (a 1e-9 m change of the target flips it): either is a refusal
+    # "unreachable") turns on the model's last bits there (a micrometre's change of the target flips it): either is a
+    # refusal
     far = "unreachable" if "5 ok, 1 unreachable" in text else "limit"
     assert f"5 ok, 1 {far}" in text and "1 target(s) NOT reached" in text
     lines = [ln for ln in out.read_text().splitlines() if not ln.startswith("#")]
