@@ -43,7 +43,7 @@ def split_clock(best: LinesFit, data: FitData, robust: bool, variance: float) ->
     inl = best.inliers
     problem = data.timed(timing).subset(inl).problem(best.lines, best.terms.subset(inl))
     x0 = np.zeros(problem.size)
-    jac = problem.jacobian_blocks(x0)
+    jac = best.jacobian_blocks(problem)
     res = problem.residuals(x0).reshape(-1, 3)
     offset = jac[:, :, problem.n_terms]  # the offset's column: the TP's velocity on streamed rows
     rows = per_sweep.offset_index()[inl]

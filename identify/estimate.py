@@ -9,7 +9,7 @@ Frames: tracker; units: metres and radians.
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -18,7 +18,15 @@ from scipy.spatial.transform import Rotation
 
 from identify.geometry import left_jacobian, skew
 from identify.outliers import leverages, outlier_free
-from identify.poe import AxisLines, JointTerms, LeastSquares, LineProblem, fit_lines, lines_from_model
+from identify.poe import (
+    AxisLines,
+    JointTerms,
+    LeastSquares,
+    LineProblem,
+    converged_tolerance,
+    fit_lines,
+    lines_from_model,
+)
 from identify.refine import NOISE_FLOOR
 from identify.sync import Retiming
 from kinematics.dh import DHModel, flange_frames, frames_from_joints
@@ -36,7 +44,8 @@ class LinesFit:
     solved; ``inliers`` (m,); ``residuals`` (m, 3) measured minus predicted, metres; ``robust_cost`` its
     soft-L1 cost on its own noise scale (starts are compared on a common one: :func:`best_start`); ``terms``
     the joint errors fitted with the lines; ``timing`` the streamed rows' clock correction (None without
-    streamed rows)."""
+    streamed rows); ``jacobian`` (m, 3, p): the weighted, projected Jacobian blocks of every row at the fit
+    (:meth:`identify.poe.LineProblem.jacobian_blocks` at zero), when the fit computed them (else None)."""
 
     lines: AxisLines
     q: Array
@@ -46,6 +55,13 @@ class LinesFit:
     start: str
     terms: JointTerms
     timing: Retiming | None = None
+    jacobian: Array | None = field(default=None, repr=False)
+
+    def jacobian_blocks(self, problem: LineProblem) -> Array:
+        """The Jacobian blocks of ``problem`` at zero, where ``problem`` is this fit's on its inliers."""
+        if self.jacobian is None:
+            return problem.jacobian_blocks(np.zeros(problem.size))
+        return self.jacobian if np.all(self.inliers) else self.jacobian[self.inliers]
 
 
 ALIGNED = 0.05  # of the points' spread: a placement missing by less has aligned the data (a stalled one misses by it)
@@ -130,8 +146,9 @@ def _placed(flange_rot: Array, flange_origin: Array, points: Array, tp_index: ND
             jac[rows, :, 6 + 3 * p:9 + 3 * p] = turned[rows]
         return jac.reshape(-1, jac.shape[2])
 
+    tol = converged_tolerance(points.size)
     solved = least_squares(residuals, np.concatenate([np.zeros(3), base[:3, 3], tools.ravel()]), jac=jacobian,
-                           method="lm", xtol=1e-12, ftol=1e-12)
+                           method="lm", xtol=tol, ftol=tol)
     x = solved.x
     base[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix() @ base[:3, :3]
     base[:3, 3] = x[3:6]
@@ -225,9 +242,11 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
     data = data.timed(timing)
     inliers = np.ones(len(data.q), dtype=bool)
     poses = _poses(data)
+    jac = None
     if robust:
         zero = np.zeros(data.problem(lines, terms).size)
-        lev = leverages(data.problem(lines, terms).jacobian_blocks(zero), data.unknown)
+        jac = data.problem(lines, terms).jacobian_blocks(zero)
+        lev = leverages(jac, data.unknown)
         inliers = _outlier_test(data, res, lev, q_s, poses)
         if not np.all(inliers):
             for _ in range(ROBUST_PASSES):  # the scale of a fit pulled by outliers is too wide: shrink it
@@ -244,12 +263,13 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
                 q_s = problem.joints(lines)
                 res = problem.residuals(zero).reshape(-1, 3)
                 kept = inliers
-                lev = leverages(problem.jacobian_blocks(zero), data.unknown)
+                jac = problem.jacobian_blocks(zero)
+                lev = leverages(jac, data.unknown)
                 inliers = _outlier_test(data, res, lev, q_s, poses)
                 if np.array_equal(inliers, kept):
                     break
     cost = _soft_l1(res, _inlier_scale(res, inliers))
-    return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms, data.timing)
+    return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms, data.timing, jac)
 
 
 def fit_kept(start: AxisLines, data: FitData, inliers: NDArray[np.bool_], label: str, terms: JointTerms) -> LinesFit:

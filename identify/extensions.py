@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.stats import chi2
 
+from identify.linalg import residual_maker
 from identify.poe import JointTerms, LeastSquares
 
 Array = NDArray[np.float64]
@@ -152,13 +153,12 @@ def score_statistics(res_w: Array, jac: Array, columns: Array, groups: list[NDAr
     """Score statistic of each column group (indices into ``columns``' last axis) at a fit with weighted
     residuals ``res_w`` (m, 3), Jacobian ``jac`` (m, 3, p) and candidate columns (m, 3, c), both weighted
     and projected; ``variance`` the noise variance in weighted units. NaN when the lines absorb a group."""
-    q_basis, _ = np.linalg.qr(jac.reshape(-1, jac.shape[2]))
-    r = res_w.reshape(-1)
-    r_perp = r - q_basis @ (q_basis.T @ r)
+    perpendicular = residual_maker(jac.reshape(-1, jac.shape[2]))
+    r_perp = perpendicular(res_w.reshape(-1))
     out = []
     for idx in groups:
         g = columns[:, :, idx].reshape(-1, len(idx))
-        g_perp = g - q_basis @ (q_basis.T @ g)
+        g_perp = perpendicular(g)
         if np.linalg.norm(g_perp) <= MIN_INDEPENDENT * max(np.linalg.norm(g), 1e-300):
             out.append(float("nan"))
             continue

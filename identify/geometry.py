@@ -17,15 +17,16 @@ Array = NDArray[np.float64]
 def unit(v: ArrayLike) -> Array:
     """``v`` scaled to unit length (last axis)."""
     v = np.asarray(v, dtype=float)
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.sqrt(np.add.reduce(v * v, axis=-1, keepdims=True))  # np.linalg.norm's sum, without its checks
 
 
 def perpendicular_basis(normal: ArrayLike) -> tuple[Array, Array]:
     """Two unit vectors ``(e1, e2)`` with ``(e1, e2, normal)`` right-handed and orthonormal."""
     n = unit(normal)
-    helper = np.eye(3)[int(np.argmin(np.abs(n)))]
-    e1 = unit(np.cross(helper, n))
-    return e1, np.cross(n, e1)
+    helper = np.zeros(3)
+    helper[int(np.argmin(np.abs(n)))] = 1.0
+    e1 = unit(cross(helper, n))
+    return e1, cross(n, e1)
 
 
 def skew(v: ArrayLike) -> Array:
@@ -40,9 +41,29 @@ def skew(v: ArrayLike) -> Array:
 
 def rotation_about_axis(axis: ArrayLike, angle: ArrayLike) -> Array:
     """Rotation matrices (Rodrigues) about unit ``axis`` by ``angle`` radians; shape (..., 3, 3)."""
-    k = skew(unit(axis))
-    angle = np.asarray(angle, dtype=float)[..., None, None]
-    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+    axis = np.asarray(axis, dtype=float)
+    angle = np.asarray(angle, dtype=float)
+    if axis.ndim > 1:
+        k = skew(unit(axis))
+        return np.eye(3) + np.sin(angle)[..., None, None] * k + (1.0 - np.cos(angle))[..., None, None] * (k @ k)
+    # one axis: I + sin K + (1 - cos) K², entry by entry (K² = k kᵀ - I)
+    kx, ky, kz = unit(axis)
+    s, c = np.sin(angle), np.cos(angle)
+    v = 1.0 - c
+    out = np.empty((*angle.shape, 3, 3))
+    out[..., 0, 0], out[..., 1, 1], out[..., 2, 2] = c + kx * kx * v, c + ky * ky * v, c + kz * kz * v
+    out[..., 0, 1], out[..., 1, 0] = kx * ky * v - kz * s, kx * ky * v + kz * s
+    out[..., 0, 2], out[..., 2, 0] = kx * kz * v + ky * s, kx * kz * v - ky * s
+    out[..., 1, 2], out[..., 2, 1] = ky * kz * v - kx * s, ky * kz * v + kx * s
+    return out
+
+
+def turned(points: Array, centre: Array, axis: Array, angle: Array) -> Array:
+    """``points`` (m, 3) turned by ``angle`` (m,) rad about the line through ``centre`` along unit ``axis`` (3,)
+    (Rodrigues' formula on the vectors, without forming the rotations)."""
+    v = points - centre
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return centre + v * c + cross(axis, v) * s + np.outer((v @ axis) * (1.0 - c[:, 0]), axis)
 
 
 @dataclass(frozen=True)
@@ -113,14 +134,11 @@ def circle_2d_algebraic(xy: ArrayLike) -> tuple[Array, float]:
 
 def cross(u: Array, v: Array) -> Array:
     """Row-wise cross product of (..., 3) arrays; faster than ``np.cross`` on small arrays."""
-    return np.stack(
-        [
-            u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1],
-            u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2],
-            u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0],
-        ],
-        axis=-1,
-    )
+    out = np.empty(np.broadcast_shapes(np.shape(u), np.shape(v)))
+    out[..., 0] = u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1]
+    out[..., 1] = u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2]
+    out[..., 2] = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    return out
 
 
 class _CircleProblem:

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
+from scipy.linalg import solve_triangular
 
 Array = NDArray[np.float64]
 
@@ -11,7 +14,8 @@ RANK_RCOND = 1e-12  # relative singular value below which a column direction cou
 
 
 def _column_scale(a: Array) -> Array:
-    return np.maximum(np.linalg.norm(a, axis=0), 1e-300)
+    """Euclidean norm of each column of ``a`` (N, p), at least 1e-300 (summed without an (N, p) temporary)."""
+    return np.maximum(np.sqrt(np.einsum("ij,ij->j", a, a)), 1e-300)
 
 
 GRAM_CONDITION = 1e10  # below this condition number of JᵀJ (1e5 of J) the Gram matrix loses < 1e-6 relative
@@ -27,6 +31,24 @@ def _r_factor(a: Array) -> Array:
         return np.linalg.cholesky(gram).T
     return np.linalg.qr(a, mode="r")
 
+
+
+def residual_maker(a: Array) -> Callable[[Array], Array]:
+    """The map ``v -> v - P v`` (``v`` (N,) or (N, k)), ``P`` the orthogonal projector on the columns of ``a``
+    (N, p), N >= p: through the Cholesky factor of the scaled columns' Gram matrix when it is well conditioned (two
+    BLAS products), else through an explicit orthonormal basis (Householder QR)."""
+    scaled = a / _column_scale(a)
+    gram = scaled.T @ scaled
+    eig = np.linalg.eigvalsh(gram)
+    if eig[0] > eig[-1] / GRAM_CONDITION:
+        lower = np.linalg.cholesky(gram)
+
+        def through_gram(v: Array) -> Array:
+            inner = solve_triangular(lower, scaled.T @ v, lower=True, check_finite=False)
+            return v - scaled @ solve_triangular(lower, inner, lower=True, trans="T", check_finite=False)
+        return through_gram
+    basis, _ = np.linalg.qr(scaled)
+    return lambda v: v - basis @ (basis.T @ v)
 
 def _svd(a: Array) -> tuple[Array, Array]:
     """Singular values and right singular vectors (rows) of ``a`` (N, p), without its left vectors."""

@@ -437,7 +437,7 @@ def _adequacy(best: LinesFit, data: FitData, unit: float, declared: float | None
     problem = rows.problem(best.lines, best.terms.subset(inl))
     zero = np.zeros(problem.size)
     runs = sweep_neighbours(rows.group, along_arc(best.q[inl], rows.joint))
-    return assess(problem.residuals(zero).reshape(-1, 3), problem.jacobian_blocks(zero), rows.unknown, runs, unit,
+    return assess(problem.residuals(zero).reshape(-1, 3), best.jacobian_blocks(problem), rows.unknown, runs, unit,
                   declared)
 
 

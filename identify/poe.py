@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from identify.geometry import cross, perpendicular_basis, rotation_about_axis, unit
+from identify.geometry import cross, perpendicular_basis, rotation_about_axis, turned, unit
 from identify.linalg import project_out
 from identify.sync import Retiming
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
@@ -75,31 +75,11 @@ def lines_from_model(model: DHModel, home: Array) -> AxisLines:
 def points_from_lines(lines: AxisLines, q: Array, tp_index: NDArray[np.int64] | None = None) -> Array:
     """Predicted TP (m, 3) at joint readings ``q`` (m, n); ``tp_index`` (m,): which tracked point (0-based
     row of ``lines.tps``; default the first)."""
-    p, _ = _chain(lines, q, tp_index)
-    return p
+    return _apply(lines, q, range(len(lines.joint_types)), _home_points(lines, len(q), tp_index))
 
 
 def _home_points(lines: AxisLines, m: int, tp_index: NDArray[np.int64] | None) -> Array:
     return np.tile(lines.tp_home, (m, 1)) if tp_index is None else lines.tps[tp_index]
-
-
-def _chain(lines: AxisLines, q: Array, tp_index: NDArray[np.int64] | None = None
-           ) -> tuple[Array, list[tuple[Array, Array, Array, Array]]]:
-    """TP and, per joint from the tip, (input point u, output point w, rotation R, angle or stroke)."""
-    m = len(q)
-    x = _home_points(lines, m, tp_index)
-    steps = []
-    for i in reversed(range(len(lines.joint_types))):
-        delta = q[:, i] - lines.home[i]
-        if lines.joint_types[i] == "R":
-            rot = rotation_about_axis(lines.directions[i], delta)
-            y = lines.points[i] + np.einsum("kij,kj->ki", rot, x - lines.points[i])
-        else:
-            rot = np.broadcast_to(np.eye(3), (m, 3, 3))
-            y = x + delta[:, None] * lines.directions[i]
-        steps.append((x, y, rot, delta))
-        x = y
-    return x, steps[::-1]
 
 
 def _apply(lines: AxisLines, q: Array, joints: range, x: Array) -> Array:
@@ -107,8 +87,7 @@ def _apply(lines: AxisLines, q: Array, joints: range, x: Array) -> Array:
     for i in reversed(joints):
         delta = q[:, i] - lines.home[i]
         if lines.joint_types[i] == "R":
-            x = lines.points[i] + np.einsum("kij,kj->ki", rotation_about_axis(lines.directions[i], delta),
-                                            x - lines.points[i])
+            x = turned(x, lines.points[i], lines.directions[i], delta)
         else:
             x = x + delta[:, None] * lines.directions[i]
     return x
@@ -252,56 +231,49 @@ class LineProblem:
             regressors = self.terms.regressors
         elif regressors is None:
             regressors = np.zeros((len(q), len(self.terms)))
-        if timed:
-            streamed = self.timing.rows
-            dq = self.timing.derivatives(self.tau(x))  # (r, n, K)
-            timing_moves = np.any(dq != 0.0, axis=(0, 2))
-        _, steps = _chain(lines, q, tp_index)
         m = len(q)
+        streamed = self.timing.rows if timed else np.zeros(m, dtype=bool)
+        if timed:
+            dq = self.timing.derivatives(self.tau(x))  # (r, n, K), the streamed rows in order
+            timing_moves = np.any(dq != 0.0, axis=(0, 2))
+            dq_row = np.cumsum(streamed) - 1  # each streamed row's index in dq
         jac = np.zeros((m, 3, self.size))
         nuisance = np.zeros((m, 3))
-        left = np.broadcast_to(np.eye(3), (m, 3, 3)).copy()  # rotation of T_1 … T_{i-1}
-        k = 0
-        for i, t in enumerate(self.types):
-            u, w, rot, delta = steps[i]
-            acting = np.flatnonzero(self.terms.joints == i)
-            moves = timed and timing_moves[i]
-            if (data and self.has_unknown) or len(acting) or moves:
-                if t == "R":  # dp/dq_i
-                    column = np.einsum("kij,kj->ki", left, cross(lines.directions[i], w - lines.points[i]))
-                else:
-                    column = left @ lines.directions[i]
-                rows = self.unknown == i if data else np.zeros(m, dtype=bool)
-                nuisance[rows] = column[rows]
-                for c in acting:
-                    jac[:, :, self.n_lines + c] = column * regressors[:, c, None]
-                if moves:
-                    jac[streamed, :, self.n_terms:] += column[streamed, :, None] * dq[:, i, None, :]
-            if t == "R":
-                # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
-                # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i),
-                # evaluated as matrix-vector products per row
-                c = lines.points[i]
-                for j in range(2):  # tilting the direction turns the line about its point c: eps_v = c x eps_w
-                    eps_w = cross(lines.directions[i], tangents[i][j])
-                    ce = cross(eps_w, c)
-                    inner = np.einsum("kij,kj->ki", rot, cross(u, eps_w) + ce) - cross(w, eps_w) - ce
-                    jac[:, :, k + j] = np.einsum("kij,kj->ki", left, inner)
-                    b = self.bases[i][j]
-                    jac[:, :, k + 2 + j] = np.einsum("kij,kj->ki", left, b - rot @ b)
-                k += 4
+        k = self.start.n_line_parameters
+        for chunk in _chunks(m):
+            tps = None if tp_index is None else tp_index[chunk]
+            lefts, outputs = self._line_columns(lines, tangents, q[chunk], tps, jac[chunk])
+            here = streamed[chunk]
+            if timed:
+                timing_columns = np.zeros((int(np.sum(here)), 3, self.size - self.n_terms))
+                dq_here = dq[dq_row[chunk][here]]
+            for i, t in enumerate(self.types):
+                acting = np.flatnonzero(self.terms.joints == i)
+                moves = timed and timing_moves[i]
+                if (data and self.has_unknown) or len(acting) or moves:
+                    if t == "R":  # dp/dq_i
+                        column = np.einsum("kij,kj->ki", lefts[i],
+                                           cross(lines.directions[i], outputs[i] - lines.points[i]))
+                    else:
+                        column = lefts[i] @ lines.directions[i]
+                    if data:
+                        rows = self.unknown[chunk] == i
+                        nuisance[chunk][rows] = column[rows]
+                    for c in acting:
+                        jac[chunk, :, self.n_lines + c] = column * regressors[chunk, c, None]
+                    if moves:
+                        timing_columns += column[here, :, None] * dq_here[:, i, None, :]
+            if timed:
+                jac[chunk][here, :, self.n_terms:] += timing_columns
+            if tps is None:
+                jac[chunk, :, k:k + 3] = lefts[-1]
             else:
-                jac[:, :, k:k + 2] = (left @ tangents[i].T) * delta[:, None, None]
-                k += 2
-            left = left @ rot
-        if tp_index is None:
-            jac[:, :, k:k + 3] = left
-        else:
-            for p in range(len(lines.tps)):
-                rows = tp_index == p
-                jac[rows, :, k + 3 * p:k + 3 * p + 3] = left[rows]
+                for p in range(len(lines.tps)):
+                    rows = np.flatnonzero(tps == p) + chunk.start
+                    jac[rows, :, k + 3 * p:k + 3 * p + 3] = lefts[-1][rows - chunk.start]
         if data:
-            jac *= self.weights[:, None, None]
+            if np.any(self.weights != 1.0):
+                jac *= self.weights[:, None, None]
             if self.has_unknown:
                 rows = np.flatnonzero(self.unknown >= 0)
                 project_out(jac, rows, nuisance[rows] * self.weights[rows, None])
@@ -309,6 +281,71 @@ class LineProblem:
 
     def jacobian(self, x: Array) -> Array:
         return self.jacobian_blocks(x).reshape(-1, self.size)
+
+    def _line_columns(self, lines: AxisLines, tangents: list[Array], q: Array, tp_index: NDArray[np.int64] | None,
+                      jac: Array) -> tuple[Array, Array]:
+        """In place, for rows at joint values ``q``: the lines' columns of ``jac`` (m, 3, size), unweighted; returns
+        the rotations (n + 1, m, 3, 3) of T_1 … T_i, i = 0 … n, and the points (n, m, 3) after T_i … T_n."""
+        n, m = len(self.types), len(q)
+        inputs, rots, outputs = np.empty((n, m, 3)), np.empty((n, m, 3, 3)), np.empty((n, m, 3))
+        lefts = np.empty((n + 1, m, 3, 3))
+        x = _home_points(lines, m, tp_index)
+        for i in reversed(range(n)):  # the chain of :func:`_apply`, with its rotations kept
+            delta = q[:, i] - lines.home[i]
+            inputs[i] = x
+            if self.types[i] == "R":
+                rots[i] = rotation_about_axis(lines.directions[i], delta)
+                outputs[i] = lines.points[i] + np.einsum("kij,kj->ki", rots[i], x - lines.points[i])
+            else:
+                rots[i] = np.eye(3)
+                outputs[i] = x + delta[:, None] * lines.directions[i]
+            x = outputs[i]
+        lefts[0] = np.eye(3)
+        for i in range(n):
+            np.matmul(lefts[i], rots[i], out=lefts[i + 1])
+        first = np.cumsum([0] + [4 if t == "R" else 2 for t in self.types])  # each joint's first column
+        revolute = [i for i, t in enumerate(self.types) if t == "R"]
+        rev = slice(None) if len(revolute) == n else revolute  # (a view when every joint is revolute)
+        if revolute:
+            # moving joint i's line rigidly by (eps_w, eps_v) moves the TP by
+            # L [(-[w]x + R [u]x) eps_w + (I - R) eps_v]   (L = rotation of the joints before i), for every
+            # revolute joint at once; tilting the direction turns the line about its point c: eps_v = c x eps_w;
+            # as matrices per row: L (R A - B), the columns of A and B (3 x 4) for the two tilts and two shifts
+            r = len(revolute)
+            eps = cross(lines.directions[revolute][:, None, :], np.array([tangents[i] for i in revolute]))  # (r, 2, 3)
+            ce = cross(eps, lines.points[revolute][:, None, :])  # (r, 2, 3)
+            a = np.empty((r, m, 3, 4))
+            b = np.empty_like(a)
+            for j in range(2):
+                a[..., j] = cross(inputs[rev], eps[:, None, j]) + ce[:, None, j]
+                b[..., j] = cross(outputs[rev], eps[:, None, j]) + ce[:, None, j]
+            a[..., 2:] = b[..., 2:] = -np.array([self.bases[i] for i in revolute]).swapaxes(1, 2)[:, None]
+            moved = np.matmul(rots[rev], a, out=a)
+            moved -= b
+            moved = np.matmul(lefts[:-1][rev], moved, out=b)  # (r, m, 3, 4)
+            for index, i in enumerate(revolute):
+                jac[:, :, first[i]:first[i] + 4] = moved[index]
+        for i, t in enumerate(self.types):
+            if t == "P":
+                jac[:, :, first[i]:first[i] + 2] = (lefts[i] @ tangents[i].T) * (q[:, i] - lines.home[i])[:, None, None]
+        return lefts, outputs
+
+ROWS_PER_CHUNK = 16384  # rows whose Jacobian blocks are formed at once (bounds the temporaries of large sessions)
+
+
+def _chunks(m: int) -> list[slice]:
+    """Row slices of at most :data:`ROWS_PER_CHUNK` covering ``m`` rows."""
+    return [slice(a, min(a + ROWS_PER_CHUNK, m)) for a in range(0, max(m, 1), ROWS_PER_CHUNK)]
+
+
+STOP_SIGMAS = 1e-3  # a least-squares fit stops when its step moves the parameters by less than this many σ
+
+
+def converged_tolerance(residuals: int) -> float:
+    """``ftol`` (also ``xtol``, ``gtol``) of a least-squares fit of ``residuals`` noise-level residuals: a step
+    that lowers the cost (about ``residuals`` noise variances at the optimum) by less than its relative share
+    (STOP_SIGMAS²/residuals) moves the parameters by less than STOP_SIGMAS standard deviations; at most 1e-10."""
+    return min(1e-10, STOP_SIGMAS**2 / max(residuals, 1))
 
 
 class LeastSquares(NamedTuple):
@@ -339,7 +376,7 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
     n_nuisance = int(np.sum(problem.unknown >= 0))
     linear = loss == "linear"
     method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
-    tol = 1e-12 if linear else 1e-8
+    tol = converged_tolerance(3 * len(q)) if linear else 1e-8
     fit = least_squares(problem.residuals, np.zeros(problem.size), jac=problem.jacobian, method=method,
                         loss=loss, f_scale=scale, x_scale="jac", xtol=tol, ftol=tol, gtol=tol,
                         max_nfev=200 if linear else 60)

@@ -22,6 +22,7 @@ from scipy.stats import f as f_dist
 
 from identify.geometry import cross, left_jacobian, skew
 from identify.linalg import triangle
+from identify.poe import converged_tolerance
 from kinematics.dh import DH_NAMES, DHModel, points_from_joints, running_frames
 
 Array = NDArray[np.float64]
@@ -204,6 +205,10 @@ class _Problem:
         v = self.full(x)
         model, tools = model_from_vector(self.start, v), self.tools(x)
         n_free, n_extra = int(self.free.sum()), 3 * (len(tools) - 1)
+        if not n_extra:  # one tracked point: its columns as they come (no second (m, 3, p) copy)
+            out = full_jacobian(replace(model, tool=tools[0]), self.q, omega=v[:3])[1][:, :, self.free]
+            out *= self.weights[:, None, None]
+            return out.reshape(-1, out.shape[2])
         out = np.zeros((len(self.q), 3, n_free + n_extra))
         for k, tool in enumerate(tools):
             rows = self.tp_index == k
@@ -220,7 +225,7 @@ def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
     """Least-squares solve; the robust (outlier-finding) pass needs less precision than the final one."""
     linear = loss == "linear"
     method = "lm" if linear and len(problem.points) * 3 >= len(x0) else "trf"
-    tol = 1e-14 if linear else 1e-8
+    tol = converged_tolerance(len(problem.points) * 3) if linear else 1e-8
     fit = least_squares(
         problem.residuals,
         x0,
@@ -235,6 +240,65 @@ def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
         max_nfev=200 if linear else 50,
     )
     return fit.x
+
+
+@dataclass(frozen=True)
+class TableFit:
+    """A DH table fitted by :func:`fit_table`: the ``model``, the ``free`` mask of the full vector, every tracked
+    point's ``tools`` (k, 3, frame n), the ``inliers`` mask and ``notes`` on the conventions applied."""
+
+    model: DHModel
+    free: NDArray[np.bool_]
+    tools: Array
+    inliers: NDArray[np.bool_]
+    notes: list[str]
+
+
+def fit_table(
+    start: DHModel,
+    q: Array,
+    points: Array,
+    sigma: Array | None = None,
+    conventional: Array | None = None,
+    parallel: Collection[int] = (),
+    noise_guess: float = 1e-4,
+    robust: bool = True,
+    max_offset: float = DEFAULT_MAX_OFFSET,
+    tp_index: NDArray[np.int64] | None = None,
+    tools: Array | None = None,
+) -> TableFit:
+    """The maximum-likelihood DH table of :func:`refine`, without its covariance (arguments as there)."""
+    tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else np.asarray(tp_index)
+    tools = start.tool[None, :] if tools is None else np.asarray(tools, dtype=float)
+    weights = np.ones(len(q)) if sigma is None else 1.0 / np.asarray(sigma, dtype=float)
+    free = select_free(start, q, parallel)
+    notes: list[str] = []
+    # values the data cannot determine take their conventional ones; the fit absorbs the change
+    model, moved = _with_conventions(start, free, conventional)
+    problem = _Problem(model, q, points, weights, free, tp_index, tools)
+    x = _solve(problem, problem.x0, "linear", 1.0)
+    inliers = np.ones(len(q), dtype=bool)
+    if robust:
+        inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
+    if not np.all(inliers):
+        scale = max(noise_guess, NOISE_FLOOR) * 3.0 * (1.0 if sigma is None else float(np.median(weights)))
+        x = _solve(problem, x, "soft_l1", scale)
+        inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
+        model, tools = problem.model(x), problem.tools(x)
+        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
+        x = _solve(problem, problem.x0, "linear", 1.0)
+    model, tools = problem.model(x), problem.tools(x)
+    if len(tools) > 1 and max_offset > 0:
+        raise ValueError("releasing the parallel-axis convention is for one tracked point")
+    free_exact = select_free(start, q, ()) if parallel and max_offset > 0 else free
+    if np.any(free_exact & ~free):  # with no offset allowed, the convention stays
+        model, free, note = _release_parallel(
+            model, q[inliers], points[inliers], weights[inliers], free, free_exact, conventional, max_offset
+        )
+        notes += [note] if note else []
+    if moved:
+        notes.append(f"{moved} undetermined parameter(s) set to their conventional values")
+    return TableFit(model, free, tools, inliers, notes)
 
 
 def refine(
@@ -262,35 +326,9 @@ def refine(
     frame n) as a start; each keeps its own tool (``Refinement.tools``), all share the table.
     """
     tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else np.asarray(tp_index)
-    tools = start.tool[None, :] if tools is None else np.asarray(tools, dtype=float)
     weights = np.ones(len(q)) if sigma is None else 1.0 / np.asarray(sigma, dtype=float)
-    free = select_free(start, q, parallel)
-    free_exact = select_free(start, q, ()) if parallel else free
-    notes: list[str] = []
-    # values the data cannot determine take their conventional ones; the fit absorbs the change
-    model, moved = _with_conventions(start, free, conventional)
-    problem = _Problem(model, q, points, weights, free, tp_index, tools)
-    x = _solve(problem, problem.x0, "linear", 1.0)
-    inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
-    if robust and not np.all(inliers):
-        scale = max(noise_guess, NOISE_FLOOR) * 3.0 * (1.0 if sigma is None else float(np.median(weights)))
-        x = _solve(problem, x, "soft_l1", scale)
-        inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
-        model, tools = problem.model(x), problem.tools(x)
-        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
-        x = _solve(problem, problem.x0, "linear", 1.0)
-    elif not robust:
-        inliers[:] = True
-    model, tools = problem.model(x), problem.tools(x)
-    if len(tools) > 1 and max_offset > 0:
-        raise ValueError("releasing the parallel-axis convention is for one tracked point")
-    if max_offset > 0 and np.any(free_exact & ~free):  # with no offset allowed, the convention stays
-        model, free, note = _release_parallel(
-            model, q[inliers], points[inliers], weights[inliers], free, free_exact, conventional, max_offset
-        )
-        notes += [note] if note else []
-    if moved:
-        notes.append(f"{moved} undetermined parameter(s) set to their conventional values")
+    table = fit_table(start, q, points, sigma, conventional, parallel, noise_guess, robust, max_offset, tp_index, tools)
+    model, free, tools, inliers, notes = table.model, table.free, table.tools, table.inliers, table.notes
     problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
     x = problem.x0
     jac = problem.jacobian(x)

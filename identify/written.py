@@ -23,7 +23,7 @@ from identify.extensions import TermSet
 from identify.linalg import project_out, scaled_inverse
 from identify.poe import AxisLines, LineProblem, points_from_lines
 from identify.predict import Predictor
-from identify.refine import Refinement, full_jacobian, parameter_names, refine
+from identify.refine import Refinement, TableFit, fit_table, full_jacobian, parameter_names
 from kinematics.dh import DHModel, frames_from_joints
 
 Array = NDArray[np.float64]
@@ -133,7 +133,7 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     lines, inl = fit.lines, fit.inliers
     problem = data.subset(inl).problem(lines, fit.terms.subset(inl))
     x0 = np.zeros(problem.size)
-    jac_blocks = problem.jacobian_blocks(x0)
+    jac_blocks = fit.jacobian_blocks(problem)
     res_w = problem.residuals(x0).reshape(-1, 3)
     inv, condition = scaled_inverse(jac_blocks.reshape(-1, problem.size))
     # noise variance in weighted units (1 for a right sigma column), never below the declared noise
@@ -190,7 +190,7 @@ class _FitRows:
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
-                rows: _FitRows, noise: float) -> tuple[DHOutput, Refinement | None, Array, tuple[float, float]]:
+                rows: _FitRows, noise: float) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float]]:
     """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH table
     refitted under that convention on every tracked point's rows (so the cost it adds is a likelihood ratio,
     chi-square when the axes are parallel); the tools (k, 3) and that cost with the RMS gap to the lines."""
@@ -198,9 +198,8 @@ def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, 
     tools = _tools(out.model, lines)
     if not capped:
         return out, None, tools, _dh_gap(out.model, tools, lines, rows)
-    dh_fit = refine(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False, 0.0,
-                    rows.tp_index, tools)
-    assert dh_fit.tools is not None
+    dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False, 0.0,
+                       rows.tp_index, tools)
     return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows)
 
 
