@@ -253,7 +253,8 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
         status, message = "fail", (
             f"registered on {check.heldout.samples} poses of its own, the result's {check.name} model still misses "
             f"by {check.heldout.rms * 1e3:.3f} mm RMS (held out), {check.ratio:.1f}x the {check.expected * 1e3:.3f} "
-            "mm it predicts: another arm or another tool than the calibration's; do not use this model here")
+            "mm it predicts: another arm or another tool than the calibration's, or an error its model does not "
+            "hold (play in the joints, a warm arm); do not use this model here")
     return Outcome(runs, status, message, missing, check, duration, why)
 
 
