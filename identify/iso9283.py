@@ -278,12 +278,12 @@ def directions_result(pose: int, attained: list[Array]) -> Directions:
 
 def fitted_rotation(commanded: Array, measured: Array) -> Array:
     """The rotation R (3, 3) of the least-squares rigid fit R x + t of the points ``commanded`` (m, 3), m >= 3 not
-    on a line, onto ``measured`` (m, 3), both in one frame (Kabsch, with the determinant kept at +1)."""
+    on a line, onto ``measured`` (m, 3), both in one frame (Kabsch: scipy's ``Rotation.align_vectors`` on the
+    centred points, as ``identify check``'s registration starts)."""
     a = np.asarray(commanded, dtype=float)
     b = np.asarray(measured, dtype=float)
-    u, _, vt = np.linalg.svd((b - b.mean(axis=0)).T @ (a - a.mean(axis=0)))
-    flip = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(u @ vt)) or 1.0)])
-    return u @ flip @ vt
+    rotation, _ = Rotation.align_vectors(b - b.mean(axis=0), a - a.mean(axis=0))
+    return rotation.as_matrix()
 
 
 def deviation_angles(commanded: Array, measured: Array) -> Array:
