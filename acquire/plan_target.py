@@ -164,7 +164,6 @@ def _clock(seconds: float) -> str:
     return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
 
 
-
 def replan_for_rate(plan: Plan, robot: RobotModel, site: SiteConfig, rate: float, target: float | None,
                     resumed: bool) -> tuple[Plan, str, bool]:
     """The plan to run when the tracker streams at ``rate`` Hz instead of the site's ``stream_rate`` (an I++ server
@@ -185,14 +184,14 @@ def replan_for_rate(plan: Plan, robot: RobotModel, site: SiteConfig, rate: float
             return plan, (f"at {rate:g} samples/s the plan would change its poses; set plan: "
                           f"{{stream_rate: {rate:g}}} in the site file and check it with --dry-run"), True
     after = predicted_accuracy_continuous(slower, robot, site.tp_guess, site.tracker_noise, rate)
-    seconds = (estimate_continuous_duration(plan, site.measure_time),
-               estimate_continuous_duration(slower, site.measure_time))
     line = (f"at {rate:g} samples/s the plan predicts {after['with_free'] * 1e3:.4g} mm held-out "
             f"({before['with_free'] * 1e3:.4g} mm planned at {site.stream_rate:g})")
     if slower is not plan:
-        fastest = max(s.speed for s in slower.steps if s.kind == "stream" and s.speed is not None)
-        line += (f"; sweeps slowed to {fastest:.3g} rad/s at most, same poses and paths: robot time "
-                 f"{_clock(seconds[0])} -> {_clock(seconds[1])}")
+        fastest = max((s for s in slower.steps if s.kind == "stream" and s.speed is not None), key=lambda s: s.speed)
+        unit = "rad/s" if robot.joint_types[fastest.joint - 1] == "R" else "m/s"
+        line += (f"; sweeps slowed to {fastest.speed:.3g} {unit} at most, same poses and paths: robot time "
+                 f"{_clock(estimate_continuous_duration(plan, site.measure_time))} -> "
+                 f"{_clock(estimate_continuous_duration(slower, site.measure_time))}")
     missed = target is not None and after["with_free"] > target
     if missed:
         line += (f"; the target {target * 1e3:g} mm is out of reach: set plan: {{stream_rate: {rate:g}}} in the "

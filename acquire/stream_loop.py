@@ -51,18 +51,19 @@ def check_streams(robot, tracker, plan: Plan, timeout: float, rate: float) -> tu
     if not plan.continuous:
         return "", rate
     _require_streams(robot, tracker)
-    taken = [rate]
+    taken = rate
     for device, start, stop in ((robot, lambda: robot.start_joint_stream(timeout), robot.stop_joint_stream),
-                                (tracker, lambda: taken.append(tracker.start_stream(rate, timeout)),
-                                 tracker.stop_stream)):
+                                (tracker, lambda: tracker.start_stream(rate, timeout), tracker.stop_stream)):
         try:
-            start()
+            started = start()
             stop(timeout)
         except (ValueError, DriverError) as exc:
             advice = "" if "--mode step" in str(exc) or "stream_rate" in str(exc) else " (use --mode step)"
             raise StreamingUnsupported(f"this plan streams, and {type(device).__name__} cannot: {exc}{advice}") \
                 from None
-    return str(getattr(tracker, "rate_note", "") or ""), float(taken[-1])
+        if device is tracker:
+            taken = float(started)
+    return str(getattr(tracker, "rate_note", "") or ""), taken
 
 
 def run_stream(robot, tracker, session: Session, clock: Clock, step: Step, plan: Plan, timeouts,
