@@ -17,14 +17,14 @@ import sys
 import time
 
 SO_TIMESTAMPNS = 35  # Linux (asm-generic): receive times as struct timespec in SCM_TIMESTAMPNS messages
-_TIMESPEC = struct.Struct("qq")  # seconds, nanoseconds (64-bit Linux)
+_TIMESPEC = struct.Struct("ll")  # struct timespec as SO_TIMESTAMPNS gives it: seconds, nanoseconds (C longs)
 _ANCILLARY = socket.CMSG_SPACE(_TIMESPEC.size) if hasattr(socket, "CMSG_SPACE") else 0
 STALE = 60.0  # s: a kernel time this far from the read time is not trusted (a wrong layout, a clock step)
 
 
 def enable_receive_times(sock: socket.socket) -> bool:
     """Ask the kernel to stamp ``sock``'s incoming data; False where it cannot (then :func:`receive` stamps reads)."""
-    if not sys.platform.startswith("linux") or not _ANCILLARY or _TIMESPEC.size != 16:
+    if not sys.platform.startswith("linux") or not _ANCILLARY:
         return False
     try:
         sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
