@@ -34,22 +34,10 @@ class Visit:
     reverse: bool = False
 
 
-def _ends(visit: Visit, sweeps: Sequence[tuple[Array, Array]], poses: Sequence[Array]) -> tuple[Array, Array]:
-    if not visit.sweep:
-        return poses[visit.item], poses[visit.item]
-    a, b = sweeps[visit.item]
-    return (b, a) if visit.reverse else (a, b)
-
-
 def tour_time(tour: Sequence[Visit], home: Array, sweeps: Sequence[tuple[Array, Array]], poses: Sequence[Array],
               move_time: MoveTime) -> float:
     """Seconds of the moves of ``tour`` from home, between its visits and back home."""
-    here, total = home, 0.0
-    for visit in tour:
-        entry, leave = _ends(visit, sweeps, poses)
-        total += move_time(here, entry)
-        here = leave
-    return total + move_time(here, home)
+    return _Costs(home, sweeps, poses, move_time).time(tour)
 
 
 class _Costs:
