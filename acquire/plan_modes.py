@@ -28,6 +28,7 @@ import numpy as np
 from acquire.plan import HOME_SWEEP, build_plan, estimate_duration
 from acquire.plan_continuous import build_continuous_plan, estimate_continuous_duration, predicted_accuracy_continuous
 from acquire.plan_report import predicted_accuracy
+from common.units import hms
 from config.cell import cell_from_config, first_contact
 from config.robots import RobotModel
 from config.site import SiteConfig
@@ -131,13 +132,8 @@ def format_modes(robot: RobotModel, site: SiteConfig, shown: Plan, free_poses: i
              f"{'samples':>8} {'predicted accuracy (RMS, held out)':>36}"]
     for mode, seconds, samples, accuracy in rows:
         shown_accuracy = f"{accuracy * 1e3:.4f} mm" if math.isfinite(accuracy) else "undetermined"
-        lines.append(f"  {mode:<11} {_clock(seconds):>10} {seconds / step_time:>7.2f} {samples:>8} "
+        lines.append(f"  {mode:<11} {hms(seconds):>10} {seconds / step_time:>7.2f} {samples:>8} "
                      f"{shown_accuracy:>36}")
     lines.append(f"  streams at {site.stream_rate:g} Hz, every sample with the tracker noise; the bounds leave out the "
                  "timing error, which the identification estimates (both: the stop-and-go sweeps need no clock)")
     return "\n".join(lines)
-
-
-def _clock(seconds: float) -> str:
-    total = round(seconds)
-    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"

@@ -15,6 +15,7 @@ import numpy as np
 
 from acquire.design import SUBSPACE_TOL, gram, whitened
 from acquire.plan import EVAL_POSES, PARTIAL_ARC, Array, _fmt, tp_model
+from common.units import hms
 from config.cell import Clearance
 from config.robots import RobotModel
 from config.site import SiteConfig
@@ -86,11 +87,6 @@ def predicted_accuracy(plan: Plan, robot: RobotModel, tp_guess: Any, noise: floa
     }
 
 
-def _hms(seconds: float) -> str:
-    total = round(seconds)
-    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
-
-
 def _per_joint_text(values: tuple[float, ...], types: str, unit_r: str, unit_p: str) -> str:
     return ", ".join(f"{math.degrees(v):.1f}{unit_r}" if t == "R" else f"{v * 1e3:.0f}{unit_p}"
                      for v, t in zip(values, types, strict=False))
@@ -128,7 +124,7 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
               + _per_joint_text(plan.speed, types, "°/s", " mm/s")
               + (" (each continuous sweep at its own speed: notes)" if count["stream"] else ""),
               f"acceleration: {_per_joint_text(plan.acceleration, types, '°/s²', ' mm/s²')}",
-              f"estimated duration: {_hms(duration_s)}"]
+              f"estimated duration: {hms(duration_s)}"]
     if accuracy:
         step = accuracy["step_noise"]
         lines += ["",

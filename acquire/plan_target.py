@@ -31,6 +31,7 @@ from acquire.plan import estimate_duration
 from acquire.plan_continuous import estimate_continuous_duration, predicted_accuracy_continuous
 from acquire.plan_modes import build_mode_plan, plan_mode
 from acquire.plan_report import predicted_accuracy
+from common.units import hms
 from config.robots import RobotModel
 from config.site import SiteConfig
 from session.plan import Plan
@@ -160,8 +161,7 @@ def format_tradeoff(found: list[Candidate], chosen: Candidate | None, target: fl
 
 def _clock(seconds: float) -> str:
     """h:mm:ss, rounded up (a plan shown at the limit fits in it)."""
-    total = math.ceil(seconds - 1e-9)
-    return f"{total // 3600}:{total % 3600 // 60:02d}:{total % 60:02d}"
+    return hms(math.ceil(seconds - 1e-9))
 
 
 def replan_for_rate(plan: Plan, robot: RobotModel, site: SiteConfig, rate: float, target: float | None,

@@ -27,6 +27,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from common.units import hms
 from drivers.motion import motion_time
 from session.plan import Plan, Step
 
@@ -62,12 +63,6 @@ def step_durations(plan: Plan, measure_time: float) -> dict[int, float]:
         out[s.index] = seconds
         here = np.asarray(s.q, dtype=float)
     return out
-
-
-def hms(seconds: float) -> str:
-    """``seconds`` as H:MM:SS."""
-    seconds = max(0, round(seconds))
-    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
 
 
 def what(step: Step) -> str:

@@ -15,7 +15,6 @@ import yaml
 from acquire.cli import UsageError, _check_start, _confirm, _open_devices, _site, _without_faults
 from acquire.plan import estimate_duration, plan_clearance
 from acquire.plan_report import format_clearance
-from acquire.progress import hms
 from acquire.resume import resume_settings
 from acquire.runner import run_session
 from acquire.session import Session
@@ -26,6 +25,7 @@ from common import fit_width
 from common.errors import InputError
 from common.fit_width import say
 from common.outputs import check_outputs, check_target, write_output
+from common.units import hms
 from config.robots import RobotModel, load_robot
 from drivers.spec import RobotSpec, TrackerSpec
 from identify.calibrated import CalibratedModel, ResultError, nominal_name

@@ -66,6 +66,12 @@ def parse_duration(text: str) -> float:
     return _quantity(text, TIME_UNITS, "duration", list(TIME_UNITS), "90s or 1.5min", "seconds")
 
 
+def hms(seconds: float) -> str:
+    """``seconds`` as H:MM:SS, rounded to the second (negative: 0:00:00)."""
+    seconds = max(0, round(seconds))
+    return f"{seconds // 3600}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+
+
 def positive_duration(text: str) -> float:
     """argparse ``type=`` for a duration that must be > 0 (seconds)."""
     try:
