@@ -154,16 +154,24 @@ def score_statistics(res_w: Array, jac: Array, columns: Array, groups: list[NDAr
     residuals ``res_w`` (m, 3), Jacobian ``jac`` (m, 3, p) and candidate columns (m, 3, c), both weighted
     and projected; ``variance`` the noise variance in weighted units. NaN when the lines absorb a group."""
     perpendicular = residual_maker(jac.reshape(-1, jac.shape[2]))
-    r_perp = perpendicular(res_w.reshape(-1))
+    flat = columns.reshape(-1, columns.shape[2])
+    squares = np.einsum("ij,ij->j", flat, flat)  # each candidate column's squared norm
+    c_perp = perpendicular(flat)  # every candidate column at once, what the fitted columns leave of it
+    inner = c_perp.T @ c_perp
+    towards = c_perp.T @ perpendicular(res_w.reshape(-1))
+    del c_perp
+    rounding = (np.finfo(float).eps * len(flat)) ** 2  # a least-squares solver's relative cut, squared
     out = []
     for idx in groups:
-        g = columns[:, :, idx].reshape(-1, len(idx))
-        g_perp = perpendicular(g)
-        if np.linalg.norm(g_perp) <= MIN_INDEPENDENT * max(np.linalg.norm(g), 1e-300):
+        block = inner[np.ix_(idx, idx)]
+        if np.trace(block) <= MIN_INDEPENDENT**2 * max(float(np.sum(squares[idx])), 1e-300):
             out.append(float("nan"))
             continue
-        coef, *_ = np.linalg.lstsq(g_perp, r_perp, rcond=None)
-        out.append(float(np.sum((g_perp @ coef) ** 2) / variance))
+        # the residual's squared projection on the group's columns, ‖P r‖² = bᵀ M⁺ b (M, b: their products)
+        values, vectors = np.linalg.eigh(block)
+        kept = values > rounding * values[-1]
+        along = vectors[:, kept].T @ towards[idx]
+        out.append(float(np.sum(along**2 / values[kept]) / variance))
     return out
 
 

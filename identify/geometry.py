@@ -132,9 +132,10 @@ def circle_2d_algebraic(xy: ArrayLike) -> tuple[Array, float]:
     return centre + mean, float(radius)
 
 
-def cross(u: Array, v: Array) -> Array:
-    """Row-wise cross product of (..., 3) arrays; faster than ``np.cross`` on small arrays."""
-    out = np.empty(np.broadcast_shapes(np.shape(u), np.shape(v)))
+def cross(u: Array, v: Array, out: Array | None = None) -> Array:
+    """Row-wise cross product of (..., 3) arrays, into ``out`` when given (it may be a strided view); faster than
+    ``np.cross`` on small arrays."""
+    out = np.empty(np.broadcast_shapes(np.shape(u), np.shape(v))) if out is None else out
     out[..., 0] = u[..., 1] * v[..., 2] - u[..., 2] * v[..., 1]
     out[..., 1] = u[..., 2] * v[..., 0] - u[..., 0] * v[..., 2]
     out[..., 2] = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]

@@ -381,7 +381,7 @@ def _identifiability(model: WrittenModel, size: float) -> Identifiability:
     scale = max(a.residual, a.declared or 0.0) * np.sqrt(a.inflation)
     held = tuple(f.name for f in model.fixed if f.reason == UNDETERMINED)
     _, jac = full_jacobian(model.model, ref.q[ref.inliers])
-    lever = np.sqrt(np.mean(np.sum(jac[:, :, ref.free] ** 2, axis=1), axis=0))
+    lever = np.sqrt(np.einsum("kij,kij->j", jac, jac)[ref.free] / len(jac))
     return identifiability(names, ref.covariance, lever, size, a.model_error, scale, int(ref.inliers.sum()), held)
 
 

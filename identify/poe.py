@@ -30,6 +30,7 @@ from scipy.optimize import least_squares
 from identify.geometry import cross, perpendicular_basis, rotation_about_axis, turned, unit
 from identify.linalg import project_out
 from identify.sync import Retiming
+from identify.tall_lsq import is_tall, solve_tall
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
 
 Array = NDArray[np.float64]
@@ -317,14 +318,20 @@ class LineProblem:
             a = np.empty((r, m, 3, 4))
             b = np.empty_like(a)
             for j in range(2):
-                a[..., j] = cross(inputs[rev], eps[:, None, j]) + ce[:, None, j]
-                b[..., j] = cross(outputs[rev], eps[:, None, j]) + ce[:, None, j]
+                cross(inputs[rev], eps[:, None, j], out=a[..., j])
+                a[..., j] += ce[:, None, j]
+                cross(outputs[rev], eps[:, None, j], out=b[..., j])
+                b[..., j] += ce[:, None, j]
             a[..., 2:] = b[..., 2:] = -np.array([self.bases[i] for i in revolute]).swapaxes(1, 2)[:, None]
             moved = np.matmul(rots[rev], a, out=a)
             moved -= b
-            moved = np.matmul(lefts[:-1][rev], moved, out=b)  # (r, m, 3, 4)
-            for index, i in enumerate(revolute):
-                jac[:, :, first[i]:first[i] + 4] = moved[index]
+            columns = jac[:, :, :4 * n].reshape(m, 3, n, 4).transpose(2, 0, 1, 3) if r == n else None
+            if columns is not None and np.may_share_memory(columns, jac):  # all revolute: joint i's 4i … 4i + 3
+                np.matmul(lefts[:-1], moved, out=columns)
+            else:
+                moved = np.matmul(lefts[:-1][rev], moved, out=b)  # (r, m, 3, 4)
+                for index, i in enumerate(revolute):
+                    jac[:, :, first[i]:first[i] + 4] = moved[index]
         for i, t in enumerate(self.types):
             if t == "P":
                 jac[:, :, first[i]:first[i] + 2] = (lefts[i] @ tangents[i].T) * (q[:, i] - lines.home[i])[:, None, None]
@@ -376,17 +383,34 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
     n_nuisance = int(np.sum(problem.unknown >= 0))
     linear = loss == "linear"
     method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
-    tol = converged_tolerance(3 * len(q)) if linear else 1e-8
-    fit = least_squares(problem.residuals, np.zeros(problem.size), jac=problem.jacobian, method=method,
-                        loss=loss, f_scale=scale, x_scale="jac", xtol=tol, ftol=tol, gtol=tol,
-                        max_nfev=200 if linear else 60)
-    lines, _ = problem.lines(fit.x)
+    if method == "lm" and is_tall(3 * len(q), problem.size):
+        x = solve_tall(problem.residuals, problem.jacobian, _warm_start(problem), STOP_SIGMAS)
+    else:
+        tol = converged_tolerance(3 * len(q)) if linear else 1e-8
+        x = least_squares(problem.residuals, np.zeros(problem.size), jac=problem.jacobian, method=method,
+                          loss=loss, f_scale=scale, x_scale="jac", xtol=tol, ftol=tol, gtol=tol,
+                          max_nfev=200 if linear else 60).x
+    lines, _ = problem.lines(x)
     lines = _canonical(lines)
-    coefs, tau = problem.coefs(fit.x), problem.tau(fit.x)
+    coefs, tau = problem.coefs(x), problem.tau(x)
     q_solved = problem.joints(lines, coefs, tau)
     residuals = (points_from_lines(lines, q_solved, problem.tp_index) - points) * weights[:, None]
     return LeastSquares(lines, q_solved, residuals, JointTerms(problem.terms.regressors, problem.terms.joints, coefs),
                         None if timing is None else replace(timing, tau=tau))
+
+
+WARM_STRIDE = 10  # a tall fit starts from the fit of every 10th row: about √10 σ from the optimum, one step away
+
+
+def _warm_start(problem: LineProblem) -> Array:
+    """The parameters (increments on ``problem``'s start) fitted to every :data:`WARM_STRIDE`-th row: from there one
+    Gauss–Newton step on every row reaches the optimum, and one more Jacobian of every row confirms it (three
+    without this start, whose first step is large)."""
+    rows = np.arange(0, len(problem.q), WARM_STRIDE)
+    sub = LineProblem(problem.start, problem.q[rows], problem.points[rows], problem.weights[rows],
+                      problem.unknown[rows], None if problem.tp_index is None else problem.tp_index[rows],
+                      problem.terms.subset(rows), None if problem.timing is None else problem.timing.subset(rows))
+    return solve_tall(sub.residuals, sub.jacobian, np.zeros(sub.size), STOP_SIGMAS)
 
 
 def _canonical(lines: AxisLines) -> AxisLines:

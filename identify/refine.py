@@ -22,7 +22,8 @@ from scipy.stats import f as f_dist
 
 from identify.geometry import cross, left_jacobian, skew
 from identify.linalg import triangle
-from identify.poe import converged_tolerance
+from identify.poe import STOP_SIGMAS, converged_tolerance
+from identify.tall_lsq import is_tall, solve_tall
 from kinematics.dh import DH_NAMES, DHModel, points_from_joints, running_frames
 
 Array = NDArray[np.float64]
@@ -62,8 +63,23 @@ def vector_from_model(model: DHModel) -> Array:
     return np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
 
 
+JACOBIAN_ROWS = 4096  # rows whose Jacobian is formed at once (its temporaries stay in cache: twice as fast)
+
+
 def full_jacobian(model: DHModel, q: Array, omega: Array | None = None) -> tuple[Array, Array]:
     """Predicted TP (m, 3) and its Jacobian (m, 3, 9 + 4n) with respect to the full vector."""
+    q = np.asarray(q, dtype=float)
+    if len(q) <= JACOBIAN_ROWS:
+        return _full_jacobian_rows(model, q, omega)
+    p, jac = np.empty((len(q), 3)), np.empty((len(q), 3, 9 + 4 * model.n_joints))
+    for start in range(0, len(q), JACOBIAN_ROWS):
+        rows = slice(start, start + JACOBIAN_ROWS)
+        p[rows], jac[rows] = _full_jacobian_rows(model, q[rows], omega)
+    return p, jac
+
+
+def _full_jacobian_rows(model: DHModel, q: Array, omega: Array | None) -> tuple[Array, Array]:
+    """:func:`full_jacobian` of a block of rows."""
     m, n = len(q), model.n_joints
     p = points_from_joints(model, q)
     jac = np.zeros((m, 3, 9 + 4 * n))
@@ -122,9 +138,10 @@ def select_free(model: DHModel, q: Array, parallel: Collection[int], tol: float 
         ideal[i - 1] = np.round(ideal[i - 1] / np.pi) * np.pi
     _, jac = full_jacobian(replace(model, alpha=ideal), q)
     columns = jac.reshape(-1, jac.shape[2])
-    columns = columns / np.maximum(np.linalg.norm(columns, axis=0), 1e-300)
-    if columns.shape[0] > columns.shape[1]:
-        columns = triangle(columns)  # same geometry of the columns in p dimensions instead of 3m
+    if columns.shape[0] > columns.shape[1]:  # the unit columns' geometry in p dimensions instead of 3m
+        columns = triangle(columns, unit_columns=True)
+    else:
+        columns = columns / np.maximum(np.linalg.norm(columns, axis=0), 1e-300)
     free = np.zeros(columns.shape[1], dtype=bool)
     basis = np.zeros((columns.shape[0], 0))
     for index in _priority(model.joint_types):
@@ -206,8 +223,9 @@ class _Problem:
         model, tools = model_from_vector(self.start, v), self.tools(x)
         n_free, n_extra = int(self.free.sum()), 3 * (len(tools) - 1)
         if not n_extra:  # one tracked point: its columns as they come (no second (m, 3, p) copy)
-            out = full_jacobian(replace(model, tool=tools[0]), self.q, omega=v[:3])[1][:, :, self.free]
-            out *= self.weights[:, None, None]
+            out = np.compress(self.free, full_jacobian(replace(model, tool=tools[0]), self.q, omega=v[:3])[1], axis=2)
+            if np.any(self.weights != 1.0):
+                out *= self.weights[:, None, None]
             return out.reshape(-1, out.shape[2])
         out = np.zeros((len(self.q), 3, n_free + n_extra))
         for k, tool in enumerate(tools):
@@ -225,6 +243,8 @@ def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
     """Least-squares solve; the robust (outlier-finding) pass needs less precision than the final one."""
     linear = loss == "linear"
     method = "lm" if linear and len(problem.points) * 3 >= len(x0) else "trf"
+    if method == "lm" and is_tall(len(problem.points) * 3, len(x0)):
+        return solve_tall(problem.residuals, problem.jacobian, x0, STOP_SIGMAS)
     tol = converged_tolerance(len(problem.points) * 3) if linear else 1e-8
     fit = least_squares(
         problem.residuals,

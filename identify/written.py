@@ -24,7 +24,7 @@ from identify.linalg import project_out, scaled_inverse
 from identify.poe import AxisLines, LineProblem, points_from_lines
 from identify.predict import Predictor
 from identify.refine import Refinement, TableFit, fit_table, full_jacobian, parameter_names
-from kinematics.dh import DHModel, frames_from_joints
+from kinematics.dh import DHModel, flange_frames, frames_from_joints
 
 Array = NDArray[np.float64]
 
@@ -93,9 +93,9 @@ class WrittenModel:
 
 def points_with_tools(model: DHModel, tools: Array, q: Array, tp_index: NDArray[np.int64]) -> Array:
     """Tracked points (m, 3) of ``model`` at joint values ``q`` (m, n), row r at tool ``tools[tp_index[r]]``."""
-    frames = frames_from_joints(model, q)[:, -1]
+    rotation, origin = flange_frames(model, q)
     tool = np.asarray(tools, dtype=float)[tp_index]
-    return np.einsum("kij,kj->ki", frames[:, :3, :3], tool) + frames[:, :3, 3]
+    return np.einsum("kij,kj->ki", rotation, tool) + origin
 
 
 def robot_size(lines: AxisLines, points: Array) -> float:
@@ -109,7 +109,9 @@ def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Ar
     """Unit-variance covariance of the ``free`` DH values (weighted units), rows of unread joints (``unknown``,
     0-based, -1 for none) projected on the complement of their nuisance joint value."""
     p, jac = full_jacobian(model, q)
-    jac = jac[:, :, free] * weights[:, None, None]
+    jac = np.compress(free, jac, axis=2)
+    if np.any(weights != 1.0):
+        jac *= weights[:, None, None]
     rows = np.flatnonzero(unknown >= 0)
     if len(rows):
         frames = frames_from_joints(model, q[rows])
@@ -224,8 +226,7 @@ def _expected_accuracy(predictor: Predictor, q: Array, tp: NDArray[np.int64], ad
     without coupling), model error included (m)."""
     plain = Predictor(predictor.lines, predictor.covariance, predictor.terms, np.zeros_like(predictor.coefs), None,
                       predictor.tp_ids)  # q already carries the joint errors
-    cov = plain.covariances(q, tp)
-    return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) + 3 * adequacy.model_error**2))
+    return float(np.sqrt(plain.mean_variance(q, tp) + 3 * adequacy.model_error**2))
 
 
 UNDETERMINED = ("not determined by these data (redundant with other parameters, e.g. joints that always move together):"
