@@ -1,6 +1,15 @@
 """Joint errors on top of a fitted lines model: the selection of :mod:`identify.extensions` run on the
 inliers of a fit (:mod:`identify.estimate`), its result tested by grouped cross-validation on those same fit
-rows (never on the rows held out for validation). Frames: tracker; metres."""
+rows (never on the rows held out for validation). Frames: tracker; metres.
+
+Streamed rows (continuous motion) carry a timing error: a row's joint values are read at its stamp plus the fitted
+latency, and what the latency misses moves the readings by the joint's speed times the time error. A latency that
+wanders within a sweep of joint j at constant speed moves joint j's readings linearly with the joint value, which
+is a reading scale error of j; a slower curve looks like an eccentricity. So the selection runs with a latency free
+to differ and drift in every streamed sweep (:meth:`identify.sync.Retiming.local`): the score test projects each
+candidate off those timing columns and every refit and cross-validation fits them, so a term earns its place only on
+what a sweep's own timing cannot explain (its ends, the still poses, the other sweeps). The written models keep the
+session's clock model."""
 
 from __future__ import annotations
 
@@ -46,6 +55,13 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
     inliers (None when none is kept) and every decision."""
     rows = data.subset(best.inliers)
     filled = best.q[best.inliers]  # unread values as solved, for the gravity torques
+    if rows.timing is None:
+        base = LeastSquares(best.lines, filled, -best.residuals[best.inliers] * data.weights[best.inliers, None],
+                            JointTerms.none(len(filled)))
+    else:  # streamed rows: every term competes with a latency free to wander (Retiming.local)
+        base = rows.timed(rows.timing.local()).fit(best.lines, JointTerms.none(len(filled)))
+        rows = rows.timed(base.timing)
+        base = base._replace(q=filled)
 
     def terms_of(terms: TermSet, coefs: Array | None = None) -> JointTerms:
         return JointTerms(terms.regressors(rows.q, filled), terms.joints,
@@ -63,11 +79,12 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
         jac = problem.jacobian_blocks(zero)
         res = problem.residuals(zero).reshape(-1, 3)
         fitted = problem.n_lines + len(terms.joints)
+        nuisance = np.concatenate([jac[:, :, :fitted], jac[:, :, problem.n_terms:]], axis=2)  # with the timing's
         groups, start = [], 0
         for c in remaining:
             groups.append(np.arange(start, start + c.dof))
             start += c.dof
-        return score_statistics(res, jac[:, :, :fitted], jac[:, :, fitted:], groups, variance)
+        return score_statistics(res, nuisance, jac[:, :, fitted:problem.n_terms], groups, variance)
 
     def chi_square(fit: LeastSquares) -> float:
         return float(np.sum(fit.residuals**2)) / variance
@@ -100,8 +117,6 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
         with_terms = left_out_squares(terms, fit)
         return with_terms / max(plain_cv[0], 1e-300), (plain_cv[0] - with_terms) / variance
 
-    base = LeastSquares(best.lines, filled, -best.residuals[best.inliers] * data.weights[best.inliers, None],
-                        JointTerms.none(len(filled)))
     room = 3 * len(filled) - best.lines.n_parameters
     return select(base, pool, empty, refit, score, chi_square, cross_validate, 3 * len(filled),
                   max(room // ROWS_PER_TERM, 0))

@@ -61,6 +61,7 @@ class Retiming:
     offset_of: NDArray[np.int64]
     offsets: int = 1
     free: bool = True
+    own_drift: Array | None = None  # per offset: the time (s) its own drift refers to; None: one common drift
 
     @property
     def size(self) -> int:
@@ -83,6 +84,24 @@ class Retiming:
         tau = np.concatenate([self.tau[: self.offsets][self.offset_of[first]], self.tau[self.offsets:]])
         return replace(self, tau=tau, offset_of=offset_of.astype(np.int64), offsets=len(ids))
 
+    def local(self) -> Retiming:
+        """One offset and one drift per streamed sweep, each drift about the middle of its sweep's time span,
+        starting where this correction is: the freedom of a latency that wanders slowly between and within the
+        sweeps. Within one sweep of joint j at constant speed v, a drift d of the latency moves the readings by
+        v·d·(t − t_k), a reading scale error d on joint j: the joint-error selection competes with it
+        (:mod:`identify.extend`)."""
+        if self.own_drift is not None:
+            return self
+        per = self.per_sweep()
+        k = per.offsets
+        refs = np.empty(k)
+        for o in range(k):
+            times = np.concatenate([seg.t for seg, of in zip(self.segments, per.offset_of, strict=True) if of == o])
+            refs[o] = 0.5 * float(times.min() + times.max())
+        drift = float(self.tau[self.offsets]) if self.drift else 0.0
+        offsets = per.tau[:k] + drift * (refs - self.t_ref)  # the same shift at every row
+        return replace(per, tau=np.concatenate([offsets, np.full(k, drift)]), own_drift=refs)
+
     def offset_index(self) -> NDArray[np.int64]:
         """Per row (m,): the index of the offset that applies to it, -1 for rows not streamed."""
         return np.where(self.rows, self.offset_of[np.maximum(self.segment, 0)], -1)
@@ -98,9 +117,13 @@ class Retiming:
         """Time correction (s) of every streamed row, (r,) in row order of ``rows``."""
         tau = self.tau if tau is None else tau
         t = self.t[self.rows]
-        out = np.asarray(tau[: self.offsets], dtype=float)[self.offset_of[self.segment[self.rows]]]
+        which = self.offset_of[self.segment[self.rows]]
+        out = np.asarray(tau[: self.offsets], dtype=float)[which]
         if len(tau) > self.offsets:
-            out = out + tau[self.offsets] * (t - self.t_ref)
+            if self.own_drift is None:
+                out = out + tau[self.offsets] * (t - self.t_ref)
+            else:
+                out = out + np.asarray(tau[self.offsets:], dtype=float)[which] * (t - self.own_drift[which])
         return out
 
     def joints(self, q: Array, tau: Array | None = None) -> Array:
@@ -117,9 +140,12 @@ class Retiming:
         times d(shift)/d(tau)."""
         _, speed = self._at(self.shift(tau))
         basis = np.zeros((len(speed), len(self.tau)))
-        basis[np.arange(len(speed)), self.offset_of[self.segment[self.rows]]] = 1.0
-        if self.drift:
+        which = self.offset_of[self.segment[self.rows]]
+        basis[np.arange(len(speed)), which] = 1.0
+        if self.drift and self.own_drift is None:
             basis[:, self.offsets] = self.t[self.rows] - self.t_ref
+        elif self.drift:
+            basis[np.arange(len(speed)), self.offsets + which] = self.t[self.rows] - self.own_drift[which]
         return speed[:, :, None] * basis[:, None, :]
 
     def _at(self, shift: Array) -> tuple[Array, Array]:

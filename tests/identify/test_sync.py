@@ -170,3 +170,22 @@ def test_no_split_without_a_jump():
     for seed in (6, 7):
         result = identify(session(seed, SETTINGS)[0], None, noise=NOISE)
         assert not result.clock.test.split and result.clock.sweeps == ()
+
+
+def test_local_timing_starts_where_the_common_one_is_and_its_columns_are_its_derivatives():
+    """Retiming.local: one offset and one drift per sweep, about the sweep's own middle; the shift it starts with is
+    the common correction's at every row, and its derivative columns match finite differences of the joints."""
+    meas, _ = session(3, StreamSettings(offset=-0.02, recorded_offset=-0.012, noise=NOISE), free=0, checks=0)
+    timing = retiming(meas.t, meas.streamed, meas.sweep, meas.q)
+    assert timing is not None and timing.drift  # long enough for a common drift
+    common = replace(timing, tau=np.array([0.004, 2e-4]))
+    local = common.local()
+    assert local.offsets == 6 and len(local.tau) == 12
+    np.testing.assert_allclose(local.shift(), common.shift(), atol=1e-15)
+    tau = local.tau + np.linspace(-1e-3, 1e-3, 12)
+    step = 1e-7
+    for k in (0, 5, 6, 11):  # an offset and a drift of the first and last sweeps
+        moved = tau.copy()
+        moved[k] += step
+        numeric = (local.joints(meas.q, moved) - local.joints(meas.q, tau))[local.rows] / step
+        np.testing.assert_allclose(local.derivatives(tau)[:, :, k], numeric, atol=1e-5)
