@@ -238,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         held = math.sqrt(np.nanmean([o.held_out**2 for o in outs]))
         ok = (has or kept <= TARGET_KEPT) and used <= TARGET_RATIO * plain
         ok_all &= ok
-        print(f"{c:>12} {kept:>6.0%} {right:>6.0%} {vouched:>7.0%} {used * 1e3:>8.4f} {plain * 1e3:>9.4f} "
+        print(f"{c:>12} {kept:>6.0%} {f'{right:.0%}' if has else '-':>6} {vouched:>7.0%} {used * 1e3:>8.4f} {plain * 1e3:>9.4f} "
               f"{used / plain:>6.3f} {held * 1e3:>8.4f}  {'yes' if ok else 'no'}")
     print(f"targets: without joint errors terms kept in <= {TARGET_KEPT:.0%} of draws; recommended / plain <= "
           f"{TARGET_RATIO}")
