@@ -7,9 +7,11 @@ time, s); the true mapping differs from that by a small correction
     shift(t) = tau_0 + tau_1 · (t − t_ref)        (s; tau_1: the relative clock drift, dimensionless)
 
 and the row's joint values are the trajectory at ``t + shift(t)``. The trajectory of a sweep is the
-piecewise-linear curve through its own streamed rows (time, joint values); it is cut wherever the rows
-leave a gap (a lost target, dropped joint packets: more than ``GAP_FACTOR`` median sample intervals), and
-a shifted time beyond a segment's end is extrapolated along its last interval, never across a gap.
+piecewise-parabolic curve through its own streamed rows (time, joint values; each interval's parabola through
+its two rows and the nearest row beyond: a chord would miss the ramps of a move streamed at 10 reports/s by
+more than the tracker noise); it is cut wherever the rows leave a gap (a lost target, dropped joint packets:
+more than ``GAP_FACTOR`` median sample intervals), and a shifted time beyond a segment's end is extrapolated
+on its last interval's parabola, never across a gap.
 
 One offset serves every sweep while the clocks keep one relation. A resume after a tracker or controller
 restart, or a timestamp jump, breaks it between sweeps: :meth:`Retiming.per_sweep` gives each streamed sweep
@@ -162,11 +164,24 @@ class Retiming:
 
 
 def _interpolate(segment: Segment, times: Array) -> tuple[Array, Array]:
-    """Piecewise-linear values and slopes of ``segment`` at ``times``, extrapolated along the end intervals."""
+    """Values and slopes of ``segment`` at ``times``: the parabola through the interval's two rows and the row
+    beyond its nearer end (exact where the joint accelerates uniformly, as on a move's ramps, where a chord errs
+    by acceleration × shift × (interval − shift) / 2: 0.4 mrad at 1 rad/s², 8 ms in 100 ms); times beyond the
+    segment's ends on the end interval's parabola; a segment of two rows is a line."""
     t, q = segment.t, segment.q
     k = np.clip(np.searchsorted(t, times, side="right") - 1, 0, len(t) - 2)
     slope = (q[k + 1] - q[k]) / (t[k + 1] - t[k])[:, None]
-    return q[k] + slope * (times - t[k])[:, None], slope
+    linear = q[k] + slope * (times - t[k])[:, None]
+    if len(t) < 3:
+        return linear, slope
+    mid = 0.5 * (t[k] + t[k + 1])
+    third = np.where(times < mid, k - 1, k + 2)
+    third = np.where(third < 0, k + 2, np.where(third > len(t) - 1, k - 1, third))
+    t3 = t[third]
+    # second divided difference of (t_k, t_k+1, t_3): half the parabola's second derivative
+    curvature = ((q[third] - q[k]) / (t3 - t[k])[:, None] - slope) / (t3 - t[k + 1])[:, None]
+    dt0, dt1 = (times - t[k])[:, None], (times - t[k + 1])[:, None]
+    return linear + curvature * dt0 * dt1, slope + curvature * (dt0 + dt1)
 
 
 def retiming(t: Array, streamed: NDArray[np.bool_], sweep: NDArray[np.int64], q: Array) -> Retiming | None:
