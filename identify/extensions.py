@@ -12,9 +12,10 @@ off the fitted parameters' (chi-square with the candidate's dof when it is absen
 and kept when its likelihood ratio passes both the information criterion (BIC: ``dof · ln N``) and a
 family-wise 5 % false-selection limit over all candidates (Bonferroni), and when its size is physically
 plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error). Each term enters on its own
-evidence only: a kind of error found on one joint does not bring the same kind on the others. The terms
-stay within what the rows can carry (:data:`ROWS_PER_TERM`). The set selected is then tested by grouped
-cross-validation on the fit rows (:mod:`identify.extend`): it is kept only if it predicts left-out blocks
+evidence only: a kind of error found on one joint does not bring the same kind on the others, and a term
+that the terms entering after it explain is dropped (its likelihood ratio beside them tested again against its
+limit). The terms stay within what the rows can carry (:data:`ROWS_PER_TERM`). The set selected is then tested
+by grouped cross-validation on the fit rows (:mod:`identify.extend`): it is kept only if it predicts left-out blocks
 of the fit rows better than the model without it; the rows held out for validation never take part.
 Every decision is recorded.
 """
