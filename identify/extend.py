@@ -1,6 +1,16 @@
 """Joint errors on top of a fitted lines model: the selection of :mod:`identify.extensions` run on the
 inliers of a fit (:mod:`identify.estimate`), its result tested by grouped cross-validation on those same fit
-rows (never on the rows held out for validation). Frames: tracker; metres."""
+rows (never on the rows held out for validation). Frames: tracker; metres.
+
+Streamed rows (continuous motion) carry a timing error: a row's joint values are read at its stamp plus the fitted
+latency, and what the latency misses moves the readings by the joint's speed times the time error. A latency that
+wanders within a sweep of joint j at constant speed moves joint j's readings linearly with the joint value, which
+is a reading scale error of j; a slower curve looks like an eccentricity. So the selection runs with a latency free
+to differ and drift in every streamed sweep (:meth:`identify.sync.Retiming.local`): the score test projects each
+candidate and the residuals off those timing columns at the fit with the session's clock (Neyman's C(alpha) form of
+the test, so a session where no candidate passes costs no refit), and every refit and cross-validation fits them,
+so a term earns its place only on what a sweep's own timing cannot explain (its ends, the still poses, the other
+sweeps). The written models keep the session's clock model."""
 
 from __future__ import annotations
 
@@ -46,6 +56,11 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
     inliers (None when none is kept) and every decision."""
     rows = data.subset(best.inliers)
     filled = best.q[best.inliers]  # unread values as solved, for the gravity torques
+    if rows.timing is not None:  # streamed rows: every term competes with a latency free to wander
+        rows = rows.timed(rows.timing.local())  # the same shift at every row as the fit's clock
+    base = LeastSquares(best.lines, filled, -best.residuals[best.inliers] * data.weights[best.inliers, None],
+                        JointTerms.none(len(filled)))
+    settled: list[LeastSquares] = []  # the fit without terms with the local latency, fitted when first needed
 
     def terms_of(terms: TermSet, coefs: Array | None = None) -> JointTerms:
         return JointTerms(terms.regressors(rows.q, filled), terms.joints,
@@ -63,13 +78,20 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
         jac = problem.jacobian_blocks(zero)
         res = problem.residuals(zero).reshape(-1, 3)
         fitted = problem.n_lines + len(terms.joints)
+        nuisance = np.concatenate([jac[:, :, :fitted], jac[:, :, problem.n_terms:]], axis=2)  # with the timing's
         groups, start = [], 0
         for c in remaining:
             groups.append(np.arange(start, start + c.dof))
             start += c.dof
-        return score_statistics(res, jac[:, :, :fitted], jac[:, :, fitted:], groups, variance)
+        return score_statistics(res, nuisance, jac[:, :, fitted:problem.n_terms], groups, variance)
 
     def chi_square(fit: LeastSquares) -> float:
+        """Sum of squared weighted residuals over the variance; for ``base`` with streamed rows, at the best local
+        latency (the score test projected it already; only a candidate that passes it needs the refit)."""
+        if fit is base and rows.timing is not None:
+            if not settled:
+                settled.append(rows.fit(base.lines, JointTerms.none(len(filled))))
+            fit = settled[0]
         return float(np.sum(fit.residuals**2)) / variance
 
     fold = cv_folds(rows, filled)
@@ -100,8 +122,6 @@ def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candi
         with_terms = left_out_squares(terms, fit)
         return with_terms / max(plain_cv[0], 1e-300), (plain_cv[0] - with_terms) / variance
 
-    base = LeastSquares(best.lines, filled, -best.residuals[best.inliers] * data.weights[best.inliers, None],
-                        JointTerms.none(len(filled)))
     room = 3 * len(filled) - best.lines.n_parameters
     return select(base, pool, empty, refit, score, chi_square, cross_validate, 3 * len(filled),
                   max(room // ROWS_PER_TERM, 0))

@@ -12,9 +12,10 @@ off the fitted parameters' (chi-square with the candidate's dof when it is absen
 and kept when its likelihood ratio passes both the information criterion (BIC: ``dof · ln N``) and a
 family-wise 5 % false-selection limit over all candidates (Bonferroni), and when its size is physically
 plausible (:data:`PLAUSIBLE`; beyond it the term stands in for another error). Each term enters on its own
-evidence only: a kind of error found on one joint does not bring the same kind on the others. The terms
-stay within what the rows can carry (:data:`ROWS_PER_TERM`). The set selected is then tested by grouped
-cross-validation on the fit rows (:mod:`identify.extend`): it is kept only if it predicts left-out blocks
+evidence only: a kind of error found on one joint does not bring the same kind on the others, and a term
+that the terms entering after it explain is dropped (its likelihood ratio beside them tested again against its
+limit). The terms stay within what the rows can carry (:data:`ROWS_PER_TERM`). The set selected is then tested
+by grouped cross-validation on the fit rows (:mod:`identify.extend`): it is kept only if it predicts left-out blocks
 of the fit rows better than the model without it; the rows held out for validation never take part.
 Every decision is recorded.
 """
@@ -232,6 +233,8 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
         decisions.append(Decision(best, best_score, ratio, limit, None, True, "selected"))
         chosen, current = trial_terms, trial
         fits.append(trial)
+    chosen, current, fits, decisions = _backward(chosen, current, fits, decisions, refit, chi_square, len(pool),
+                                                 n_observations)
     if cross_validate is None or not chosen.candidates:
         return chosen, current, decisions
     kept = list(chosen.candidates)
@@ -251,3 +254,33 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
         decisions = [replace(d, selected=False, reason=why) if d.candidate == dropped and d.selected else d
                      for d in decisions]
     return empty, base, decisions
+
+
+def _backward(chosen: TermSet, current: LeastSquares, fits: list[LeastSquares], decisions: list[Decision],
+              refit: Refit, chi_square: Callable[[LeastSquares], float], n_candidates: int, n_observations: int
+              ) -> tuple[TermSet, LeastSquares, list[LeastSquares], list[Decision]]:
+    """The forward selection's terms, each tested again beside the ones that entered after it: while the term
+    whose removal costs least no longer passes its limit (the likelihood ratio of the fit with and without it),
+    it is dropped. ``fits``: the fits after each term kept, rebuilt for the terms left."""
+    dropped = False
+    while len(chosen.candidates) > 1:
+        trials = []
+        for c in chosen.candidates:
+            others = TermSet(tuple(x for x in chosen.candidates if x != c), chosen.home, chosen.torques)
+            without = refit(others, fits[0])
+            trials.append((chi_square(without) - chi_square(current), c, others, without))
+        ratio, c, others, without = min(trials, key=lambda x: x[0] / limit_for(x[1].dof, n_candidates, n_observations))
+        limit = limit_for(c.dof, n_candidates, n_observations)
+        if ratio > limit:
+            break
+        why = (f"dropped: beside the terms selected after it its likelihood ratio is {ratio:.3g}, below the limit "
+               f"{limit:.3g}")
+        decisions = [replace(d, selected=False, reason=why) if d.candidate == c and d.selected else d
+                     for d in decisions]
+        chosen, current, dropped = others, without, True
+    if dropped:
+        fits = [fits[0]]
+        for k in range(1, len(chosen.candidates) + 1):
+            fits.append(refit(TermSet(chosen.candidates[:k], chosen.home, chosen.torques), fits[-1]))
+        current = fits[-1]
+    return chosen, current, fits, decisions

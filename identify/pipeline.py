@@ -332,7 +332,7 @@ def identify(
     if validations:
         v = validations[use]
         others = {k: (w.rms, w.expected) for k, w in validations.items() if k != use}
-        found.append(checks.holdout(v.samples, v.rms, v.expected, use, others))
+        found.append(checks.holdout(v.samples, v.rms, v.expected, use, others, _moved(models, tp_ids, check_rows)))
     elif use == "extended" and not np.any(fitm.joint == 0):
         found.append(checks.sweeps_only_extension())
     if nominal is not None and np.sum(unknown < 0) >= 3:
@@ -372,6 +372,15 @@ def identify(
 def _written_points(model: WrittenModel, tp_ids: NDArray[np.int64], q: Array, tp: NDArray[np.int64]) -> Array:
     """What ``model``'s written numbers predict at DH joint values ``q`` for tracked point ids ``tp``."""
     return model.dh_points(q, np.searchsorted(tp_ids, tp))
+
+
+def _moved(models: dict[str, WrittenModel], tp_ids: NDArray[np.int64], rows: Measurements) -> float | None:
+    """RMS distance (m) between the extended and plain models' predictions at ``rows`` (None without joint errors)."""
+    if "extended" not in models:
+        return None
+    gap = (_written_points(models["extended"], tp_ids, rows.q, rows.tp)
+           - _written_points(models["plain"], tp_ids, rows.q, rows.tp))
+    return float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))
 
 
 def _identifiability(model: WrittenModel, size: float) -> Identifiability:

@@ -206,7 +206,7 @@ def test_report_headline_says_the_verdict_and_the_accuracy_before_and_after(tmp_
     parsed = _parse(text)
     assert parsed.ids[0] == "headline"
     head = text[text.index('id="headline"'):text.index("</section>")]
-    assert "Verdict: PASS" in head and "before (nominal ur5e)" in head
+    assert f"Verdict: {ident.verdict.status.upper()}" in head and "before (nominal ur5e)" in head
     assert f"after (identified, {ident.use} model)" in head
     assert f"{before['measured'] * 1e3:.4f} ± {before['measured_std'] * 1e3:.4f} mm" in head
     assert "AP, pose accuracy" in head and "1.6000 mm" in head and "0.0230 mm" in head
