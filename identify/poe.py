@@ -387,9 +387,11 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
         x = solve_tall(problem.residuals, problem.jacobian, _warm_start(problem), STOP_SIGMAS)
     else:
         tol = converged_tolerance(3 * len(q)) if linear else 1e-8
+        # a tall robust fit (it only finds the outliers) solves its trust-region steps by LSMR, not by an SVD of J
+        solver = "lsmr" if method == "trf" and is_tall(3 * len(q), problem.size) else None
         x = least_squares(problem.residuals, np.zeros(problem.size), jac=problem.jacobian, method=method,
                           loss=loss, f_scale=scale, x_scale="jac", xtol=tol, ftol=tol, gtol=tol,
-                          max_nfev=200 if linear else 60).x
+                          max_nfev=200 if linear else 60, tr_solver=solver).x
     lines, _ = problem.lines(x)
     lines = _canonical(lines)
     coefs, tau = problem.coefs(x), problem.tau(x)

@@ -116,12 +116,19 @@ def _stream_session(seed: int) -> tuple[Measurements, object]:
     return joined(stream, poses), nominal
 
 
-def test_a_session_solved_as_tall_identifies_what_minpack_does(monkeypatch):
+@pytest.mark.parametrize("outliers", [0, 12])
+def test_a_session_solved_as_tall_identifies_what_minpack_does(monkeypatch, outliers):
     meas, nominal = _stream_session(5)
+    if outliers:  # beam breaks: 5 mm off in x on streamed rows (the robust fits go through LSMR when tall)
+        rows = np.random.default_rng(6).choice(np.flatnonzero(meas.streamed), outliers, replace=False)
+        points = meas.points.copy()
+        points[rows, 0] += 5e-3
+        meas = replace(meas, points=points)
     reference = identify(meas, nominal, noise=NOISE)
     monkeypatch.setattr(tall_lsq, "TALL_ENTRIES", 0)  # every linear fit through the normal equations
     tall = identify(meas, nominal, noise=NOISE)
     assert tall.use == reference.use and tall.verdict.status == reference.verdict.status
+    assert tall.rejected_rows == reference.rejected_rows and len(tall.rejected_rows) >= outliers
     for name, model in reference.models.items():
         ref = model.refinement
         changed = np.abs(vector_from_model(tall.models[name].refinement.model) - vector_from_model(ref.model))
