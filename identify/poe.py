@@ -383,15 +383,17 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
     n_nuisance = int(np.sum(problem.unknown >= 0))
     linear = loss == "linear"
     method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
-    if method == "lm" and is_tall(3 * len(q), problem.size):
+    tall = is_tall(3 * len(q), problem.size)
+    if method == "lm" and tall:
         x = solve_tall(problem.residuals, problem.jacobian, _warm_start(problem), STOP_SIGMAS)
     else:
-        tol = converged_tolerance(3 * len(q)) if linear else 1e-8
-        # a tall robust fit (it only finds the outliers) solves its trust-region steps by LSMR, not by an SVD of J
-        solver = "lsmr" if method == "trf" and is_tall(3 * len(q), problem.size) else None
-        x = least_squares(problem.residuals, np.zeros(problem.size), jac=problem.jacobian, method=method,
+        # a tall robust fit only serves to find the outliers: every WARM_STRIDE-th row holds thousands, and the
+        # residuals of every row below are taken at its lines
+        fitted = _every(problem, WARM_STRIDE) if tall else problem
+        tol = converged_tolerance(3 * len(fitted.q)) if linear else 1e-8
+        x = least_squares(fitted.residuals, np.zeros(fitted.size), jac=fitted.jacobian, method=method,
                           loss=loss, f_scale=scale, x_scale="jac", xtol=tol, ftol=tol, gtol=tol,
-                          max_nfev=200 if linear else 60, tr_solver=solver).x
+                          max_nfev=200 if linear else 60).x
     lines, _ = problem.lines(x)
     lines = _canonical(lines)
     coefs, tau = problem.coefs(x), problem.tau(x)
@@ -401,17 +403,22 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
                         None if timing is None else replace(timing, tau=tau))
 
 
-WARM_STRIDE = 10  # a tall fit starts from the fit of every 10th row: about √10 σ from the optimum, one step away
+WARM_STRIDE = 10  # a tall fit starts from a fit of every 10th row (√10 σ off, one step away); a robust one stops there
+
+
+def _every(problem: LineProblem, stride: int) -> LineProblem:
+    """The same problem (same parameters) on every ``stride``-th row of ``problem``."""
+    rows = np.arange(0, len(problem.q), stride)
+    return LineProblem(problem.start, problem.q[rows], problem.points[rows], problem.weights[rows],
+                       problem.unknown[rows], None if problem.tp_index is None else problem.tp_index[rows],
+                       problem.terms.subset(rows), None if problem.timing is None else problem.timing.subset(rows))
 
 
 def _warm_start(problem: LineProblem) -> Array:
     """The parameters (increments on ``problem``'s start) fitted to every :data:`WARM_STRIDE`-th row: from there one
     Gauss–Newton step on every row reaches the optimum, and one more Jacobian of every row confirms it (three
     without this start, whose first step is large)."""
-    rows = np.arange(0, len(problem.q), WARM_STRIDE)
-    sub = LineProblem(problem.start, problem.q[rows], problem.points[rows], problem.weights[rows],
-                      problem.unknown[rows], None if problem.tp_index is None else problem.tp_index[rows],
-                      problem.terms.subset(rows), None if problem.timing is None else problem.timing.subset(rows))
+    sub = _every(problem, WARM_STRIDE)
     return solve_tall(sub.residuals, sub.jacobian, np.zeros(sub.size), STOP_SIGMAS)
 
 
