@@ -33,14 +33,17 @@ def is_tall(residuals: int, parameters: int) -> bool:
     return residuals * parameters >= TALL_ENTRIES
 
 
-def _damped_step(normal: Array, gradient: Array, damping: float) -> Array:
-    """The step s minimising ‖J s + r‖² + damping ‖s‖² from the (scaled) normal matrix JᵀJ and gradient Jᵀr."""
+def _damped_steps(normal: Array, gradient: Array) -> Callable[[float], Array]:
+    """The map damping -> the step s minimising ‖J s + r‖² + damping ‖s‖², from the (scaled) normal matrix JᵀJ and
+    gradient Jᵀr: one eigen-decomposition serves every damping."""
     values, vectors = np.linalg.eigh(normal)
     values = np.maximum(values, 0.0)
     present = values > EIGEN_FLOOR * values[-1]
-    coefficients = np.zeros_like(values)
-    coefficients[present] = -(vectors[:, present].T @ gradient) / (values[present] + damping)
-    return vectors @ coefficients
+    along = vectors[:, present].T @ gradient
+
+    def step(damping: float) -> Array:
+        return -vectors[:, present] @ (along / (values[present] + damping))
+    return step
 
 
 def solve_tall(fun: Callable[[Array], Array], jac: Callable[[Array], Array], x0: Array, stop_sigmas: float,
@@ -60,12 +63,12 @@ def solve_tall(fun: Callable[[Array], Array], jac: Callable[[Array], Array], x0:
         normal, gradient = j.T @ j, j.T @ r
         del j
         scale = np.sqrt(np.maximum(np.diag(normal), 1e-300))
-        scaled = normal / np.outer(scale, scale)
-        newton = _damped_step(scaled, gradient / scale, 0.0) / scale
+        steps = _damped_steps(normal / np.outer(scale, scale), gradient / scale)
+        newton = steps(0.0) / scale
         if float(newton @ normal @ newton) <= stop_sigmas**2 * cost / dof:  # ‖J Δx‖² against s²
             return x + newton
         while True:
-            step = newton if damping == 0.0 else _damped_step(scaled, gradient / scale, damping) / scale
+            step = newton if damping == 0.0 else steps(damping) / scale
             predicted = -(2.0 * float(gradient @ step) + float(step @ normal @ step))  # the linear model's decrease
             trial = fun(x + step)
             trial_cost = float(trial @ trial)
