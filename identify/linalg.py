@@ -59,10 +59,10 @@ def residual_maker(a: Array) -> Callable[[Array], Array]:
         lower = np.linalg.cholesky(gram)
 
         def through_gram(v: Array) -> Array:
-            scaled = (a.T @ v) / (scale if v.ndim == 1 else scale[:, None])
-            inner = solve_triangular(lower, scaled, lower=True, check_finite=False)
+            column = scale if v.ndim == 1 else scale[:, None]
+            inner = solve_triangular(lower, (a.T @ v) / column, lower=True, check_finite=False)
             step = solve_triangular(lower, inner, lower=True, trans="T", check_finite=False)
-            return v - a @ (step / (scale if v.ndim == 1 else scale[:, None]))
+            return v - a @ (step / column)
         return through_gram
     basis, _ = np.linalg.qr(a / scale)
     return lambda v: v - basis @ (basis.T @ v)
