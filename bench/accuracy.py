@@ -6,7 +6,7 @@ For every robot family and case (tracker noise × sweep arc, plus a case with gr
 true robot is drawn, 200 held-out joint configurations are drawn, and then ``--draws`` data sets with fresh
 noise are simulated and identified. The error of a draw is the RMS over the held-out poses of the 3D
 distance between the identified model's predicted tracked point (TP) and the truth's. The bound is
-:func:`identify.bounds.prediction_rms_bound` for the same fitted joint readings (true outlier rows
+:func:`identify.estimator.bounds.prediction_rms_bound` for the same fitted joint readings (true outlier rows
 excluded) and noise. Reported: ``ratio = sqrt(mean over draws of RMS²) / bound`` for the refined model and
 for the geometric step alone (the paper's method). Target: refined ratio <= 1.10 in every case; the exit
 status is 1 when a case misses it.
@@ -31,10 +31,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from config.robots import load_robot
-from identify.bounds import prediction_rms_bound
-from identify.pipeline import identify
-from identify.refine import full_jacobian
-from identify.simulate import random_poses, simulate
+from identify.estimator.bounds import prediction_rms_bound
+from identify.estimator.refine import full_jacobian
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import DHModel, points_from_joints
 from kinematics.truth import random_truth
 

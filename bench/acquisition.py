@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from acquire.orchestrator import Orchestrator
-from acquire.plan import build_plan
-from acquire.session import Session
+from acquire.planning.plan import build_plan
+from acquire.running.orchestrator import Orchestrator
+from acquire.running.session import Session
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.clock import VirtualClock
@@ -95,7 +95,7 @@ def overhead(folder: Path, points: int = 1) -> tuple[float, float, int]:
 
 def end_to_end(folder: Path) -> tuple[float, float, int]:
     """Seconds for the default mock session in-process and as a new process; steps recorded."""
-    from acquire.cli import main
+    from acquire.commands.cli import main
 
     path = folder / f"e2e-{time.time_ns()}.session"
     t = time.perf_counter()
@@ -105,7 +105,7 @@ def end_to_end(folder: Path) -> tuple[float, float, int]:
         steps = len(s.steps())
     path2 = folder / f"e2e2-{time.time_ns()}.session"
     t = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "acquire.cli", "--robot", "mock:ur5e", "--tracker", "mock",
+    subprocess.run([sys.executable, "-m", "acquire.commands.cli", "--robot", "mock:ur5e", "--tracker", "mock",
                     "--session", str(path2), "--quiet"], check=True, capture_output=True)
     fresh = time.perf_counter() - t
     return inproc, fresh, steps

@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from config.robots import load_robot
+from identify.estimator.measurements import Measurements
 from identify.io.csvio import format_measurements
-from identify.measurements import Measurements
-from identify.simulate import random_poses
-from identify.simulate_stream import StreamSettings, joined, move_duration, streamed_sweeps
+from identify.simulators.simulate import random_poses
+from identify.simulators.simulate_stream import StreamSettings, joined, move_duration, streamed_sweeps
 from kinematics.dh import points_from_joints
 from kinematics.truth import perturbed_model, random_base
 
@@ -61,7 +61,7 @@ def identify_child(csv: Path, out: Path) -> tuple[float, float, float]:
     """(wall s, CPU s, peak resident bytes) of ``identify CSV --json --out OUT`` as a fresh process (its run,
     imports excluded)."""
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    code = ("import resource, sys, time; from identify.launch import main; t = time.perf_counter(); "
+    code = ("import resource, sys, time; from identify.commands.launch import main; t = time.perf_counter(); "
             f"rc = main([{str(csv)!r}, '--json', '--out', {str(out)!r}, '--force']); "
             "u = resource.getrusage(resource.RUSAGE_SELF); "
             "print('RESULT', time.perf_counter() - t, u.ru_utime + u.ru_stime, u.ru_maxrss, rc, file=sys.stderr)")

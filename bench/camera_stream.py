@@ -101,9 +101,9 @@ def session(mode: str, tracker: str, folder: Path) -> dict[str, object]:
     path = folder / f"{mode}.session"
     (folder / "site.yaml").write_text(SITE)
     started = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "acquire.launch", "--robot", ROBOT, "--tracker", tracker, "--mode", mode,
-                    "--config", str(folder / "site.yaml"), "--session", str(path), "--quiet"], check=False,
-                   stdout=subprocess.DEVNULL)
+    subprocess.run([sys.executable, "-m", "acquire.commands.launch", "--robot", ROBOT, "--tracker", tracker,
+                    "--mode", mode, "--config", str(folder / "site.yaml"), "--session", str(path), "--quiet"],
+                   check=False, stdout=subprocess.DEVNULL)
     wall = time.perf_counter() - started
     seconds, samples = robot_time(path)
     result_path = path.with_suffix(".result.yaml")

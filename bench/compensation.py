@@ -40,11 +40,11 @@ import yaml
 from scipy.stats import chi2
 
 from config.robots import load_robot
-from identify.calibrated import CalibratedModel
-from identify.compare import compare
-from identify.compensate import compensate
-from identify.pipeline import identify
-from identify.simulate import random_poses, simulate
+from identify.applications.calibrated import CalibratedModel
+from identify.applications.compare import compare
+from identify.applications.compensate import compensate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import points_from_joints
 from kinematics.truth import random_truth
 
@@ -117,8 +117,8 @@ def accuracy(draws: int) -> tuple[list[str], list[str]]:
 
 
 def verification() -> tuple[list[str], list[str]]:
-    from acquire.cli import main as acquire
-    from acquire.session import Session
+    from acquire.commands.cli import main as acquire
+    from acquire.running.session import Session
     from drivers.sim.rig import SimulatedRig
 
     noise, cycles, samples = 5e-5, 10, 5

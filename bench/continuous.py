@@ -107,7 +107,7 @@ def _acquire(mode: str, draw: Draw, folder: Path, extra: list[str]) -> tuple[Pat
     session = folder / f"{mode}-{draw.index}.session"
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     started = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "acquire.launch", "--robot", ROBOT, "--tracker", draw.tracker,
+    done = subprocess.run([sys.executable, "-m", "acquire.commands.launch", "--robot", ROBOT, "--tracker", draw.tracker,
                            "--mode", mode, "--session", str(session), "--quiet", *extra], env=env,
                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if done.returncode not in (0, 3):  # 3: identified, verdict fail (still measured)
@@ -117,7 +117,7 @@ def _acquire(mode: str, draw: Draw, folder: Path, extra: list[str]) -> tuple[Pat
 
 def measure(session: Path, wall: float, truth, q_eval: np.ndarray) -> Result:
     """The numbers of one finished session against the simulated ``truth`` at ``q_eval``."""
-    from acquire.session import Session
+    from acquire.running.session import Session
     from drivers.sim.stream import robot_time_of_stamps
     from identify.io.result_io import load_result
     from kinematics.dh import points_from_joints
@@ -165,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         p.error("--draws must be >= 2 and --jobs >= 1")
     from config.robots import load_robot
     from drivers.sim.rig import SimulatedRig
-    from identify.simulate import random_poses
+    from identify.simulators.simulate import random_poses
 
     extra = [] if args.free_poses is None else ["--free-poses", str(args.free_poses)]
     plan = draws(args.draws, args.seed)

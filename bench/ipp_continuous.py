@@ -34,21 +34,21 @@ from pathlib import Path
 
 import numpy as np
 
-from acquire.orchestrator import Orchestrator, Timeouts
-from acquire.plan_continuous import predicted_accuracy_continuous
-from acquire.plan_modes import build_mode_plan
-from acquire.plan_report import predicted_accuracy
-from acquire.plan_target import replan_for_rate
-from acquire.session import Session
-from acquire.stream_loop import check_streams
+from acquire.planning.plan_continuous import predicted_accuracy_continuous
+from acquire.planning.plan_modes import build_mode_plan
+from acquire.planning.plan_report import predicted_accuracy
+from acquire.planning.plan_target import replan_for_rate
+from acquire.running.orchestrator import Orchestrator, Timeouts
+from acquire.running.session import Session
+from acquire.running.stream_loop import check_streams
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.clock import VirtualClock, WallClock
 from drivers.registry import open_tracker
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.robot import SimulatedRobot
-from identify.pipeline import identify
-from identify.simulate import random_poses
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
 from kinematics.dh import points_from_joints
 from tests.ipp_device import IppServer
 
@@ -101,7 +101,7 @@ def session(mode: str, run: int, noise: float, folder: Path, stream_speed: float
     if mode == "continuous":
         rate = taken
         predicted = predicted_accuracy_continuous(plan, robot, site.tp_guess, noise, rate)["with_free"]  # the bound
-        # leaves out the host's receive-stamp jitter (acquire/plan_continuous.py)
+        # leaves out the host's receive-stamp jitter (acquire/planning/plan_continuous.py)
     else:
         rate = 0.0
         predicted = predicted_accuracy(plan, robot, site.tp_guess, noise)["with_free"]

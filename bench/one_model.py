@@ -4,7 +4,8 @@ For simulated arms with joint errors a DH table cannot hold (eccentricity, gear 
 arm, on random joints) and with several reflectors, it identifies session 1 and reads the written result back from
 YAML. Every figure below is computed here, with the shared forward model, from the written numbers:
 - stated vs scored: each written model's held-out RMS on the check rows against the figure the result states;
-- plain vs DH-only: the plain model against a DH-only maximum-likelihood fit of the same rows (identify.refine's
+- plain vs DH-only: the plain model against a DH-only maximum-likelihood fit of the same rows
+(identify.estimator.refine's
   DH parameterisation from the nominal placed on the data: another estimator; no outlier rejection, as the data
   hold no gross outliers and a rejection that differs would compare other rows);
 - second session: the same arm, the tracker moved (random rotation, up to 2 m), new free poses; each model is
@@ -29,12 +30,12 @@ import numpy as np
 import yaml
 
 from config.robots import load_robot
-from identify.estimate import place_nominal
+from identify.estimator.estimate import place_nominal
+from identify.estimator.refine import refine
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
-from identify.refine import refine
-from identify.simulate import random_poses
-from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
+from identify.simulators.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from kinematics.joint_errors import JointErrors, gravity_torques
 from kinematics.truth import random_base, random_truth

@@ -42,13 +42,13 @@ import yaml
 from config.cell import cell_from_config, contact_at
 from config.robots import load_robot
 from config.site import site_from_dict
-from identify.calibrated import CalibratedModel
-from identify.cli import main as identify_main
-from identify.compensate import controller_poses, solve_ik
+from identify.applications.calibrated import CalibratedModel
+from identify.applications.compensate import controller_poses, solve_ik
+from identify.commands.cli import main as identify_main
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
 from identify.programs import urscript
-from identify.simulate import simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.dh import points_from_joints
 from kinematics.truth import random_truth
 

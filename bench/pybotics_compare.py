@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from config.robots import load_robot
-from identify.bounds import prediction_rms_bound
-from identify.pipeline import identify
-from identify.simulate import random_poses, simulate
+from identify.estimator.bounds import prediction_rms_bound
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import DHModel, points_from_joints
 from kinematics.truth import random_truth
 

@@ -3,7 +3,7 @@
     .venv/bin/python -m bench.real_robots [--draws 60] [--quick] [--jobs 2] [--case compliance ...]
 
 Every draw simulates a fresh true arm (``kinematics.truth.random_truth``: perturbed DH, random base and TP)
-measured by ``identify.simulate_joints`` at 0.02 mm per axis, identifies it as the CLI does
+measured by ``identify.simulators.simulate_joints`` at 0.02 mm per axis, identifies it as the CLI does
 (``identify(meas, nominal, noise=..., links=...)``) and scores ``ident.predict`` at 200 random held-out
 readings against where the TP truly is. ``bound``: the Cramér-Rao bound of the model that generated the data
 (axis lines, every tracked point, and the true joint-error family on every joint it can act on), from
@@ -38,12 +38,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from config.robots import load_robot
-from identify.estimate import with_tools
-from identify.extensions import TermSet, candidates
-from identify.pipeline import identify
-from identify.poe import AxisLines, lines_from_model, points_from_lines
-from identify.simulate import line_parameter_count, moved_lines, random_poses
-from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
+from identify.estimator.estimate import with_tools
+from identify.estimator.extensions import TermSet, candidates
+from identify.estimator.poe import AxisLines, lines_from_model, points_from_lines
+from identify.results.pipeline import identify
+from identify.simulators.simulate import line_parameter_count, moved_lines, random_poses
+from identify.simulators.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 from kinematics.joint_errors import JointErrors, gravity_torques
 from kinematics.truth import random_truth
 

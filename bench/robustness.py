@@ -2,8 +2,8 @@
 
     .venv/bin/python -m bench.robustness [--draws 50] [--quick] [--jobs 2] [--robot ur5e ...] [--case outliers ...]
 
-Every draw simulates a fresh true cell (``identify.simulate``: a perturbed robot as axis lines, a random base and
-TP) and one data set of a case, identifies it with ``identify.pipeline.identify(meas, nominal, noise)`` and
+Every draw simulates a fresh true cell (``identify.simulators.simulate``: a perturbed robot as axis lines, a random base
+and TP) and one data set of a case, identifies it with ``identify.results.pipeline.identify(meas, nominal, noise)`` and
 scores it at 200 random held-out joint configurations (readings as the controller reports them):
 
 - ``ratio``: sqrt(mean over draws of (RMS/bound)²), RMS = 3D error of ``ident.predict`` against where the TP
@@ -45,9 +45,9 @@ from scipy.stats import binom
 from bench.robustness_cells import FANUC_SIM, GRID_ROBOT, gravity_sag, grid_scenario
 from config.robots import RobotModel
 from config.robots import load_robot as _load_robot
-from identify import pipeline
-from identify.poe import AxisLines, fit_lines, points_from_lines
-from identify.simulate import (
+from identify.estimator.poe import AxisLines, fit_lines, points_from_lines
+from identify.results import pipeline
+from identify.simulators.simulate import (
     Scenario,
     dh_truth,
     line_parameter_count,
@@ -82,7 +82,7 @@ FD_STEP = 1e-6  # rad or m: central differences for the nuisance columns
 
 def lines_jacobian(lines: AxisLines, q: Array) -> Array:
     """Jacobian (3m, size) of the TPs predicted at true joint values ``q`` (m, n) with respect to the lines
-    parameters of ``identify.simulate.moved_lines`` (rad, m) at zero; central differences (``FD_STEP``),
+    parameters of ``identify.simulators.simulate.moved_lines`` (rad, m) at zero; central differences (``FD_STEP``),
     relative error ~1e-9."""
     size = line_parameter_count(lines.joint_types)
     jac = np.empty((3 * len(q), size))
@@ -126,10 +126,11 @@ def lines_bound(lines: AxisLines, q_fit: Array, unknown: NDArray[np.bool_], move
 
 
 class Oracle:
-    """The bench's self-check (``--oracle``): a maximum-likelihood fit of the axis lines (identify.poe.fit_lines)
-    started at the truth, to the clean fitted rows that have readings, with the true outliers as its rejections and
-    the lines bound at its own estimate as its reported uncertainty. Its ratio near 1 shows the bound is attainable
-    on a case; it needs readings, so it does not run the positions-only and jogged cases."""
+    """The bench's self-check (``--oracle``): a maximum-likelihood fit of the axis lines
+    (identify.estimator.poe.fit_lines) started at the truth, to the clean fitted rows that have readings, with the true
+    outliers as its rejections and the lines bound at its own estimate as its reported uncertainty. Its ratio near 1
+    shows the bound is attainable on a case; it needs readings, so it does not run the positions-only and jogged
+    cases."""
 
     def __init__(self, scen: Scenario):
         fit = ~scen.meas.check & np.all(np.isfinite(scen.meas.q), axis=1)

@@ -23,9 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from config.robots import RobotModel
-from identify.measurements import Measurements
-from identify.poe import lines_from_model, points_from_lines
-from identify.simulate import Scenario
+from identify.estimator.measurements import Measurements
+from identify.estimator.poe import lines_from_model, points_from_lines
+from identify.simulators.simulate import Scenario
 from kinematics.dh import DHModel
 from kinematics.joint_errors import LinkMasses, gravity_torques
 from kinematics.truth import perturbed_model, random_base

@@ -5,7 +5,7 @@
 For every bundled robot with the default site (cell margin 20 mm, 50 mm above the mounting surface, the
 default tool capsule): the default plan's size, the configurations checked (every step and every move,
 sampled so that no body point travels more than 1 cm between samples), the check time (median of
-``--repeats`` runs of :func:`acquire.plan.plan_clearance`, the cell built each time), the plan-building
+``--repeats`` runs of :func:`acquire.planning.plan.plan_clearance`, the cell built each time), the plan-building
 time, and the clearance: the closest approach and between what, and the least margin left beyond what the
 cell requires (20 mm between bodies, 50 mm above the surface) at a checked sample, and where; the planner
 keeps it >= 10 mm (the most a distance can drop between samples), so the required distances hold all
@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from acquire.plan import build_plan, plan_clearance
+from acquire.planning.plan import build_plan, plan_clearance
 from config.cell import cell_from_config
 from config.robots import load_robot, robot_names
 from config.site import SiteConfig

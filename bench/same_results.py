@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from config.robots import load_robot
-from identify.pipeline import identify
-from identify.simulate import simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.truth import random_truth
 
 SEED, NOISE = 20240602, 5e-5  # as bench.speed

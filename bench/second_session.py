@@ -11,7 +11,7 @@ joint's reading scaled by 1 + 2e-4 and off by a once-per-turn 0.02° at a random
 2. each model of the written result (``plain``: the DH table; ``extended``: with its joint errors, when selected)
    predicts session 1's held-out rows: that model's first-session held-out RMS;
 3. session 2 of the same arm: the tracker moved (any rotation, 1.5-2.5 m), 40 free poses, fresh noise;
-   ``identify check`` (identify.holds): its cross-validated RMS per model after re-registering the tracker;
+   ``identify check`` (identify.applications.holds): its cross-validated RMS per model after re-registering the tracker;
 4. session 2 of another arm of the same model (another truth, its own joint errors): ``identify check`` again.
 
 Reported per case and model: the RMS over pairs of both figures and of their ratio, the share of same-arm pairs
@@ -38,11 +38,11 @@ import numpy as np
 import yaml
 
 from config.robots import load_robot
-from identify.holds import check_models
+from identify.applications.holds import check_models
+from identify.applications.result_models import result_models
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
-from identify.result_models import result_models
-from identify.simulate import dh_truth, make_scenario, reading_error, transform_lines
+from identify.results.pipeline import identify
+from identify.simulators.simulate import dh_truth, make_scenario, reading_error, transform_lines
 from kinematics.truth import random_base
 
 ROBOT = "ur5e"

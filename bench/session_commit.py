@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 import session.store as session_module
-from acquire.session import Session
+from acquire.running.session import Session
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 
 MODES = ("wal", "wal+checkpoint", "delete")

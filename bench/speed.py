@@ -1,4 +1,4 @@
-"""Speed benchmark: wall time of :func:`identify.pipeline.identify` in-process (DESIGN.md, "Targets").
+"""Speed benchmark: wall time of :func:`identify.results.pipeline.identify` in-process (DESIGN.md, "Targets").
 
     .venv/bin/python -m bench.speed [--repeats 10] [--datasets 5]
 
@@ -23,9 +23,9 @@ import numpy as np
 import scipy
 
 from config.robots import load_robot
-from identify.cpa import geometric_step
-from identify.pipeline import identify
-from identify.simulate import simulate
+from identify.estimator.cpa import geometric_step
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.truth import random_truth
 
 SEED = 20240602

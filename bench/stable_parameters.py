@@ -26,11 +26,11 @@ import yaml
 
 from bench.one_model import rms, written_points
 from config.robots import RobotModel, load_robot
+from identify.estimator.measurements import Measurements
 from identify.io.result_io import result_to_dict
-from identify.measurements import Measurements
-from identify.pipeline import Identification, identify
-from identify.simulate import random_poses, sweep_readings
-from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
+from identify.results.pipeline import Identification, identify
+from identify.simulators.simulate import random_poses, sweep_readings
+from identify.simulators.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 from kinematics.joint_errors import JointErrors
 from kinematics.truth import random_truth
 

@@ -3,11 +3,11 @@
     .venv/bin/python -m bench.target_plan [--draws 50] [--jobs 1]
 
 For each case (a UR5e in the default cell, tracker noise 0.05 mm per axis, a target accuracy and a mode set, as
-``acquire --target-accuracy``), the planner (acquire/plan_target.py) chooses its plan and predicts its held-out
+``acquire --target-accuracy``), the planner (acquire/planning/plan_target.py) chooses its plan and predicts its held-out
 error (Cramér-Rao bound of the RMS TP error at random poses within the limits). Then ``--draws`` true robots are
 drawn (the nominal model with every DH value perturbed, 0.5 mm and 1 mrad, at a random base pose, its TP the
 plan's guess moved by 5 mm per axis), the plan's data are simulated in process and identified
-(identify.pipeline.identify, as ``identify`` does), and the error of a draw is the RMS over 200 random poses
+(identify.results.pipeline.identify, as ``identify`` does), and the error of a draw is the RMS over 200 random poses
 within the limits of the distance between the identified model's TP and the truth's.
 
 The data of a plan: every stop-and-go pose of its fit (sweep steps, fitted free poses, continuous sweeps' start
@@ -37,15 +37,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from acquire.plan import tp_model
-from acquire.plan_continuous import STREAM_START_SLACK
-from acquire.plan_target import Candidate, candidates, choose
+from acquire.planning.plan import tp_model
+from acquire.planning.plan_continuous import STREAM_START_SLACK
+from acquire.planning.plan_target import Candidate, candidates, choose
 from config.robots import RobotModel, load_robot
 from config.site import SiteConfig
-from identify.measurements import Measurements
-from identify.pipeline import identify
-from identify.simulate import random_poses
-from identify.simulate_stream import move_duration, trapezoid
+from identify.estimator.measurements import Measurements
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
+from identify.simulators.simulate_stream import move_duration, trapezoid
 from kinematics.dh import DHModel, points_from_joints
 from kinematics.truth import perturbed_model, random_base
 from session.plan import Plan

@@ -45,14 +45,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from acquire.plan import tp_model
-from acquire.plan_continuous import build_continuous_plan
+from acquire.planning.plan import tp_model
+from acquire.planning.plan_continuous import build_continuous_plan
 from config.robots import RobotModel, load_robot
 from config.site import SiteConfig
-from identify.measurements import Measurements
-from identify.pipeline import identify
-from identify.simulate import random_poses
-from identify.simulate_stream import move_duration, trapezoid
+from identify.estimator.measurements import Measurements
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
+from identify.simulators.simulate_stream import move_duration, trapezoid
 from kinematics.dh import DHModel, points_from_joints
 from kinematics.joint_errors import JointErrors
 from kinematics.truth import perturbed_model, random_base

@@ -29,9 +29,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from config.robots import load_robot
-from identify.pipeline import identify
-from identify.refine import parameter_names, vector_from_model
-from identify.simulate import simulate
+from identify.estimator.refine import parameter_names, vector_from_model
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.truth import random_truth
 
 FAMILIES = ("ur5e", "scara")

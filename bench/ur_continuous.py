@@ -44,7 +44,7 @@ import yaml
 from config.robots import load_robot
 from drivers.trackers.ascii_profile import TRACKERS_DIR
 from identify.io.result_io import validation_of
-from identify.simulate import random_poses
+from identify.simulators.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from tests.ur_emulator import EmulatorProcess
 
@@ -94,7 +94,7 @@ def session_numbers(session: Path, scale: float) -> dict[str, float]:
 def run_session(mode: str, emu: EmulatorProcess, tracker: str, rate: float, folder: Path, scale: float) -> dict:
     """One ``acquire`` session as a fresh process; its numbers, result YAML and error against the truth."""
     session = folder / f"{mode}.session"
-    command = [sys.executable, "-m", "acquire.launch", "--robot", f"ur5e@{emu.host}?rtde_frequency={rate:g}",
+    command = [sys.executable, "-m", "acquire.commands.launch", "--robot", f"ur5e@{emu.host}?rtde_frequency={rate:g}",
                "--tracker", tracker, "--mode", mode, "--yes", "--session", str(session), "--quiet"]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     load = os.getloadavg()
@@ -116,7 +116,7 @@ def run_session(mode: str, emu: EmulatorProcess, tracker: str, rate: float, fold
 
 def dry_run_estimate(mode: str, emu_host: str, tracker: str, rate: float) -> float:
     """The dry run's robot time estimate (s) for ``mode``: ``acquire ... --dry-run --json``'s ``duration_s``."""
-    command = [sys.executable, "-m", "acquire.launch", "--robot", f"ur5e@{emu_host}?rtde_frequency={rate:g}",
+    command = [sys.executable, "-m", "acquire.commands.launch", "--robot", f"ur5e@{emu_host}?rtde_frequency={rate:g}",
                "--tracker", tracker, "--mode", mode, "--dry-run", "--json"]
     done = subprocess.run(command, env={**os.environ, "PYTHONPATH": str(ROOT)}, capture_output=True, text=True,
                           check=True)

@@ -38,8 +38,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from acquire.cli import main as acquire
-from acquire.session import Session
+from acquire.commands.cli import main as acquire
+from acquire.running.session import Session
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.world import backlash_play
 from kinematics.dh import points_from_joints

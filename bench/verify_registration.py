@@ -38,13 +38,13 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from acquire.cli import main as acquire
-from acquire.session import Session
+from acquire.commands.cli import main as acquire
+from acquire.running.session import Session
 from config.robots import load_robot
 from drivers.sim.rig import SimulatedRig
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
-from identify.simulate import simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.dh import points_from_joints
 
 NOISE = 5e-5

@@ -1,5 +1,5 @@
-"""What both commands' light parsers share (acquire/options.py, identify/options.py): argparse that reports a usage
-error in one line with exit code 2, and a ``--version`` that looks the version up only when asked."""
+"""What both commands' light parsers share (acquire/commands/options.py, identify/commands/options.py): argparse that
+reports a usage error in one line with exit code 2, and a ``--version`` that looks the version up only when asked."""
 
 from __future__ import annotations
 

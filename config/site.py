@@ -114,10 +114,10 @@ class SiteConfig:
     ``tool_radius``; ``boxes`` ``{name, min, max}`` (axis-aligned corners) and ``cylinders``
     ``{name, a, b, radius}`` (axis ends). A camera cell: ``camera_pose`` (base frame ← camera frame, 4x4;
     None: no camera view check), ``camera_half_fov`` and ``camera_max_tilt`` (rad) and ``target_normal``
-    (flange frame): see :mod:`acquire.camera_view`. Timeouts in s; ``retries`` per failed measurement. Verification
-    (``acquire verify``, :mod:`identify.iso9283`): the test cube's ``verify_centre`` (base frame, m; None: the TP at
-    home) and ``verify_edge`` (m; None: from the robot's reach), ``verify_cycles`` per pose. ``source`` names where
-    it came from.
+    (flange frame): see :mod:`acquire.planning.camera_view`. Timeouts in s; ``retries`` per failed measurement.
+    Verification (``acquire verify``, :mod:`identify.applications.iso9283`): the test cube's ``verify_centre`` (base
+    frame, m; None: the TP at home) and ``verify_edge`` (m; None: from the robot's reach), ``verify_cycles`` per pose.
+    ``source`` names where it came from.
     """
 
     robot_model: str | None = None
@@ -162,7 +162,7 @@ class SiteConfig:
     retries: int = 3
     verify_centre: tuple[float, float, float] | None = None
     verify_edge: float | None = None
-    verify_cycles: int = 30  # ISO 9283 (identify.iso9283.ISO_CYCLES)
+    verify_cycles: int = 30  # ISO 9283 (identify.applications.iso9283.ISO_CYCLES)
     source: str = field(default="<defaults>", compare=False)
 
     @classmethod

@@ -24,14 +24,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from common.errors import InputError
 from common.outputs import write_output
-from identify.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
-from identify.compare import CompareError, Comparison, check_same_robot
-from identify.compare import compare as _compare
-from identify.compensate import Compensation, controller_poses, ur_pose
-from identify.compensate import compensate as _compensate
+from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
+from identify.applications.compare import CompareError, Comparison, check_same_robot
+from identify.applications.compare import compare as _compare
+from identify.applications.compensate import Compensation, controller_poses, ur_pose
+from identify.applications.compensate import compensate as _compensate
+from identify.estimator.measurements import Measurements
 from identify.io.result_io import result_to_dict
-from identify.measurements import Measurements
-from identify.pipeline import Identification, identify, split_holdout
+from identify.results.pipeline import Identification, identify, split_holdout
 
 Array = NDArray[np.float64]
 

@@ -2,8 +2,8 @@
 tracker frame with its tracked point (TP) off every revolute axis.
 
 Shared by the simulated rig of mock mode (drivers/sim/) and the simulated measurements of tests and benchmarks
-(identify/simulate.py). Every random draw comes from the ``numpy.random.Generator`` passed in; lengths in metres,
-angles in radians.
+(identify/simulators/simulate.py). Every random draw comes from the ``numpy.random.Generator`` passed in; lengths in
+metres, angles in radians.
 """
 
 from __future__ import annotations

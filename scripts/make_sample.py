@@ -15,7 +15,7 @@ import yaml
 
 from config.robots import load_robot
 from identify.io.csvio import format_measurements
-from identify.simulate import simulate
+from identify.simulators.simulate import simulate
 from kinematics.dh import model_to_dict
 from kinematics.truth import random_truth
 

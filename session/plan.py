@@ -1,6 +1,6 @@
 """The plan as a session stores it: its steps and settings, and their JSON (the session header's ``plan``). Data
-only: building and checking plans is acquire's (acquire/plan.py, acquire/plan_continuous.py; the Plan JSON of
-``acquire --dry-run --json``: acquire/plan_report.py).
+only: building and checking plans is acquire's (acquire/planning/plan.py, acquire/planning/plan_continuous.py; the Plan
+JSON of ``acquire --dry-run --json``: acquire/planning/plan_report.py).
 
 Joint values: rad (revolute) / m (prismatic); speeds rad/s or m/s, accelerations rad/s² or m/s²; times s.
 """
@@ -11,7 +11,8 @@ import json
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-STEP_KINDS = ("sweep", "free", "home", "verify", "stream")  # verify: acquire/verify.py; stream: plan_continuous.py
+#: verify: acquire/verification/verify.py; stream: acquire/planning/plan_continuous.py
+STEP_KINDS = ("sweep", "free", "home", "verify", "stream")
 
 
 @dataclass(frozen=True)
@@ -19,8 +20,8 @@ class Step:
     """One commanded pose. ``index`` is its 0-based place in the plan; ``sweep`` the CSV sweep id;
     ``joint`` the 1-based joint a sweep moves (0 for free poses and home checks); ``q`` the commanded
     joint values; ``role`` is "fit" or "check" (held out for validation). A ``stream`` step (continuous motion,
-    acquire/plan_continuous.py) moves ``joint`` from ``start`` to ``q`` at the constant ``speed`` (rad/s or m/s),
-    ramping at ``acceleration`` (rad/s², m/s²), while both devices stream; other steps have none of the three
+    acquire/planning/plan_continuous.py) moves ``joint`` from ``start`` to ``q`` at the constant ``speed`` (rad/s or
+    m/s), ramping at ``acceleration`` (rad/s², m/s²), while both devices stream; other steps have none of the three
     (and their JSON none of the keys)."""
 
     index: int

@@ -1,5 +1,5 @@
 """A session: one SQLite file holding everything an acquisition recorded, durable and resumable. ``acquire`` writes
-it (acquire/session.py adds the measurements); identify's edge reads it (identify/io/session_measurements.py).
+it (acquire/running/session.py adds the measurements); identify's edge reads it (identify/io/session_measurements.py).
 
 The file's tables and settings: session/schema.py; a step's rows: session/rows.py.
 
@@ -19,7 +19,7 @@ Creation is atomic too: the file is built under a temporary name and linked into
 One writer: opening for writing (:meth:`SessionFile.create`, ``SessionFile.open(path, write=True)``) takes an
 exclusive ``flock`` on the file, held until :meth:`SessionFile.close`; a second writer is refused at once with a
 :class:`SessionBusy` naming the holder's PID (session/lock.py). Readers take no lock and work while
-a session is written. :func:`acquire.session_backup.backup_session` copies a live session.
+a session is written. :func:`acquire.running.session_backup.backup_session` copies a live session.
 
 Units: metres (positions, sigma), radians / metres (joints), seconds since the epoch (times).
 """
@@ -84,8 +84,8 @@ class RunInfo:
 class SessionFile:
     """An open session file. Create with :meth:`create`, reopen with :meth:`open`; use as a context manager.
 
-    The file's contents, written and read back; ``acquire.session.Session`` adds its measurements (the rows as the
-    measurement CSV, identify/io/session_measurements.py)."""
+    The file's contents, written and read back; ``acquire.running.session.Session`` adds its measurements (the rows as
+    the measurement CSV, identify/io/session_measurements.py)."""
 
     def __init__(self, path: Path, conn: sqlite3.Connection, header: dict[str, Any], plan: Plan,
                  lock_fd: int | None = None) -> None:

@@ -3,8 +3,8 @@ client in the test process.
 
     python -m tests._acquire_writer        then, per line on stdin, a JSON list of ``acquire`` arguments
 
-It imports ``acquire.cli`` once (a fresh interpreter costs most of a second of imports), then for each line
-forks a child that runs ``acquire.cli.main(ARGS)`` and prints, unbuffered:
+It imports ``acquire.commands.cli`` once (a fresh interpreter costs most of a second of imports), then for each line
+forks a child that runs ``acquire.commands.cli.main(ARGS)`` and prints, unbuffered:
 
     pid N            the child's process id (the test may SIGKILL it)
     opened           the child opened a robot driver (anything after this may move the robot)
@@ -24,8 +24,8 @@ import sys
 import time
 from pathlib import Path
 
-import acquire.cli as cli
-import acquire.runner as runner
+import acquire.commands.cli as cli
+import acquire.running.runner as runner
 import drivers.registry as registry
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from acquire.session import Session
+from acquire.running.session import Session
 from drivers.base import DeviceIdentity, TrackerReading
 from session.plan import Plan, Step
 from session.records import StepRecord

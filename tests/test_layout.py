@@ -16,8 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: The top-level packages, each importing only those before it (``common`` and ``kinematics`` import none).
 ORDER = ("common", "kinematics", "config", "drivers", "session", "identify", "acquire")
 #: identify's modules that are not its math: the commands at its top, and its edge (files read and written).
-IDENTIFY_COMMANDS = ("identify.cli", "identify.compare_cli", "identify.compensate_cli", "identify.program_cli",
-                     "identify.check_cli", "identify.api", "identify.launch", "identify.options")
+IDENTIFY_COMMANDS = ("identify.commands", "identify.api")
 IDENTIFY_EDGE = ("identify.io", "identify.report", "identify.exports")
 MAX_LINES = 550
 

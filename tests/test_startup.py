@@ -9,8 +9,8 @@ import sys
 
 import pytest
 
-HEAVY = ("numpy", "scipy", "cv2", "matplotlib", "yaml", "identify.refine", "identify.pipeline", "acquire.cli",
-         "identify.cli", "tqdm")
+HEAVY = ("numpy", "scipy", "cv2", "matplotlib", "yaml", "identify.estimator.refine", "identify.results.pipeline",
+         "acquire.commands.cli", "identify.commands.cli", "tqdm")
 
 PROBE = """
 import json, sys
@@ -24,19 +24,19 @@ print(json.dumps([code, sorted(sys.modules)]))
 
 
 @pytest.mark.parametrize(("module", "argv", "code"), [
-    ("acquire.launch", ["--help"], 0),
-    ("acquire.launch", ["--version"], 0),
-    ("acquire.launch", ["--robot", "moc:ur5e"], 2),
-    ("acquire.launch", ["--noise", "0.05xx"], 2),
-    ("acquire.launch", ["--tracker", "serial"], 2),
-    ("acquire.launch", ["export", "--help"], 0),  # before, these two imported everything (1 s of CPU)
-    ("acquire.launch", ["backup", "--help"], 0),
-    ("acquire.launch", ["verify", "--help"], 0),  # before: the estimator and the drivers (about 1 s of CPU)
-    ("acquire.launch", ["export", "s.session"], 2),
-    ("identify.launch", ["--help"], 0),
-    ("identify.launch", ["--version"], 0),
-    ("identify.launch", ["missing.csv"], 2),
-    ("identify.launch", ["x.csv", "--noise", "-1mm"], 2),
+    ("acquire.commands.launch", ["--help"], 0),
+    ("acquire.commands.launch", ["--version"], 0),
+    ("acquire.commands.launch", ["--robot", "moc:ur5e"], 2),
+    ("acquire.commands.launch", ["--noise", "0.05xx"], 2),
+    ("acquire.commands.launch", ["--tracker", "serial"], 2),
+    ("acquire.commands.launch", ["export", "--help"], 0),  # before, these two imported everything (1 s of CPU)
+    ("acquire.commands.launch", ["backup", "--help"], 0),
+    ("acquire.commands.launch", ["verify", "--help"], 0),  # before: the estimator and the drivers (about 1 s of CPU)
+    ("acquire.commands.launch", ["export", "s.session"], 2),
+    ("identify.commands.launch", ["--help"], 0),
+    ("identify.commands.launch", ["--version"], 0),
+    ("identify.commands.launch", ["missing.csv"], 2),
+    ("identify.commands.launch", ["x.csv", "--noise", "-1mm"], 2),
 ])
 def test_help_version_and_refusals_import_nothing_heavy(module, argv, code, tmp_path):
     out = subprocess.run([sys.executable, "-c", PROBE.format(module=module, argv=argv)], capture_output=True,
@@ -51,10 +51,10 @@ def test_help_version_and_refusals_import_nothing_heavy(module, argv, code, tmp_
 def test_the_light_parsers_defaults_are_the_estimators():
     import inspect
 
-    from identify import options
-    from identify.cpa import DEFAULT_PARALLEL_TOL
+    from identify.commands import options
+    from identify.estimator.cpa import DEFAULT_PARALLEL_TOL
     from identify.io.csvio import UNITS
-    from identify.pipeline import identify
+    from identify.results.pipeline import identify
 
     assert options.DEFAULT_PARALLEL_TOL == DEFAULT_PARALLEL_TOL
     # --max-offset's default is the estimator's: None (the robot's size)

@@ -80,7 +80,7 @@ def second_session_rms(model: score.Model, second: Converted) -> float:
 
 def identify_in_process(csv: Path, result: Path, robot: Path | None) -> tuple[int, float, str]:
     """Run ``identify`` as its command does; exit code, wall time (s) and what it printed."""
-    from identify.cli import main
+    from identify.commands.cli import main
 
     argv = [str(csv), "--out", str(result), "--force"] + (["--robot", str(robot)] if robot else [])
     text = io.StringIO()

@@ -60,7 +60,7 @@ the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence fo
 isotropic noise of that sigma (reduced chi-square ~1), the relative weights of the samples are right
 (an oblique or distant view weighs less), but the fit cannot down-weight depth against lateral errors
 (unbiased, not minimum variance), and identify's outlier test must allow anisotropic residuals
-(identify/refine.py ``inlier_mask``).
+(identify/estimator/refine.py ``inlier_mask``).
 
 Faults: no frame within ``timeout`` -> the camera is reopened once, then DeviceTimeout; target not seen
 -> TargetLost; an id seen twice -> BadReading (DuplicateMarker); too few points, no pose, or a reprojection

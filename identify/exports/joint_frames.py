@@ -1,9 +1,9 @@
 """Joint frames of an axis-lines model, for formats that give every joint a full frame (URDF, UR calibration).
 
-An :class:`identify.poe.AxisLines` model holds each joint's axis as a line in the tracker frame with the arm at the
-readings ``lines.home``; joint ``i`` at reading ``q_i`` turns about (or slides along) its line by ``q_i - home_i``,
-after every joint beyond it has moved (``identify.poe.points_from_lines``). Give joint ``i`` a frame ``F_i`` at
-home (tracker frame) whose z axis is its line; then the chain
+An :class:`identify.estimator.poe.AxisLines` model holds each joint's axis as a line in the tracker frame with the arm
+at the readings ``lines.home``; joint ``i`` at reading ``q_i`` turns about (or slides along) its line by ``q_i -
+home_i``, after every joint beyond it has moved (``identify.estimator.poe.points_from_lines``). Give joint ``i`` a frame
+``F_i`` at home (tracker frame) whose z axis is its line; then the chain
 ``base · O_1 · J_1(q_1) · O_2 · J_2(q_2) · … · O_n · J_n(q_n)`` with ``J_i`` = ``Rz(q_i)`` (revolute) or
 ``Tz(q_i)`` (prismatic) and the fixed origins ``O_i = F_{i-1}⁻¹ · F_i · J_i(-home_i)`` (``F_0 = base``) is that
 model exactly, with its zero at reading 0; a tracked point sits at ``F_n⁻¹ · tp`` in the last link's frame.
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.poe import AxisLines
+from identify.estimator.poe import AxisLines
 from kinematics.dh import transform_from_dh
 
 Array = NDArray[np.float64]

@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from identify.estimator.measurements import Measurements
 from identify.io.csvio import format_measurements
-from identify.measurements import Measurements
 from kinematics.dh import DHModel
 
 

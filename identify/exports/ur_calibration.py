@@ -32,9 +32,9 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
+from identify.estimator.poe import AxisLines
 from identify.exports.joint_frames import joint_frames
 from identify.exports.urdf import rpy_from_matrix, transform_from_xyz_rpy
-from identify.poe import AxisLines
 from kinematics.dh import DHModel, transform_from_dh
 
 Array = NDArray[np.float64]

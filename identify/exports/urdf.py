@@ -27,8 +27,8 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from identify.estimator.poe import AxisLines
 from identify.exports.joint_frames import joint_frames
-from identify.poe import AxisLines
 from kinematics.dh import DHModel, transform_from_dh
 
 Array = NDArray[np.float64]

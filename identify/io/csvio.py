@@ -22,7 +22,7 @@ import numpy as np
 import yaml
 
 from common.errors import InputError
-from identify.measurements import Measurements, looks_like_millimetres
+from identify.estimator.measurements import Measurements, looks_like_millimetres
 from kinematics.dh import check_joint_types
 from kinematics.joint_errors import Coupling
 

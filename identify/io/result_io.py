@@ -13,12 +13,12 @@ import numpy as np
 import yaml
 
 from common import __version__
-from identify.calibrated import CalibratedModel, ResultError
-from identify.extensions import EQUATIONS, UNITS
-from identify.pipeline import Identification
-from identify.poe import AxisLines
-from identify.refine import parameter_names
-from identify.written import WrittenModel
+from identify.applications.calibrated import CalibratedModel, ResultError
+from identify.estimator.extensions import EQUATIONS, UNITS
+from identify.estimator.poe import AxisLines
+from identify.estimator.refine import parameter_names
+from identify.results.pipeline import Identification
+from identify.results.written import WrittenModel
 from kinematics.dh import DH_NAMES, DHModel, model_to_dict
 
 CONVENTION = (
@@ -186,11 +186,11 @@ def lines_to_dict(lines: AxisLines) -> dict[str, Any]:
 
 
 def covariance_to_dict(model: WrittenModel) -> dict[str, Any]:
-    """The parameters' covariance, for compensation, verification and comparison (identify/calibrated.py):
-    ``parameters`` (the free names of :func:`identify.refine.parameter_names`; base rotation a rotation vector
+    """The parameters' covariance, for compensation, verification and comparison (identify/applications/calibrated.py):
+    ``parameters`` (the free names of :func:`identify.estimator.refine.parameter_names`; base rotation a rotation vector
     applied on the left of ``base``) and ``matrix`` (their covariance, m and rad squared: the DH table's), and
     ``predictor``: the covariance of what predicts (the axis lines' minimal parameters, the tracked points', then
-    the joint-error coefficients: :class:`identify.predict.Predictor`)."""
+    the joint-error coefficients: :class:`identify.results.predict.Predictor`)."""
     names = parameter_names(model.model.n_joints)
     free = np.flatnonzero(model.refinement.free)
     return {

@@ -6,8 +6,8 @@ readings, the averaged TP, the plan's sweep id, joint and role; home re-measurem
 Streams (continuous motion, :func:`with_streams`): every complete, current attempt whose stream step is recorded
 ok becomes rows: one per tracker sample (each tracked point), ``t`` its tracker time, ``q`` the joint stream
 interpolated (linearly) at robot time ``t + clock_offset``; ``clock_offset`` is the coarse estimate of
-:func:`identify.timing.coarse_clock_offset` over all the session's sweeps. Rows whose robot time lies outside the
-recorded joint stream or within one sample of a joint-stream gap are dropped (counted).
+:func:`identify.estimator.timing.coarse_clock_offset` over all the session's sweeps. Rows whose robot time lies outside
+the recorded joint stream or within one sample of a joint-stream gap are dropped (counted).
 
 Units: metres (positions, sigma), radians / metres (joint readings), seconds.
 """
@@ -23,9 +23,9 @@ import numpy as np
 from common import __version__
 from common.errors import InputError
 from common.outputs import OutputError, same_file, write_output
+from identify.estimator.measurements import Measurements
+from identify.estimator.timing import SweepStreams, coarse_clock_offset, interpolate_joints
 from identify.io.csvio import CsvContent, format_measurements
-from identify.measurements import Measurements
-from identify.timing import SweepStreams, coarse_clock_offset, interpolate_joints
 from kinematics.joint_errors import Coupling
 from session.records import PointRecord
 from session.rows import points_seen

@@ -4,8 +4,8 @@ program meant on the controller's model, checked against the joint limits; the r
 What a target means: a pose is where the controller puts the tool centre point (TCP); joint values mean the pose
 the controller's model gives them. The controller solves a pose from the joints it is at, so each pose target is
 solved from the previous target's joints (the first from ``start``), as the controller would run the program.
-The compensated joints (:func:`identify.compensate.compensate`, seeded by the controller's own solution) are
-written back as joints, or as the pose the controller's model gives them (so its own inverse kinematics lands
+The compensated joints (:func:`identify.applications.compensate.compensate`, seeded by the controller's own solution)
+are written back as joints, or as the pose the controller's model gives them (so its own inverse kinematics lands
 on them). Frames: the robot's base frame (DH frame 0) of both models. Units: m, rad.
 """
 
@@ -16,8 +16,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from identify.calibrated import CalibratedModel
-from identify.compensate import compensate, controller_poses, solve_ik, why_not
+from identify.applications.calibrated import CalibratedModel
+from identify.applications.compensate import compensate, controller_poses, solve_ik, why_not
 from identify.programs.core import Array, Language, Parsed, Target, rewrite
 from kinematics.dh import DHModel
 

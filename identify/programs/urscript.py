@@ -15,7 +15,7 @@ import re
 
 import numpy as np
 
-from identify.compensate import parse_ur_pose, rotvecs
+from identify.applications.compensate import parse_ur_pose, rotvecs
 from identify.programs.core import Array, Parsed, Skipped, Target, line_of, line_text
 
 name = "urscript"

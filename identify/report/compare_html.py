@@ -12,11 +12,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from common import __version__
-from identify.calibrated import CalibratedModel
-from identify.compare import Comparison, dh_label, displacement
-from identify.refine import parameter_names
+from identify.applications.calibrated import CalibratedModel
+from identify.applications.compare import Comparison, dh_label, displacement
+from identify.estimator.refine import parameter_names
 from identify.report.html import _CSS, _e, _figure_html, _table, _when
-from identify.simulate import random_poses
+from identify.simulators.simulate import random_poses
 
 
 def _value_std(model: CalibratedModel, index: int) -> tuple[float, float]:

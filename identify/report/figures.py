@@ -17,8 +17,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
-from identify.measurements import Measurements
-from identify.pipeline import Identification
+from identify.estimator.measurements import Measurements
+from identify.results.pipeline import Identification
 from kinematics.dh import frames_from_joints, points_from_joints
 
 Array = NDArray[np.float64]

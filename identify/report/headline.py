@@ -16,10 +16,10 @@ from typing import Any
 
 import numpy as np
 
-from identify.calibrated import CalibratedModel
-from identify.estimate import place_nominal
-from identify.measurements import Measurements
-from identify.pipeline import Identification
+from identify.applications.calibrated import CalibratedModel
+from identify.estimator.estimate import place_nominal
+from identify.estimator.measurements import Measurements
+from identify.results.pipeline import Identification
 from kinematics.dh import DHModel, points_from_joints
 
 MM = 1e3
@@ -45,7 +45,8 @@ def accuracy_summary(ident: Identification, meas: Measurements, nominal: DHModel
     k = len(check)
     predicted = model.points(check.q)
     after_pred = model.expected_rms(check.q)
-    # measured: the figure of the written model the result recommends (identify.validation), not of the fit's lines
+    # measured: the figure of the written model the result recommends (identify.results.validation), not of the fit's
+    # lines
     after_meas = ident.validation.rms if ident.validation is not None else _rms(check.points - predicted)
     noise = ident.adequacy.noise if check.sigma is None else float(np.sqrt(np.mean(check.sigma**2)))
     out: dict[str, Any] = {

@@ -1,6 +1,6 @@
 """The identification report: one self-contained HTML file (figures embedded as base64 PNG, opens offline).
 
-Pure: :func:`report_html` builds the text from an :class:`~identify.pipeline.Identification` in memory and the
+Pure: :func:`report_html` builds the text from an :class:`~identify.results.pipeline.Identification` in memory and the
 measurements it was made from; :func:`write_report` writes it. Figures are drawn with matplotlib's object
 API (``matplotlib.figure.Figure``, no pyplot state, no GUI backend). Lengths are shown in mm, angles in deg.
 
@@ -26,13 +26,13 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from common import __version__
-from identify.extensions import UNITS
-from identify.measurements import Measurements
-from identify.pipeline import Identification
+from identify.estimator.extensions import UNITS
+from identify.estimator.measurements import Measurements
 from identify.report.figures import figure_frames, figure_joint
 from identify.report.figures import focus_on_inliers as _focus_on_inliers
 from identify.report.headline import accuracy_summary, headline_html
 from identify.report.terminal import format_clock
+from identify.results.pipeline import Identification
 from kinematics.dh import DH_NAMES, DHModel
 
 if TYPE_CHECKING:
@@ -324,7 +324,7 @@ def report_html(
     (nominal) and after (identified) at the held-out poses, and ``verification`` (the ``.verify.yaml`` of an
     ``acquire verify`` run of this result) when given.
 
-    ``meas``: the measurements given to :func:`identify.pipeline.identify` (after the hold-out split), so
+    ``meas``: the measurements given to :func:`identify.results.pipeline.identify` (after the hold-out split), so
     fitted and held-out rows can be told apart. ``nominal``: deltas against it. ``reference``: (label, model)
     for another comparison, e.g. the controller's factory calibration; ``reference_note``: shown with the DH
     table, e.g. why there is no factory calibration. ``session``: adds the acquisition record. ``cell``: the

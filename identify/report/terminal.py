@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from common import fit_width
-from identify.pipeline import ClockFit, Identification, SweepFit
+from identify.results.pipeline import ClockFit, Identification, SweepFit
 from kinematics.dh import DHModel
 
 _SCALE = {"theta": np.degrees(1.0), "d": 1e3, "a": 1e3, "alpha": np.degrees(1.0)}

@@ -15,14 +15,14 @@ import numpy as np
 import pytest
 import yaml
 
-from acquire.cli import main
-from acquire.session import Session
+from acquire.commands.cli import main
+from acquire.running.session import Session
 from config.robots import load_robot
 from drivers.clock import VirtualClock
 from drivers.sim.rig import SimulatedRig
 from drivers.spec import RobotSpec, TrackerSpec
-from identify.bounds import prediction_rms_bound
-from identify.simulate import random_poses
+from identify.estimator.bounds import prediction_rms_bound
+from identify.simulators.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from tests._session_steps import recorded_steps
 
@@ -129,7 +129,7 @@ def test_robot_faults_stop_the_run_and_keep_what_was_recorded(tmp_path, capsys, 
 
 
 def test_export_and_offline_identify_of_a_session(tmp_path, capsys):
-    from identify.cli import main as identify_main
+    from identify.commands.cli import main as identify_main
 
     code, path = _run(tmp_path)
     assert code == 0
@@ -164,7 +164,7 @@ def test_sigkill_at_random_moments_then_resume_equals_an_uninterrupted_run(tmp_p
     recorded exactly once, with the commanded poses of the plan and positions that agree with an
     uninterrupted run of the same simulated robot within the tracker noise."""
     reference = tmp_path / "ref.session"
-    cmd = [sys.executable, "-m", "acquire.cli", "--robot", ROBOT, "--tracker", "mock", *SMALL]
+    cmd = [sys.executable, "-m", "acquire.commands.cli", "--robot", ROBOT, "--tracker", "mock", *SMALL]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     subprocess.run([*cmd, "--session", str(reference)], check=True, capture_output=True, env=env, timeout=120)
     path = tmp_path / "crash.session"
@@ -173,7 +173,7 @@ def test_sigkill_at_random_moments_then_resume_equals_an_uninterrupted_run(tmp_p
     kills = 0
     for _ in range(40):
         args = ["--resume", str(path), "--quiet"] if path.exists() else ["--session", str(path)]
-        base = [sys.executable, "-m", "acquire.cli"] if path.exists() else cmd
+        base = [sys.executable, "-m", "acquire.commands.cli"] if path.exists() else cmd
         wanted = int(rng.integers(1, 10))
         log.unlink(missing_ok=True)
         # progress from the run's own log (one line per recorded step), not from the session: a reader polling
@@ -206,8 +206,8 @@ def test_sigkill_at_random_moments_then_resume_equals_an_uninterrupted_run(tmp_p
 def test_ctrl_c_stops_motion_closes_the_session_and_prints_the_resume_command(tmp_path):
     """SIGINT to a real-time mock run mid-plan: exit 130, the run recorded as aborted, resumable."""
     path = tmp_path / "c.session"
-    proc = subprocess.Popen([sys.executable, "-m", "acquire.cli", "--robot", ROBOT, "--tracker", "mock", *SMALL,
-                             "--realtime", "--session", str(path)], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-m", "acquire.commands.cli", "--robot", ROBOT, "--tracker", "mock",
+                             *SMALL, "--realtime", "--session", str(path)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
     while recorded_steps(path) < 1 and time.monotonic() < deadline and proc.poll() is None:

@@ -14,20 +14,20 @@ import pytest
 import yaml
 from scipy.stats import chi2
 
-from acquire.cli import main
-from acquire.plan import build_plan, check_plan, plan_clearance
-from acquire.plan_continuous import build_continuous_plan, validation_poses
-from acquire.plan_modes import build_both_plan, build_mode_plan, mode_site, plan_mode
-from acquire.session import Session
-from acquire.stream_loop import StreamingUnsupported, check_streams
+from acquire.commands.cli import main
+from acquire.planning.plan import build_plan, check_plan, plan_clearance
+from acquire.planning.plan_continuous import build_continuous_plan, validation_poses
+from acquire.planning.plan_modes import build_both_plan, build_mode_plan, mode_site, plan_mode
+from acquire.running.session import Session
+from acquire.running.stream_loop import StreamingUnsupported, check_streams
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.stream import robot_time_of_stamps
-from identify.cli import main as identify_main
+from identify.commands.cli import main as identify_main
 from identify.io.csvio import format_measurements, read_measurements
 from identify.io.result_io import load_result, validation_of
-from identify.simulate import random_poses
+from identify.simulators.simulate import random_poses
 from kinematics.dh import points_from_joints
 from session.plan import Plan
 
@@ -216,7 +216,7 @@ def test_stop_and_go_rows_check_the_streams_timing(mixed: Path, tmp_path: Path, 
     assert identify_main(["compare", str(step), str(streamed)]) == 0
     assert "no significant change" in capsys.readouterr().out
     # one stream's stamps 1 ms late (a tracker clock that jumped for one sweep): the streamed fit gives that sweep
-    # its own offset (identify/clock_split.py), says so in its timing check, and still agrees with the
+    # its own offset (identify/estimator/clock_split.py), says so in its timing check, and still agrees with the
     # stop-and-go rows
     jumped = tmp_path / "jumped.session"
     shutil.copyfile(mixed, jumped)

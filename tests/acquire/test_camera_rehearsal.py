@@ -1,5 +1,5 @@
-"""A camera rehearsal says what it assumes (acquire/camera_rehearsal.py): the camera's pose, its own noise, the steps
-it expects to lose; the run's progress keeps its total; the verdict counts the steps recorded missing."""
+"""A camera rehearsal says what it assumes (acquire/planning/camera_rehearsal.py): the camera's pose, its own noise, the
+steps it expects to lose; the run's progress keeps its total; the verdict counts the steps recorded missing."""
 
 from __future__ import annotations
 
@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 import yaml
 
-from acquire.camera_rehearsal import camera_assumptions
-from acquire.cli import main
-from acquire.plan_modes import build_mode_plan
+from acquire.commands.cli import main
+from acquire.planning.camera_rehearsal import camera_assumptions
+from acquire.planning.plan_modes import build_mode_plan
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.clock import VirtualClock
 from drivers.sim.rig import SimulatedRig
 from drivers.spec import RobotSpec, TrackerSpec
-from identify.verdict import missing_steps
+from identify.results.verdict import missing_steps
 
 pytest.importorskip("cv2")
 

@@ -9,19 +9,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquire.cli import main
-from acquire.orchestrator import Orchestrator, StopRequest, Timeouts
-from acquire.plan import build_plan, check_plan, plan_clearance, tp_model
-from acquire.plan_continuous import (
+from acquire.commands.cli import main
+from acquire.planning.plan import build_plan, check_plan, plan_clearance, tp_model
+from acquire.planning.plan_continuous import (
     STREAM_SPEED_CAP,
     build_continuous_plan,
     deflection_limits,
     estimate_continuous_duration,
     stream_speed,
 )
-from acquire.plan_modes import build_both_plan
-from acquire.session import Session
-from acquire.stream_loop import COMMIT_PERIOD
+from acquire.planning.plan_modes import build_both_plan
+from acquire.running.orchestrator import Orchestrator, StopRequest, Timeouts
+from acquire.running.session import Session
+from acquire.running.stream_loop import COMMIT_PERIOD
 from config.cell import cell_from_config
 from config.robots import load_robot
 from config.site import SiteConfig

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import re
 
-from acquire.plan_modes import build_mode_plan, mode_site
-from acquire.plan_report import format_plan
+from acquire.planning.plan_modes import build_mode_plan, mode_site
+from acquire.planning.plan_report import format_plan
 from config.robots import load_robot
 from config.site import SiteConfig
 

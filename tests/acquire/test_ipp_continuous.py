@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from acquire.orchestrator import Orchestrator, Timeouts
-from acquire.plan_continuous import build_continuous_plan
-from acquire.plan_target import replan_for_rate
-from acquire.session import Session
-from acquire.stream_loop import check_streams
+from acquire.planning.plan_continuous import build_continuous_plan
+from acquire.planning.plan_target import replan_for_rate
+from acquire.running.orchestrator import Orchestrator, Timeouts
+from acquire.running.session import Session
+from acquire.running.stream_loop import check_streams
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.clock import WallClock
@@ -25,8 +25,8 @@ from drivers.motion import motion_time
 from drivers.registry import open_tracker
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.robot import SimulatedRobot
-from identify.bounds import prediction_rms_bound
-from identify.pipeline import identify
+from identify.estimator.bounds import prediction_rms_bound
+from identify.results.pipeline import identify
 from kinematics.dh import points_from_joints
 from tests.ipp_device import IppServer
 from tests.ur_emulator import EmulatorProcess
@@ -95,7 +95,7 @@ def test_a_target_the_standard_rate_cannot_reach_is_refused_before_anything_move
     """``--target-accuracy`` plans at the site's 250 Hz; a standard I++ server then streams 10 reports/s, and the
     confirmed plan no longer reaches the target: one line, exit 2, no session, the arm never commanded. The real
     ur_rtde client against the controller emulator, the real I++ client against the simulated server."""
-    from acquire.cli import main
+    from acquire.commands.cli import main
 
     rig = SimulatedRig(load_robot("ur5e"), seed=3)
     with EmulatorProcess(time_scale=4.0) as emu, IppServer(rig, move_reports=True, standard=True) as server:

@@ -1,4 +1,4 @@
-"""Plan building, checking, duration and accuracy prediction (acquire/plan.py)."""
+"""Plan building, checking, duration and accuracy prediction (acquire/planning/plan.py)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from acquire import plan as plan_module
-from acquire.design import greedy_design
-from acquire.plan import (
+from acquire.planning import plan as plan_module
+from acquire.planning.design import greedy_design
+from acquire.planning.plan import (
     HOME_SWEEP,
     PlanError,
     axis_distances_many,
@@ -22,12 +22,12 @@ from acquire.plan import (
     sweep_values,
     tp_model,
 )
-from acquire.plan_report import format_plan, predicted_accuracy, prediction_bound
+from acquire.planning.plan_report import format_plan, predicted_accuracy, prediction_bound
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.motion import motion_time
-from identify.bounds import prediction_rms_bound
-from identify.simulate import random_poses
+from identify.estimator.bounds import prediction_rms_bound
+from identify.simulators.simulate import random_poses
 from kinematics.truth import axis_distances
 from session.plan import Plan, Step
 

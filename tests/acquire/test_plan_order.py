@@ -8,10 +8,15 @@ import itertools
 import numpy as np
 import pytest
 
-from acquire.plan import plan_clearance, tp_model
-from acquire.plan_continuous import _via_home, build_continuous_plan, estimate_continuous_duration, validation_poses
-from acquire.plan_modes import mode_site
-from acquire.plan_order import Visit, order_visits, tour_time
+from acquire.planning.plan import plan_clearance, tp_model
+from acquire.planning.plan_continuous import (
+    _via_home,
+    build_continuous_plan,
+    estimate_continuous_duration,
+    validation_poses,
+)
+from acquire.planning.plan_modes import mode_site
+from acquire.planning.plan_order import Visit, order_visits, tour_time
 from config.cell import cell_from_config, first_contact
 from config.robots import load_robot
 from config.site import SiteConfig

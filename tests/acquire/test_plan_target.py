@@ -1,4 +1,4 @@
-"""Plans designed for a target accuracy (acquire/plan_target.py, ``acquire --target-accuracy``)."""
+"""Plans designed for a target accuracy (acquire/planning/plan_target.py, ``acquire --target-accuracy``)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,14 @@ import json
 import numpy as np
 import pytest
 
-from acquire.cli import main
-from acquire.plan_continuous import (
+from acquire.commands.cli import main
+from acquire.planning.plan_continuous import (
     STREAM_START_SLACK,
     estimate_continuous_duration,
     predicted_accuracy_continuous,
     stream_poses,
 )
-from acquire.plan_target import Candidate, TargetError, candidates, choose, clear_ranges, format_tradeoff
+from acquire.planning.plan_target import Candidate, TargetError, candidates, choose, clear_ranges, format_tradeoff
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.motion import motion_time

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquire.cli import main
-from acquire.orchestrator import Orchestrator
-from acquire.plan import build_plan
-from acquire.session import Session
+from acquire.commands.cli import main
+from acquire.planning.plan import build_plan
+from acquire.running.orchestrator import Orchestrator
+from acquire.running.session import Session
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.base import TrackerReading

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from acquire.cli import main
+from acquire.commands.cli import main
 
 pytest.importorskip("serial")
 from tests.tracker_devices import AsciiDevice

@@ -1,5 +1,5 @@
-"""The progress of a run (acquire/progress.py): counted in the plan's seconds, in wall-clock time, an estimate that
-does not jump, a line every few seconds without a terminal, and a bar that fits a real 80-column terminal."""
+"""The progress of a run (acquire/running/progress.py): counted in the plan's seconds, in wall-clock time, an estimate
+that does not jump, a line every few seconds without a terminal, and a bar that fits a real 80-column terminal."""
 
 from __future__ import annotations
 
@@ -17,11 +17,11 @@ from pathlib import Path
 
 import pytest
 
-from acquire.orchestrator import Progress
-from acquire.plan import estimate_duration
-from acquire.plan_continuous import estimate_continuous_duration
-from acquire.plan_modes import build_mode_plan, mode_site
-from acquire.progress import LINE_PERIOD, ProgressDisplay, step_durations
+from acquire.planning.plan import estimate_duration
+from acquire.planning.plan_continuous import estimate_continuous_duration
+from acquire.planning.plan_modes import build_mode_plan, mode_site
+from acquire.running.orchestrator import Progress
+from acquire.running.progress import LINE_PERIOD, ProgressDisplay, step_durations
 from config.robots import load_robot
 from config.site import SiteConfig
 
@@ -165,7 +165,7 @@ def test_a_session_and_its_verification_fit_an_80_column_terminal(tmp_path):
 def test_a_motion_rehearsal_shows_the_same_progress(capsys):
     """--tracker none: the same display (without a terminal: the first and the last step), in wall-clock time with
     the simulated time labelled; nothing measured, so no sample counts."""
-    from acquire.cli import main
+    from acquire.commands.cli import main
 
     assert main(["--robot", "mock:ur5e", "--tracker", "none", "--steps", "6", "--free-poses", "4"]) == 0
     err = capsys.readouterr().err.splitlines()

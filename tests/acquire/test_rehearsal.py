@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from acquire.cli import main as acquire
-from acquire.plan import build_plan
+from acquire.commands.cli import main as acquire
+from acquire.planning.plan import build_plan
 from config.robots import load_robot
 from config.site import load_site
 from drivers.motion import motion_time
@@ -76,8 +76,8 @@ def test_rehearsal_on_the_simulated_robot_and_its_speed_fraction(tmp_path, monke
 def test_ctrl_c_stops_a_rehearsal_and_a_fault_fails_it() -> None:
     """The rehearsal loop: Ctrl-C (the stop request) stops the arm and ends the run as aborted; a robot fault
     stops it and ends it as failed; nothing else happens between moves."""
-    from acquire.orchestrator import StopRequest
-    from acquire.rehearsal import rehearse
+    from acquire.running.orchestrator import StopRequest
+    from acquire.running.rehearsal import rehearse
     from drivers.base import RobotState
     from drivers.errors import ProtectiveStop
 

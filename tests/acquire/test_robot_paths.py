@@ -8,12 +8,12 @@ from pathlib import Path
 import pytest
 import yaml
 
-from acquire.cli import main
-from acquire.session import Session
+from acquire.commands.cli import main
+from acquire.running.session import Session
 from config.robots import ROBOTS_DIR
 from drivers.errors import SpecError
 from drivers.spec import RobotSpec
-from identify.cli import main as identify_main
+from identify.commands.cli import main as identify_main
 
 SMALL = ["--steps", "8", "--samples", "2", "--free-poses", "4", "--quiet"]
 SAMPLE = Path(__file__).resolve().parents[2] / "identify" / "data" / "sample_ur5e.csv"

@@ -1,5 +1,5 @@
 """Safe motion: every plan keeps the arm clear of its cell and of itself (kinematics/collision.py, config/cell.py,
-the planner in acquire/plan.py, the clearance and the Plan JSON in acquire/cli.py).
+the planner in acquire/planning/plan.py, the clearance and the Plan JSON in acquire/commands/cli.py).
 
 The plans are checked here by an independent point sampling of the capsules: points every ``H`` along each
 capsule's axis, their distances to the plane, to the boxes and to the other capsule's axis (a projection),
@@ -21,9 +21,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from acquire.cli import main as acquire
-from acquire.plan import PlanError, build_plan, plan_clearance
-from acquire.plan_continuous import build_continuous_plan
+from acquire.commands.cli import main as acquire
+from acquire.planning.plan import PlanError, build_plan, plan_clearance
+from acquire.planning.plan_continuous import build_continuous_plan
 from config.geometry import TOOL
 from config.robots import RobotModel, load_robot, robot_names
 from config.site import SiteConfig
@@ -308,7 +308,7 @@ def test_dry_run_shows_the_clearance_and_json_is_the_design_contract(capsys) -> 
     kinds = [s["kind"] for s in doc["steps"]]
     assert set(kinds) == {"sweep", "free", "check", "home"}
     assert kinds.count("check") == SITE.check_poses
-    from acquire.plan import estimate_duration
+    from acquire.planning.plan import estimate_duration
 
     assert doc["duration_s"] == pytest.approx(estimate_duration(plan, load_robot("ur5e"), SITE.measure_time), rel=1e-9)
     assert 0 < doc["predicted_accuracy"]["with_free"] < doc["predicted_accuracy"]["step_noise"]
@@ -321,7 +321,7 @@ def test_dry_run_shows_the_clearance_and_json_is_the_design_contract(capsys) -> 
 def test_a_run_starts_only_when_the_move_from_where_the_arm_stands_is_clear() -> None:
     """The plan is checked from home; an arm left elsewhere (jogged, or stopped mid-move before a resume) must
     reach the first step clear of the cell too, or nothing moves."""
-    from acquire.cli import UsageError, _check_start
+    from acquire.commands.cli import UsageError, _check_start
 
     ur = load_robot("ur5e")
     plan = build_plan(ur, replace(SITE, free_poses=0, check_poses=0, steps_per_sweep=4))

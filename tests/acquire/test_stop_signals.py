@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from acquire.cli import main
-from acquire.session import Session
+from acquire.commands.cli import main
+from acquire.running.session import Session
 from tests._session_steps import recorded_steps
 
 ROBOT = "mock:ur5e?seed=3"

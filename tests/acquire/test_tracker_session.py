@@ -17,9 +17,9 @@ import pytest
 
 pytest.importorskip("serial")
 
-from acquire.orchestrator import Orchestrator, Progress, Timeouts
-from acquire.plan import build_plan
-from acquire.session import Session
+from acquire.planning.plan import build_plan
+from acquire.running.orchestrator import Orchestrator, Progress, Timeouts
+from acquire.running.session import Session
 from config.robots import load_robot
 from config.site import SiteConfig
 from drivers.base import Tracker
@@ -27,9 +27,9 @@ from drivers.clock import VirtualClock
 from drivers.registry import open_tracker
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.robot import SimulatedRobot
-from identify.bounds import prediction_covariances, prediction_rms_bound
-from identify.pipeline import identify
-from identify.simulate import random_poses
+from identify.estimator.bounds import prediction_covariances, prediction_rms_bound
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
 from kinematics.dh import points_from_joints
 from tests.tracker_devices import AsciiDevice, IppServer
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 import yaml
 
-from acquire.cli import main
-from acquire.session import Session
+from acquire.commands.cli import main
+from acquire.running.session import Session
 from config.robots import load_robot
 from drivers.clock import VirtualClock
 from drivers.sim.rig import SimulatedRig

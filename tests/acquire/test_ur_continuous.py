@@ -28,18 +28,18 @@ from scipy.stats import chi2
 
 pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
 
-from acquire.cli import main as acquire
-from acquire.plan_continuous import build_continuous_plan
-from acquire.plan_modes import mode_site
-from acquire.session import Session
+from acquire.commands.cli import main as acquire
+from acquire.planning.plan_continuous import build_continuous_plan
+from acquire.planning.plan_modes import mode_site
+from acquire.running.session import Session
 from config.robots import load_robot
 from config.site import load_site
 from drivers.base import JointStreamBatch, TrackerStreamBatch
 from drivers.registry import open_tracker
 from drivers.trackers.ascii_profile import TRACKERS_DIR
-from identify.bounds import prediction_rms_bound
+from identify.estimator.bounds import prediction_rms_bound
 from identify.io.result_io import validation_of
-from identify.simulate import random_poses
+from identify.simulators.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from tests.ur_emulator import CMD_STOPJ, EmulatorProcess, connected_robot
 
@@ -256,7 +256,7 @@ def test_ctrl_c_mid_sweep_stops_the_arm_and_the_run_ends_aborted(tmp_path: Path)
     start, end = joint6_sweep(site)
     with EmulatorProcess(time_scale=SCALE, native_rate=True, rate=RATE) as emu:
         url = emu.serve_tracker(str(profile), NOISE, 3, latency=LATENCY)
-        command = [sys.executable, "-m", "acquire.cli", "--robot", f"ur5e@{emu.host}?rtde_frequency={RATE:g}",
+        command = [sys.executable, "-m", "acquire.commands.cli", "--robot", f"ur5e@{emu.host}?rtde_frequency={RATE:g}",
                    "--tracker", f"serial:{url}?protocol={profile}", "--mode", "continuous", "--yes", "--config",
                    str(site), "--session", str(path), "--quiet"]
         env = {**os.environ, "PYTHONPATH": str(ROOT)}

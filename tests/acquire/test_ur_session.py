@@ -19,14 +19,14 @@ import yaml
 
 pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
 
-from acquire.cli import main as acquire
-from acquire.session import Session
+from acquire.commands.cli import main as acquire
+from acquire.running.session import Session
 from config.robots import load_robot
 from drivers.sim.rig import SimulatedRig
 from drivers.spec import parse_faults
-from identify.bounds import prediction_rms_bound
-from identify.cli import main as identify
-from identify.simulate import random_poses
+from identify.commands.cli import main as identify
+from identify.estimator.bounds import prediction_rms_bound
+from identify.simulators.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from session.rows import factory_calibration
 from tests.ur_emulator import CMD_MOVEJ, CMD_STOPJ, EmulatorProcess, ScaledClock
@@ -115,7 +115,7 @@ def test_ctrl_c_mid_run_stops_the_arm_resume_completes_and_the_report_says_no_fa
     controller does not send its calibration: the run works, and both reports say so."""
     with EmulatorProcess(time_scale=SCALE, kinematics=False) as emu:
         tracker = emu.serve_tracker("polled-xyz", NOISE, 3)
-        command = [sys.executable, "-m", "acquire.cli", *_args(emu, tracker, tmp_path)]
+        command = [sys.executable, "-m", "acquire.commands.cli", *_args(emu, tracker, tmp_path)]
         env = {**os.environ, "PYTHONPATH": str(ROOT)}
         proc = subprocess.Popen(command, cwd=ROOT, env=env, start_new_session=True, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True)

@@ -12,16 +12,16 @@ import pytest
 import yaml
 from scipy.stats import chi2
 
-from acquire.cli import main as acquire
-from acquire.session import Session
-from acquire.verify import APPROACH_AXES, REGISTER_POSES
+from acquire.commands.cli import main as acquire
+from acquire.running.session import Session
+from acquire.verification.verify import APPROACH_AXES, REGISTER_POSES
 from config.robots import load_robot
 from drivers.sim.rig import SimulatedRig
-from identify.cli import main as identify_main
+from identify.applications.iso9283 import ISO_ORDER, accuracy, cube_poses, pose_result, visit_order
+from identify.commands.cli import main as identify_main
 from identify.io.result_io import result_to_dict
-from identify.iso9283 import ISO_ORDER, accuracy, cube_poses, pose_result, visit_order
-from identify.pipeline import identify
-from identify.simulate import simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.dh import points_from_joints
 
 NOISE, SAMPLES, CYCLES = 5e-5, 5, 5
@@ -323,7 +323,7 @@ def test_a_moved_tracker_gives_the_same_figures_and_another_arm_fails(tmp_path, 
 
 def test_distance_drift_and_multi_directional_follow_iso_9283_by_hand() -> None:
     """ISO 9283 7.3, 7.6 and 7.2 on numbers worked out by hand (mm written as 1e-3 m)."""
-    from identify.iso9283 import distance_result, drift, multi_directional
+    from identify.applications.iso9283 import distance_result, drift, multi_directional
 
     mm = 1e-3
     a = np.zeros((3, 3))
@@ -351,7 +351,7 @@ def test_distance_drift_and_multi_directional_follow_iso_9283_by_hand() -> None:
 def test_registration_variance_is_that_of_a_mean_at_the_centroid_and_grows_outside() -> None:
     """At the centroid of the fitted points the rotation does not count: the 3D variance is expected² / k (a mean of
     k points); beyond them it grows with the distance (the rotation's lever arm)."""
-    from acquire.verify_analysis import registration_variance
+    from acquire.verification.verify_analysis import registration_variance
 
     corners = 0.1 * np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
     var = registration_variance(corners + 5.0, np.array([[5.0, 5.0, 5.0], [5.3, 5.0, 5.0]]), 1e-4)

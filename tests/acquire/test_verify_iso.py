@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 import yaml
 
-from acquire.cli import main as acquire
-from acquire.session import Session
+from acquire.commands.cli import main as acquire
+from acquire.running.session import Session
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.world import backlash_play
-from identify.iso9283 import deviation_angles
+from identify.applications.iso9283 import deviation_angles
 from kinematics.dh import points_from_joints
 
 LASH = 2e-4  # rad on every joint: 0.1-0.2 mm at the TP between two approach directions
@@ -126,10 +126,10 @@ def test_approach_poses_are_planned_and_checked_like_every_step(tmp_path: Path) 
     """Every approach pose (three per pose and run) is a step of the plan the checks see (limits, cell), lies 20 % of
     the edge from its pose along +x, +y, +z on the model that commands it, and a check that fails on them refuses
     the test with its reason."""
-    from acquire.verify import APPROACH_SHARE, VerifyError, build, design, problems
+    from acquire.verification.verify import APPROACH_SHARE, VerifyError, build, design, problems
     from config.robots import load_robot
     from config.site import SiteConfig
-    from identify.calibrated import CalibratedModel
+    from identify.applications.calibrated import CalibratedModel
     from identify.io.result_io import load_result
     from tests.acquire.test_verify import _result
 

@@ -283,7 +283,7 @@ def test_bench_on_zhang_layout_matches_the_baseline(tmp_path: Path) -> None:
 
 
 def test_a_grid_of_sweeps_identifies_with_the_nominal_as_without(tmp_path: Path) -> None:
-    from identify.cli import main
+    from identify.commands.cli import main
 
     write_zhang(tmp_path / "zhang2016" / zhang2016.FIT_FILE, np.random.default_rng(5))
     data = zhang2016.convert(tmp_path / "zhang2016")

@@ -8,7 +8,7 @@ import pytest
 
 from bench import robustness
 from bench.robustness_cells import GRID_ROBOT, gravity_sag
-from identify import pipeline
+from identify.results import pipeline
 from kinematics.dh import points_from_joints
 
 
@@ -64,8 +64,8 @@ def test_joint_errors_from_sweeps_alone_are_not_vouched_for_away_from_the_sweeps
 
 def test_an_elastic_arm_keeps_its_sweeps_and_does_not_pass_beyond_its_stated_accuracy() -> None:
     """Draw 6 rejected 10 of the 12 J2/J3 sweep samples as gross outliers and failed at 827 mm: a sweep the model
-    misses as a whole is now kept (identify/outliers.py, test 5), and the joint errors fitted on sweeps alone are not
-    vouched for (the holdout check warns)."""
+    misses as a whole is now kept (identify/estimator/outliers.py, test 5), and the joint errors fitted on sweeps alone
+    are not vouched for (the holdout check warns)."""
     for k in (4, 6):
         ident, err, stated, _ = identified("ur5e", "elastic", k)
         assert len(ident.rejected_rows) == 0, k

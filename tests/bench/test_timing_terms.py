@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from bench.timing_terms import TRUE_TERMS, run_draw
-from identify.verdict import holdout, holdout_resolution
+from identify.results.verdict import holdout, holdout_resolution
 
 
 @pytest.mark.parametrize("seed", [2026, 2029])

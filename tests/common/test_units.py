@@ -34,8 +34,8 @@ def test_a_positive_length_refuses_zero_and_negatives():
 
 
 def test_every_length_option_of_the_commands_takes_units():
-    from acquire.cli import build_parser as acquire_parser
-    from identify.cli import build_parser as identify_parser
+    from acquire.commands.cli import build_parser as acquire_parser
+    from identify.commands.cli import build_parser as identify_parser
 
     got = identify_parser().parse_args(["x.csv", "--noise", "50um", "--max-offset", "5cm"])
     assert (got.noise, got.max_offset) == pytest.approx((5e-5, 0.05), rel=1e-12)

@@ -1,11 +1,11 @@
-"""Model adequacy (identify/adequacy.py): white tracker noise and a model error shared along each sweep are
+"""Model adequacy (identify/estimator/adequacy.py): white tracker noise and a model error shared along each sweep are
 told apart, and the covariance is scaled for what each of them does to a fitted parameter."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from identify.adequacy import assess
+from identify.estimator.adequacy import assess
 
 SWEEPS, PER_SWEEP = 40, 36
 SIGMA = 1e-5  # m per axis, the declared tracker noise
@@ -26,7 +26,7 @@ def _location_fit(model_error: float, seed: int, white: float = 0.0) -> tuple[fl
     runs = [np.arange(s * PER_SWEEP, (s + 1) * PER_SWEEP) for s in range(SWEEPS)]
     a = assess(residuals, jac, np.full(m, -1), runs, 1.0, SIGMA)
     true_var = noise**2 / m + model_error**2 / SWEEPS
-    implied = max(a.residual, SIGMA) ** 2 * a.inflation / m  # as identify/pipeline.py scales the covariance
+    implied = max(a.residual, SIGMA) ** 2 * a.inflation / m  # as identify/results/pipeline.py scales the covariance
     return true_var, implied, a
 
 

@@ -16,7 +16,7 @@ import pytest
 
 from common.errors import InputError
 from identify import api
-from identify.compensate import parse_ur_pose
+from identify.applications.compensate import parse_ur_pose
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -13,13 +13,13 @@ import pytest
 import yaml
 
 from config.robots import load_robot
-from identify.cli import main
-from identify.holds import check_models, pose_groups
+from identify.applications.holds import check_models, pose_groups
+from identify.applications.result_models import result_models
+from identify.commands.cli import main
 from identify.io.csvio import format_measurements
 from identify.io.result_io import result_to_dict, validation_of
-from identify.pipeline import identify
-from identify.result_models import result_models
-from identify.simulate import dh_truth, make_scenario, reading_error, simulate, transform_lines
+from identify.results.pipeline import identify
+from identify.simulators.simulate import dh_truth, make_scenario, reading_error, simulate, transform_lines
 from kinematics.truth import random_base, random_truth
 
 ROBOT = load_robot("ur5e")
@@ -165,9 +165,9 @@ def test_undeclared_higher_noise_warns_and_declared_passes(first, tmp_path, caps
 def test_each_tracked_point_gets_its_own_figure():
     """Three reflectors, one of them knocked 1 mm off since the calibration: the pooled figure fails, and only
     that point's own held-out RMS is far beyond the noise."""
-    from identify.holds import Model
-    from identify.poe import points_from_lines
-    from identify.simulate import lines_from_model
+    from identify.applications.holds import Model
+    from identify.estimator.poe import points_from_lines
+    from identify.simulators.simulate import lines_from_model
 
     rng = np.random.default_rng(15)
     truth = random_truth(ROBOT.nominal, ROBOT.home, rng)
@@ -228,7 +228,7 @@ def _session_then_check(folder: str) -> tuple[int, int, str]:
     import io
     from pathlib import Path
 
-    from acquire.cli import main as acquire
+    from acquire.commands.cli import main as acquire
 
     path, out = Path(folder) / "s.session", io.StringIO()
     with contextlib.redirect_stdout(io.StringIO()):

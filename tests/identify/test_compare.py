@@ -13,12 +13,12 @@ import pytest
 import yaml
 
 from config.robots import load_robot
-from identify.calibrated import CalibratedModel
-from identify.cli import main
-from identify.compare import _holm, compare
+from identify.applications.calibrated import CalibratedModel
+from identify.applications.compare import _holm, compare
+from identify.commands.cli import main
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
-from identify.simulate import simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.truth import random_truth
 from tests._single_thread import run_single_threaded
 
@@ -117,7 +117,7 @@ def two_sessions(folder: str) -> tuple[list[int], int, str]:
     import contextlib
     import io
 
-    from acquire.cli import main as acquire
+    from acquire.commands.cli import main as acquire
 
     sessions, codes = [], []
     with contextlib.redirect_stdout(io.StringIO()):

@@ -12,13 +12,13 @@ import pytest
 import yaml
 
 from config.robots import load_robot
-from identify.calibrated import CalibratedModel, ResultError
-from identify.cli import main
-from identify.compensate import compensate, parse_ur_pose, pose_matrices, solve_ik
+from identify.applications.calibrated import CalibratedModel, ResultError
+from identify.applications.compensate import compensate, parse_ur_pose, pose_matrices, solve_ik
+from identify.commands.cli import main
+from identify.estimator.poe import lines_from_model
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
-from identify.poe import lines_from_model
-from identify.simulate import random_poses, simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import points_from_joints
 from kinematics.truth import random_truth
 from tests._single_thread import run_single_threaded
@@ -59,8 +59,8 @@ def test_the_result_document_gives_the_identification_s_predictions_and_covarian
     np.testing.assert_allclose(model.points(q), ident.predict(q), atol=1e-12)
     np.testing.assert_allclose(model.point_covariances(q), ident.prediction_covariances(q), rtol=1e-9, atol=1e-20)
     # the frames along the predictor's axis lines are the DH model's for the same robot (the IK's Jacobian, tool poses)
-    from identify.extensions import TermSet
-    from identify.predict import Predictor
+    from identify.estimator.extensions import TermSet
+    from identify.results.predict import Predictor
 
     exact = CalibratedModel.exact(ident.model)
     by_lines = replace(exact, predictor=Predictor(lines_from_model(ident.model, ROBOT.home), np.eye(27),
@@ -75,8 +75,8 @@ def test_the_result_document_gives_the_identification_s_predictions_and_covarian
 def _joint_error_result(tmp_path):
     """A UR10e whose joints bend under gravity (1e-6 rad/(N m): 0.1 mm at the TP) and a FANUC whose controller
     reads J3 against the horizontal, each identified (compliance selected; coupling declared) and written."""
-    from identify.simulate import sweep_readings
-    from identify.simulate_joints import RealArm, measure
+    from identify.simulators.simulate import sweep_readings
+    from identify.simulators.simulate_joints import RealArm, measure
     from kinematics.joint_errors import JointErrors
 
     out = []
@@ -184,7 +184,7 @@ def test_controller_pose_round_trip(case) -> None:
     result = compensate(model, targets, q_plan, ROBOT.limits, rotations, nominal=nominal, frame="base")
     ok = result.solution.status == "ok"
     assert ok.sum() >= 45
-    from identify.compensate import controller_poses, ur_pose
+    from identify.applications.compensate import controller_poses, ur_pose
 
     written = [ur_pose(p) for p in controller_poses(nominal, result.solution.q[ok], model.tool())]
     poses = np.array([parse_ur_pose(text) for text in written])
@@ -266,7 +266,7 @@ def test_pose_targets_in_the_base_frame_with_a_tool(case, result_file, tmp_path,
     tcp = np.array([0.0, 0.0, 0.1])
     flange = model.flanges(q)
     pos = flange[:, :3, :3] @ tcp + flange[:, :3, 3]
-    from identify.compensate import rotvecs
+    from identify.applications.compensate import rotvecs
 
     rv = rotvecs(flange)
     body = "\n".join(",".join(map(str, [*p, *r])) for p, r in zip(pos, rv, strict=True))

@@ -1,4 +1,4 @@
-"""The geometric step (identify/cpa.py): DH frames from joint axes, axes from sweeps, and the whole step.
+"""The geometric step (identify/estimator/cpa.py): DH frames from joint axes, axes from sweeps, and the whole step.
 
 Round trips: a known DH model gives its joint axes at a home pose (z_{i-1} of frame i-1 is joint i's axis);
 ``dh_from_axes`` must return a model that predicts the same tracked point (TP) at every joint configuration.
@@ -15,9 +15,9 @@ from hypothesis import strategies as st
 
 from common.errors import InputError
 from config.robots import load_robot
-from identify.cpa import DEFAULT_PARALLEL_TOL, MIN_CHORD, axis_from_sweep, dh_from_axes, geometric_step
-from identify.measurements import Measurements
-from identify.simulate import random_poses, simulate
+from identify.estimator.cpa import DEFAULT_PARALLEL_TOL, MIN_CHORD, axis_from_sweep, dh_from_axes, geometric_step
+from identify.estimator.measurements import Measurements
+from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
 from kinematics.truth import random_base, random_truth
 

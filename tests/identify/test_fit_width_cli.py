@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from identify.cli import main
+from identify.commands.cli import main
 
 SAMPLE = Path(__file__).resolve().parents[2] / "identify" / "data" / "sample_ur5e.csv"
 

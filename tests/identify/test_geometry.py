@@ -1,4 +1,4 @@
-"""Property-based tests of identify/geometry.py: plane, line and circle fits, common normal, rotations.
+"""Property-based tests of identify/estimator/geometry.py: plane, line and circle fits, common normal, rotations.
 
 Noiseless cases are checked to ~1e-9 (exact geometry up to rounding); noisy cases against tolerances derived
 from the noise level (a few standard deviations of the estimator), never "it ran".
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from identify.geometry import (
+from identify.estimator.geometry import (
     Circle,
     angles_on_circle,
     circle_2d_algebraic,

@@ -1,5 +1,5 @@
 """Issue 23, symptom 8: "determined" speaks of the parameters a user reads, with their sigma, not of a condition
-number. Unit checks of identify.identifiability, then the pipeline's conditioning check on data that leave
+number. Unit checks of identify.estimator.identifiability, then the pipeline's conditioning check on data that leave
 parameters undetermined (linked joints, an elastic arm fitted without its joint errors)."""
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ from dataclasses import replace
 import numpy as np
 
 from config.robots import load_robot
-from identify.identifiability import LEVEL, identifiability
-from identify.pipeline import identify
-from identify.simulate import random_poses
-from identify.simulate_joints import RealArm, measure, sweeps_and_poses
+from identify.estimator.identifiability import LEVEL, identifiability
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
+from identify.simulators.simulate_joints import RealArm, measure, sweeps_and_poses
 from kinematics.joint_errors import JointErrors
 from kinematics.truth import random_truth
 

@@ -15,12 +15,12 @@ import pytest
 import yaml
 
 from config.robots import load_robot
-from identify.bounds import prediction_rms_bound
-from identify.cli import main
+from identify.commands.cli import main
+from identify.estimator.bounds import prediction_rms_bound
 from identify.io.csvio import format_measurements, read_measurements
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify, split_holdout
-from identify.simulate import random_poses, simulate
+from identify.results.pipeline import identify, split_holdout
+from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import model_from_dict, model_to_dict, points_from_joints
 from kinematics.truth import random_truth
 

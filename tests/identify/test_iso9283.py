@@ -1,4 +1,4 @@
-"""ISO 9283 beyond AP/RP (identify/iso9283.py): vAP per pose, orientation AP/RP from a rigid fit, and the
+"""ISO 9283 beyond AP/RP (identify/applications/iso9283.py): vAP per pose, orientation AP/RP from a rigid fit, and the
 Monte-Carlo uncertainty of every figure against the spread of simulated repeats of the test."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from identify.iso9283 import (
+from identify.applications.iso9283 import (
     accuracy,
     deviation_angles,
     directions_result,
@@ -92,7 +92,7 @@ def test_monte_carlo_never_states_less_than_the_noise_allows() -> None:
 def test_spread_covariances_pool_the_poses_of_a_group_by_hand() -> None:
     """Two sets of one group, three visits each along x (sample variances 1 and 4 mm², 2 dof each), no noise: the
     group's is 2.5 mm²; each set's (2 own + 10 group) / 12; a third set in a group of its own keeps its own."""
-    from identify.iso9283 import spread_covariances
+    from identify.applications.iso9283 import spread_covariances
 
     sets = {"a": np.array([[-1, 0, 0], [0, 0, 0], [1, 0, 0]]) * MM,
             "b": np.array([[-2, 0, 0], [0, 0, 0], [2, 0, 0]]) * MM,

@@ -1,5 +1,5 @@
-"""The lines model's Jacobian blocks (identify.poe.LineProblem.jacobian_blocks): equal to central differences of
-the residuals, and the same whether the rows are formed in one block or in many (the chunks that bound the memory
+"""The lines model's Jacobian blocks (identify.estimator.poe.LineProblem.jacobian_blocks): equal to central differences
+of the residuals, and the same whether the rows are formed in one block or in many (the chunks that bound the memory
 of large sessions), with every kind of column present: streamed rows with their clock, joint-error terms, unread
 joints and two tracked points."""
 
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from config.robots import load_robot
-from identify import poe
-from identify.poe import JointTerms, LineProblem, lines_from_model, points_from_lines
-from identify.sync import retiming
+from identify.estimator import poe
+from identify.estimator.poe import JointTerms, LineProblem, lines_from_model, points_from_lines
+from identify.estimator.sync import retiming
 
 ROBOT = load_robot("ur5e")
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identify import verdict
-from identify.adequacy import assess
-from identify.cli import main
+from identify.commands.cli import main
+from identify.estimator.adequacy import assess
+from identify.results import verdict
 
 SAMPLE = Path(__file__).resolve().parents[2] / "identify" / "data" / "sample_ur5e.csv"
 SAMPLE_NOISE = 5e-5  # m per axis: the noise the sample was made with (sample_ur5e_truth.yaml)

@@ -15,11 +15,11 @@ import pytest
 import yaml
 
 from config.robots import load_robot
-from identify.dh_output import dh_output
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
-from identify.simulate import tilted_truth
-from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
+from identify.results.dh_output import dh_output
+from identify.results.pipeline import identify
+from identify.simulators.simulate import tilted_truth
+from identify.simulators.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from kinematics.joint_errors import JointErrors
 from kinematics.truth import random_truth
@@ -180,8 +180,8 @@ def test_the_same_arm_gives_the_same_table_from_one_noise_draw_to_the_next():
 def test_the_terminal_names_the_worst_sweeps_joint_and_prints_no_nan():
     """Issue 25, item 9 (terminal content): "(worst: sweep 8)" named a sweep id, not a joint; a group whose samples
     were all rejected printed "free nan"."""
-    from identify.pipeline import SweepFit
     from identify.report.terminal import format_report
+    from identify.results.pipeline import SweepFit
 
     robot = load_robot("ur5e")
     arm, rng = _arm(robot, 2307)
@@ -216,7 +216,7 @@ def test_without_sweeps_or_declared_noise_model_error_is_not_called_zero():
     """Symptom 6 (last sentence): free poses only and no --noise: nothing tells noise from model error, yet the
     result said "tracker noise 6.73 mm, model error 0" and "consistent with no independent noise estimate"."""
     from identify.report.terminal import format_report
-    from identify.simulate import random_poses
+    from identify.simulators.simulate import random_poses
 
     robot = load_robot("ur5e")
     arm, rng = _arm(robot, 2310)

@@ -1,12 +1,12 @@
-"""The outlier test (identify/outliers.py) on residuals with known structure: isolated gross errors go, an error
-that moves the greater part of a sweep stays (it is the model's to show, not a beam break)."""
+"""The outlier test (identify/estimator/outliers.py) on residuals with known structure: isolated gross errors go, an
+error that moves the greater part of a sweep stays (it is the model's to show, not a beam break)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from identify.outliers import outlier_free
+from identify.estimator.outliers import outlier_free
 
 SIGMA = 5e-5  # m per axis
 SWEEPS, SAMPLES = 6, 6

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from config.robots import load_robot
-from identify.estimate import place_nominal
+from identify.estimator.estimate import place_nominal
 from kinematics.dh import points_from_joints
 
 ROBOT = Path(__file__).parents[2] / "bench" / "realdata" / "robots" / "iiwa7_a1a2.yaml"

@@ -14,13 +14,13 @@ import yaml
 
 from bench.program_filter import draw
 from config.robots import load_robot
-from identify.cli import main
-from identify.controller import controller_model
+from identify.applications.controller import controller_model
+from identify.commands.cli import main
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
 from identify.programs import urscript
 from identify.programs.core import rewrite
-from identify.simulate import simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.truth import random_truth
 
 ROBOT = load_robot("ur5e")
@@ -224,7 +224,7 @@ def test_compensated_targets_are_checked_against_the_cell_of_the_plan_checks(res
 def test_a_pose_target_with_a_rotated_tool_is_the_tool_s_orientation(result, tmp_path, capsys) -> None:
     """``--frame base`` targets with rx,ry,rz and ``--tool X,Y,Z,RX,RY,RZ``: the tool's pose at known joints comes
     back as those joints (the tool rotation was applied twice: joint 6 came back 0.5 rad off)."""
-    from identify.compensate import pose_matrices, rotvecs
+    from identify.applications.compensate import pose_matrices, rotvecs
     from identify.io.result_io import load_result
 
     model = load_result(str(result))[0].with_base(np.eye(4))

@@ -1,6 +1,6 @@
 """Issue 14: coupled joints, several tracked points, and the joint errors a DH table cannot hold.
 
-Simulated arms (identify.simulate_joints) write readings as their controller reports them; tolerances come
+Simulated arms (identify.simulators.simulate_joints) write readings as their controller reports them; tolerances come
 from the tracker noise (0.02 mm per axis) through the fit's own reported uncertainty.
 """
 
@@ -14,11 +14,11 @@ import yaml
 
 from common.errors import InputError
 from config.robots import load_robot
-from identify.cli import main
+from identify.commands.cli import main
 from identify.io.csvio import format_measurements, parse_measurements
-from identify.pipeline import identify
-from identify.simulate import random_poses
-from identify.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
+from identify.simulators.simulate_joints import RealArm, measure, reflector_plate, sweeps_and_poses
 from kinematics.joint_errors import JointErrors
 from kinematics.truth import random_truth
 

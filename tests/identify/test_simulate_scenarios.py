@@ -1,4 +1,4 @@
-"""The realistic-cell scenarios of identify/simulate.py and the lines-model bound of bench/robustness.py."""
+"""The realistic-cell scenarios of identify/simulators/simulate.py and the lines-model bound of bench/robustness.py."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-import identify.bounds
+import identify.estimator.bounds
 from bench.robustness import lines_bound
 from config.robots import load_robot
-from identify.bounds import prediction_rms_bound
-from identify.poe import points_from_lines
-from identify.simulate import (
+from identify.estimator.bounds import prediction_rms_bound
+from identify.estimator.poe import points_from_lines
+from identify.simulators.simulate import (
     WRIST_STEP,
     dh_truth,
     line_distances,
@@ -178,7 +178,7 @@ def test_lines_bound_equals_the_dh_bound_for_an_untilted_truth(name, monkeypatch
     q, _, joint = sweep_readings(robot.joint_types, robot.home, robot.limits, 12)
     q_check = random_poses(robot.limits, 100, rng)
     if name == "ur5e":  # three nearly parallel axes: the DH Jacobian has a 3e-9 singular value that RCOND drops
-        monkeypatch.setattr(identify.bounds, "RCOND", 1e-13)
+        monkeypatch.setattr(identify.estimator.bounds, "RCOND", 1e-13)
     dh = prediction_rms_bound(model, q, q_check, 5e-5)
     lines = lines_bound(lines_from_model(model, robot.home), q, np.zeros(len(q), bool), joint, q_check, 5e-5)
     assert lines == pytest.approx(dh, rel=1e-6)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from identify.cli import main
+from identify.commands.cli import main
 
 SAMPLE = Path(__file__).resolve().parents[2] / "identify" / "data" / "sample_ur5e.csv"
 
@@ -68,11 +68,11 @@ def test_readings_in_degrees_are_refused_with_or_without_a_robot_model(tmp_path,
 @pytest.mark.parametrize("option", ["--report", "--out"])
 def test_an_output_no_file_can_be_written_to_is_refused_before_fitting(monkeypatch, capsys, option):
     """/proc is a folder, but no file can be made in it: before, the refusal came after the fit."""
-    import identify.cli
+    import identify.commands.cli
 
     def no_fit(*args, **kwargs):
         raise AssertionError("fitted before refusing the output")
 
-    monkeypatch.setattr(identify.cli, "identify", no_fit)
+    monkeypatch.setattr(identify.commands.cli, "identify", no_fit)
     assert main([str(SAMPLE), option, f"/proc/out-{option[2:]}"]) == 2
     _one_line(capsys, option, "no file can be written in /proc")

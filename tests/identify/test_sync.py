@@ -1,4 +1,4 @@
-"""The clock fit of streamed rows (identify/sync.py through the pipeline): offset and drift recovered from
+"""The clock fit of streamed rows (identify/estimator/sync.py through the pipeline): offset and drift recovered from
 the data with honest uncertainties, gaps never bridged, the CSV round trip, and the result's outputs."""
 
 from __future__ import annotations
@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from config.robots import load_robot
+from identify.estimator.measurements import Measurements
+from identify.estimator.sync import retiming
 from identify.io.csvio import format_measurements, parse_measurements
 from identify.io.result_io import result_to_dict
-from identify.measurements import Measurements
-from identify.pipeline import identify
 from identify.report.terminal import format_report
-from identify.simulate import random_poses
-from identify.simulate_stream import StreamSettings, joined, streamed_sweeps
-from identify.sync import retiming
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
+from identify.simulators.simulate_stream import StreamSettings, joined, streamed_sweeps
 from kinematics.dh import points_from_joints
 from kinematics.truth import perturbed_model, random_base
 
@@ -195,8 +195,8 @@ def test_the_trajectory_follows_a_move_streamed_at_10_reports_per_second():
     """A 0.25 rad/s move with 1 rad/s² ramps, rows every 0.1 s, read 8 ms off the rows: within a ramp the
     trajectory is exact; where a ramp meets the cruise it misses by less than half what a chord misses anywhere on
     a ramp (1 rad/s² x 8 ms x 92 ms / 2 = 0.37 mrad: 0.18 mm at 0.5 m, the chord's miss before)."""
-    from identify.simulate_stream import trapezoid
-    from identify.sync import Segment, _interpolate
+    from identify.estimator.sync import Segment, _interpolate
+    from identify.simulators.simulate_stream import trapezoid
 
     def move(x):
         return trapezoid(-0.5, 0.2, 0.25, 1.0, x)

@@ -1,5 +1,5 @@
-"""The tall-problem solver (identify/tall_lsq.py) and the blocked linear algebra of large sessions: the same optimum
-as MINPACK to far below the estimate's uncertainty, on a toy problem and through the whole pipeline."""
+"""The tall-problem solver (identify/estimator/tall_lsq.py) and the blocked linear algebra of large sessions: the same
+optimum as MINPACK to far below the estimate's uncertainty, on a toy problem and through the whole pipeline."""
 
 from __future__ import annotations
 
@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-import identify.linalg as linalg
-import identify.tall_lsq as tall_lsq
+import identify.estimator.linalg as linalg
+import identify.estimator.tall_lsq as tall_lsq
 from config.robots import load_robot
-from identify.extensions import score_statistics
-from identify.measurements import Measurements
-from identify.pipeline import identify
-from identify.refine import vector_from_model
-from identify.simulate import random_poses
-from identify.simulate_stream import StreamSettings, joined, streamed_sweeps
-from identify.tall_lsq import solve_tall
+from identify.estimator.extensions import score_statistics
+from identify.estimator.measurements import Measurements
+from identify.estimator.refine import vector_from_model
+from identify.estimator.tall_lsq import solve_tall
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses
+from identify.simulators.simulate_stream import StreamSettings, joined, streamed_sweeps
 from kinematics.dh import points_from_joints
 from kinematics.truth import perturbed_model, random_base
 

@@ -1,4 +1,4 @@
-"""identify/timing.py: joints interpolated in time, and the coarse clock offset from speed profiles; plus the
+"""identify/estimator/timing.py: joints interpolated in time, and the coarse clock offset from speed profiles; plus the
 simulated rig's streams (drivers/sim/stream.py), whose configured latency the offset must recover."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from drivers.motion import profile_fraction
 from drivers.sim.rig import SimulatedRig
 from drivers.sim.robot import open_robot
 from drivers.sim.tracker import open_tracker
-from identify.timing import SweepStreams, coarse_clock_offset, interpolate_joints
+from identify.estimator.timing import SweepStreams, coarse_clock_offset, interpolate_joints
 
 
 def _trapezoid(t: np.ndarray, t0: float, duration: float = 3.5, distance: float = 1.5) -> np.ndarray:

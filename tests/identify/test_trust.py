@@ -17,11 +17,11 @@ import pytest
 
 from common.errors import InputError
 from config.robots import load_robot
-from identify.cli import main
+from identify.commands.cli import main
+from identify.estimator.measurements import Measurements
 from identify.io.csvio import format_measurements
-from identify.measurements import Measurements
-from identify.pipeline import Identification, identify
-from identify.simulate import observe, random_poses, simulate, sweep_readings
+from identify.results.pipeline import Identification, identify
+from identify.simulators.simulate import observe, random_poses, simulate, sweep_readings
 from kinematics.dh import points_from_joints
 from kinematics.truth import random_truth
 

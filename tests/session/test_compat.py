@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquire.cli import main
-from acquire.session import Session
+from acquire.commands.cli import main
+from acquire.running.session import Session
 from session.schema import columns
 
 DATA = Path(__file__).parents[1] / "data"

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquire.session import Session
+from acquire.running.session import Session
 from tests._acquire_writer import Writer
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -135,7 +135,8 @@ def test_sigkill_then_copy_the_session_file_alone_and_resume_the_copy(tmp_path: 
 
 
 def test_two_writers_started_together_one_runs_the_other_exits_2_at_once(tmp_path: Path) -> None:
-    """Two fresh ``acquire --resume`` processes (the installed entry point, acquire/launch.py) started together."""
+    """Two fresh ``acquire --resume`` processes (the installed entry point, acquire/commands/launch.py) started
+    together."""
     site = tmp_path / "fast.yaml"
     site.write_text(FAST_SITE)
     path = tmp_path / "s.session"
@@ -149,7 +150,7 @@ def test_two_writers_started_together_one_runs_the_other_exits_2_at_once(tmp_pat
     with Session.open(path) as session:
         runs_before, steps_before = len(session.runs()), len(session.steps())
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
-    cmd = [sys.executable, "-m", "acquire.launch", "--resume", str(path), "--realtime", "--quiet"]
+    cmd = [sys.executable, "-m", "acquire.commands.launch", "--resume", str(path), "--realtime", "--quiet"]
     started = time.monotonic()
     procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=tmp_path)
              for _ in range(2)]

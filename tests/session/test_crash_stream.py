@@ -4,7 +4,7 @@ then resumed with ``acquire --resume`` as a fresh process.
 The run is at real speed (``--realtime``: the rig's clock is the wall clock, so the kill's time and the session's
 timestamps share one clock) and the kill lands while the first continuous sweep is being recorded, at a random
 moment between two of its commits. The file then holds every batch committed before the kill, up to the last
-second (acquire/stream_loop.py commits every 0.5 s); the attempt is left ``recording`` (detectable: no process
+second (acquire/running/stream_loop.py commits every 0.5 s); the attempt is left ``recording`` (detectable: no process
 ended it); the resume marks it interrupted and superseded, redoes the sweep from its start, completes the session
 and identifies it from the redo alone.
 """
@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 import yaml
 
-from acquire.session import Session
-from acquire.stream_loop import COMMIT_PERIOD
+from acquire.running.session import Session
+from acquire.running.stream_loop import COMMIT_PERIOD
 from drivers.sim.stream import robot_time_of_stamps
 from tests._acquire_writer import ROOT, Writer
 
@@ -117,8 +117,8 @@ def test_sigkill_mid_sweep_keeps_the_committed_batches_and_the_resume_redoes_the
 
     # resume: a fresh process, the installed entry point (virtual clock: the rest of the plan in seconds)
     env = {**os.environ, "PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1"}
-    done = subprocess.run([sys.executable, "-m", "acquire.launch", "--resume", str(path), "--quiet"], cwd=tmp_path,
-                          env=env, capture_output=True, text=True, timeout=600)
+    done = subprocess.run([sys.executable, "-m", "acquire.commands.launch", "--resume", str(path), "--quiet"],
+                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "result written" in done.stdout
     attempts = _read(path, "SELECT attempt, status, superseded, reason FROM streams WHERE plan_index = ? ORDER BY "

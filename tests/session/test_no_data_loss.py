@@ -18,11 +18,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-from acquire.cli import main as acquire_main
-from acquire.resume import ResumeRefused, resume_settings
-from acquire.session import Session
-from acquire.session_backup import backup_session
-from identify.cli import main as identify_main
+from acquire.commands.cli import main as acquire_main
+from acquire.running.resume import ResumeRefused, resume_settings
+from acquire.running.session import Session
+from acquire.running.session_backup import backup_session
+from identify.commands.cli import main as identify_main
 from session.schema import SessionBusy, SessionError
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 
@@ -252,8 +252,8 @@ def test_a_second_writer_is_refused_naming_the_holder_and_readers_still_work(tmp
 
 
 def test_the_entry_point_refuses_a_second_writer_before_the_heavy_imports(tmp_path: Path, capsys) -> None:
-    from acquire.launch import main as launch_main
-    from acquire.launch import resume_target
+    from acquire.commands.launch import main as launch_main
+    from acquire.commands.launch import resume_target
 
     assert resume_target(["--resume", "a.session", "--quiet"]) == Path("a.session")
     assert resume_target(["--resume=b.session"]) == Path("b.session")

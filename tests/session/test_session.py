@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquire.session import Session
+from acquire.running.session import Session
 from common import __version__
 from drivers.base import TrackerReading
 from identify.io.csvio import read_measurements

@@ -15,15 +15,15 @@ cv2 = pytest.importorskip("cv2")
 
 from scipy.spatial.transform import Rotation  # noqa: E402
 
-from acquire.cli import main  # noqa: E402
-from acquire.session import Session  # noqa: E402
+from acquire.commands.cli import main  # noqa: E402
+from acquire.running.session import Session  # noqa: E402
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics, write_intrinsics  # noqa: E402
 from drivers.camera.renderer import Optics, Renderer  # noqa: E402
 from drivers.camera.targets import charuco_board, dictionary_id  # noqa: E402
 from drivers.clock import VirtualClock  # noqa: E402
 from drivers.sim.rig import SimulatedRig  # noqa: E402
 from drivers.spec import RobotSpec, TrackerSpec  # noqa: E402
-from identify.bounds import prediction_rms_bound  # noqa: E402
+from identify.estimator.bounds import prediction_rms_bound  # noqa: E402
 from kinematics.dh import model_from_dict, points_from_joints  # noqa: E402
 
 TRUE_CAMERA = CameraIntrinsics([[610.0, 0, 322.5], [0, 608.0, 236.0], [0, 0, 1]], [-0.12, 0.05, 0.0, 0.0, 0.0],

@@ -13,7 +13,7 @@ import yaml
 
 cv2 = pytest.importorskip("cv2")
 
-from acquire.cli import main  # noqa: E402
+from acquire.commands.cli import main  # noqa: E402
 from drivers.camera.intrinsics import CameraIntrinsics  # noqa: E402
 from drivers.camera.renderer import Optics, Renderer  # noqa: E402
 from drivers.camera.sources import LiveCamera, device_stamps_usable  # noqa: E402

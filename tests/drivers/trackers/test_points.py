@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acquire.orchestrator import Orchestrator, Progress
-from acquire.session import Session
+from acquire.running.orchestrator import Orchestrator, Progress
+from acquire.running.session import Session
 from config.robots import ConfigError
 from drivers.errors import BadReading, ConnectionFailed, SpecError, TargetLost
 from drivers.registry import open_tracker

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from config.robots import load_robot
-from identify.factory import factory_model, factory_reference
+from identify.applications.factory import factory_model, factory_reference
 from kinematics.dh import points_from_joints
 from session.rows import factory_calibration
 

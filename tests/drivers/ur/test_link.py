@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
 
-from acquire.orchestrator import StopRequest
+from acquire.running.orchestrator import StopRequest
 from config.robots import load_robot
 from drivers.errors import ConnectionFailed, RobotFault
 from drivers.sim.rig import SimulatedRig

@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
 
-from acquire.orchestrator import StopRequest
+from acquire.running.orchestrator import StopRequest
 from config.robots import load_robot
 from drivers.base import JointStreamBatch, StreamingRobot
 from drivers.errors import ProtectiveStop, RobotFault, SpecError

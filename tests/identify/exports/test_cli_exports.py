@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from identify.cli import main
+from identify.commands.cli import main
 from identify.io.csvio import format_measurements, read_measurements
 from kinematics.dh import model_from_dict
 
@@ -38,7 +38,7 @@ def test_every_export_is_written_and_consistent(tmp_path, capsys):
 
 def test_ur_calibration_of_a_non_ur_robot_is_refused_before_identifying(tmp_path, capsys):
     from config.robots import load_robot
-    from identify.simulate import simulate
+    from identify.simulators.simulate import simulate
     from kinematics.truth import random_truth
 
     robot = load_robot("scara")
@@ -54,7 +54,7 @@ def test_ur_calibration_of_a_non_ur_robot_is_refused_before_identifying(tmp_path
 
 def test_acquire_writes_the_report_beside_the_session(tmp_path):
     pytest.importorskip("matplotlib")
-    from acquire.cli import main as acquire_main
+    from acquire.commands.cli import main as acquire_main
 
     session = tmp_path / "s.session"
     assert acquire_main(["--robot", "mock:ur5e?seed=2", "--tracker", "mock", "--session", str(session), "--steps",

@@ -30,8 +30,8 @@ from identify.exports.ur_calibration import (
 from identify.exports.urdf import matrix_from_rpy, rpy_from_matrix, urdf_from_model, write_urdf
 from identify.io.csvio import read_measurements
 from identify.io.result_io import result_to_dict
-from identify.pipeline import identify
-from identify.simulate import random_poses, simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints, transform_from_dh
 from kinematics.truth import random_truth
 

@@ -1,6 +1,6 @@
 """Exports of the exact axis lines (URDF, UR calibration): every joint a full frame, so the written files
-reproduce ``identify.poe.points_from_lines`` to 1e-9 m at random readings, also where nearly parallel axes would
-give an exact DH table metres or kilometres of ``d``; no origin is then far from the arm."""
+reproduce ``identify.estimator.poe.points_from_lines`` to 1e-9 m at random readings, also where nearly parallel axes
+would give an exact DH table metres or kilometres of ``d``; no origin is then far from the arm."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ import pytest
 import yaml
 
 from config.robots import load_robot
-from identify.cpa import dh_from_axes
+from identify.estimator.cpa import dh_from_axes
+from identify.estimator.poe import points_from_lines
 from identify.exports.joint_frames import joint_frames
 from identify.exports.ur_calibration import (
     calibration_from_lines,
@@ -21,8 +22,7 @@ from identify.exports.ur_calibration import (
     read_calibration,
 )
 from identify.exports.urdf import urdf_from_lines
-from identify.poe import points_from_lines
-from identify.simulate import lines_from_model, random_poses, tilted_truth
+from identify.simulators.simulate import lines_from_model, random_poses, tilted_truth
 from kinematics.dh import frames_from_joints
 from kinematics.truth import random_base, random_truth
 

@@ -16,11 +16,11 @@ import pytest
 import yaml
 
 from config.robots import load_robot
-from identify.cli import main
+from identify.commands.cli import main
+from identify.estimator.measurements import Measurements
 from identify.io.csvio import format_measurements
 from identify.io.result_io import validation_of
-from identify.measurements import Measurements
-from identify.simulate import simulate
+from identify.simulators.simulate import simulate
 from kinematics.dh import DHModel, points_from_joints
 from kinematics.truth import random_truth
 
@@ -356,7 +356,7 @@ def test_duplicate_column(tmp_path, lines, capsys):
 
 def _process(*args) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "identify.cli", *map(str, args)],
+        [sys.executable, "-m", "identify.commands.cli", *map(str, args)],
         capture_output=True, text=True, timeout=60, cwd=ROOT, check=False,
     )
 

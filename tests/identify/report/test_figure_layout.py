@@ -12,12 +12,12 @@ from scipy.stats import chi2
 
 pytest.importorskip("matplotlib")
 
-from identify.calibrated import CalibratedModel
+from identify.applications.calibrated import CalibratedModel
 from identify.report.compare_html import figure_displacement, figure_trend
 from identify.report.figures import figure_frames, figure_joint
 from identify.report.html import _fit_rows, figure_drift, figure_sweeps, figure_validation
 from identify.report.verify_html import figure_accuracy
-from identify.simulate import random_poses
+from identify.simulators.simulate import random_poses
 from tests._figure_layout import figure_problems
 from tests.identify.report.test_html import _identified
 

@@ -15,11 +15,11 @@ import pytest
 
 pytest.importorskip("matplotlib")
 
-from acquire.session import Session
+from acquire.running.session import Session
 from config.robots import load_robot
-from identify.pipeline import identify
 from identify.report.html import report_html, write_report
-from identify.simulate import simulate
+from identify.results.pipeline import identify
+from identify.simulators.simulate import simulate
 from kinematics.truth import random_truth
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 

@@ -11,9 +11,9 @@ import pytest
 
 pytest.importorskip("matplotlib")
 
-from acquire.session import Session
-from identify.calibrated import CalibratedModel
-from identify.compare import compare
+from acquire.running.session import Session
+from identify.applications.calibrated import CalibratedModel
+from identify.applications.compare import compare
 from identify.report.compare_html import compare_html
 from identify.report.html import report_html
 from identify.report.verify_html import verification_html

@@ -1,0 +1,1 @@
+"""The ``acquire`` command's front-ends: options, entry point, and one module per subcommand."""

@@ -1,0 +1,485 @@
+"""``acquire``: plan, move, measure and record a session, then identify (the operator's main job).
+
+Its options, subcommands and exit codes: acquire/commands/options.py (``acquire --help``). The run itself, its progress
+and what a complete session leaves beside it (result YAML, HTML report): acquire/running/runner.py.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import logging
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from acquire.commands.options import build_parser
+from acquire.planning.plan import check_plan, estimate_duration, plan_clearance
+from acquire.planning.plan_continuous import estimate_continuous_duration
+from acquire.planning.plan_modes import build_mode_plan, format_modes, mode_site, plan_mode
+from acquire.planning.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
+from acquire.planning.plan_target import TargetError, candidates, choose, format_tradeoff, replan_for_rate
+from acquire.running.orchestrator import RunResult, StopRequest
+from acquire.running.resume import ResumeRefused, resume_settings
+from acquire.running.runner import finish, run_session
+from acquire.running.session import Session
+from acquire.running.stream_loop import check_streams
+from common import stop_signals
+from common.errors import InputError
+from common.fit_width import say
+from common.outputs import OutputError, check_outputs, check_target, same_file
+from config.cell import Clearance
+from config.robots import ConfigError, RobotModel, load_robot
+from config.site import SiteConfig, load_site
+from drivers.clock import VirtualClock, WallClock
+from drivers.errors import DriverError
+from drivers.spec import RobotSpec, TrackerSpec
+from session.plan import Plan
+from session.schema import SessionError
+
+log = logging.getLogger("acquire")
+
+
+class UsageError(Exception):
+    """Bad input: one line, exit code 2."""
+
+
+REHEARSAL_SPEED = 0.25  # --tracker none: the share of the model's default speeds and accelerations
+
+
+def _site(args: argparse.Namespace) -> SiteConfig:
+    site = load_site(args.config) if args.config else SiteConfig.default()
+    fraction = args.speed_fraction
+    if fraction is None and getattr(args, "tracker", None) == "none":
+        fraction = REHEARSAL_SPEED
+    if fraction is not None and not 0 < fraction <= 1:
+        raise UsageError(f"--speed-fraction must be in (0, 1], got {fraction}")
+    return site.with_overrides(steps_per_sweep=args.steps, samples_per_step=args.samples,
+                               free_poses=args.free_poses, tracker_noise=args.noise, speed_fraction=fraction,
+                               acceleration_fraction=fraction)
+
+
+def _without_faults(spec):
+    """``spec`` without a mock backend's ``fault`` option."""
+    if spec.backend != "mock" or "fault" not in spec.options:
+        return spec
+    return replace(spec, options={k: v for k, v in spec.options.items() if k != "fault"})
+
+
+def _confirm(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, question: str | None = None) -> None:
+    """A real robot moves only after the operator has seen the plan and said yes (or passed --yes)."""
+    if robot_spec.backend == "mock" or args.yes:
+        return
+    if not sys.stdin.isatty():
+        raise UsageError("a real robot needs confirmation: run in a terminal or pass --yes after reading the plan")
+    question = question or f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: "
+    answer = input(question).strip()
+    if answer.lower() != "yes":
+        raise UsageError("not confirmed; nothing moved")
+
+
+TRACED_BACKENDS = ("serial", "ipp")  # trackers whose byte stream --trace-io can log
+
+
+def _open_tracker(tracker_spec: TrackerSpec, rig, site: SiteConfig, trace_io: Path | None):
+    from drivers.registry import open_tracker
+
+    if trace_io is not None and tracker_spec.backend not in TRACED_BACKENDS:
+        raise UsageError(f"--trace-io logs the bytes of serial and I++ trackers, not of {tracker_spec.backend!r}")
+    extra = {"trace_io": trace_io} if trace_io is not None else {}
+    return open_tracker(tracker_spec, rig=rig, site=site, **extra)
+
+
+def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bool, site: SiteConfig,
+                  trace_io: Path | None = None):
+    from drivers.registry import open_robot
+
+    clock = WallClock() if realtime or robot_spec.backend != "mock" else VirtualClock()
+    rig = None
+    if robot_spec.backend == "mock" or tracker_spec.backend == "mock":
+        from drivers.sim.rig import SimulatedRig
+
+        rig = SimulatedRig.from_spec(robot_spec, tracker_spec, clock)
+    robot = open_robot(robot_spec, rig=rig, site=site)
+    tracker = _open_tracker(tracker_spec, rig, site, trace_io)
+    robot.connect(site.timeouts.connect)
+    tracker.connect(site.timeouts.connect)
+    return robot, tracker, clock
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.probe:
+        from acquire.commands.probe import probe
+
+        return probe(args)
+    _check_files(args)
+    if args.log:  # our own handler: basicConfig would do nothing where logging is already configured
+        handler = logging.FileHandler(args.log, encoding="utf-8")
+        handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(message)s"))
+        log.addHandler(handler)
+        log.setLevel(logging.INFO)
+    if not args.resume:
+        return _run(args, None)
+    if args.dry_run:
+        with Session.open(args.resume) as session:  # a dry run only reads: no lock, works beside a writer
+            return _run(args, session)
+    # the write lock first: a second writer is refused here, before any device is opened
+    with Session.open(args.resume, write=True) as session:
+        return _run(args, session)
+
+
+def _check_files(args: argparse.Namespace) -> None:
+    """Refuse, before anything is opened or moved, files that would overwrite data: a new session that exists
+    or has no folder, a result or report beside it that exists (without --force), a log that is an input."""
+    if args.remeasure_missing and not args.resume:
+        raise UsageError("--remeasure-missing goes with --resume SESSION")
+    inputs = [p for p in (args.resume, args.config) if p is not None]
+    for option, log_file in (("--log", args.log), ("--trace-io", args.trace_io)):  # appended to, never replaced
+        if log_file is not None and any(same_file(log_file, p) for p in [*inputs, args.session] if p is not None):
+            raise UsageError(f"{option} {log_file} is the session or the site file; a log is a file of its own")
+    if args.resume or args.dry_run or args.session is None:
+        return
+    try:
+        check_target(args.session, force=False, option="--session")
+    except OutputError as exc:  # --force replaces derived files, never a session
+        raise UsageError(str(exc).replace("pass --force to replace it",
+                                          "a session file is never overwritten")) from None
+    check_outputs(inputs, [("--session", args.session), ("result", args.session.with_suffix(".result.yaml")),
+                           ("report", args.session.with_suffix(".report.html"))], args.force)
+
+
+def _run(args: argparse.Namespace, session: Session | None) -> int:
+    """Plan (or the session's plan), show it, then connect and record; ``session`` is the session to resume
+    (open for writing, or for reading in a dry run) or None for a new one."""
+    changes: tuple[str, ...] = ()
+    if session is not None:
+        if "verification" in (session.header.get("config") or {}):
+            raise UsageError(f"{session.path} is a verification session: resume it with acquire verify --resume")
+        options = {"--steps": args.steps, "--samples": args.samples, "--free-poses": args.free_poses}
+        settings = resume_settings(session.header, args.robot, args.tracker, args.config, options)
+        # a rehearsal's injected faults happened in the run that stopped; the resumed run starts clear
+        robot_spec = settings.robot if args.robot else _without_faults(settings.robot)
+        tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
+        site, plan, path, changes = settings.site, session.plan, args.resume, settings.changes
+        if not args.dry_run and _died_after_its_last_step(session, args.remeasure_missing):
+            session.begin_run()  # closes the dead run; nothing connects or moves
+            session.end_run("complete")
+            return finish(RunResult("complete", "", 0, len(session.missing_indices())), session, args.resume,
+                           load_robot(robot_spec.model))
+        if not args.dry_run and _nothing_to_do(session, args.remeasure_missing):
+            return 0
+    else:
+        site = mode_site(_site(args), args.mode, args.free_poses)  # streams carry the fit: no free poses unless asked
+        robot_spec = RobotSpec.parse(args.robot if args.robot is not None else "mock:ur5e").resolved()
+        tracker_arg = args.tracker or "mock"
+        tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)
+        path, plan = None, None
+    if args.json and not args.dry_run:
+        raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")
+    rehearsal = tracker_spec is None
+    if not args.dry_run and not rehearsal:
+        from drivers.sim.pairing import check_pairing
+
+        check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
+    robot_model = load_robot(robot_spec.model)
+    planned = args.target_accuracy is not None or args.max_robot_time is not None
+    tradeoff = None
+    if planned:
+        site, plan, tradeoff = _plan_for_target(args, robot_model, session, rehearsal)
+    if plan is None:
+        plan = build_mode_plan(args.mode, robot_model, site)
+    elif args.mode is not None and args.mode != plan_mode(plan):
+        raise UsageError(f"--mode {args.mode}: the session's plan is {plan_mode(plan)}; a resume keeps its plan")
+    if plan.continuous and rehearsal:
+        raise UsageError("--tracker none rehearses stop-and-go plans; use --mode step")
+    problems = check_plan(plan, robot_model)
+    clearance = plan_clearance(plan, robot_model, site)
+    problems += _motion_problems(plan, robot_model, robot_spec, clearance, site)
+    if problems:
+        for line in problems:
+            print(f"acquire: plan refused: {line}", file=sys.stderr)
+        return 2
+    camera = None
+    if tracker_spec is not None and tracker_spec.backend == "aruco" and not plan.continuous:
+        from acquire.planning.camera_rehearsal import camera_assumptions  # OpenCV: only for a camera
+
+        camera = camera_assumptions(plan, robot_model, site, tracker_spec, args.noise)
+    if plan.continuous:
+        duration = estimate_continuous_duration(plan, site.measure_time)
+        accuracy = None
+    else:
+        duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
+        accuracy = None if rehearsal else predicted_accuracy(
+            plan if camera is None else camera.seen_plan(plan), robot_model, site.tp_guess,
+            site.tracker_noise if camera is None else camera.noise)
+    if args.json:
+        doc = plan_json(plan, clearance, duration, accuracy)
+        if camera is not None:
+            doc["camera"] = camera.as_dict(plan)
+        print(json.dumps(doc, allow_nan=False))
+        return 0
+    if session is not None:
+        say(_resuming(session))
+    say(format_plan(plan, robot_model, duration, accuracy, "camera" if camera is not None else "tracker"))
+    if camera is not None:
+        say("\n".join(["", *camera.lines(plan)]))
+    say(format_clearance(clearance, plan, site))
+    if tradeoff is not None:
+        say(tradeoff)
+    elif args.dry_run and not rehearsal and session is None:
+        say("modes: not compared for a camera (which streamed frames it would see is not modelled)" if camera
+            else format_modes(robot_model, _site(args), plan, args.free_poses))
+    if args.dry_run:
+        print("dry run: nothing was connected or moved")
+        return 0
+    if rehearsal:
+        return _rehearse(robot_spec, args, plan, site)
+    if session is None:
+        path = args.session or _default_session_path(robot_model.name)
+    _confirm(robot_spec, args, plan)
+    opening = time.monotonic()
+    robot, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
+    connected = clock.now() - (time.monotonic() - opening)  # the connect's wall time, on the run's clock
+    released = False
+    try:
+        first = 0 if session is None else session.next_index()
+        if first is not None:
+            _check_start(robot, plan, robot_model, site, first, session)
+            note, rate = check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before a move
+            if note:
+                print(f"tracker: {note}")
+                plan, line, refused = replan_for_rate(plan, robot_model, site, rate, args.target_accuracy,
+                                                      session is not None)
+                if refused:
+                    print(f"acquire: plan refused: {line}", file=sys.stderr)
+                    return 2
+                print(f"plan: {line}")
+        if session is None:
+            config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
+                      "command": " ".join(sys.argv)}
+            session = Session.create(path, plan, config, robot.identity(), tracker.identity(), robot_model.coupling)
+        elif changes:
+            session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))
+        print(f"session: {path}")
+        result = run_session(robot, tracker, session, clock, site, args.quiet)
+        robot.close()  # released before the identification: it needs neither device
+        tracker.close()
+        released = True
+        held = f"{clock.now() - connected:.1f} s"
+        if isinstance(clock, VirtualClock):  # mock devices: their time is simulated, and says so
+            held += f" simulated ({time.monotonic() - opening:.1f} s wall)"
+        print(f"robot released: held {held} since connecting")
+        return finish(result, session, path, robot_model)
+    finally:
+        if not released:
+            robot.close()
+            tracker.close()
+        if session is not None:
+            session.close()
+
+
+def _plan_for_target(args: argparse.Namespace, robot: RobotModel, session: Session | None,
+                     rehearsal: bool) -> tuple[SiteConfig, Plan, str]:
+    """(site, plan, trade-off table) of ``--target-accuracy`` / ``--max-robot-time`` (acquire/planning/plan_target.py):
+    the quickest candidate predicted to reach the target, or the most accurate within the time alone."""
+    if session is not None:
+        raise UsageError("--target-accuracy and --max-robot-time plan a new session; a resume keeps its plan")
+    if rehearsal:
+        raise UsageError("--target-accuracy and --max-robot-time plan a measurement; --tracker none measures nothing")
+    if args.mode == "both":
+        raise UsageError("--target-accuracy and --max-robot-time plan step or continuous sessions, not both")
+    modes = ("step", "continuous") if args.mode is None else (args.mode,)
+    found = candidates(modes, robot, _site(args), args.steps, args.free_poses)
+    try:
+        chosen = choose(found, args.target_accuracy, args.max_robot_time)
+    except TargetError as exc:
+        say(format_tradeoff(found, None, args.target_accuracy, args.max_robot_time))
+        raise UsageError(str(exc)) from None
+    return chosen.site, chosen.plan, format_tradeoff(found, chosen, args.target_accuracy, args.max_robot_time)
+
+
+def _default_session_path(robot: str) -> Path:
+    """sessions/<robot>-<time>.session; the one folder of the default (not any folder the operator names) is
+    made if missing."""
+    folder = Path("sessions")
+    with contextlib.suppress(FileExistsError):
+        folder.mkdir()
+    path = folder / f"{robot}-{time.strftime('%Y%m%d-%H%M%S')}.session"
+    check_target(path, option="session")
+    return path
+
+
+def _resuming(session: Session) -> str:
+    """What a resume continues: ``resuming S: 12 of 256 steps recorded (1 missing); run 1 aborted (stopped by
+    SIGTERM)``; the plan printed after it is the session's own."""
+    total = len(session.plan.steps)
+    missing = len(session.missing_indices())
+    text = f"resuming {session.path}: {len(session.recorded_indices())} of {total} steps recorded" + (
+        f" ({missing} missing)" if missing else "")
+    runs = session.runs()
+    if runs:
+        last = runs[-1]
+        how = ("ended without closing (the process died)" if last.outcome == "running"
+               else last.outcome + (f" ({last.reason})" if last.reason else ""))
+        text += f"; run {last.id} {how}"
+    return text + "; the session's plan:"
+
+
+def _died_after_its_last_step(session: Session, remeasure: bool) -> bool:
+    """True (after saying so) when every step is recorded (or only missing ones not to be measured again) but the
+    process that recorded the last one died before it closed its run and identified the session."""
+    if session.next_index() is not None or session.outcome() != "running":
+        return False
+    if remeasure and session.missing_indices():
+        return False
+    print(f"{session.path}: every step is recorded, but the run that recorded them ended without closing; "
+          "closing it and identifying the session (nothing connects or moves)")
+    return True
+
+
+def _nothing_to_do(session: Session, remeasure: bool) -> bool:
+    """True (after saying so) when a resumed session has every step recorded and no missing step is to be
+    measured again: nothing connects, nothing moves."""
+    if session.next_index() is not None:
+        return False
+    missing = session.missing_indices()
+    total = len(session.plan.steps)
+    if not missing:
+        print(f"{session.path} is complete: all {total} steps recorded; nothing to do")
+        return True
+    if not remeasure:
+        print(f"{session.path} is complete: {total} steps recorded, {len(missing)} missing (steps "
+              f"{', '.join(map(str, missing))}); nothing moved. --remeasure-missing measures them again")
+        return True
+    return False
+
+
+def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clearance: Clearance | None,
+                     site: SiteConfig) -> list[str]:
+    """Why the plan's motion may not run: a step or move that comes too close to the cell, or no geometry to
+    check it with on a real robot."""
+    if clearance is None:
+        if robot_spec.backend == "mock":
+            return []
+        return [f"{robot.name} has no collision geometry ('collision:' in {robot.path.name}): the plan cannot be "
+                "checked against the cell and the arm itself"]
+    if clearance.slack >= clearance.guard:
+        return []
+    step = plan.steps[clearance.slack_move]
+    needs = clearance.slack_distance - clearance.slack + clearance.guard
+    return [f"the move to step {step.index} ({step.kind}) comes too close: {clearance.slack_what} "
+            f"{clearance.slack_distance * 1e3:.1f} mm apart at a checked sample (needs {needs * 1e3:.0f} mm with "
+            f"{clearance.guard * 1e3:g} mm for the motion between samples)"]
+
+
+def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int,
+                 session: Session | None = None) -> None:
+    """The plan is checked from home; the arm may stand elsewhere (jogged, or stopped mid-move before a
+    resume). UsageError unless the move from where it stands to step ``index`` is clear too. The robot's
+    readings give DH values through the session's coupling (a new session: the model's)."""
+    import numpy as np
+
+    from config.cell import cell_from_config, first_contact
+
+    cell = cell_from_config(robot_model, site)
+    if cell is None or not plan.steps:
+        return
+    here = np.asarray(robot.read_joints(), dtype=float)
+    coupling = robot_model.coupling if session is None else session.coupling
+    if coupling is not None:
+        here = coupling.dh_from_readings(here[None, :])[0]
+    step = plan.steps[index]
+    contact = first_contact(cell, here, np.asarray(step.start if step.start is not None else step.q))
+    if contact is not None:
+        home = ", ".join(f"{np.degrees(v):.1f}" if t == "R" else f"{v:.3f}"
+                         for v, t in zip(plan.home, plan.joint_types, strict=True))
+        raise UsageError(f"the move from the arm's current pose to step {index} would come too close: {contact.what} "
+                         f"{contact.distance * 1e3:.1f} mm apart (needs {contact.required * 1e3:.0f} mm); jog the "
+                         f"arm to home ({home}; deg / m) first")
+
+
+def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site: SiteConfig) -> int:
+    """``--tracker none``: move through the plan at the reduced speed after confirmation, measuring nothing."""
+    from acquire.running.rehearsal import rehearse
+    from drivers.registry import open_robot
+
+    _confirm(robot_spec, args, plan, f"Rehearse the motion: move {robot_spec} through these {len(plan.steps)} "
+             f"steps at {site.speed_fraction:g} x the default speed, measuring nothing? Type 'yes' to start: ")
+    rig = None
+    if robot_spec.backend == "mock":
+        from drivers.sim.rig import SimulatedRig
+
+        rig = SimulatedRig.from_spec(robot_spec, None, WallClock() if args.realtime else VirtualClock())
+    robot = open_robot(robot_spec, rig=rig, site=site)
+    robot.connect(site.timeouts.connect)
+    try:
+        _check_start(robot, plan, load_robot(robot_spec.model), site, 0)
+    except UsageError:
+        robot.close()
+        raise
+
+    from acquire.running.orchestrator import Progress
+    from acquire.running.progress import ProgressDisplay
+
+    clock = rig.clock if rig is not None else WallClock()  # the rehearsal's own clock (virtual in mock mode)
+    display = ProgressDisplay(plan, 0.0, args.quiet, simulated=isinstance(clock, VirtualClock))
+    display.plan_steps(list(plan.steps))
+    started = clock.now()
+
+    def show(step, done: int, total: int) -> None:  # after each move: this step reached, the next one starts
+        display.done(Progress(step, done, total, clock.now() - started, 0.0, 0, "reached", None))
+        if done < total:
+            display.start(plan.steps[done], done + 1, total)
+
+    stop = StopRequest()
+    try:
+        if plan.steps:
+            display.start(plan.steps[0], 1, len(plan.steps))
+        with stop.installed():
+            result = rehearse(robot, plan, site.timeouts.move, stop, show, load_robot(robot_spec.model).coupling)
+    finally:
+        display.close()
+        robot.close()
+    log.info("rehearsal %s%s; %d of %d steps reached", result.outcome, f" ({result.reason})" if result.reason else "",
+             result.recorded, len(plan.steps))
+    if result.outcome != "complete":
+        print(f"acquire: rehearsal {result.outcome}: {result.reason}; {result.recorded} of {len(plan.steps)} steps "
+              "reached", file=sys.stderr)
+        return 130 if result.outcome == "aborted" else 1
+    print(f"rehearsal complete: {result.recorded} steps reached, nothing measured or recorded")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    with stop_signals.raising():  # SIGTERM and SIGHUP stop like Ctrl-C (common/stop_signals.py)
+        return _main(argv)
+
+
+def _main(argv: list[str]) -> int:
+    try:
+        if argv[:1] in (["export"], ["backup"]):  # acquire/commands/session_commands.py
+            from acquire.commands.session_commands import backup, export
+
+            return (export if argv[0] == "export" else backup)(argv[1:])
+        if argv[:1] == ["verify"]:  # ISO 9283-style verification of a calibration: acquire/commands/verify_cli.py
+            from acquire.commands.verify_cli import main as verify_main
+
+            return verify_main(argv[1:])
+        if argv[:1] in (["calibrate-camera"], ["print-board"]):  # camera tools: acquire/commands/camera_cli.py
+            from acquire.commands.camera_cli import main as camera_main
+
+            return camera_main(argv)
+        return run(build_parser().parse_args(argv))
+    except (UsageError, ResumeRefused, ConfigError, SessionError, InputError, DriverError, ValueError) as exc:
+        print(f"acquire: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as exc:  # outside a run (a run records its stop and prints its own line)
+        print(f"acquire: {stop_signals.reason_of(exc)}", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

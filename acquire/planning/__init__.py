@@ -1,0 +1,2 @@
+"""The acquisition plan, decided before anything moves (pure): poses, sweeps, their order, design and predicted
+accuracy."""

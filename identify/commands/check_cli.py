@@ -1,0 +1,186 @@
+"""``identify check RESULT DATA``: does a calibration still hold on new data?
+
+RESULT is a result YAML (identify --out); DATA a measurement CSV or an
+acquisition session of the same arm, taken with the tracker wherever it stands
+now. The tracker frame is registered anew (a rigid 6-DoF fit, robust to a few
+gross errors), then each model of the result predicts every row: the plain DH
+table and, when the result selected joint errors, the extended model. The
+figure that decides is cross-validated (each of 5 blocks of poses is predicted
+from a registration fitted on the others) and compared with the error the
+result expects there (tracker noise, model uncertainty, model error): up to
+1.5x it holds (pass), beyond 3x it does not (fail), in between: warn.
+
+--refit-tool also refits each tracked point's position on the flange (3
+numbers per point): use it when the reflector was re-mounted. The check then
+cannot see a changed tool, nor a change of the arm that looks like one.
+
+Exit codes: 0 pass or warn, 3 fail (another arm, another tool, or the arm
+changed), 2 bad input (one line).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from common.arguments import OneLineParser
+from common.errors import InputError
+from common.outputs import check_outputs, write_output
+from identify.applications.calibrated import ResultError
+from identify.applications.holds import Check, check_models
+from identify.applications.result_models import ResultModels, result_models
+from identify.estimator.measurements import Measurements
+from identify.io.csvio import UNITS, read_measurements
+from identify.io.result_io import finite
+from identify.io.session_measurements import read_session
+from session.schema import is_session_file
+
+PROG = "identify check"
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = OneLineParser(prog=PROG, description="Does a calibration still hold on new data of the arm?",
+                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
+    p.add_argument("result", metavar="RESULT", help="result YAML of the calibration (identify --out)")
+    p.add_argument("data", metavar="DATA", help="measurement CSV or acquisition session of the arm today")
+    p.add_argument("--refit-tool", action="store_true",
+                   help="also refit each tracked point on the flange (a re-mounted reflector)")
+    p.add_argument("--noise", type=float, metavar="M",
+                   help="today's tracker noise, m per axis (default: the calibration's)")
+    p.add_argument("--joints", metavar="TYPES", help="joint types of a CSV without '# joints:', e.g. RRRRRR")
+    p.add_argument("--units", choices=sorted(UNITS), help="unit of x, y, z in the CSV (default: file or m)")
+    p.add_argument("--json", action="store_true", help="print the check as one JSON object")
+    p.add_argument("--out", metavar="FILE", help="write the check as YAML")
+    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    return p
+
+
+def load(args: argparse.Namespace) -> tuple[dict[str, Any], Measurements, list[str]]:
+    """The result document, the new data's rows that can be predicted, and notes."""
+    try:
+        doc = yaml.safe_load(Path(args.result).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"{args.result}: no such result file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{args.result}: cannot be read ({type(exc).__name__})") from None
+    except yaml.YAMLError:
+        raise InputError(f"{args.result}: not YAML (a result file of identify --out?)") from None
+    if not isinstance(doc, dict) or "joints" not in doc:
+        raise InputError(f"{args.result}: not a result file of identify --out (no 'joints')")
+    if is_session_file(Path(args.data)):
+        meas = read_session(Path(args.data))[0].measurements
+    else:
+        meas = read_measurements(args.data, args.joints, args.units).measurements
+    notes = []
+    if meas.has_streams:
+        notes.append(f"{int(meas.streamed.sum())} streamed rows: readings interpolated at the recorded clock offset "
+                     "(not refined here)")
+    read = np.all(np.isfinite(meas.q), axis=1)
+    if not read.all():
+        notes.append(f"{int((~read).sum())} rows without every joint reading left out (cannot be predicted)")
+        meas = meas.subset(read)
+    return doc, meas, notes
+
+
+def run(args: argparse.Namespace) -> tuple[Check, ResultModels, Measurements, list[str]]:
+    """Check per ``args``; InputError (one line) for bad input."""
+    if args.noise is not None and not (args.noise > 0 and math.isfinite(args.noise)):
+        raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
+    check_outputs([args.result, args.data], [("--out", args.out)], args.force)
+    doc, meas, notes = load(args)
+    try:
+        models = result_models(doc, meas.q, meas.tp, args.noise)
+        check = check_models(meas.points, meas.q, meas.tp, models.models, models.use, args.refit_tool)
+    except (ResultError, ValueError) as exc:
+        raise InputError(f"{args.result} on {args.data}: {exc}") from None
+    return check, models, meas, notes
+
+
+def as_dict(check: Check, models: ResultModels, meas: Measurements, notes: list[str]) -> dict[str, Any]:
+    """The check as plain data (m, rad; rows 1-based as in the data file)."""
+    def errors(e: Any) -> dict[str, Any]:
+        return {"samples": e.samples, "rms": e.rms, "max": e.max}
+
+    out: dict[str, Any] = {"status": check.status, "use": check.use, "folds": check.folds,
+                           "refit_tool": check.refit_tool, "models": {}, "notes": notes}
+    for m in check.models:
+        reg = m.registration
+        out["models"][m.name] = {
+            "status": m.status, "reasons": m.reasons, "heldout": errors(m.heldout),
+            "per_tp": {int(i): errors(e) for i, e in m.per_tp.items()},
+            "fitted": errors(m.fitted), "fitted_dof_rms": m.fitted_dof_rms, "parameters": m.parameters,
+            "expected_rms": m.expected, "expected_from": models.sources[m.name], "ratio": m.ratio,
+            "limit": m.limit, "gross_rows": [int(r) for r in meas.row[m.gross]], "gross_cutoff": m.gross_cutoff,
+            "tracker": {"rotation": reg.rotation.tolist(), "translation": reg.translation.tolist(),
+                        "moved": reg.moved, "turned": reg.turned},
+            **({"tool_change": {int(i): t.tolist() for i, t in reg.tools.items()}} if check.refit_tool else {}),
+        }
+    return finite(out)
+
+
+def format_check(check: Check, models: ResultModels, meas: Measurements, notes: list[str]) -> str:
+    """The verdict line, the tracker's move, one line per model, per tracked point, notes (<= 80 columns)."""
+    c = check.chosen
+    word = {"pass": "PASS: the calibration holds", "warn": "WARN: the calibration holds only roughly",
+            "fail": "FAIL: the calibration does not hold"}[check.status]
+    lines = [f"{word} ({c.name} model)",
+             f"tracker: moved {c.registration.moved * 1e3:.1f} mm, turned "
+             f"{math.degrees(c.registration.turned):.2f} deg since the calibration",
+             "model     held-out rms   max  expected  ratio  in-sample  status",
+             "              mm          mm     mm               mm"]
+    for m in check.models:
+        mark = "" if models.sources[m.name] == "stated" else "*"
+        lines.append(f"{m.name:<9} {m.heldout.rms * 1e3:10.3f} {m.heldout.max * 1e3:8.3f} "
+                     f"{m.expected * 1e3:7.3f}{mark:1} {m.ratio:6.2f} {m.fitted_dof_rms * 1e3:9.3f}  {m.status}")
+    lines.append(f"held-out: each of {check.folds} blocks of poses predicted from a registration on the others")
+    lines.append(f"in-sample: all kept rows, RMS dof-corrected for {c.parameters} registration parameters")
+    if any(s != "stated" for s in models.sources.values()):
+        lines.append("* expected computed from the result's covariance (it states none)")
+    if len(models.tp_ids) > 1 or len(c.per_tp) > 1:
+        for m in check.models:
+            parts = [f"tp {i}: {e.rms * 1e3:.3f}" for i, e in m.per_tp.items() if e.samples]
+            lines.append(f"{m.name} per tracked point, held-out rms mm: " + ", ".join(parts))
+    for m in check.models:
+        lines += [f"{m.name}: {r}" for r in m.reasons]
+        if len(m.gross):
+            rows = ", ".join(str(int(r)) for r in meas.row[m.gross][:8]) + (", ..." if len(m.gross) > 8 else "")
+            lines.append(f"{m.name}: {len(m.gross)} rows left out as gross errors (> "
+                         f"{m.gross_cutoff * 1e3:.2f} mm), at data lines {rows}")
+    if check.refit_tool:
+        for i, t in c.registration.tools.items():
+            lines.append(f"tool refitted: tp {i} moved {np.linalg.norm(t) * 1e3:.3f} mm on the flange")
+        lines.append("(a changed tool, or a change the last link shows as one, is not seen)")
+    lines += [f"note: {n}" for n in notes]
+    return "\n".join(_wrap(line) for line in lines)
+
+
+def _wrap(line: str, width: int = 80) -> str:
+    """``line`` broken at spaces into lines of at most ``width`` columns (continuations indented)."""
+    return "\n".join(textwrap.wrap(line, width, subsequent_indent="  ", break_on_hyphens=False)) or line
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(sys.argv[2:] if argv is None else argv)
+    try:
+        check, models, meas, notes = run(args)
+        doc = as_dict(check, models, meas, notes)
+        if args.out:
+            write_output(args.out, yaml.safe_dump(doc, sort_keys=False), force=args.force)
+    except InputError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    print(json.dumps(doc, allow_nan=False) if args.json else format_check(check, models, meas, notes))
+    if args.out and not args.json:
+        print(f"check written to {args.out}")
+    return 3 if check.status == "fail" else 0

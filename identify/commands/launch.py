@@ -1,0 +1,36 @@
+"""The ``identify`` command's entry point: ``--help``, ``--version`` and usage errors before the heavy imports.
+
+Parsing with the light parser (identify/commands/options.py) answers them at once; anything else goes on to the command
+(identify/commands/cli.py, or a subcommand's module), which parses again. A stop signal (Ctrl-C, SIGTERM) during
+start-up, imports included, or during the run stops the command with one line and exit code 130.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from common.stop_signals import guarded
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``identify``; see :func:`identify.commands.cli.main`."""
+    argv = sys.argv[1:] if argv is None else argv
+    return guarded("identify", lambda: _main(argv))
+
+
+def _main(argv: list[str]) -> int:
+    from identify.commands.options import SUBCOMMANDS, build_parser
+
+    if not argv[:1] or argv[0] not in SUBCOMMANDS:
+        args = build_parser().parse_args(argv)  # --help, --version and usage errors exit here
+        if not Path(args.input).exists():
+            print(f"identify: error: {args.input}: no such file", file=sys.stderr)
+            return 2
+    from identify.commands.cli import main as full_main
+
+    return full_main(argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,247 @@
+"""A fitted lines model written as the DH model a reader takes away, with its uncertainty and its cost.
+
+The identification keeps two models (:mod:`identify.results.pipeline`): the plain one (DH, no joint errors) and, when
+the data support joint errors, the extended one. Each is fitted as axis lines (:mod:`identify.estimator.estimate`) and
+written here as standard DH (:mod:`identify.results.dh_output`): exact, except where a near-parallel pair's exact ``d``
+would move beyond ``max_offset`` (the robot's size by default, :func:`robot_size`); such a link keeps the
+parallel-axis convention and the table is refitted under it, every tracked point included, so what it costs is
+measured (the ``dh_table`` check). Frames: tracker; units: m, rad.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from identify.estimator.adequacy import Adequacy
+from identify.estimator.estimate import FitData, LinesFit
+from identify.estimator.extensions import TermSet
+from identify.estimator.linalg import project_out, scaled_inverse
+from identify.estimator.poe import AxisLines, LineProblem, points_from_lines
+from identify.estimator.refine import Refinement, TableFit, fit_table, full_jacobian, parameter_names
+from identify.results import verdict as checks
+from identify.results.dh_output import DHOutput, dh_output, near_parallel
+from identify.results.predict import Predictor
+from kinematics.dh import DHModel, flange_frames, frames_from_joints
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class FixedParameter:
+    """A parameter held at ``value`` (rad or m) by a convention, for ``reason``."""
+
+    name: str
+    value: float
+    reason: str
+
+
+@dataclass(frozen=True)
+class WrittenModel:
+    """One model as written: ``name`` (``plain`` or ``extended``), the DH ``model`` (tool: the first tracked
+    point) with every point's ``tools`` (k, 3, frame n), the standard uncertainty of every full-vector parameter
+    (``std``; 0 where ``fixed``), the ``refinement`` record, the links kept at the parallel-axis convention
+    (``capped``, 1-based, with the ``d`` shift exact DH would need, m), the ``dh_check`` of what that costs, and
+    the exact model it was written from: the fitted ``lines`` with the joint-error ``terms`` and the ``predictor``
+    (lines, terms, covariance). ``covariance`` is over the fit's whole problem (clock parameters last);
+    ``expected``: RMS 3D prediction uncertainty at the fitted poses, model error included (m)."""
+
+    name: str
+    fit: LinesFit
+    adequacy: Adequacy
+    model: DHModel
+    tools: Array
+    std: Array
+    fixed: list[FixedParameter]
+    refinement: Refinement
+    capped: dict[int, float]
+    dh_check: checks.Check
+    terms: TermSet
+    predictor: Predictor
+    lines_covariance: Array
+    covariance: Array
+    condition: float
+    expected: float
+    problem: LineProblem
+    jacobian_blocks: Array
+
+    @property
+    def lines(self) -> AxisLines:
+        return self.fit.lines
+
+    @property
+    def fit_rms(self) -> float:
+        """RMS 3D residual of the fitted inliers (m)."""
+        res = self.fit.residuals[self.fit.inliers]
+        return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
+
+    @property
+    def coefs(self) -> Array:
+        """The joint-error coefficients (units in :data:`identify.estimator.extensions.UNITS`)."""
+        return self.predictor.coefs
+
+    def dh_joints(self, q: Array) -> Array:
+        """The joint values the written DH table takes at DH joint values ``q`` (m, n): with the joint errors."""
+        return self.terms.terms(q, self.coefs).corrected(q)
+
+    def dh_points(self, q: Array, tp_index: NDArray[np.int64]) -> Array:
+        """Tracked points (m, 3), tracker frame, the written numbers predict at DH joint values ``q`` (m, n)."""
+        return points_with_tools(self.model, self.tools, self.dh_joints(q), tp_index)
+
+
+def points_with_tools(model: DHModel, tools: Array, q: Array, tp_index: NDArray[np.int64]) -> Array:
+    """Tracked points (m, 3) of ``model`` at joint values ``q`` (m, n), row r at tool ``tools[tp_index[r]]``."""
+    rotation, origin = flange_frames(model, q)
+    tool = np.asarray(tools, dtype=float)[tp_index]
+    return np.einsum("kij,kj->ki", rotation, tool) + origin
+
+
+def robot_size(lines: AxisLines, points: Array) -> float:
+    """The robot's size (m): the farthest measured tracked point from the first joint's axis point. No joint of
+    the arm lies farther out, so no DH ``d`` of a real near-parallel pair needs to reach beyond it."""
+    return float(np.max(np.linalg.norm(points - lines.points[0], axis=1)))
+
+
+def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
+                  unknown: NDArray[np.int64]) -> Array:
+    """Unit-variance covariance of the ``free`` DH values (weighted units), rows of unread joints (``unknown``,
+    0-based, -1 for none) projected on the complement of their nuisance joint value."""
+    p, jac = full_jacobian(model, q)
+    jac = np.compress(free, jac, axis=2)
+    if np.any(weights != 1.0):
+        jac *= weights[:, None, None]
+    rows = np.flatnonzero(unknown >= 0)
+    if len(rows):
+        frames = frames_from_joints(model, q[rows])
+        j = unknown[rows]
+        axis = frames[np.arange(len(rows)), j, :3, 2]
+        origin = frames[np.arange(len(rows)), j, :3, 3]
+        revolute = model.revolute[j]
+        g = np.where(revolute[:, None], np.cross(axis, p[rows] - origin), axis) * weights[rows, None]
+        project_out(jac, rows, g)
+    return scaled_inverse(jac.reshape(-1, jac.shape[2]))[0]
+
+
+def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, terms: TermSet,
+                  tp_ids: tuple[int, ...], conventional: Array, nominal: DHModel | None, parallel_tol: float,
+                  max_offset: float, unit: float, declared: float | None, sigma: Array | None) -> WrittenModel:
+    """``fit`` (its inliers, joint errors ``terms``) written as DH with its covariance. ``data``: the fit rows
+    (timed as ``fit``); ``unit``: the weights' scale (median sigma, or 1); ``declared``: the tracker noise
+    declared (m per axis) or None; ``sigma`` (m,) per-row uncertainties or None; the rest as in
+    :func:`identify.results.pipeline.identify`."""
+    data = data.timed(fit.timing)
+    lines, inl = fit.lines, fit.inliers
+    problem = data.subset(inl).problem(lines, fit.terms.subset(inl))
+    x0 = np.zeros(problem.size)
+    jac_blocks = fit.jacobian_blocks(problem)
+    res_w = problem.residuals(x0).reshape(-1, 3)
+    inv, condition = scaled_inverse(jac_blocks.reshape(-1, problem.size))
+    # noise variance in weighted units (1 for a right sigma column), never below the declared noise
+    variance = max(adequacy.residual, declared or 0.0) ** 2 / unit**2 * adequacy.inflation
+    covariance = inv * variance
+    lines_cov = covariance[: lines.n_parameters, : lines.n_parameters]
+    near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
+    tp_index = data.tp_index[inl]
+    q_fit, weights = fit.q[inl], data.weights[inl]
+    rows = _FitRows(q_fit, data.points[inl], None if sigma is None else sigma[inl], weights, tp_index, res_w,
+                    variance)
+    out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise)
+    if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
+        # the data resolve the misalignment: exact DH wherever it stays within max_offset
+        out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise)
+    first = tp_index == 0
+    if dh_fit is None:  # exact DH: the lines' covariance carried over
+        model = out.model
+        free = np.any(out.jacobian != 0.0, axis=1)
+        cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
+    else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
+        model, free = dh_fit.model, dh_fit.free
+        cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first]) * variance
+    std = np.zeros(len(free))
+    std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
+    n = model.n_joints
+    names = parameter_names(n)
+    vector = np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
+    fixed = [FixedParameter(names[k], float(vector[k]), _reason(names[k], n, model.joint_types, out.capped))
+             for k in np.flatnonzero(~free)]
+    kinematic = slice(0, problem.n_terms)  # the clock correction's parameters come last
+    predictor = Predictor(lines, covariance[kinematic, kinematic], terms, fit.terms.coefs, None, tp_ids)
+    expected = _expected_accuracy(predictor, q_fit, np.asarray(tp_ids)[tp_index], adequacy)
+    dh_check = checks.dh_table(gap[0], gap[1], expected, [f"d{i}" for i in out.capped])
+    ref = Refinement(model, free, cov_free, adequacy.noise, inl, fit.residuals, condition,
+                     float(np.sum(res_w**2)), fit.q, data.points, [], tools)
+    return WrittenModel(name, fit, adequacy, model, tools, std, fixed, ref, dict(out.capped), dh_check, terms,
+                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks)
+
+
+@dataclass(frozen=True)
+class _FitRows:
+    """The inlier rows a DH table is written from: joint values ``q`` (with joint errors), ``points``, ``sigma``
+    (or None), ``weights``, ``tp_index``, the lines' weighted residuals ``res_w`` and the noise ``variance``
+    (weighted units)."""
+
+    q: Array
+    points: Array
+    sigma: Array | None
+    weights: Array
+    tp_index: NDArray[np.int64]
+    res_w: Array
+    variance: float
+
+
+def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
+                rows: _FitRows, noise: float) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float]]:
+    """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH table
+    refitted under that convention on every tracked point's rows (so the cost it adds is a likelihood ratio,
+    chi-square when the axes are parallel); the tools (k, 3) and that cost with the RMS gap to the lines."""
+    out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
+    tools = _tools(out.model, lines)
+    if not capped:
+        return out, None, tools, _dh_gap(out.model, tools, lines, rows)
+    dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False, 0.0,
+                       rows.tp_index, tools)
+    return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows)
+
+
+def _dh_gap(model: DHModel, tools: Array, lines: AxisLines, rows: _FitRows) -> tuple[float, float]:
+    """RMS difference (m) of the DH model's and the lines' predictions at the fitted rows, and the cost the DH
+    model adds over the lines', in noise variances."""
+    dh = points_with_tools(model, tools, rows.q, rows.tp_index)
+    gap = dh - points_from_lines(lines, rows.q, rows.tp_index)
+    res_dh = (rows.points - dh) * rows.weights[:, None]
+    added = float(np.sum(res_dh**2) - np.sum(rows.res_w**2)) / max(rows.variance, 1e-300)
+    return float(np.sqrt(np.mean(np.sum(gap**2, axis=1)))), added
+
+
+def _tools(model: DHModel, lines: AxisLines) -> Array:
+    """Every tracked point (k, 3) in the last DH frame of ``model`` (whose axes are ``lines``' at home)."""
+    flange = frames_from_joints(model, lines.home[None, :])[0, -1]
+    return (lines.tps - flange[:3, 3]) @ flange[:3, :3]
+
+
+def _expected_accuracy(predictor: Predictor, q: Array, tp: NDArray[np.int64], adequacy: Adequacy) -> float:
+    """RMS 3D prediction uncertainty at the fitted configurations (DH values with joint errors: the predictor
+    without coupling), model error included (m)."""
+    plain = Predictor(predictor.lines, predictor.covariance, predictor.terms, np.zeros_like(predictor.coefs), None,
+                      predictor.tp_ids)  # q already carries the joint errors
+    return float(np.sqrt(plain.mean_variance(q, tp) + 3 * adequacy.model_error**2))
+
+
+UNDETERMINED = ("not determined by these data (redundant with other parameters, e.g. joints that always move together):"
+                " held at its conventional value")
+
+
+def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
+    joint = int("".join(ch for ch in name if ch.isdigit()) or 0)
+    if joint in capped and name.startswith("d"):
+        return (f"axes {joint} and {joint + 1} are parallel within tolerance or their uncertainty: the common "
+                f"normal is placed by convention (exact DH would move d{joint} by {capped[joint]:.3g} m)")
+    if joint == 1 and name[:-1] in ("theta", "d"):
+        return "redundant with the base pose (frame 0 is placed by convention)"
+    if joint == n:
+        return "redundant with the tool: frame n is placed by convention and the tool carries the TP"
+    if types[joint - 1] == "P" and name[:-1] in ("a", "d"):
+        return "a prismatic axis has no position; it is placed to meet the next axis"
+    return UNDETERMINED
