@@ -1,9 +1,13 @@
 """What both commands' light parsers share (acquire/commands/options.py, identify/commands/options.py): argparse that
-reports a usage error in one line with exit code 2, and a ``--version`` that looks the version up only when asked."""
+reports a usage error in one line with exit code 2, a ``--version`` that looks the version up only when asked, and
+options given as comma-separated numbers."""
 
 from __future__ import annotations
 
 import argparse
+import math
+
+from common.errors import InputError
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -23,3 +27,15 @@ class VersionAction(argparse.Action):
         from common import __version__
 
         parser.exit(0, f"{parser.prog} (dh-calib) {__version__}\n")
+
+
+def comma_numbers(text: str, what: str, counts: tuple[int, ...]) -> list[float]:
+    """The finite numbers of an option given as ``x,y,z`` (``what`` names it in the message); InputError unless
+    there are as many as one of ``counts``."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise InputError(f"{what} must be comma-separated numbers, got {text!r}") from None
+    if len(values) not in counts or not all(math.isfinite(v) for v in values):
+        raise InputError(f"{what} needs {' or '.join(map(str, counts))} finite numbers, got {text!r}")
+    return values

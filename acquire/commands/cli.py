@@ -12,10 +12,17 @@ import json
 import logging
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 from acquire.commands.options import build_parser
+from acquire.commands.prepare import (
+    UsageError,
+    check_start,
+    confirm,
+    open_devices,
+    site_from_args,
+    without_faults,
+)
 from acquire.planning.plan import check_plan, estimate_duration, plan_clearance
 from acquire.planning.plan_continuous import estimate_continuous_duration
 from acquire.planning.plan_modes import build_mode_plan, format_modes, mode_site, plan_mode
@@ -32,7 +39,7 @@ from common.fit_width import say
 from common.outputs import OutputError, check_outputs, check_target, same_file
 from config.cell import Clearance
 from config.robots import ConfigError, RobotModel, load_robot
-from config.site import SiteConfig, load_site
+from config.site import SiteConfig
 from drivers.clock import VirtualClock, WallClock
 from drivers.errors import DriverError
 from drivers.spec import RobotSpec, TrackerSpec
@@ -40,73 +47,6 @@ from session.plan import Plan
 from session.schema import SessionError
 
 log = logging.getLogger("acquire")
-
-
-class UsageError(Exception):
-    """Bad input: one line, exit code 2."""
-
-
-REHEARSAL_SPEED = 0.25  # --tracker none: the share of the model's default speeds and accelerations
-
-
-def _site(args: argparse.Namespace) -> SiteConfig:
-    site = load_site(args.config) if args.config else SiteConfig.default()
-    fraction = args.speed_fraction
-    if fraction is None and getattr(args, "tracker", None) == "none":
-        fraction = REHEARSAL_SPEED
-    if fraction is not None and not 0 < fraction <= 1:
-        raise UsageError(f"--speed-fraction must be in (0, 1], got {fraction}")
-    return site.with_overrides(steps_per_sweep=args.steps, samples_per_step=args.samples,
-                               free_poses=args.free_poses, tracker_noise=args.noise, speed_fraction=fraction,
-                               acceleration_fraction=fraction)
-
-
-def _without_faults(spec):
-    """``spec`` without a mock backend's ``fault`` option."""
-    if spec.backend != "mock" or "fault" not in spec.options:
-        return spec
-    return replace(spec, options={k: v for k, v in spec.options.items() if k != "fault"})
-
-
-def _confirm(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, question: str | None = None) -> None:
-    """A real robot moves only after the operator has seen the plan and said yes (or passed --yes)."""
-    if robot_spec.backend == "mock" or args.yes:
-        return
-    if not sys.stdin.isatty():
-        raise UsageError("a real robot needs confirmation: run in a terminal or pass --yes after reading the plan")
-    question = question or f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: "
-    answer = input(question).strip()
-    if answer.lower() != "yes":
-        raise UsageError("not confirmed; nothing moved")
-
-
-TRACED_BACKENDS = ("serial", "ipp")  # trackers whose byte stream --trace-io can log
-
-
-def _open_tracker(tracker_spec: TrackerSpec, rig, site: SiteConfig, trace_io: Path | None):
-    from drivers.registry import open_tracker
-
-    if trace_io is not None and tracker_spec.backend not in TRACED_BACKENDS:
-        raise UsageError(f"--trace-io logs the bytes of serial and I++ trackers, not of {tracker_spec.backend!r}")
-    extra = {"trace_io": trace_io} if trace_io is not None else {}
-    return open_tracker(tracker_spec, rig=rig, site=site, **extra)
-
-
-def _open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bool, site: SiteConfig,
-                  trace_io: Path | None = None):
-    from drivers.registry import open_robot
-
-    clock = WallClock() if realtime or robot_spec.backend != "mock" else VirtualClock()
-    rig = None
-    if robot_spec.backend == "mock" or tracker_spec.backend == "mock":
-        from drivers.sim.rig import SimulatedRig
-
-        rig = SimulatedRig.from_spec(robot_spec, tracker_spec, clock)
-    robot = open_robot(robot_spec, rig=rig, site=site)
-    tracker = _open_tracker(tracker_spec, rig, site, trace_io)
-    robot.connect(site.timeouts.connect)
-    tracker.connect(site.timeouts.connect)
-    return robot, tracker, clock
 
 
 def run(args: argparse.Namespace) -> int:
@@ -160,8 +100,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         options = {"--steps": args.steps, "--samples": args.samples, "--free-poses": args.free_poses}
         settings = resume_settings(session.header, args.robot, args.tracker, args.config, options)
         # a rehearsal's injected faults happened in the run that stopped; the resumed run starts clear
-        robot_spec = settings.robot if args.robot else _without_faults(settings.robot)
-        tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
+        robot_spec = settings.robot if args.robot else without_faults(settings.robot)
+        tracker_spec = settings.tracker if args.tracker else without_faults(settings.tracker)
         site, plan, path, changes = settings.site, session.plan, args.resume, settings.changes
         if not args.dry_run and _died_after_its_last_step(session, args.remeasure_missing):
             session.begin_run()  # closes the dead run; nothing connects or moves
@@ -171,7 +111,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         if not args.dry_run and _nothing_to_do(session, args.remeasure_missing):
             return 0
     else:
-        site = mode_site(_site(args), args.mode, args.free_poses)  # streams carry the fit: no free poses unless asked
+        # streams carry the fit: no free poses unless asked
+        site = mode_site(site_from_args(args), args.mode, args.free_poses)
         robot_spec = RobotSpec.parse(args.robot if args.robot is not None else "mock:ur5e").resolved()
         tracker_arg = args.tracker or "mock"
         tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)
@@ -230,7 +171,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         say(tradeoff)
     elif args.dry_run and not rehearsal and session is None:
         say("modes: not compared for a camera (which streamed frames it would see is not modelled)" if camera
-            else format_modes(robot_model, _site(args), plan, args.free_poses))
+            else format_modes(robot_model, site_from_args(args), plan, args.free_poses))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
@@ -238,15 +179,15 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         return _rehearse(robot_spec, args, plan, site)
     if session is None:
         path = args.session or _default_session_path(robot_model.name)
-    _confirm(robot_spec, args, plan)
+    confirm(robot_spec, args, plan)
     opening = time.monotonic()
-    robot, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
+    robot, tracker, clock = open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
     connected = clock.now() - (time.monotonic() - opening)  # the connect's wall time, on the run's clock
     released = False
     try:
         first = 0 if session is None else session.next_index()
         if first is not None:
-            _check_start(robot, plan, robot_model, site, first, session)
+            check_start(robot, plan, robot_model, site, first, session)
             note, rate = check_streams(robot, tracker, plan, site.timeouts.measure, site.stream_rate)  # before a move
             if note:
                 print(f"tracker: {note}")
@@ -291,7 +232,7 @@ def _plan_for_target(args: argparse.Namespace, robot: RobotModel, session: Sessi
     if args.mode == "both":
         raise UsageError("--target-accuracy and --max-robot-time plan step or continuous sessions, not both")
     modes = ("step", "continuous") if args.mode is None else (args.mode,)
-    found = candidates(modes, robot, _site(args), args.steps, args.free_poses)
+    found = candidates(modes, robot, site_from_args(args), args.steps, args.free_poses)
     try:
         chosen = choose(found, args.target_accuracy, args.max_robot_time)
     except TargetError as exc:
@@ -374,38 +315,12 @@ def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clear
             f"{clearance.guard * 1e3:g} mm for the motion between samples)"]
 
 
-def _check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int,
-                 session: Session | None = None) -> None:
-    """The plan is checked from home; the arm may stand elsewhere (jogged, or stopped mid-move before a
-    resume). UsageError unless the move from where it stands to step ``index`` is clear too. The robot's
-    readings give DH values through the session's coupling (a new session: the model's)."""
-    import numpy as np
-
-    from config.cell import cell_from_config, first_contact
-
-    cell = cell_from_config(robot_model, site)
-    if cell is None or not plan.steps:
-        return
-    here = np.asarray(robot.read_joints(), dtype=float)
-    coupling = robot_model.coupling if session is None else session.coupling
-    if coupling is not None:
-        here = coupling.dh_from_readings(here[None, :])[0]
-    step = plan.steps[index]
-    contact = first_contact(cell, here, np.asarray(step.start if step.start is not None else step.q))
-    if contact is not None:
-        home = ", ".join(f"{np.degrees(v):.1f}" if t == "R" else f"{v:.3f}"
-                         for v, t in zip(plan.home, plan.joint_types, strict=True))
-        raise UsageError(f"the move from the arm's current pose to step {index} would come too close: {contact.what} "
-                         f"{contact.distance * 1e3:.1f} mm apart (needs {contact.required * 1e3:.0f} mm); jog the "
-                         f"arm to home ({home}; deg / m) first")
-
-
 def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site: SiteConfig) -> int:
     """``--tracker none``: move through the plan at the reduced speed after confirmation, measuring nothing."""
     from acquire.running.rehearsal import rehearse
     from drivers.registry import open_robot
 
-    _confirm(robot_spec, args, plan, f"Rehearse the motion: move {robot_spec} through these {len(plan.steps)} "
+    confirm(robot_spec, args, plan, f"Rehearse the motion: move {robot_spec} through these {len(plan.steps)} "
              f"steps at {site.speed_fraction:g} x the default speed, measuring nothing? Type 'yes' to start: ")
     rig = None
     if robot_spec.backend == "mock":
@@ -415,7 +330,7 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
     robot = open_robot(robot_spec, rig=rig, site=site)
     robot.connect(site.timeouts.connect)
     try:
-        _check_start(robot, plan, load_robot(robot_spec.model), site, 0)
+        check_start(robot, plan, load_robot(robot_spec.model), site, 0)
     except UsageError:
         robot.close()
         raise

@@ -8,7 +8,7 @@ import sys
 
 import numpy as np
 
-from acquire.commands.cli import UsageError, _open_tracker, _site
+from acquire.commands.prepare import UsageError, open_traced_tracker, site_from_args
 from drivers.clock import VirtualClock
 from drivers.errors import DeviceTimeout, MeasurementError
 from drivers.spec import RobotSpec, TrackerSpec
@@ -21,7 +21,7 @@ def probe(args: argparse.Namespace) -> int:
     that sees several points shows each (``point N``); the spread is point 1's."""
     if args.count < 1:
         raise UsageError(f"--count must be at least 1, got {args.count}")
-    site = _site(args)
+    site = site_from_args(args)
     tracker_spec = TrackerSpec.parse(args.tracker or "mock")
     rig = None
     if tracker_spec.backend == "mock" or str(tracker_spec).startswith("aruco:sim"):  # a simulated tracker
@@ -31,7 +31,7 @@ def probe(args: argparse.Namespace) -> int:
         robot_spec = RobotSpec.parse(args.robot if args.robot is not None else "mock:ur5e")
         robot_spec = robot_spec if robot_spec.backend == "mock" else RobotSpec.parse(f"mock:{robot_spec.model}")
         rig = SimulatedRig.from_spec(robot_spec, tracker_spec, VirtualClock())
-    tracker = _open_tracker(tracker_spec, rig, site, args.trace_io)
+    tracker = open_traced_tracker(tracker_spec, rig, site, args.trace_io)
     tracker.connect(site.timeouts.connect)
     points, failed, several = [], 0, False
     try:

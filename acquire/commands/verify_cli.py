@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from acquire.commands.cli import UsageError, _check_start, _confirm, _open_devices, _site, _without_faults
+from acquire.commands.prepare import UsageError, check_start, confirm, open_devices, site_from_args, without_faults
 from acquire.commands.verify_options import build_parser
 from acquire.planning.plan import estimate_duration, plan_clearance
 from acquire.planning.plan_report import format_clearance
@@ -160,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     model, doc, sha = _load(args.result)
     robot_spec, robot = _robot_for(args, doc, model)
     tracker_spec = TrackerSpec.parse(args.tracker or "mock")
-    site = _site(args)
+    site = site_from_args(args)
     cycles = site.verify_cycles if args.cycles is None else args.cycles
     if cycles < 2:
         raise UsageError(f"--cycles must be at least 2 (AP and RP need repeated visits), got {cycles}")
@@ -196,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         print("dry run: nothing was connected or moved")
         return 0
     path = args.session or _default_path(robot.name)
-    _confirm(robot_spec, args, plan, f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: ")
+    confirm(robot_spec, args, plan, f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: ")
     config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
               "command": " ".join(sys.argv), "verification": info}
     return _measure(args, None, path, plan, robot_spec, tracker_spec, site, robot, config)
@@ -213,8 +213,8 @@ def _resume(args: argparse.Namespace, session: Session) -> int:
         raise UsageError(f"--cycles {args.cycles}: the session's test has {info['cycles']}; a resume cannot change it")
     settings = resume_settings(session.header, args.robot, args.tracker, args.config, options)
     robot = load_robot(settings.robot.model)
-    robot_spec = settings.robot if args.robot else _without_faults(settings.robot)
-    tracker_spec = settings.tracker if args.tracker else _without_faults(settings.tracker)
+    robot_spec = settings.robot if args.robot else without_faults(settings.robot)
+    tracker_spec = settings.tracker if args.tracker else without_faults(settings.tracker)
     if args.dry_run:
         duration = estimate_duration(session.plan, robot, settings.site.measure_time)
         say(format_design(info, robot, session.plan, duration))
@@ -224,7 +224,7 @@ def _resume(args: argparse.Namespace, session: Session) -> int:
         print(f"{session.path} is complete: all {len(session.plan.steps)} steps recorded; nothing moved")
         outcome, _ = _finish(session, args.resume, robot)
         return _code(outcome)
-    _confirm(robot_spec, args, session.plan)
+    confirm(robot_spec, args, session.plan)
     return _measure(args, session, args.resume, session.plan, robot_spec, tracker_spec, settings.site, robot, None,
                     settings)
 
@@ -232,10 +232,10 @@ def _resume(args: argparse.Namespace, session: Session) -> int:
 def _measure(args, session: Session | None, path: Path, plan, robot_spec: RobotSpec, tracker_spec: TrackerSpec,
              site, robot: RobotModel, config: dict[str, Any] | None, settings=None) -> int:
     """Connect, check the first move, record the steps, then analyse and write the outputs."""
-    robot_dev, tracker, clock = _open_devices(robot_spec, tracker_spec, args.realtime, site)
+    robot_dev, tracker, clock = open_devices(robot_spec, tracker_spec, args.realtime, site)
     try:
         first = 0 if session is None else session.next_index()
-        _check_start(robot_dev, plan, robot, site, first or 0, session)
+        check_start(robot_dev, plan, robot, site, first or 0, session)
         if session is None:
             assert config is not None
             session = Session.create(path, plan, config, robot_dev.identity(), tracker.identity(), robot.coupling)

@@ -47,6 +47,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--force", action="store_true",
                    help="replace an existing .verify.yaml or report beside a new session")
-    for name in ("noise", "steps", "free_poses", "speed_fraction", "log", "trace_io"):  # what _site/_open read
+    for name in ("noise", "steps", "free_poses", "speed_fraction", "log", "trace_io"):  # what prepare.py reads
         p.set_defaults(**{name: None})
     return p

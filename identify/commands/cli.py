@@ -302,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] and argv[0] in SUBCOMMANDS:
         from importlib import import_module
 
-        return import_module(f"identify.{argv[0]}_cli").main(argv[1:])
+        return import_module(f"identify.commands.{argv[0]}_cli").main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         doc = run(args)

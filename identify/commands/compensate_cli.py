@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 
 from common import __version__
-from common.arguments import OneLineParser
+from common.arguments import OneLineParser, comma_numbers
 from common.errors import InputError
 from common.help_text import description as _description
 from common.outputs import check_outputs, write_output
@@ -93,16 +93,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--force", action="store_true", help="replace --out if it exists")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     return p
-
-
-def _numbers(text: str, what: str, counts: tuple[int, ...]) -> list[float]:
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise InputError(f"{what} must be comma-separated numbers, got {text!r}") from None
-    if len(values) not in counts or not all(np.isfinite(values)):
-        raise InputError(f"{what} needs {' or '.join(map(str, counts))} finite numbers, got {text!r}")
-    return values
 
 
 def read_targets(path: str | Path) -> tuple[dict[str, np.ndarray], list[str]]:
@@ -171,7 +161,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
         raise InputError("--as controller-pose needs the controller's model: give --robot (the result names none)")
     tcp, tcp_rot = identified.tool(), np.eye(3)
     if args.tool:
-        values = _numbers(args.tool, "--tool", (3, 6))
+        values = comma_numbers(args.tool, "--tool", (3, 6))
         tcp = np.array(values[:3])
         if len(values) == 6:
             tcp_rot = pose_matrices(np.zeros(3), np.array(values[3:]))[0, :3, :3]

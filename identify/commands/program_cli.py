@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from common.arguments import comma_numbers
 from common.errors import InputError
 from common.outputs import write_output
 from identify.applications.calibrated import CalibratedModel
@@ -38,10 +39,8 @@ def read_program(path: str) -> str:
 def _tool(args: argparse.Namespace, program_tcp: tuple[float, ...] | None, identified: CalibratedModel
           ) -> tuple[np.ndarray, np.ndarray, bool, str]:
     """TCP position (3,) and rotation (3, 3) in the flange frame, whether it was given, and where it came from."""
-    from identify.commands.compensate_cli import _numbers
-
     if args.tool:
-        values, source = _numbers(args.tool, "--tool", (3, 6)), "--tool"
+        values, source = comma_numbers(args.tool, "--tool", (3, 6)), "--tool"
     elif program_tcp is not None:
         values, source = list(program_tcp), "the program's set_tcp"
     else:

@@ -321,7 +321,7 @@ def test_dry_run_shows_the_clearance_and_json_is_the_design_contract(capsys) -> 
 def test_a_run_starts_only_when_the_move_from_where_the_arm_stands_is_clear() -> None:
     """The plan is checked from home; an arm left elsewhere (jogged, or stopped mid-move before a resume) must
     reach the first step clear of the cell too, or nothing moves."""
-    from acquire.commands.cli import UsageError, _check_start
+    from acquire.commands.prepare import UsageError, check_start
 
     ur = load_robot("ur5e")
     plan = build_plan(ur, replace(SITE, free_poses=0, check_poses=0, steps_per_sweep=4))
@@ -333,12 +333,12 @@ def test_a_run_starts_only_when_the_move_from_where_the_arm_stands_is_clear() ->
         def read_joints(self):
             return tuple(self.q)
 
-    _check_start(Arm(ur.home), plan, ur, SITE, 0)  # at home: fine
+    check_start(Arm(ur.home), plan, ur, SITE, 0)  # at home: fine
     folded = ur.home.copy()
     folded[1] = 0.3  # shoulder tipped over: the arm is in the table
     with pytest.raises(UsageError, match=r"to step 0 would come too close: .* mounting surface .* jog the arm to "
                                          r"home \(0\.0, -90\.0, 90\.0, -90\.0, -90\.0, 0\.0; deg / m\) first"):
-        _check_start(Arm(folded), plan, ur, SITE, 0)
+        check_start(Arm(folded), plan, ur, SITE, 0)
 
 
 def _camera_site(tmp_path):

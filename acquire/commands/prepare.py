@@ -1,0 +1,113 @@
+"""What the ``acquire`` commands share before anything moves: the site with the command line's overrides, the
+operator's confirmation, the devices opened (mock mode's simulated rig behind them), and the check of the move from
+where the arm stands to the plan's first step. ``UsageError``: bad input, one line and exit code 2."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from config.site import SiteConfig, load_site
+from drivers.clock import VirtualClock, WallClock
+from drivers.spec import RobotSpec, TrackerSpec
+
+if TYPE_CHECKING:
+    from acquire.running.session import Session
+    from config.robots import RobotModel
+    from session.plan import Plan
+
+
+class UsageError(Exception):
+    """Bad input: one line, exit code 2."""
+
+
+REHEARSAL_SPEED = 0.25  # --tracker none: the share of the model's default speeds and accelerations
+
+
+def site_from_args(args: argparse.Namespace) -> SiteConfig:
+    site = load_site(args.config) if args.config else SiteConfig.default()
+    fraction = args.speed_fraction
+    if fraction is None and getattr(args, "tracker", None) == "none":
+        fraction = REHEARSAL_SPEED
+    if fraction is not None and not 0 < fraction <= 1:
+        raise UsageError(f"--speed-fraction must be in (0, 1], got {fraction}")
+    return site.with_overrides(steps_per_sweep=args.steps, samples_per_step=args.samples,
+                               free_poses=args.free_poses, tracker_noise=args.noise, speed_fraction=fraction,
+                               acceleration_fraction=fraction)
+
+
+def without_faults(spec):
+    """``spec`` without a mock backend's ``fault`` option."""
+    if spec.backend != "mock" or "fault" not in spec.options:
+        return spec
+    return replace(spec, options={k: v for k, v in spec.options.items() if k != "fault"})
+
+
+def confirm(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, question: str | None = None) -> None:
+    """A real robot moves only after the operator has seen the plan and said yes (or passed --yes)."""
+    if robot_spec.backend == "mock" or args.yes:
+        return
+    if not sys.stdin.isatty():
+        raise UsageError("a real robot needs confirmation: run in a terminal or pass --yes after reading the plan")
+    question = question or f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: "
+    answer = input(question).strip()
+    if answer.lower() != "yes":
+        raise UsageError("not confirmed; nothing moved")
+
+
+TRACED_BACKENDS = ("serial", "ipp")  # trackers whose byte stream --trace-io can log
+
+
+def open_traced_tracker(tracker_spec: TrackerSpec, rig, site: SiteConfig, trace_io: Path | None):
+    from drivers.registry import open_tracker
+
+    if trace_io is not None and tracker_spec.backend not in TRACED_BACKENDS:
+        raise UsageError(f"--trace-io logs the bytes of serial and I++ trackers, not of {tracker_spec.backend!r}")
+    extra = {"trace_io": trace_io} if trace_io is not None else {}
+    return open_tracker(tracker_spec, rig=rig, site=site, **extra)
+
+
+def open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bool, site: SiteConfig,
+                  trace_io: Path | None = None):
+    from drivers.registry import open_robot
+
+    clock = WallClock() if realtime or robot_spec.backend != "mock" else VirtualClock()
+    rig = None
+    if robot_spec.backend == "mock" or tracker_spec.backend == "mock":
+        from drivers.sim.rig import SimulatedRig
+
+        rig = SimulatedRig.from_spec(robot_spec, tracker_spec, clock)
+    robot = open_robot(robot_spec, rig=rig, site=site)
+    tracker = open_traced_tracker(tracker_spec, rig, site, trace_io)
+    robot.connect(site.timeouts.connect)
+    tracker.connect(site.timeouts.connect)
+    return robot, tracker, clock
+
+
+def check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int,
+                 session: Session | None = None) -> None:
+    """The plan is checked from home; the arm may stand elsewhere (jogged, or stopped mid-move before a
+    resume). UsageError unless the move from where it stands to step ``index`` is clear too. The robot's
+    readings give DH values through the session's coupling (a new session: the model's)."""
+    import numpy as np
+
+    from config.cell import cell_from_config, first_contact
+
+    cell = cell_from_config(robot_model, site)
+    if cell is None or not plan.steps:
+        return
+    here = np.asarray(robot.read_joints(), dtype=float)
+    coupling = robot_model.coupling if session is None else session.coupling
+    if coupling is not None:
+        here = coupling.dh_from_readings(here[None, :])[0]
+    step = plan.steps[index]
+    contact = first_contact(cell, here, np.asarray(step.start if step.start is not None else step.q))
+    if contact is not None:
+        home = ", ".join(f"{np.degrees(v):.1f}" if t == "R" else f"{v:.3f}"
+                         for v, t in zip(plan.home, plan.joint_types, strict=True))
+        raise UsageError(f"the move from the arm's current pose to step {index} would come too close: {contact.what} "
+                         f"{contact.distance * 1e3:.1f} mm apart (needs {contact.required * 1e3:.0f} mm); jog the "
+                         f"arm to home ({home}; deg / m) first")
