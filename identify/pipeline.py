@@ -233,11 +233,11 @@ def identify(
     rows = fit_rows(meas, noise)
     geo, fits = fits_from_starts(rows, nominal, conventional, parallel_tol, robust, warnings)
     best, adequacy, clock_test = clock_tested(best_start(fits, rows.data), rows, robust)
+    torques = None if links is None or nominal is None else (lambda x: gravity_torques(nominal, links, x))
     # joint errors referenced to the readings' zero, not to this data set's home: the extended model's DH offsets
     # then mean the same on every data set of the arm (a home that moved with the split moved them by c·τ(home))
-    torques = None if links is None or nominal is None else (lambda x: gravity_torques(nominal, links, x))
     empty = TermSet((), np.zeros(meas.n_joints), torques)
-    cap = robot_size(best.lines, rows.meas.points) if max_offset is None else max_offset  # before joint errors
+    cap = robot_size(best.lines, rows.meas.points) if max_offset is None else max_offset  # size before joint errors
     write = partial(written_model, tp_ids=tuple(meas.tp_ids), conventional=conventional, nominal=nominal,
                     parallel_tol=parallel_tol, max_offset=cap, unit=rows.unit, declared=rows.declared,
                     sigma=rows.meas.sigma)
@@ -245,7 +245,7 @@ def identify(
                                            else (best, adequacy, None, []))
     models = written_models(write, rows, best, adequacy, empty, extended)
     use = "extended" if "extended" in models else "plain"
-    check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
+    check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))  # held out, every joint read
     validations = held_out(models, check_rows, meas.tp_ids)
     sweeps = sweep_fits(rows, models[use].refinement, warnings)
     clock = clock_fit(models[use], meas.clock_offset, clock_test)
