@@ -15,60 +15,36 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
-from common.errors import InputError
-from identify.estimator.adequacy import Adequacy, assess
-from identify.estimator.clock_split import ClockSplit, split_clock
-from identify.estimator.cpa import DEFAULT_PARALLEL_TOL, GeometricResult, home_from_measurements
-from identify.estimator.estimate import FitData, LinesFit, along_arc, best_start, fit, fit_kept, place_nominal, readmit
-from identify.estimator.extend import select_terms
-from identify.estimator.extensions import Decision, TermSet, candidates
-from identify.estimator.identifiability import Identifiability, identifiability
-from identify.estimator.measurements import Measurements, in_dh_joints, prepared_joints, validate
-from identify.estimator.outliers import sweep_neighbours
-from identify.estimator.poe import AxisLines, LineProblem, points_from_lines
-from identify.estimator.refine import Refinement, full_jacobian, parameter_names
-from identify.estimator.starts import starts
-from identify.estimator.sync import Retiming, retiming
+from identify.estimator.adequacy import Adequacy
+from identify.estimator.cpa import DEFAULT_PARALLEL_TOL, GeometricResult
+from identify.estimator.estimate import best_start
+from identify.estimator.extensions import Decision, TermSet
+from identify.estimator.measurements import Measurements
+from identify.estimator.poe import AxisLines
+from identify.estimator.refine import Refinement
 from identify.results import verdict as checks
 from identify.results.predict import Predictor
+from identify.results.stages import (
+    ClockFit,
+    SweepFit,
+    add_notes,
+    checked_measurements,
+    clock_fit,
+    clock_tested,
+    fit_rows,
+    fits_from_starts,
+    held_out,
+    joint_errors,
+    sweep_fits,
+    verdict_of,
+    written_models,
+)
 from identify.results.validation import Validation
-from identify.results.validation import validate as validate_model
-from identify.results.written import UNDETERMINED, FixedParameter, WrittenModel, robot_size, written_model
+from identify.results.written import FixedParameter, WrittenModel, robot_size, written_model
 from kinematics.dh import DHModel, points_from_joints
 from kinematics.joint_errors import Coupling, LinkMasses, gravity_torques
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class SweepFit:
-    """Residuals of one sweep (or of the free poses, ``joint`` 0): RMS 3D residual (m) of inliers."""
-
-    sweep: int
-    joint: int
-    samples: int
-    rejected: int
-    rms: float
-
-
-@dataclass(frozen=True)
-class ClockFit:
-    """The tracker-to-robot clock relation of streamed rows, fitted with the kinematics: robot time =
-    tracker time + ``offset`` + ``drift`` · (tracker time − ``t_ref``). ``offset`` (s) is the recording's
-    coarse offset plus the fitted correction; ``*_std`` their standard uncertainties (``drift`` None when not
-    fitted: streams shorter than :data:`identify.estimator.sync.DRIFT_SPAN`); ``rows`` the streamed rows fitted.
-    ``test``: whether the sweeps needed an offset each (:mod:`identify.estimator.clock_split`); when they did,
-    ``sweeps`` lists (sweep id, offset s, std s) per streamed sweep, ``offset`` is their inverse-variance
-    mean and ``offset_std`` the largest of their uncertainties."""
-
-    offset: float
-    offset_std: float
-    drift: float | None
-    drift_std: float | None
-    t_ref: float
-    rows: int
-    test: ClockSplit | None = None
-    sweeps: tuple[tuple[int, float, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -246,214 +222,49 @@ def identify(
     for compliance; ``extensions``: select joint errors the fit rows support (:mod:`identify.estimator.extensions`).
     Readings are the controller's (``meas.coupling``); several tracked points (``meas.tp``) share the model, each with
     its own tool.
+
+    The body reads as the data's way through the estimator: each call is one stage of :mod:`identify.results.stages`
+    (its docstring gives inputs, outputs and units), and ``rows`` (:class:`identify.results.stages.FitRows`) carries the
+    prepared fit rows through them.
     """
     coupling = meas.coupling
-    meas, relabelled = in_dh_joints(meas)
-    try:
-        warnings = validate(meas, with_nominal=nominal is not None) + relabelled
-    except InputError as exc:  # say what the coupling did to the sweeps when it matters
-        raise InputError("; ".join([str(exc), *relabelled])) from None
-    n = meas.n_joints
-    if nominal is not None and nominal.joint_types != meas.joint_types:
-        raise ValueError(f"nominal model has joints {nominal.joint_types}, data have {meas.joint_types}")
-    conventional = np.zeros((n, 4)) if nominal is None else nominal.dh_table()
-    tp_ids = meas.tp_ids
-    fitm = meas.subset(~meas.check)
-    home = home_from_measurements(fitm)
-    q, unknown = prepared_joints(fitm, home)
-    tp_index = np.searchsorted(tp_ids, fitm.tp)
-    weights = np.ones(len(q)) if fitm.sigma is None else 1.0 / fitm.sigma
-    numbers = {s: k + 1 for k, s in enumerate(np.unique(fitm.sweep[fitm.joint > 0]))}
-    sweep_group = np.array([numbers.get(int(s), 0) if j > 0 else 0 for s, j in zip(fitm.sweep, fitm.joint,
-                                                                                     strict=True)])
-    group = np.where(sweep_group > 0, sweep_group * len(tp_ids) + tp_index, 0)  # neighbours: same sweep and point
-    timing = None if fitm.t is None else retiming(fitm.t, fitm.streamed, fitm.sweep, q)
-    data = FitData(q, fitm.points, weights, unknown, tp_index, group, fitm.joint, timing)
-    geo, found_starts = starts(fitm, q, unknown, tp_index, home, nominal, conventional, parallel_tol, warnings)
-    fits = [fit(start, data, robust, label) for label, start in found_starts]
-    best: LinesFit = best_start(fits, data)
-    unit = 1.0 if fitm.sigma is None else float(np.median(fitm.sigma))
-    declared = unit if fitm.sigma is not None else noise
-    adequacy = _adequacy(best, data, unit, declared)
-    best, clock_test = split_clock(best, data, robust, max(adequacy.residual, declared or 0.0) ** 2 / unit**2)
-    if clock_test is not None and clock_test.split:
-        adequacy = _adequacy(best, data, unit, declared)
+    meas, warnings = checked_measurements(meas, nominal)
+    conventional = np.zeros((meas.n_joints, 4)) if nominal is None else nominal.dh_table()
+    rows = fit_rows(meas, noise)
+    geo, fits = fits_from_starts(rows, nominal, conventional, parallel_tol, robust, warnings)
+    best, adequacy, clock_test = clock_tested(best_start(fits, rows.data), rows, robust)
     torques = None if links is None or nominal is None else (lambda x: gravity_torques(nominal, links, x))
     # joint errors referenced to the readings' zero, not to this data set's home: the extended model's DH offsets
     # then mean the same on every data set of the arm (a home that moved with the split moved them by c·τ(home))
-    empty = TermSet((), np.zeros(n), torques)
-    cap = robot_size(best.lines, fitm.points) if max_offset is None else max_offset
-    write = partial(written_model, tp_ids=tuple(tp_ids), conventional=conventional, nominal=nominal,
-                    parallel_tol=parallel_tol, max_offset=cap, unit=unit, declared=declared, sigma=fitm.sigma)
-    decisions: list[Decision] = []
-    extended: tuple[LinesFit, TermSet] | None = None
-    if extensions:
-        pool = candidates(meas.joint_types, q[best.inliers], torques)
-        variance = max(adequacy.noise, declared or 0.0) ** 2 / unit**2
-        terms, _, decisions = select_terms(best, data.timed(best.timing), empty, pool, variance)
-        if terms.candidates:  # refitted on the plain model's inliers: joint errors never make outliers
-            joint_errors = readmit(fit_kept(best.lines, data.timed(best.timing), best.inliers, best.start,
-                                            terms.terms(q, None, best.q)), data)
-            if not np.array_equal(joint_errors.inliers, best.inliers):  # rows the joint errors explain are not gross
-                best = fit_kept(best.lines, data.timed(best.timing), joint_errors.inliers, best.start, best.terms)
-                adequacy = _adequacy(best, data, unit, declared)
-            extended = joint_errors, terms
-    models = {"plain": write("plain", best, data, adequacy, empty)}
-    if extended is not None:
-        fitted, terms = extended
-        models["extended"] = write("extended", fitted, data, _adequacy(fitted, data, unit, declared), terms)
+    empty = TermSet((), np.zeros(meas.n_joints), torques)
+    cap = robot_size(best.lines, rows.meas.points) if max_offset is None else max_offset  # size before joint errors
+    write = partial(written_model, tp_ids=tuple(meas.tp_ids), conventional=conventional, nominal=nominal,
+                    parallel_tol=parallel_tol, max_offset=cap, unit=rows.unit, declared=rows.declared,
+                    sigma=rows.meas.sigma)
+    best, adequacy, extended, decisions = (joint_errors(best, adequacy, rows, empty) if extensions
+                                           else (best, adequacy, None, []))
+    models = written_models(write, rows, best, adequacy, empty, extended)
     use = "extended" if "extended" in models else "plain"
-    used = models[use]
-    inl = used.fit.inliers
-    check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
-    validations = {} if not len(check_rows) else {
-        name: validate_model(check_rows.q, check_rows.points, check_rows.tp, check_rows.sigma,
-                             partial(_written_points, m, tp_ids), m.predictor, m.adequacy.noise, m.adequacy.model_error)
-        for name, m in models.items()}
-    ref = used.refinement
-    sweeps = [_sweep_fit(int(sid), int(fitm.joint[sweep_group == g][0]), ref, sweep_group == g)
-              for sid, g in numbers.items()]
-    if np.any(fitm.joint == 0):
-        sweeps.append(_sweep_fit(0, 0, ref, fitm.joint == 0))
-    for sw in sweeps:
-        if sw.rejected:
-            warnings.append(f"sweep {sw.sweep}: {sw.rejected} sample(s) rejected as outliers")
-    clock = None if used.fit.timing is None else _clock(
-        used.fit.timing, used.covariance[used.problem.n_terms:, used.problem.n_terms:], meas.clock_offset, clock_test)
-    found = [
-        checks.model_fit(used.fit_rms, used.adequacy, _cause(models, decisions)),
-        checks.conditioning(used.condition, _identifiability(used, robot_size(best.lines, fitm.points))),
-        checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
-        models["plain"].dh_check,
-    ]
-    if clock is not None:
-        found.append(checks.timing(clock.offset_std, _tp_speed(used.jacobian_blocks, used.problem, weights[inl]),
-                                   used.adequacy.noise, clock.test, [o for _, o, _ in clock.sweeps]))
-    if validations:
-        v = validations[use]
-        others = {k: (w.rms, w.expected) for k, w in validations.items() if k != use}
-        found.append(checks.holdout(v.samples, v.rms, v.expected, use, others, _moved(models, tp_ids, check_rows)))
-    elif use == "extended" and not np.any(fitm.joint == 0):
-        found.append(checks.sweeps_only_extension())
-    if nominal is not None and np.sum(unknown < 0) >= 3:
-        known = unknown < 0
-        lines = models["plain"].lines
-        placed, _ = place_nominal(nominal, best.q[known], points_from_lines(lines, best.q[known]),
-                                  tool=models["plain"].tools[0])
-        gap = points_from_joints(placed, best.q[known]) - points_from_lines(lines, best.q[known])
-        found.append(checks.nominal("model", float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))))
-    if decisions:
-        kept = [d.candidate.names for d in decisions if d.selected]
-        warnings.append("joint errors selected: " + (", ".join(n for names in kept for n in names) if kept else "none"))
-    notes = [f"fitted from the {best.start}" + (f" (of {len(fits)} starts)" if len(fits) > 1 else "")]
-    a = used.adequacy
-    if fitm.sigma is not None:
-        notes.append(f"reduced chi-square {a.statistic:.3g} (1 when the given sigma is right)")
-    if a.inflation > 1.0:
-        notes.append(f"residuals correlated along the arcs (lag-1 {a.rho:.2f}): covariance inflated {a.inflation:.3g}x")
-    ref.notes.extend(notes)
+    check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))  # held out, every joint read
+    validations = held_out(models, check_rows, meas.tp_ids)
+    sweeps = sweep_fits(rows, models[use].refinement, warnings)
+    clock = clock_fit(models[use], meas.clock_offset, clock_test)
+    verdict = verdict_of(models, use, decisions, validations, sweeps, clock, rows, check_rows, nominal, meas.tp_ids)
+    add_notes(models, use, decisions, len(fits), rows, warnings)
     return Identification(
         models=models,
         use=use,
         validations=validations,
         geometric=geo,
         sweeps=sweeps,
-        rejected_rows=[int(r) for r in fitm.row[~inl]],
+        rejected_rows=[int(r) for r in rows.meas.row[~models[use].fit.inliers]],
         convention="nominal" if nominal is not None else "zero",
-        verdict=checks.Verdict(tuple(found)),
-        start=best.start,
+        verdict=verdict,
+        start=models["plain"].fit.start,
         coupling=coupling,
         decisions=decisions,
         warnings=warnings,
         clock=clock,
     )
-
-
-def _written_points(model: WrittenModel, tp_ids: NDArray[np.int64], q: Array, tp: NDArray[np.int64]) -> Array:
-    """What ``model``'s written numbers predict at DH joint values ``q`` for tracked point ids ``tp``."""
-    return model.dh_points(q, np.searchsorted(tp_ids, tp))
-
-
-def _moved(models: dict[str, WrittenModel], tp_ids: NDArray[np.int64], rows: Measurements) -> float | None:
-    """RMS distance (m) between the extended and plain models' predictions at ``rows`` (None without joint errors)."""
-    if "extended" not in models:
-        return None
-    gap = (_written_points(models["extended"], tp_ids, rows.q, rows.tp)
-           - _written_points(models["plain"], tp_ids, rows.q, rows.tp))
-    return float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))
-
-
-def _identifiability(model: WrittenModel, size: float) -> Identifiability:
-    """What the data determine of ``model``'s free parameters, for the robot's ``size`` (m)."""
-    ref, a = model.refinement, model.adequacy
-    names = [name for name, free in zip(parameter_names(model.model.n_joints), ref.free, strict=False) if free]
-    scale = max(a.residual, a.declared or 0.0) * np.sqrt(a.inflation)
-    held = tuple(f.name for f in model.fixed if f.reason == UNDETERMINED)
-    _, jac = full_jacobian(model.model, ref.q[ref.inliers])
-    lever = np.sqrt(np.einsum("kij,kij->j", jac, jac)[ref.free] / len(jac))
-    return identifiability(names, ref.covariance, lever, size, a.model_error, scale, int(ref.inliers.sum()), held)
-
-
-def _cause(models: dict[str, WrittenModel], decisions: list[Decision]) -> str | None:
-    """What the joint-error selection says about a large model error: the kinds of error selected and how much
-    of the residual they explain, or that none explained it."""
-    if not decisions:
-        return None
-    plain = models["plain"].fit_rms
-    ext = models.get("extended")
-    if ext is None:
-        return "no joint error (gear ratio, eccentricity, compliance) explains it"
-    kinds = sorted({d.candidate.family for d in decisions if d.selected})
-    name = {"compliance": "elasticity (compliance under gravity)", "scale": "gear ratio (reading scale)",
-            "eccentricity": "eccentricity"}
-    return (f"{', '.join(name[k] for k in kinds)} selected: residual RMS {checks.mm(plain)} without joint errors, "
-            f"{checks.mm(ext.fit_rms)} with them")
-
-
-def _tp_speed(jac_blocks: Array, problem: LineProblem, weights: Array) -> float:
-    """RMS speed (m/s) of the tracked point over the streamed rows: the Jacobian column of the clock offset."""
-    rows = problem.timing.rows
-    velocity = jac_blocks[rows, :, problem.n_terms] / weights[rows, None]
-    return float(np.sqrt(np.mean(np.sum(velocity**2, axis=1))))
-
-
-def _clock(timing: Retiming, covariance: Array, offset: float, test: ClockSplit | None) -> ClockFit:
-    """The fitted clock relation (``covariance`` of ``timing.tau``; ``offset`` s the recording's coarse one;
-    ``test`` whether the sweeps needed one offset each)."""
-    std = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    k = timing.offsets
-    drift, drift_std = (float(timing.tau[k]), float(std[k])) if timing.drift else (None, None)
-    rows = int(np.sum(timing.rows))
-    if k == 1:
-        return ClockFit(offset + float(timing.tau[0]), float(std[0]), drift, drift_std, timing.t_ref, rows, test)
-    offsets, stds = offset + timing.tau[:k], np.maximum(std[:k], 1e-300)
-    mean = float(np.sum(offsets / stds**2) / np.sum(1 / stds**2))
-    sweeps = tuple((int(s), float(o), float(e)) for s, o, e in zip(np.unique(timing.sweep), offsets, std[:k],
-                                                                     strict=True))
-    return ClockFit(mean, float(np.max(std[:k])), drift, drift_std, timing.t_ref, rows, test, sweeps)
-
-
-def _lost(sweeps: list[SweepFit]) -> list[str]:
-    """Sweeps that lost more than half their samples, or all but two, to the outlier test."""
-    return [f"sweep {s.sweep} (joint {s.joint})" for s in sweeps
-            if s.joint > 0 and (s.rejected * 2 > s.samples or s.samples - s.rejected < 3)]
-
-
-def _adequacy(best: LinesFit, data: FitData, unit: float, declared: float | None) -> Adequacy:
-    """Adequacy of ``best`` on its inliers (see :mod:`identify.estimator.adequacy`)."""
-    inl = best.inliers
-    rows = data.timed(best.timing).subset(inl)
-    problem = rows.problem(best.lines, best.terms.subset(inl))
-    zero = np.zeros(problem.size)
-    runs = sweep_neighbours(rows.group, along_arc(best.q[inl], rows.joint))
-    return assess(problem.residuals(zero).reshape(-1, 3), best.jacobian_blocks(problem), rows.unknown, runs, unit,
-                  declared)
-
-
-def _sweep_fit(sweep: int, joint: int, ref: Refinement, rows: NDArray[np.bool_]) -> SweepFit:
-    good = rows & ref.inliers
-    res = ref.residuals[good]
-    rms = float(np.sqrt(np.mean(np.sum(res**2, axis=1)))) if len(res) else float("nan")
-    return SweepFit(sweep, joint, int(rows.sum()), int((rows & ~ref.inliers).sum()), rms)
 
 
