@@ -1,2 +1,2 @@
 """Configuration as data: robot models (``robots/*.yaml``), tracker profiles (``trackers/*.yaml``), the site file,
-and the code that loads and validates them (``robots``, ``site``, ``geometry``)."""
+and the code that loads and validates them (``files``: reading and errors; ``robots``, ``site``, ``geometry``)."""

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from config.robots import ConfigError, _got, _read_yaml, check_schema
+from config.files import ConfigError, check_schema, got, read_yaml
 
 SCHEMA_VERSION = 1
 
@@ -219,14 +219,14 @@ def load_site(path: str | Path) -> SiteConfig:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(path, None, "an existing site YAML file", "no such file")
-    return site_from_dict(_read_yaml(path), path)
+    return site_from_dict(read_yaml(path), path)
 
 
 def site_from_dict(data: Any, source: str | Path = "<dict>") -> SiteConfig:
     """Validate a site mapping (as read from YAML or written by :meth:`SiteConfig.as_dict`)."""
     v = _Validator(source)
     if not isinstance(data, dict):
-        raise ConfigError(source, None, f"a mapping with the keys {', '.join(TOP_KEYS)}", _got(data))
+        raise ConfigError(source, None, f"a mapping with the keys {', '.join(TOP_KEYS)}", got(data))
     v.known(None, data, TOP_KEYS)
     if "schema" not in data:
         raise ConfigError(source, "schema", f"the schema version ({SCHEMA_VERSION})", "nothing (missing key)")
@@ -237,7 +237,7 @@ def site_from_dict(data: Any, source: str | Path = "<dict>") -> SiteConfig:
         if value is None:
             value = {}
         if not isinstance(value, dict):
-            raise ConfigError(source, name, "a mapping (or nothing)", _got(value))
+            raise ConfigError(source, name, "a mapping (or nothing)", got(value))
         allowed = [key for section, key in FIELDS.values() if section == name]
         v.known(name, value, allowed)
         sections[name] = value
@@ -262,7 +262,7 @@ class _Validator:
         self.source = source
 
     def fail(self, key: str, expected: str, value: Any) -> ConfigError:
-        return ConfigError(self.source, key, expected, _got(value))
+        return ConfigError(self.source, key, expected, got(value))
 
     def known(self, section: str | None, mapping: dict[str, Any], allowed: Any) -> None:
         for key in mapping:
@@ -416,13 +416,11 @@ def _camera_pose(v: _Validator, key: str, value: Any) -> tuple[tuple[float, ...]
     if isinstance(value, str):
         import numpy as np
 
-        from config.robots import _read_yaml
-
         where = Path(v.source).parent if isinstance(v.source, Path) else Path.cwd()
         path = where / value
         if not path.is_file():
             raise v.fail(key, expected, value)
-        doc = _read_yaml(path)
+        doc = read_yaml(path)
         base = doc.get("base") if isinstance(doc, dict) else None
         if not (isinstance(base, list) and len(base) == 4):
             raise v.fail(key, f"{expected} (with a 4x4 'base')", value)
