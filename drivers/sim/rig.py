@@ -70,7 +70,7 @@ from drivers.errors import (
 from drivers.motion import joint_durations as _durations
 from drivers.motion import profile_fraction as _fraction
 from drivers.sim.pairing import _points_settings, _unpaired, check_pairing, is_simulated_camera
-from drivers.sim.stream import StreamedMove, StreamSettings
+from drivers.sim.stream_model import StreamedMove, StreamSettings
 from drivers.sim.world import backlash_play, joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
 from kinematics.dh import frames_from_joints, points_from_joints
