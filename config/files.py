@@ -36,7 +36,6 @@ class ConfigError(ValueError):
         super().__init__(" ".join(text.split()))
 
 
-
 def check_schema(source: object, schema: object, supported: int) -> None:
     """Raise ConfigError unless ``schema`` is an integer file-format version this software reads."""
     if isinstance(schema, bool) or not isinstance(schema, int) or schema < 1:
@@ -45,7 +44,6 @@ def check_schema(source: object, schema: object, supported: int) -> None:
     if schema > supported:
         raise ConfigError(source, "schema", f"a schema version <= {supported} (the newest this software "
                           "reads; a newer file needs a newer version)", got(schema))
-
 
 
 def config_file(name_or_path: str | Path, directory: Path, kind: str, names: Callable[[], list[str]]) -> Path:
@@ -81,7 +79,7 @@ def got(value: object) -> str:
     return text if len(text) <= 80 else text[:77] + "..."
 
 
-class StrictLoader(yaml.SafeLoader):
+class _StrictLoader(yaml.SafeLoader):
     """SafeLoader that rejects duplicate keys in a mapping."""
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
@@ -105,7 +103,7 @@ def read_yaml(path: Path) -> Any:
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(path, None, "a readable UTF-8 YAML file", got(str(exc))) from exc
     try:
-        return yaml.load(text, Loader=StrictLoader)  # a SafeLoader: builds plain data only
+        return yaml.load(text, Loader=_StrictLoader)  # a SafeLoader: builds plain data only
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         problem = getattr(exc, "problem", None) or str(exc)

@@ -73,7 +73,6 @@ def robot_names() -> list[str]:
     return sorted(p.stem for p in ROBOTS_DIR.glob("*.yaml"))
 
 
-
 def load_robot(name_or_path: str | Path) -> RobotModel:
     """Load and validate a bundled model by name (case-insensitive) or a YAML file by path.
 
@@ -82,7 +81,6 @@ def load_robot(name_or_path: str | Path) -> RobotModel:
     """
     path = config_file(name_or_path, ROBOTS_DIR, "robot", robot_names)
     return _model_from_dict(path, read_yaml(path))
-
 
 
 def _number(path: Path, key: str, value: Any, expected: str = "a finite number") -> float:

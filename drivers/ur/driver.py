@@ -154,7 +154,6 @@ def open_robot(spec: RobotSpec | str, rig: object = None, site: Any = None) -> U
     return URRobot(model, host, options)
 
 
-
 class URRobot(JointStreaming):
     """A UR arm through ur_rtde in a worker process (implements :class:`drivers.base.Robot` and
     :class:`drivers.base.StreamingRobot`); see the module docstring. ``factory_calibration``: the controller's
