@@ -24,6 +24,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from config.files import ConfigError, got
+
 Array = NDArray[np.float64]
 
 KEYS = ("source", "mounting", "bodies", "ignore")
@@ -50,10 +52,8 @@ class RobotGeometry:
 
 def geometry_from_dict(path: Path, data: Any, n_joints: int) -> RobotGeometry:
     """Validate a ``collision`` block for a chain of ``n_joints``; ConfigError (one line) on any problem."""
-    from config.robots import ConfigError, _got
-
     def fail(key: str, expected: str, value: Any) -> ConfigError:
-        return ConfigError(path, f"collision.{key}" if key else "collision", expected, _got(value))
+        return ConfigError(path, f"collision.{key}" if key else "collision", expected, got(value))
 
     def vector(key: str, value: Any) -> Array:
         ok = isinstance(value, list) and len(value) == 3

@@ -16,7 +16,7 @@ unknown key is rejected. Sections and keys (units: m, rad, s; per-joint values b
 
 The loaded configuration is a flat frozen :class:`SiteConfig` (``site.tracker_noise``,
 ``site.move_timeout``, ...); :data:`FIELDS` maps each field to its place in the file.
-``config/site_example.yaml`` documents every key.
+``config/site_example.yaml`` documents every key; config/site_checks.py checks each key's value.
 
 >>> site = load_site("site.yaml").with_overrides(samples_per_step=args.samples)  # None: not given
 >>> session_header["config"] = site.as_dict()                                    # the resolved values
@@ -24,12 +24,12 @@ The loaded configuration is a flat frozen :class:`SiteConfig` (``site.tracker_no
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from config.robots import ConfigError, _got, _read_yaml, check_schema
+from config.files import ConfigError, check_schema, got, read_yaml
+from config.site_checks import CHECKS, Range, Validator
 
 SCHEMA_VERSION = 1
 
@@ -81,8 +81,6 @@ FIELDS: dict[str, tuple[str | None, str]] = {
 }
 SECTIONS = ("robot", "tracker", "plan", "cell", "timeouts", "verify")
 TOP_KEYS = ("schema", *SECTIONS, "retries")
-
-Range = tuple[float, float]
 
 
 class Timeouts(NamedTuple):
@@ -219,14 +217,14 @@ def load_site(path: str | Path) -> SiteConfig:
     path = Path(path)
     if not path.is_file():
         raise ConfigError(path, None, "an existing site YAML file", "no such file")
-    return site_from_dict(_read_yaml(path), path)
+    return site_from_dict(read_yaml(path), path)
 
 
 def site_from_dict(data: Any, source: str | Path = "<dict>") -> SiteConfig:
     """Validate a site mapping (as read from YAML or written by :meth:`SiteConfig.as_dict`)."""
-    v = _Validator(source)
+    v = Validator(source)
     if not isinstance(data, dict):
-        raise ConfigError(source, None, f"a mapping with the keys {', '.join(TOP_KEYS)}", _got(data))
+        raise ConfigError(source, None, f"a mapping with the keys {', '.join(TOP_KEYS)}", got(data))
     v.known(None, data, TOP_KEYS)
     if "schema" not in data:
         raise ConfigError(source, "schema", f"the schema version ({SCHEMA_VERSION})", "nothing (missing key)")
@@ -237,7 +235,7 @@ def site_from_dict(data: Any, source: str | Path = "<dict>") -> SiteConfig:
         if value is None:
             value = {}
         if not isinstance(value, dict):
-            raise ConfigError(source, name, "a mapping (or nothing)", _got(value))
+            raise ConfigError(source, name, "a mapping (or nothing)", got(value))
         allowed = [key for section, key in FIELDS.values() if section == name]
         v.known(name, value, allowed)
         sections[name] = value
@@ -249,252 +247,16 @@ def site_from_dict(data: Any, source: str | Path = "<dict>") -> SiteConfig:
         if key not in mapping:
             continue
         dotted = key if section is None else f"{section}.{key}"
-        values[name] = _CHECKS[name](v, dotted, mapping[key])
+        values[name] = CHECKS[name](v, dotted, mapping[key])
     site = replace(defaults, **values, source=str(source))
     _check_consistency(v, site)
     return site
 
 
-class _Validator:
-    """Value checks; every failure is a :class:`ConfigError` naming ``source`` and the dotted key."""
-
-    def __init__(self, source: str | Path) -> None:
-        self.source = source
-
-    def fail(self, key: str, expected: str, value: Any) -> ConfigError:
-        return ConfigError(self.source, key, expected, _got(value))
-
-    def known(self, section: str | None, mapping: dict[str, Any], allowed: Any) -> None:
-        for key in mapping:
-            if key not in allowed:
-                dotted = str(key) if section is None else f"{section}.{key}"
-                where = "at the top level" if section is None else f"in '{section}'"
-                raise ConfigError(self.source, dotted, f"only the keys {', '.join(allowed)} {where}",
-                                  "an unknown key")
-
-    def text(self, key: str, value: Any) -> str | None:
-        if value is None:
-            return None
-        if not isinstance(value, str) or not value.strip():
-            raise self.fail(key, "a non-empty string (or null)", value)
-        return value.strip()
-
-    def number(self, key: str, value: Any, expected: str, low: float, strict: bool) -> float:
-        ok = not isinstance(value, bool) and isinstance(value, int | float) and math.isfinite(value)
-        if not ok or value < low or (strict and value == low):
-            raise self.fail(key, expected, value)
-        return float(value)
-
-    def integer(self, key: str, value: Any, low: int) -> int:
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise self.fail(key, f"an integer >= {low}", value)
-        return value
-
-    def numbers(self, key: str, value: Any, expected: str, count: int | None = None,
-                positive: bool = False) -> tuple[float, ...]:
-        if not isinstance(value, list) or not value or (count is not None and len(value) != count):
-            raise self.fail(key, expected, value)
-        low = 0.0 if positive else -math.inf
-        return tuple(self.number(f"{key}[{i}]", x, expected, low, strict=positive) for i, x in enumerate(value))
+assert set(CHECKS) == set(FIELDS) == {f.name for f in fields(SiteConfig)} - {"source"}
 
 
-def _positive(unit: str) -> Any:
-    return lambda v, key, x: v.number(key, x, f"a number > 0 ({unit})", 0.0, strict=True)
-
-
-def _hosts(v: _Validator, key: str, value: Any) -> dict[str, str]:
-    expected = "a mapping from robot model name to host, e.g. {ur5e: 192.168.1.10}"
-    if not isinstance(value, dict):
-        raise v.fail(key, expected, value)
-    out = {}
-    for name, host in value.items():
-        if not isinstance(name, str) or not name.strip():
-            raise v.fail(key, expected, name)
-        out[name.strip().lower()] = v.text(f"{key}.{name}", host) or ""
-        if not out[name.strip().lower()]:
-            raise v.fail(f"{key}.{name}", "a host name or address", host)
-    return out
-
-
-def _settings(v: _Validator, key: str, value: Any) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise v.fail(key, "a mapping of setting names to numbers, strings or booleans", value)
-    for name, item in value.items():
-        if not isinstance(name, str) or not (item is None or isinstance(item, str | int | float | bool)):
-            raise v.fail(f"{key}.{name}", "a number, string or boolean", item)
-    return dict(value)
-
-
-def _joints(v: _Validator, key: str, value: Any) -> tuple[int, ...] | None:
-    if value is None:
-        return None
-    expected = "a list of distinct 1-based joint numbers (or null for all joints)"
-    if not isinstance(value, list) or not value:
-        raise v.fail(key, expected, value)
-    out = tuple(v.integer(f"{key}[{i}]", j, 1) for i, j in enumerate(value))
-    if len(set(out)) != len(out):
-        raise v.fail(key, expected, value)
-    return out
-
-
-def _ranges(v: _Validator, key: str, value: Any) -> tuple[Range | None, ...] | None:
-    if value is None:
-        return None
-    expected = "a list with one [min, max] (rad / m) or null per joint"
-    if not isinstance(value, list) or not value:
-        raise v.fail(key, expected, value)
-    out: list[Range | None] = []
-    for i, item in enumerate(value):
-        if item is None:
-            out.append(None)
-            continue
-        pair = v.numbers(f"{key}[{i}]", item, "[min, max] (rad / m) with min < max, or null", 2)
-        if not pair[0] < pair[1]:
-            raise v.fail(f"{key}[{i}]", "[min, max] (rad / m) with min < max, or null", item)
-        out.append((pair[0], pair[1]))
-    return tuple(out)
-
-
-def _optional_numbers(unit: str) -> Any:
-    def check(v: _Validator, key: str, value: Any) -> tuple[float, ...] | None:
-        if value is None:
-            return None
-        return v.numbers(key, value, f"a list of numbers > 0 ({unit}), one per joint, or null", positive=True)
-
-    return check
-
-
-def _obstacles(keys: tuple[str, ...], example: str) -> Any:
-    def check(v: _Validator, key: str, value: Any) -> tuple[dict[str, Any], ...]:
-        expected = f"a list of mappings {example}"
-        if value is None:
-            return ()
-        if not isinstance(value, list):
-            raise v.fail(key, expected, value)
-        out, names = [], set()
-        for i, item in enumerate(value):
-            where = f"{key}[{i}]"
-            if not isinstance(item, dict) or set(item) != set(keys):
-                raise v.fail(where, f"a mapping with exactly the keys {', '.join(keys)}, e.g. {example}", item)
-            name = v.text(f"{where}.name", item["name"])
-            if name is None or name in names:
-                raise v.fail(f"{where}.name", "a name, unique among the boxes and cylinders", item["name"])
-            names.add(name)
-            entry: dict[str, Any] = {"name": name}
-            for k in keys[1:]:
-                if k == "radius":
-                    entry[k] = v.number(f"{where}.radius", item[k], "a number > 0 (m)", 0.0, strict=True)
-                else:
-                    entry[k] = list(v.numbers(f"{where}.{k}", item[k], "[x, y, z] in the base frame (m)", 3))
-            if "min" in entry and not all(lo < hi for lo, hi in zip(entry["min"], entry["max"], strict=True)):
-                raise v.fail(where, "min < max on every axis", item)
-            out.append(entry)
-        return tuple(out)
-
-    return check
-
-
-def _optional_point(v: _Validator, key: str, value: Any) -> tuple[float, ...] | None:
-    if value is None:
-        return None
-    return v.numbers(key, value, "[x, y, z] in the flange frame (m), or null for the TP guess", 3)
-
-
-def _optional_offset(v: _Validator, key: str, value: Any) -> float | None:
-    if value is None:
-        return None
-    return v.number(key, value, "a number (m along the surface normal), or null for the robot model's", -math.inf,
-                    strict=True)
-
-
-def _camera_pose(v: _Validator, key: str, value: Any) -> tuple[tuple[float, ...], ...] | None:
-    """A 4x4 pose (base frame ← camera), or the path of a result YAML whose ``base`` is camera ← base."""
-    if value is None:
-        return None
-    expected = ("a 4x4 pose of the camera in the robot's base frame, or the path of a result YAML of a session "
-                "with this camera")
-    if isinstance(value, str):
-        import numpy as np
-
-        from config.robots import _read_yaml
-
-        where = Path(v.source).parent if isinstance(v.source, Path) else Path.cwd()
-        path = where / value
-        if not path.is_file():
-            raise v.fail(key, expected, value)
-        doc = _read_yaml(path)
-        base = doc.get("base") if isinstance(doc, dict) else None
-        if not (isinstance(base, list) and len(base) == 4):
-            raise v.fail(key, f"{expected} (with a 4x4 'base')", value)
-        matrix = np.array([v.numbers(f"{key}.base[{i}]", row, "4 numbers", 4) for i, row in enumerate(base)])
-        inverse = np.eye(4)
-        inverse[:3, :3] = matrix[:3, :3].T
-        inverse[:3, 3] = -matrix[:3, :3].T @ matrix[:3, 3]
-        value = inverse.tolist()
-    if not isinstance(value, list) or len(value) != 4:
-        raise v.fail(key, expected, value)
-    rows = tuple(v.numbers(f"{key}[{i}]", row, "a row of 4 numbers", 4) for i, row in enumerate(value))
-    rotation = [row[:3] for row in rows[:3]]
-    ortho = all(abs(sum(rotation[k][i] * rotation[k][j] for k in range(3)) - (i == j)) < 1e-6
-                for i in range(3) for j in range(3))
-    if rows[3] != (0.0, 0.0, 0.0, 1.0) or not ortho:
-        raise v.fail(key, f"{expected}: a rotation and a translation, last row 0, 0, 0, 1", value)
-    return rows
-
-
-_CHECKS: dict[str, Any] = {
-    "robot_model": lambda v, key, x: v.text(key, x),
-    "host": lambda v, key, x: v.text(key, x),
-    "hosts": _hosts,
-    "speed_fraction": _positive("a fraction of the speed"),
-    "acceleration_fraction": _positive("a fraction of the acceleration"),
-    "speed": _optional_numbers("rad/s / m/s"),
-    "acceleration": _optional_numbers("rad/s² / m/s²"),
-    "tracker": lambda v, key, x: v.text(key, x),
-    "tracker_noise": _positive("m per axis"),
-    "tracker_settings": _settings,
-    "measure_time": lambda v, key, x: v.number(key, x, "a number >= 0 (s per reading)", 0.0, strict=False),
-    "tp_guess": lambda v, key, x: v.numbers(key, x, "[x, y, z] in the flange frame (m)", 3),
-    "samples_per_step": lambda v, key, x: v.integer(key, x, 1),
-    "settle_time": lambda v, key, x: v.number(key, x, "a number >= 0 (s)", 0.0, strict=False),
-    "steps_per_sweep": lambda v, key, x: v.integer(key, x, 3),
-    "sweep_joints": _joints,
-    "sweep_ranges": _ranges,
-    "free_poses": lambda v, key, x: v.integer(key, x, 0),
-    "check_poses": lambda v, key, x: v.integer(key, x, 0),
-    "home_check_every": lambda v, key, x: v.integer(key, x, 0),
-    "min_axis_distance": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
-    "stream_speed": lambda v, key, x: None if x is None else v.number(key, x, "a speed > 0 (rad/s or m/s), or null",
-                                                                        0.0, strict=True),
-    "stream_rate": lambda v, key, x: v.number(key, x, "a rate > 0 (Hz)", 0.0, strict=True),
-    "cell_margin": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
-    "mounting_offset": _optional_offset,
-    "mounting_clearance": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
-    "tool_a": lambda v, key, x: v.numbers(key, x, "[x, y, z] in the flange frame (m)", 3),
-    "tool_b": _optional_point,
-    "tool_radius": _positive("m"),
-    "boxes": _obstacles(("name", "min", "max"), "{name: fixture, min: [0.4, -0.2, 0], max: [0.6, 0.2, 0.3]}"),
-    "cylinders": _obstacles(("name", "a", "b", "radius"),
-                            "{name: tracker stand, a: [1.5, 0, 0], b: [1.5, 0, 1.2], radius: 0.15}"),
-    "camera_pose": _camera_pose,
-    "camera_half_fov": lambda v, key, x: v.number(key, x, "an angle > 0 (rad)", 0.0, strict=True),
-    "camera_max_tilt": lambda v, key, x: v.number(key, x, "an angle > 0 (rad)", 0.0, strict=True),
-    "target_normal": lambda v, key, x: v.numbers(key, x, "[x, y, z] in the flange frame, not zero", 3),
-    "connect_timeout": _positive("s"),
-    "move_timeout": _positive("s"),
-    "settle_timeout": _positive("s"),
-    "measure_timeout": _positive("s"),
-    "retries": lambda v, key, x: v.integer(key, x, 0),
-    "verify_centre": lambda v, key, x: None if x is None else v.numbers(key, x, "[x, y, z] in the base frame (m), or "
-                                                                         "null for the TP at home", 3),
-    "verify_edge": lambda v, key, x: None if x is None else v.number(key, x, "a number > 0 (m), or null for a size "
-                                                                       "from the robot's reach", 0.0, strict=True),
-    "verify_cycles": lambda v, key, x: v.integer(key, x, 2),
-}
-assert set(_CHECKS) == set(FIELDS) == {f.name for f in fields(SiteConfig)} - {"source"}
-
-
-def _check_consistency(v: _Validator, site: SiteConfig) -> None:
+def _check_consistency(v: Validator, site: SiteConfig) -> None:
     """Checks across keys that do not need the robot model (those are made when the plan is built)."""
     if site.settle_timeout < site.settle_time:
         raise v.fail("timeouts.settle", f"a timeout >= plan.settle_time = {site.settle_time!r} s",

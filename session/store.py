@@ -65,7 +65,7 @@ from session.schema import (
     not_a_session,
     read_meta,
 )
-from session.streams import StreamData, current_streams
+from session.stream_data import StreamData, current_streams
 
 OUTCOMES = ("running", "complete", "aborted", "failed")
 

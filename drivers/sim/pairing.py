@@ -19,11 +19,11 @@ def check_pairing(robot: RobotSpec, tracker: TrackerSpec) -> None:
     arm, nor a real tracker a simulated one (one simulated world, :class:`SimulatedRig`)."""
     simulated = (robot.is_mock, tracker.is_mock or is_simulated_camera(tracker))
     if simulated[0] != simulated[1]:
-        raise _unpaired(robot, tracker)
+        raise unpaired(robot, tracker)
 
 
-def _points_settings(robot: RobotSpec, tracker: TrackerSpec | None, r: dict[str, Any],
-                     t: dict[str, Any]) -> dict[str, Any]:
+def points_settings(robot: RobotSpec, tracker: TrackerSpec | None, r: dict[str, Any],
+                    t: dict[str, Any]) -> dict[str, Any]:
     """The rig's ``points`` and ``occlusion``: given on the robot spec (the reflectors on its flange) or on the
     tracker spec (what it sees), the robot's default otherwise; SpecError when the two specs disagree."""
     out = {}
@@ -38,6 +38,7 @@ def _points_settings(robot: RobotSpec, tracker: TrackerSpec | None, r: dict[str,
     return out
 
 
-def _unpaired(robot: RobotSpec, tracker: TrackerSpec | None) -> SpecError:
+def unpaired(robot: RobotSpec, tracker: TrackerSpec | None) -> SpecError:
+    """The error for a simulated device paired with a real one."""
     return SpecError(f"a simulated rig needs mock devices on both sides (mock:MODEL with mock or aruco:sim), got "
                      f"{str(robot)!r} and {str(tracker)!r}")

@@ -69,8 +69,8 @@ from drivers.errors import (
 )
 from drivers.motion import joint_durations as _durations
 from drivers.motion import profile_fraction as _fraction
-from drivers.sim.pairing import _points_settings, _unpaired, check_pairing, is_simulated_camera
-from drivers.sim.stream import StreamedMove, StreamSettings
+from drivers.sim.pairing import check_pairing, is_simulated_camera, points_settings, unpaired
+from drivers.sim.stream_model import StreamedMove, StreamSettings
 from drivers.sim.world import backlash_play, joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
 from kinematics.dh import frames_from_joints, points_from_joints
@@ -183,13 +183,13 @@ class SimulatedRig:
         robot = robot if isinstance(robot, RobotSpec) else RobotSpec.parse(robot)
         tracker = tracker if tracker is None or isinstance(tracker, TrackerSpec) else TrackerSpec.parse(tracker)
         if not robot.is_mock:
-            raise _unpaired(robot, tracker)
+            raise unpaired(robot, tracker)
         if tracker is not None:
             check_pairing(robot, tracker)
         camera = tracker is not None and is_simulated_camera(tracker)
         r = robot.mock_settings()
         t = tracker.mock_settings() if tracker is not None and not camera else TrackerSpec("mock").mock_settings()
-        world = _points_settings(robot, tracker, r, t)
+        world = points_settings(robot, tracker, r, t)
         view = None
         if camera:  # only the camera's pixels are simulated: the rig takes its faults, seed and placement
             assert tracker is not None

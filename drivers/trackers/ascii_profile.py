@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from config.robots import ConfigError, _got, _read_yaml, check_schema, config_file
+from config.files import ConfigError, check_schema, config_file, got, read_yaml
 from drivers.errors import BadReading, MeasurementError, TargetLost
 
 SCHEMA_VERSION = 1
@@ -147,23 +147,23 @@ def profile_names() -> list[str]:
 def load_profile(name_or_path: str | Path) -> Profile:
     """A bundled profile by name, or a YAML file by path; ConfigError (one line: file, key, expected)."""
     path = config_file(name_or_path, TRACKERS_DIR, "tracker profile", profile_names)
-    return profile_from_dict(_read_yaml(path), path)
+    return profile_from_dict(read_yaml(path), path)
 
 
 def _regex(src: Any, key: str, value: Any) -> re.Pattern[str]:
     if not isinstance(value, str) or not value:
-        raise ConfigError(src, key, "a regular expression (string)", _got(value))
+        raise ConfigError(src, key, "a regular expression (string)", got(value))
     try:
         return re.compile(value)
     except re.error as exc:
-        raise ConfigError(src, key, f"a valid regular expression ({exc})", _got(value)) from None
+        raise ConfigError(src, key, f"a valid regular expression ({exc})", got(value)) from None
 
 
 def _text(src: Any, key: str, value: Any, optional: bool = True) -> str | None:
     if value is None and optional:
         return None
     if not isinstance(value, str) or not value.strip() or any(c in value for c in "\r\n"):
-        raise ConfigError(src, key, "a non-empty one-line string" + (" (or null)" if optional else ""), _got(value))
+        raise ConfigError(src, key, "a non-empty one-line string" + (" (or null)" if optional else ""), got(value))
     return value
 
 
@@ -171,7 +171,7 @@ def _strings(src: Any, key: str, value: Any) -> frozenset[str]:
     if value is None:
         return frozenset()
     if not isinstance(value, list) or not all(isinstance(v, str | int) and not isinstance(v, bool) for v in value):
-        raise ConfigError(src, key, "a list of status values (strings)", _got(value))
+        raise ConfigError(src, key, "a list of status values (strings)", got(value))
     return frozenset(str(v) for v in value)
 
 
@@ -179,7 +179,7 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
     """Validate a profile mapping; ConfigError naming ``source`` and the key."""
     src = source
     if not isinstance(data, dict):
-        raise ConfigError(src, None, "a mapping (a tracker profile)", _got(data))
+        raise ConfigError(src, None, "a mapping (a tracker profile)", got(data))
     for key in data:
         if key not in KEYS:
             raise ConfigError(src, str(key), f"only the keys {', '.join(KEYS)}", "an unknown key")
@@ -189,37 +189,37 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
     check_schema(src, data["schema"], SCHEMA_VERSION)
     name = _text(src, "name", data["name"], optional=False) or ""
     if isinstance(source, Path) and source.stem.lower() != name.lower():
-        raise ConfigError(src, "name", f"the file's stem {source.stem!r}", _got(name))
+        raise ConfigError(src, "name", f"the file's stem {source.stem!r}", got(name))
     mode = data["mode"]
     if mode not in ("polled", "streaming"):
-        raise ConfigError(src, "mode", "polled or streaming", _got(mode))
+        raise ConfigError(src, "mode", "polled or streaming", got(mode))
     trigger = _text(src, "trigger", data.get("trigger"))
     if mode == "polled" and trigger is None:
         raise ConfigError(src, "trigger", "the command that triggers one measurement (mode polled)", "nothing")
     if mode == "streaming" and trigger is not None:
-        raise ConfigError(src, "trigger", "no trigger in mode streaming (use start/stop)", _got(trigger))
+        raise ConfigError(src, "trigger", "no trigger in mode streaming (use start/stop)", got(trigger))
     eol = data.get("line_ending", "\r\n")
     if eol not in ("\r\n", "\n", "\r"):
-        raise ConfigError(src, "line_ending", "one of \"\\r\\n\", \"\\n\", \"\\r\"", _got(eol))
+        raise ConfigError(src, "line_ending", "one of \"\\r\\n\", \"\\n\", \"\\r\"", got(eol))
     serial = data.get("serial") or {}
     if not isinstance(serial, dict):
-        raise ConfigError(src, "serial", f"a mapping with the keys {', '.join(SERIAL_KEYS)}", _got(serial))
+        raise ConfigError(src, "serial", f"a mapping with the keys {', '.join(SERIAL_KEYS)}", got(serial))
     for key, value in serial.items():
         if key not in SERIAL_KEYS:
             raise ConfigError(src, f"serial.{key}", f"only the keys {', '.join(SERIAL_KEYS)}", "an unknown key")
         if key == "parity" and value not in ("N", "E", "O", "M", "S"):
-            raise ConfigError(src, "serial.parity", "N, E, O, M or S", _got(value))
+            raise ConfigError(src, "serial.parity", "N, E, O, M or S", got(value))
         if key != "parity" and (isinstance(value, bool) or not isinstance(value, int | float) or value <= 0):
-            raise ConfigError(src, f"serial.{key}", "a number > 0", _got(value))
+            raise ConfigError(src, f"serial.{key}", "a number > 0", got(value))
     init = []
     raw_init = data.get("init") or []
     if not isinstance(raw_init, list):
-        raise ConfigError(src, "init", "a list of commands (strings or {send, expect})", _got(raw_init))
+        raise ConfigError(src, "init", "a list of commands (strings or {send, expect})", got(raw_init))
     for i, item in enumerate(raw_init):
         if isinstance(item, dict):
             extra = set(item) - {"send", "expect"}
             if extra or "send" not in item:
-                raise ConfigError(src, f"init[{i}]", "a string or a mapping {send, expect}", _got(item))
+                raise ConfigError(src, f"init[{i}]", "a string or a mapping {send, expect}", got(item))
             expect = None if item.get("expect") is None else _regex(src, f"init[{i}].expect", item["expect"])
             init.append(InitCommand(_text(src, f"init[{i}].send", item["send"], False) or "", expect))
         else:
@@ -229,13 +229,13 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
         ident = data["identify"]
         if not isinstance(ident, dict) or set(ident) != {"send", "pattern"}:
             raise ConfigError(src, "identify", "a mapping {send, pattern} (pattern groups model, serial, firmware)",
-                              _got(ident))
+                              got(ident))
         identify = (_text(src, "identify.send", ident["send"], False) or "",
                     _regex(src, "identify.pattern", ident["pattern"]))
     response = data["response"]
     pattern, delimiter, fields = None, None, ()
     if not isinstance(response, dict) or set(response) not in ({"pattern"}, {"fields"}, {"fields", "delimiter"}):
-        raise ConfigError(src, "response", "a mapping {pattern} or {delimiter, fields}", _got(response))
+        raise ConfigError(src, "response", "a mapping {pattern} or {delimiter, fields}", got(response))
     if "pattern" in response:
         pattern = _regex(src, "response.pattern", response["pattern"])
         missing = [g for g in ("x", "y", "z") if g not in pattern.groupindex]
@@ -245,40 +245,40 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
     else:
         delimiter = response.get("delimiter")
         if delimiter is not None and (not isinstance(delimiter, str) or not delimiter):
-            raise ConfigError(src, "response.delimiter", "a non-empty string (or null: white space)", _got(delimiter))
+            raise ConfigError(src, "response.delimiter", "a non-empty string (or null: white space)", got(delimiter))
         fields = response["fields"]
         ok = isinstance(fields, list) and all(f is None or f in FIELDS for f in fields)
         named = [f for f in fields if f is not None] if ok else []
         if not ok or len(named) != len(set(named)) or not {"x", "y", "z"} <= set(named):
             raise ConfigError(src, "response.fields", f"a list of distinct field names ({', '.join(FIELDS)}) or "
-                              "null, with x, y and z", _got(fields))
+                              "null, with x, y and z", got(fields))
         fields, names = tuple(fields), tuple(named)
     points = data.get("points", 1)
     if isinstance(points, bool) or not isinstance(points, int) or points < 1:
-        raise ConfigError(src, "points", "an integer >= 1 (tracked points per trigger)", _got(points))
+        raise ConfigError(src, "points", "an integer >= 1 (tracked points per trigger)", got(points))
     if points > 1 and mode != "polled":
-        raise ConfigError(src, "points", "1 in mode streaming (several points per reply need a trigger)", _got(points))
+        raise ConfigError(src, "points", "1 in mode streaming (several points per reply need a trigger)", got(points))
     if points > 1 and "tp" not in names:
         raise ConfigError(src, "response", "a tp field (the tracked point's id) with points > 1", "none")
     units = data["units"]
     if units not in UNITS:
-        raise ConfigError(src, "units", f"one of {', '.join(UNITS)}", _got(units))
+        raise ConfigError(src, "units", f"one of {', '.join(UNITS)}", got(units))
     max_abs = data.get("max_abs", 1000.0)
     if isinstance(max_abs, bool) or not isinstance(max_abs, int | float) or not 0 < max_abs < math.inf:
-        raise ConfigError(src, "max_abs", "a number > 0 (m)", _got(max_abs))
+        raise ConfigError(src, "max_abs", "a number > 0 (m)", got(max_abs))
     sigma = data.get("sigma")
     if sigma is not None and (isinstance(sigma, bool) or not isinstance(sigma, int | float) or not sigma > 0):
-        raise ConfigError(src, "sigma", "a number > 0 (m per axis) or null", _got(sigma))
+        raise ConfigError(src, "sigma", "a number > 0 (m per axis) or null", got(sigma))
     checksum, covers = None, "line"
     if data.get("checksum") is not None:
         cs = data["checksum"]
         if not isinstance(cs, dict) or "algorithm" not in cs or set(cs) - {"algorithm", "covers"}:
-            raise ConfigError(src, "checksum", "a mapping {algorithm: xor|sum8, covers: payload|line}", _got(cs))
+            raise ConfigError(src, "checksum", "a mapping {algorithm: xor|sum8, covers: payload|line}", got(cs))
         checksum, covers = cs["algorithm"], cs.get("covers", "line")
         if checksum not in ("xor", "sum8"):
-            raise ConfigError(src, "checksum.algorithm", "xor or sum8", _got(checksum))
+            raise ConfigError(src, "checksum.algorithm", "xor or sum8", got(checksum))
         if covers not in ("payload", "line"):
-            raise ConfigError(src, "checksum.covers", "payload or line", _got(covers))
+            raise ConfigError(src, "checksum.covers", "payload or line", got(covers))
         if "checksum" not in names:
             raise ConfigError(src, "response", "a checksum field (the profile has a checksum)", "none")
         if covers == "payload" and (pattern is None or "payload" not in pattern.groupindex):
@@ -287,29 +287,29 @@ def profile_from_dict(data: Any, source: str | Path = "<dict>") -> Profile:
         raise ConfigError(src, "checksum", "a checksum algorithm (the response has a checksum field)", "nothing")
     status = data.get("status") or {}
     if not isinstance(status, dict) or set(status) - {"ok", "target_lost"}:
-        raise ConfigError(src, "status", "a mapping {ok: [...], target_lost: [...]}", _got(status))
+        raise ConfigError(src, "status", "a mapping {ok: [...], target_lost: [...]}", got(status))
     if ("status" in names) != bool(status.get("ok")):
         raise ConfigError(src, "status.ok", "the ok values of the response's status field (both or neither)",
-                          _got(status.get("ok")))
+                          got(status.get("ok")))
     errors = []
     raw_errors = data.get("errors") or []
     if not isinstance(raw_errors, list):
-        raise ConfigError(src, "errors", "a list of {pattern, kind: error|target_lost}", _got(raw_errors))
+        raise ConfigError(src, "errors", "a list of {pattern, kind: error|target_lost}", got(raw_errors))
     for i, item in enumerate(raw_errors):
         if not isinstance(item, dict) or set(item) - {"pattern", "kind"} or "pattern" not in item:
-            raise ConfigError(src, f"errors[{i}]", "a mapping {pattern, kind: error|target_lost}", _got(item))
+            raise ConfigError(src, f"errors[{i}]", "a mapping {pattern, kind: error|target_lost}", got(item))
         kind = item.get("kind", "error")
         if kind not in ("error", "target_lost"):
-            raise ConfigError(src, f"errors[{i}].kind", "error or target_lost", _got(kind))
+            raise ConfigError(src, f"errors[{i}].kind", "error or target_lost", got(kind))
         errors.append((_regex(src, f"errors[{i}].pattern", item["pattern"]), kind))
     reset = None if data.get("reset") is None else _regex(src, "reset", data["reset"])
     period = data.get("period")
     if period is not None and (isinstance(period, bool) or not isinstance(period, int | float) or not period > 0
                                or mode != "streaming"):
-        raise ConfigError(src, "period", "a number > 0 (s between streamed lines; mode streaming only)", _got(period))
+        raise ConfigError(src, "period", "a number > 0 (s between streamed lines; mode streaming only)", got(period))
     simulation = data.get("simulation") or {}
     if not isinstance(simulation, dict):
-        raise ConfigError(src, "simulation", "a mapping (how the simulated device formats replies)", _got(simulation))
+        raise ConfigError(src, "simulation", "a mapping (how the simulated device formats replies)", got(simulation))
     return Profile(
         name=name, description=str(data.get("description") or ""), path=str(source), mode=mode, line_ending=eol,
         serial=dict(serial), init=tuple(init), identify=identify, trigger=trigger,

@@ -55,7 +55,7 @@ class IppNotice:
         return f"{kind} {self.code}{where}: {self.text}"
 
 
-def _error_fields(body: str) -> tuple[int, str, str, str]:
+def error_fields(body: str) -> tuple[int, str, str, str]:
     """(severity, code, method, text) of an ``Error(F1, F2, F3, Text)`` body; severity 9 if it does not parse."""
     match = _ERROR.match(body)
     if match is None:
@@ -94,7 +94,7 @@ class IppProtocol:
             if kind == "#":
                 data.append(body)
             elif kind == "!":
-                severity, code, method, message = _error_fields(body)
+                severity, code, method, message = error_fields(body)
                 if severity < 2:
                     self._notice(IppNotice(time.time(), severity, code, method, message, text))
                     continue
@@ -140,7 +140,7 @@ class IppProtocol:
             if match.group("tag").startswith("E"):
                 self.events.append(line)
                 if match.group("kind") == "!":
-                    self._notice(IppNotice(time.time(), *_error_fields(match.group("body").strip()), ""))
+                    self._notice(IppNotice(time.time(), *error_fields(match.group("body").strip()), ""))
                 continue
             if match.group("tag") != tag:
                 self._trace.event(f"skipped reply of another tag: {line!r}")

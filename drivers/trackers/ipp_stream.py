@@ -54,7 +54,7 @@ from drivers.errors import ConnectionFailed
 from drivers.receive_time import enable_receive_times, receive
 from drivers.stream_buffer import BufferedStreaming
 from drivers.trace import one_line
-from drivers.trackers.ipp_protocol import IppError, _error_fields
+from drivers.trackers.ipp_protocol import IppError, error_fields
 
 GAP_FACTOR = 1.5  # a step above this many intervals (plus JITTER) between reports is a gap
 JITTER = 0.02  # s: host receive times of reports jitter by the network and the scheduler
@@ -208,7 +208,7 @@ class EventStreaming(BufferedStreaming):
                 last, broken = received, False
             elif line.startswith((f"{tag} !", "E0000 !")):
                 if last is None and line.startswith(tag):  # refused before any report: no such daemon here
-                    severity, code, _, text = _error_fields(line.partition("!")[2].strip())
+                    severity, code, _, text = error_fields(line.partition("!")[2].strip())
                     with self._stream_lock:
                         self._failure = IppError(f"{self.where}: OnMoveReportE failed: error {code} (severity "
                                                  f"{severity}): {text}", severity, code, text)

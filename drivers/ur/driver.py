@@ -31,7 +31,8 @@ How it drives the arm:
   runs at that joint's speed.
 - readings are ``getActualQ`` (encoder values); ``wait_until_still`` watches ``getActualQd``.
 - robot mode and safety mode are checked before every move and while moving and settling; a protective stop,
-  emergency stop, safeguard stop or a powered-off arm raises with what to do on the teach pendant.
+  emergency stop, safeguard stop or a powered-off arm raises with what to do on the teach pendant
+  (drivers/ur/modes.py).
 - a lost link (the worker died or hung, ur_rtde lost the connection, or the stream's timestamp stood still
   for ``stream_timeout`` s) is retried with a fresh worker ``reconnects`` times, then ConnectionFailed. A move
   cut by a lost link is commanded again to the same target after the reconnection.
@@ -60,14 +61,13 @@ from drivers.errors import (
     BackendUnavailable,
     ConnectionFailed,
     DeviceTimeout,
-    EmergencyStop,
-    ProtectiveStop,
     RobotFault,
     SpecError,
 )
 from drivers.motion import leading_joint_limits
 from drivers.spec import ROBOT_FORMS, RobotSpec
 from drivers.ur.info import DASHBOARD_PORT, Dashboard, dashboard_model, polyscope_major, read_factory_calibration
+from drivers.ur.modes import check_modes, robot_state
 from drivers.ur.stream import JointStreaming
 from drivers.ur.worker import CALL_TIMEOUT, LinkLost, Snapshot, Worker, WorkerError
 
@@ -91,28 +91,6 @@ OPTIONS: dict[str, tuple[object, str]] = {
     "rtde_frequency": (None, "the RTDE rate in Hz, at most 500 (default: 500 on e-Series, 125 on CB3)"),
 }
 NATIVE_RATE = {True: 500.0, False: 125.0}  # Hz, e-Series / CB3
-
-# RTDE robot_mode and safety_mode values (UR's RTDE guide)
-ROBOT_MODES = {-1: "NO_CONTROLLER", 0: "DISCONNECTED", 1: "CONFIRM_SAFETY", 2: "BOOTING", 3: "POWER_OFF",
-               4: "POWER_ON", 5: "IDLE", 6: "BACKDRIVE", 7: "RUNNING", 8: "UPDATING_FIRMWARE"}
-SAFETY_MODES = {1: "NORMAL", 2: "REDUCED", 3: "PROTECTIVE_STOP", 4: "RECOVERY", 5: "SAFEGUARD_STOP",
-                6: "SYSTEM_EMERGENCY_STOP", 7: "ROBOT_EMERGENCY_STOP", 8: "VIOLATION", 9: "FAULT",
-                10: "VALIDATE_JOINT_ID", 11: "UNDEFINED", 12: "AUTOMATIC_MODE_SAFEGUARD_STOP",
-                13: "SYSTEM_THREE_POSITION_ENABLING_STOP"}
-ROBOT_MODE_RUNNING = 7
-SAFETY_OK = (1, 2)  # normal, reduced
-SAFETY_PROTECTIVE = (3, 5, 12, 13)
-SAFETY_EMERGENCY = (6, 7)
-
-PROTECTIVE_HELP = ("on the teach pendant: find and remove the cause (collision, obstacle, limit), press 'Unlock' "
-                   "(e-Series: 'Enable') in the protective-stop dialog, switch back to Remote Control, then "
-                   "resume the run")
-SAFEGUARD_HELP = ("the safeguard input is open: close the guard door / reset the light curtain, then resume "
-                  "the run")
-EMERGENCY_HELP = ("release the emergency-stop button, on the teach pendant confirm the dialog, power on and "
-                  "release the brakes (Initialize screen), switch back to Remote Control, then resume the run")
-POWER_HELP = ("on the teach pendant: power on and release the brakes (Initialize screen), switch back to "
-              "Remote Control, then resume the run")
 
 
 def _check_ur_rtde() -> None:
@@ -174,7 +152,6 @@ def open_robot(spec: RobotSpec | str, rig: object = None, site: Any = None) -> U
         raise SpecError(f"robot spec {str(spec)!r}: {model.name} is not a Universal Robots model")
     _check_ur_rtde()
     return URRobot(model, host, options)
-
 
 
 class URRobot(JointStreaming):
@@ -353,31 +330,12 @@ class URRobot(JointStreaming):
             _, _, robot_mode, safety_mode, _, qd, _ = self._snapshot()
         except LinkLost:
             return RobotState.DISCONNECTED
-        if safety_mode in SAFETY_PROTECTIVE:
-            return RobotState.PROTECTIVE_STOP
-        if safety_mode in SAFETY_EMERGENCY:
-            return RobotState.EMERGENCY_STOP
-        if safety_mode not in SAFETY_OK or robot_mode != ROBOT_MODE_RUNNING:
-            return RobotState.FAULT
-        return RobotState.MOVING if max(map(abs, qd), default=0.0) > self.still_speed else RobotState.READY
+        return robot_state(robot_mode, safety_mode, qd, self.still_speed)
 
     def _checked_snapshot(self) -> Snapshot:
         """A snapshot; raises the RobotFault that fits the controller's state (none when it can be commanded)."""
         snap = self._snapshot()
-        robot_mode, safety_mode = snap[2], snap[3]
-        mode = SAFETY_MODES.get(safety_mode, str(safety_mode))
-        if safety_mode in (5, 12):
-            raise ProtectiveStop(f"UR safeguard stop ({mode}) at {self.host}: {SAFEGUARD_HELP}")
-        if safety_mode in SAFETY_PROTECTIVE:
-            raise ProtectiveStop(f"UR protective stop at {self.host}: {PROTECTIVE_HELP}")
-        if safety_mode in SAFETY_EMERGENCY:
-            raise EmergencyStop(f"UR emergency stop ({mode}) at {self.host}: {EMERGENCY_HELP}")
-        if safety_mode not in SAFETY_OK:
-            raise RobotFault(f"UR safety mode {mode} at {self.host}: read the message on the teach pendant, "
-                             "clear it (restart the controller after a FAULT or VIOLATION), then resume the run")
-        if robot_mode != ROBOT_MODE_RUNNING:
-            name = ROBOT_MODES.get(robot_mode, str(robot_mode))
-            raise RobotFault(f"the UR arm at {self.host} is not running (robot mode {name}): {POWER_HELP}")
+        check_modes(snap[2], snap[3], self.host)
         return snap
 
     # --- motion -----------------------------------------------------------------------------------------------
