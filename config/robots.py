@@ -20,7 +20,6 @@ import numpy as np
 
 from config.files import ConfigError as ConfigError  # re-exported: the error of every config file
 from config.files import check_schema, config_file, got, read_yaml
-from config.files import read_yaml as _read_yaml  # noqa: F401  (re-exported: acquire.resume imports it here)
 from config.geometry import RobotGeometry, geometry_from_dict
 from kinematics.dh import Array, DHModel, check_joint_types
 from kinematics.joint_errors import Coupling, LinkMasses

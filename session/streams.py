@@ -18,7 +18,6 @@ import numpy as np
 
 from drivers.base import JointStreamBatch, TrackerStreamBatch
 from session.schema import dump_q
-from session.stream_data import StreamData as StreamData  # re-exported: identify.io imports it from here
 
 if TYPE_CHECKING:
     from session.store import SessionFile

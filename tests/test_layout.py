@@ -1,5 +1,7 @@
-"""The layout shows the architecture and keeps it: every import between the project's packages points one way,
-identify's math reads no files, modules stay small, package ``__init__`` files stay light.
+"""The layout shows the architecture and keeps it: every import between the project's packages points one way, no
+two modules import each other (directly or round a circle), identify's math reads no files, folders hold at most
+20 modules and modules at most 500 lines, package ``__init__`` files stay light, and the README's "Layout" section
+names every folder.
 
 Imports are read from the source (``ast``) of every module: module-level, function-level and ``TYPE_CHECKING``
 imports alike, and the literal module names given to ``importlib.import_module``.
@@ -18,7 +20,9 @@ ORDER = ("common", "kinematics", "config", "drivers", "session", "identify", "ac
 #: identify's modules that are not its math: the commands at its top, and its edge (files read and written).
 IDENTIFY_COMMANDS = ("identify.commands", "identify.api")
 IDENTIFY_EDGE = ("identify.io", "identify.report", "identify.exports")
-MAX_LINES = 550
+MAX_LINES = 500  #: a module of the product
+MAX_TEST_LINES = 550  #: a test or benchmark module
+MAX_MODULES = 20  #: modules in one folder of the product (``__init__`` not counted)
 
 
 def _modules() -> dict[str, Path]:
@@ -142,10 +146,52 @@ def test_identify_math_reads_no_files_and_knows_no_devices() -> None:
 
 
 def test_modules_stay_small() -> None:
-    paths = [*MODULES.values(), *sorted((ROOT / "tests").rglob("*.py")), *sorted((ROOT / "bench").rglob("*.py"))]
-    long = {str(p.relative_to(ROOT)): n for p in paths if (n := len(p.read_text(encoding="utf-8").splitlines())) >
-            MAX_LINES}
-    assert long == {}
+    def long(paths: list[Path], limit: int) -> dict[str, int]:
+        return {str(p.relative_to(ROOT)): n for p in paths if (n := len(p.read_text(encoding="utf-8").splitlines()))
+                > limit}
+
+    assert long(list(MODULES.values()), MAX_LINES) == {}
+    assert long([*sorted((ROOT / "tests").rglob("*.py")), *sorted((ROOT / "bench").rglob("*.py"))],
+                MAX_TEST_LINES) == {}
+
+
+def test_no_folder_holds_more_than_twenty_modules() -> None:
+    folders: dict[str, int] = {}
+    for path in MODULES.values():
+        if path.name != "__init__.py":
+            folder = str(path.parent.relative_to(ROOT))
+            folders[folder] = folders.get(folder, 0) + 1
+    assert {f: n for f, n in folders.items() if n > MAX_MODULES} == {}
+
+
+def _module_of(target: str) -> str | None:
+    """The project module an import names: ``a.b`` or, for ``from a.b import c`` of a name, ``a.b``."""
+    if target in MODULES:
+        return target
+    head = target.rpartition(".")[0]
+    return head if head in MODULES else None
+
+
+def test_no_import_circle_between_modules() -> None:
+    """Function-level imports count: a circle closed inside a function is still a circle for the reader."""
+    graph: dict[str, set[str]] = {}
+    for name, imports in IMPORTS.items():
+        for target, _ in imports:
+            module = _module_of(target)
+            if module is not None and module != name and not (MODULES[module].name == "__init__.py"
+                                                               and name.startswith(module + ".")):
+                graph.setdefault(name, set()).add(module)
+    assert _cycles(graph) == []
+
+
+def test_the_readme_layout_names_every_folder() -> None:
+    """Every package folder of the product has its own line in the README's "Layout" section."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text[text.index("\n## Layout"):]
+    section = section[: section.find("\n## ", 1) if "\n## " in section[1:] else len(section)]
+    folders = sorted({str(p.parent.relative_to(ROOT)) for p in MODULES.values() if p.name == "__init__.py"})
+    missing = [f for f in folders if f"- `{f}/`:" not in section]
+    assert missing == []
 
 
 def test_package_inits_import_nothing_heavy() -> None:

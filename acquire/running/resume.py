@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from config.robots import _read_yaml
+from config.files import read_yaml
 from config.site import FIELDS, SiteConfig, load_site
 from drivers.spec import RobotSpec, TrackerSpec
 
@@ -108,7 +108,7 @@ def _site(old: SiteConfig, path: Path, model: str) -> SiteConfig:
     """``old`` with the connection fields the file at ``path`` sets; ResumeRefused if it sets a plan field to
     another value. Keys the file leaves out keep the session's values (a site file of hosts only is enough)."""
     new = load_site(path)
-    raw = _read_yaml(path)
+    raw = read_yaml(path)
     updates: dict[str, Any] = {}
     for name, (section, key) in FIELDS.items():
         mapping = raw if section is None else (raw.get(section) or {})

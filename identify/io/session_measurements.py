@@ -31,7 +31,7 @@ from session.records import PointRecord
 from session.rows import points_seen
 from session.schema import SessionError
 from session.store import SessionFile
-from session.streams import StreamData
+from session.stream_data import StreamData
 
 
 def open_session(path: Path) -> SessionFile:
