@@ -70,3 +70,12 @@ class StreamRecorder:
         with self.session._transaction("end the stream"):
             self.session._db.execute("UPDATE streams SET status = ?, reason = ?, ended = ? WHERE id = ?",
                                      (status, " ".join(reason.split()), now, self.id))
+
+    def last_point(self) -> tuple[tuple[float, float, float], float | None] | None:
+        """The attempt's last streamed position (tracker frame, m) of its smallest tracked-point id, with its sigma
+        (m; None: not given); None when the tracker streamed no position."""
+        row = self.session._db.execute("SELECT x, y, z, sigma FROM tracker_samples WHERE stream = ? AND x IS NOT NULL "
+                                       "ORDER BY t DESC, tp LIMIT 1", (self.id,)).fetchone()
+        if row is None:
+            return None
+        return (float(row[0]), float(row[1]), float(row[2])), None if row[3] is None else float(row[3])

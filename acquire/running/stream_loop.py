@@ -133,7 +133,7 @@ def run_stream(robot, tracker, session: Session, clock: Clock, step: Step, plan:
         return _missing(step, command, t_start, clock, "stopped by the operator")
     recorder.end("complete", "", clock.now())
     q_act = tuple(float(v) for v in robot.read_joints())
-    last_point = _last_point(session, recorder.id)
+    last_point = recorder.last_point()  # the arm at rest at the range end
     if last_point is None:
         return _missing(step, command, t_start, clock, "the tracker streamed no sample", q_act)
     position, sigma = last_point
@@ -149,26 +149,7 @@ def _pump_for(clock: Clock, seconds: float, pump: Callable[[], None]) -> None:
         pump()
 
 
-def _last_point(session: Session, stream: int) -> tuple[tuple[float, float, float], float | None] | None:
-    """The last streamed position of the smallest tracked-point id (the arm at rest at the range end)."""
-    row = session._db.execute("SELECT x, y, z, sigma FROM tracker_samples WHERE stream = ? AND x IS NOT NULL "
-                              "ORDER BY t DESC, tp LIMIT 1", (stream,)).fetchone()
-    if row is None:
-        return None
-    return (float(row[0]), float(row[1]), float(row[2])), None if row[3] is None else float(row[3])
-
-
 def _missing(step: Step, command, t_start: float, clock: Clock, reason: str,
              q_act: tuple[float, ...] | None = None) -> StepRecord:
     return StepRecord.from_step(step, q_cmd=command(step.q), q_act=q_act, position=None, sigma=None, samples=0,
                                 rejected=0, status="missing", reason=reason, t_start=t_start, t_end=clock.now())
-
-
-def streamed_samples(session: Session) -> int:
-    """Tracker samples stored in the current attempts of ``session``'s streams (for progress and benchmarks)."""
-    row = session._db.execute("SELECT count(*) FROM tracker_samples t JOIN streams s ON s.id = t.stream "
-                              "WHERE s.superseded = 0 AND s.status = 'complete'").fetchone()
-    return int(row[0]) if row else 0
-
-
-
