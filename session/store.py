@@ -19,7 +19,7 @@ Creation is atomic too: the file is built under a temporary name and linked into
 One writer: opening for writing (:meth:`SessionFile.create`, ``SessionFile.open(path, write=True)``) takes an
 exclusive ``flock`` on the file, held until :meth:`SessionFile.close`; a second writer is refused at once with a
 :class:`SessionBusy` naming the holder's PID (session/lock.py). Readers take no lock and work while
-a session is written. :func:`acquire.running.session_backup.backup_session` copies a live session.
+a session is written. :func:`session.backup.backup_session` copies a live session.
 
 Units: metres (positions, sigma), radians / metres (joints), seconds since the epoch (times).
 """

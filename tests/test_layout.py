@@ -194,6 +194,13 @@ def test_the_readme_layout_names_every_folder() -> None:
     assert missing == []
 
 
+def test_only_the_session_package_speaks_sql() -> None:
+    """The session file's tables are ``session``'s to know: no other package imports sqlite3."""
+    wrong = [f"{_where(name, line)}: {name} imports {target}" for name, imports in IMPORTS.items()
+             if not _within(name, ("session",)) for target, line in imports if _within(target, ("sqlite3",))]
+    assert not wrong, "\n".join(wrong)
+
+
 def test_package_inits_import_nothing_heavy() -> None:
     """Importing a package imports none of its modules (the registry imports backends only when asked)."""
     for name, path in MODULES.items():

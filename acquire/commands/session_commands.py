@@ -44,7 +44,7 @@ def backup(argv: list[str]) -> int:
     p.add_argument("dest", type=Path, help="the copy (a new file; an existing one only with --force)")
     p.add_argument("--force", action="store_true", help="replace DEST if it exists")
     args = p.parse_args(argv)
-    from acquire.running.session_backup import backup_session
+    from session.backup import backup_session
 
     steps = backup_session(args.session, args.dest, args.force)
     print(f"copied {args.session} to {args.dest} ({steps} steps)")

@@ -21,8 +21,8 @@ import yaml
 from acquire.commands.cli import main as acquire_main
 from acquire.running.resume import ResumeRefused, resume_settings
 from acquire.running.session import Session
-from acquire.running.session_backup import backup_session
 from identify.commands.cli import main as identify_main
+from session.backup import backup_session
 from session.schema import SessionBusy, SessionError
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 

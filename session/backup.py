@@ -1,4 +1,4 @@
-"""``acquire backup SESSION DEST``: a consistent copy of a session, even while another process writes it."""
+"""A consistent copy of a session file, even while another process writes it (``acquire backup SESSION DEST``)."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import sqlite3
 import tempfile
 from pathlib import Path
 
-from acquire.running.session import Session
 from common.outputs import check_outputs, commit_file
 from session.schema import SessionError
+from session.store import SessionFile
 
 
 def backup_session(source: str | Path, dest: str | Path, force: bool = False) -> int:
@@ -24,7 +24,8 @@ def backup_session(source: str | Path, dest: str | Path, force: bool = False) ->
     os.close(fd)
     temp = Path(tmp)
     try:
-        with Session.open(source) as session, contextlib.closing(sqlite3.connect(temp, isolation_level=None)) as copy:
+        with (SessionFile.open(source) as session,
+              contextlib.closing(sqlite3.connect(temp, isolation_level=None)) as copy):
             session.backup_to(copy)
             copy.execute("PRAGMA journal_mode = DELETE")  # a session of an older version may be in WAL mode
             steps = copy.execute("SELECT count(*) FROM steps").fetchone()[0]
