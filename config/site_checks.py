@@ -234,7 +234,7 @@ CHECKS: dict[str, Any] = {
     "tool_radius": positive("m"),
     "boxes": obstacles(("name", "min", "max"), "{name: fixture, min: [0.4, -0.2, 0], max: [0.6, 0.2, 0.3]}"),
     "cylinders": obstacles(("name", "a", "b", "radius"),
-                            "{name: tracker stand, a: [1.5, 0, 0], b: [1.5, 0, 1.2], radius: 0.15}"),
+                           "{name: tracker stand, a: [1.5, 0, 0], b: [1.5, 0, 1.2], radius: 0.15}"),
     "camera_pose": camera_pose,
     "camera_half_fov": lambda v, key, x: v.number(key, x, "an angle > 0 (rad)", 0.0, strict=True),
     "camera_max_tilt": lambda v, key, x: v.number(key, x, "an angle > 0 (rad)", 0.0, strict=True),

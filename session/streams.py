@@ -1,4 +1,5 @@
-"""A session's streams (continuous motion): writing a stream step's samples in batches.
+"""A session's streams (continuous motion): writing a stream step's samples in batches, and the attempt's last
+position (the step's record).
 
 The tables are in session/schema.py. Writing (:class:`StreamRecorder`): an attempt of a stream step is a
 ``streams`` row (status ``recording``); its samples and gaps are committed in batches (the orchestrator's stream

@@ -321,7 +321,7 @@ def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site:
     from drivers.registry import open_robot
 
     confirm(robot_spec, args, plan, f"Rehearse the motion: move {robot_spec} through these {len(plan.steps)} "
-             f"steps at {site.speed_fraction:g} x the default speed, measuring nothing? Type 'yes' to start: ")
+            f"steps at {site.speed_fraction:g} x the default speed, measuring nothing? Type 'yes' to start: ")
     rig = None
     if robot_spec.backend == "mock":
         from drivers.sim.rig import SimulatedRig

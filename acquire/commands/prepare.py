@@ -8,16 +8,20 @@ import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 from config.site import SiteConfig, load_site
-from drivers.clock import VirtualClock, WallClock
+from drivers.clock import Clock, VirtualClock, WallClock
 from drivers.spec import RobotSpec, TrackerSpec
 
 if TYPE_CHECKING:
     from acquire.running.session import Session
     from config.robots import RobotModel
+    from drivers.base import Robot, Tracker
+    from drivers.sim.rig import SimulatedRig
     from session.plan import Plan
+
+Spec = TypeVar("Spec", RobotSpec, TrackerSpec)
 
 
 class UsageError(Exception):
@@ -28,6 +32,8 @@ REHEARSAL_SPEED = 0.25  # --tracker none: the share of the model's default speed
 
 
 def site_from_args(args: argparse.Namespace) -> SiteConfig:
+    """The site file (``--config``; default the built-in site) with the command line's overrides; ``--tracker
+    none`` (a rehearsal) moves at :data:`REHEARSAL_SPEED` unless ``--speed-fraction`` says otherwise."""
     site = load_site(args.config) if args.config else SiteConfig.default()
     fraction = args.speed_fraction
     if fraction is None and getattr(args, "tracker", None) == "none":
@@ -39,7 +45,7 @@ def site_from_args(args: argparse.Namespace) -> SiteConfig:
                                acceleration_fraction=fraction)
 
 
-def without_faults(spec):
+def without_faults(spec: Spec) -> Spec:
     """``spec`` without a mock backend's ``fault`` option."""
     if spec.backend != "mock" or "fault" not in spec.options:
         return spec
@@ -61,7 +67,10 @@ def confirm(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, questio
 TRACED_BACKENDS = ("serial", "ipp")  # trackers whose byte stream --trace-io can log
 
 
-def open_traced_tracker(tracker_spec: TrackerSpec, rig, site: SiteConfig, trace_io: Path | None):
+def open_traced_tracker(tracker_spec: TrackerSpec, rig: SimulatedRig | None, site: SiteConfig,
+                        trace_io: Path | None) -> Tracker:
+    """The tracker opened (not yet connected), logging its bytes to ``trace_io`` when given (serial and I++ only:
+    UsageError otherwise)."""
     from drivers.registry import open_tracker
 
     if trace_io is not None and tracker_spec.backend not in TRACED_BACKENDS:
@@ -71,7 +80,9 @@ def open_traced_tracker(tracker_spec: TrackerSpec, rig, site: SiteConfig, trace_
 
 
 def open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bool, site: SiteConfig,
-                  trace_io: Path | None = None):
+                 trace_io: Path | None = None) -> tuple[Robot, Tracker, Clock]:
+    """The robot and tracker opened and connected (within the site's connect timeout, s), and the run's clock:
+    mock mode's simulated rig behind mock devices, on a virtual clock unless ``realtime``."""
     from drivers.registry import open_robot
 
     clock = WallClock() if realtime or robot_spec.backend != "mock" else VirtualClock()
@@ -87,8 +98,8 @@ def open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: boo
     return robot, tracker, clock
 
 
-def check_start(robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int,
-                 session: Session | None = None) -> None:
+def check_start(robot: Robot, plan: Plan, robot_model: RobotModel, site: SiteConfig, index: int,
+                session: Session | None = None) -> None:
     """The plan is checked from home; the arm may stand elsewhere (jogged, or stopped mid-move before a
     resume). UsageError unless the move from where it stands to step ``index`` is clear too. The robot's
     readings give DH values through the session's coupling (a new session: the model's)."""
