@@ -6,12 +6,22 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
+from typing import Any
 
 from common.errors import InputError
 
+#: a negative number, with a unit or not (``-0.05mm``, ``-3 s``): an option's value, never an option's name
+NEGATIVE = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*[^\d\s.+-]*$")
+
 
 class OneLineParser(argparse.ArgumentParser):
-    """argparse that reports usage errors in one line with exit code 2."""
+    """argparse that reports usage errors in one line with exit code 2, and reads a negative number with a unit
+    (``--noise -0.05mm``) as a value, to be refused for its sign rather than as a missing argument."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE
 
     def error(self, message: str) -> None:  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")

@@ -18,6 +18,7 @@ from acquire.commands.options import build_parser
 from acquire.commands.prepare import (
     UsageError,
     check_start,
+    check_units,
     confirm,
     open_devices,
     site_from_args,
@@ -116,6 +117,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         robot_spec = RobotSpec.parse(args.robot if args.robot is not None else "mock:ur5e").resolved()
         tracker_arg = args.tracker or "mock"
         tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)
+        check_units(args, site, tracker_spec)
         path, plan = None, None
     if args.json and not args.dry_run:
         raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")

@@ -10,7 +10,7 @@ import argparse
 from pathlib import Path
 
 from common.arguments import OneLineParser, VersionAction
-from common.units import positive_duration, positive_length
+from common.units import Typed, positive_duration, positive_length
 
 DESCRIPTION = "Plan, move, measure and record a calibration session, then identify the robot from it."
 
@@ -64,14 +64,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, help="steps per sweep (site default 36)")
     p.add_argument("--samples", type=int, help="tracker samples per step (site default)")
     p.add_argument("--free-poses", type=int, help="free poses added for the fit and validation")
-    p.add_argument("--noise", type=positive_length, metavar="LENGTH",
+    p.add_argument("--noise", action=Typed, convert=positive_length, metavar="LENGTH",
                    help="tracker noise per axis (1 sigma) for the predicted accuracy, e.g. 0.05mm or 50um (a bare "
                         "number is metres)")
-    p.add_argument("--target-accuracy", type=positive_length, metavar="LENGTH",
+    p.add_argument("--target-accuracy", action=Typed, convert=positive_length, metavar="LENGTH",
                    help="plan for this predicted held-out accuracy (RMS TP error, e.g. 0.02mm) in the least robot "
                         "time: candidate sweep ranges, speeds, steps and free poses, and the dry run prints their "
                         "robot time against predicted accuracy (with --mode: that mode's only)")
-    p.add_argument("--max-robot-time", type=positive_duration, metavar="TIME",
+    p.add_argument("--max-robot-time", action=Typed, convert=positive_duration, metavar="TIME",
                    help="the longest robot time a planned session may take, e.g. 90s or 2min (a bare number is "
                         "seconds); alone: the most accurate candidate plan within it")
     p.add_argument("--probe", action="store_true",

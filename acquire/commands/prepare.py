@@ -45,6 +45,55 @@ def site_from_args(args: argparse.Namespace) -> SiteConfig:
                                acceleration_fraction=fraction)
 
 
+UNIT_SLIP = 10.0  # a noise this many times off the tracker's stated one: a unit slip, not the tracker
+NOISE_MAX = 0.01  # m: a noise (per axis) or a target accuracy above 1 cm calibrates nothing
+TARGET_SLIP = 100.0  # a target accuracy this many times the tracker's noise is met by any plan: a unit slip
+
+
+def stated_noise(tracker: TrackerSpec | None) -> float | None:
+    """The noise per axis (m) the named tracker states: a mock tracker's ``noise`` option (or its default), a
+    serial profile's data-sheet ``sigma``; None when it states none (or it cannot be read: said elsewhere)."""
+    if tracker is None:
+        return None
+    if tracker.backend == "mock":
+        from drivers.spec import MOCK_TRACKER_OPTIONS
+
+        try:
+            return float(tracker.options.get("noise", MOCK_TRACKER_OPTIONS["noise"][1]))
+        except ValueError:
+            return None
+    if tracker.backend == "serial":
+        from drivers.trackers.ascii_profile import load_profile
+
+        try:
+            return load_profile(tracker.options.get("protocol", "polled-xyz")).sigma
+        except Exception:
+            return None
+    return None
+
+
+def check_units(args: argparse.Namespace, site: SiteConfig, tracker: TrackerSpec | None) -> None:
+    """UsageError (one line, repeating what was typed) for a ``--noise`` or ``--target-accuracy`` that looks
+    1000x off: a noise above :data:`NOISE_MAX` or :data:`UNIT_SLIP` times off the tracker's stated noise, a target
+    above :data:`NOISE_MAX` or :data:`TARGET_SLIP` times the noise planned with (``site.tracker_noise``, m)."""
+    from common.units import as_typed, mm, slip_hint
+
+    stated = stated_noise(tracker)
+    noise = args.noise
+    if noise is not None:
+        what = f"the tracker states {mm(stated)} per axis" if stated else f"no tracker is noisier than {mm(NOISE_MAX)}"
+        if noise > NOISE_MAX or (stated and noise > UNIT_SLIP * stated):
+            raise UsageError(f"{slip_hint('--noise', as_typed(args, 'noise'), noise)} ({what})")
+        if stated and noise * UNIT_SLIP < stated:
+            raise UsageError(f"{slip_hint('--noise', as_typed(args, 'noise'), noise, too_large=False)} ({what}; "
+                             "a tracker is not tenfold better than its data sheet)")
+    target = args.target_accuracy
+    if target is not None and (target > NOISE_MAX or target > TARGET_SLIP * site.tracker_noise):
+        raise UsageError(f"{slip_hint('--target-accuracy', as_typed(args, 'target_accuracy'), target)} "
+                         f"({target / site.tracker_noise:.0f}x the tracker noise {mm(site.tracker_noise)} per axis: "
+                         "any plan reaches it)")
+
+
 def without_faults(spec: Spec) -> Spec:
     """``spec`` without a mock backend's ``fault`` option."""
     if spec.backend != "mock" or "fault" not in spec.options:

@@ -34,6 +34,7 @@ import yaml
 from common.arguments import OneLineParser
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
+from common.units import Typed, as_typed, mm, positive_length, slip_hint
 from identify.applications.calibrated import ResultError
 from identify.applications.holds import Check, check_models
 from identify.applications.result_models import ResultModels, result_models
@@ -53,8 +54,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("data", metavar="DATA", help="measurement CSV or acquisition session of the arm today")
     p.add_argument("--refit-tool", action="store_true",
                    help="also refit each tracked point on the flange (a re-mounted reflector)")
-    p.add_argument("--noise", type=float, metavar="M",
-                   help="today's tracker noise, m per axis (default: the calibration's)")
+    p.add_argument("--noise", action=Typed, convert=positive_length, metavar="LENGTH",
+                   help="today's tracker noise per axis (1 sigma), e.g. 0.05mm or 50um (a bare number is metres; "
+                   "default: the calibration's)")
     p.add_argument("--joints", metavar="TYPES", help="joint types of a CSV without '# joints:', e.g. RRRRRR")
     p.add_argument("--units", choices=sorted(UNITS), help="unit of x, y, z in the CSV (default: file or m)")
     p.add_argument("--json", action="store_true", help="print the check as one JSON object")
@@ -92,16 +94,36 @@ def load(args: argparse.Namespace) -> tuple[dict[str, Any], Measurements, list[s
 
 def run(args: argparse.Namespace) -> tuple[Check, ResultModels, Measurements, list[str]]:
     """Check per ``args``; InputError (one line) for bad input."""
-    if args.noise is not None and not (args.noise > 0 and math.isfinite(args.noise)):
-        raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
     check_outputs([args.result, args.data], [("--out", args.out)], args.force)
     doc, meas, notes = load(args)
     try:
+        if args.noise is not None:
+            check_noise(args.noise, as_typed(args, "noise"), _check(doc, meas, None, args.refit_tool))
         models = result_models(doc, meas.q, meas.tp, args.noise)
         check = check_models(meas.points, meas.q, meas.tp, models.models, models.use, args.refit_tool)
     except (ResultError, ValueError) as exc:
         raise InputError(f"{args.result} on {args.data}: {exc}") from None
     return check, models, meas, notes
+
+
+def _check(doc: dict[str, Any], meas: Measurements, noise: float | None, refit_tool: bool) -> Check:
+    """The result's models checked on ``meas`` at tracker ``noise`` (m per axis; None: the result's)."""
+    models = result_models(doc, meas.q, meas.tp, noise)
+    return check_models(meas.points, meas.q, meas.tp, models.models, models.use, refit_tool)
+
+
+UNIT_SLIP = 10.0  # a stated noise this many times the data's own scatter cannot be the tracker's: a unit slip
+
+
+def check_noise(noise: float, typed: str | None, check: Check) -> None:
+    """InputError (one line) when ``noise`` (m per axis, typed as ``typed``) is more than :data:`UNIT_SLIP` times
+    the scatter the data show: the in-sample RMS per axis of ``check`` (made at the result's own noise), which
+    holds the tracker's noise and every model error, so no real noise exceeds it tenfold (1000x: a bare number
+    meant in mm)."""
+    scatter = min(m.fitted_dof_rms for m in check.models) / math.sqrt(3.0)
+    if noise > UNIT_SLIP * scatter:
+        raise InputError(f"{slip_hint('--noise', typed, noise)} ({noise / scatter:.0f}x the scatter these data "
+                         f"show, {mm(scatter)} per axis in-sample: no tracker is noisier than its own data)")
 
 
 def as_dict(check: Check, models: ResultModels, meas: Measurements, notes: list[str]) -> dict[str, Any]:
