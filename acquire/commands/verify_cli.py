@@ -58,7 +58,7 @@ def _robot_for(args: argparse.Namespace, doc: dict[str, Any], model: CalibratedM
     spec = RobotSpec.parse(args.robot if args.robot is not None else f"mock:{name or 'ur5e'}").resolved()
     robot = load_robot(spec.model)
     try:
-        check_same_robot(doc, model.model.joint_types, robot, result=str(args.result))
+        check_same_robot(doc, model.model.joint_types, robot, result=str(args.result), identified=model)
     except InputError as exc:
         raise UsageError(str(exc)) from None
     return spec, robot

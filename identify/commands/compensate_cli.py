@@ -27,9 +27,10 @@ Pose targets are solved from the previous target's joints (the first from home),
 The compensated joints are checked against the joint limits and the cell of ``--config SITE`` (default: the robot
 alone on its mounting surface); a target that fails is kept as written and listed.
 
-Another robot model than the result's is refused. Exit codes: 0 every target reached (with --program: every
-target rewritten and every motion line understood), 3 some not (each row or listed line says why), 2 bad input
-(one line).
+Another robot model than the result's is refused; a result that records none (identified without --robot) is
+compared with --robot's nominal by its geometry, and another model's is refused. Exit codes: 0 every target
+reached (with --program: every target rewritten and every motion line understood), 3 some not (each row or
+listed line says why), 2 bad input (one line).
 """
 
 from __future__ import annotations
@@ -151,8 +152,10 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
         raise InputError(f"{args.result} fails its verdict: its model must not be used (see the result's checks)")
     robot = robot_model(args.robot if args.robot is not None else nominal_name(doc))
     n = identified.n_joints
+    misfit = None
     if robot is not None:  # another robot model's joint values mean another arm: refused before any work
-        check_same_robot(doc, identified.model.joint_types, robot, result=str(args.result))
+        misfit = check_same_robot(doc, identified.model.joint_types, robot, result=str(args.result),
+                                  identified=identified)
     if args.program:
         from identify.commands.program_cli import run_program
 
@@ -210,6 +213,9 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     write_output(args.out, text, force=args.force)
     summary = _summary(result, args, status, robot)
     summary["before"] = before
+    if misfit is not None:
+        summary["note"] = (f"the result records no robot model: {robot.name} taken as its nominal (it fits the "
+                           f"identified arm within {misfit * 1e3:.2g} mm RMS)")
     return summary, 0 if bool(np.all(result.solution.reached)) else 3
 
 
