@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common.arguments import OneLineParser
+from common.arguments import OneLineParser, size
 from common.outputs import check_outputs, commit_file, write_output
 from common.units import positive_length
 from drivers.camera.intrinsics import CameraIntrinsics, write_intrinsics
@@ -58,7 +58,7 @@ def calibrate_main(argv: list[str]) -> int:
     p = _parser("acquire calibrate-camera", "Calibrate a camera from ChArUco board views; write its intrinsics.")
     p.add_argument("images", nargs="?", help="folder or glob of board images")
     p.add_argument("--live", metavar="CAMERA", help="grab the views from this camera (index or device) instead")
-    p.add_argument("--views", type=int, default=25, help="views to grab with --live (25), one a second")
+    p.add_argument("--views", type=size("views"), default=25, help="views to grab with --live (25), one a second")
     p.add_argument("--min-corners", type=int, default=8, help="least ChArUco corners in a usable view (8)")
     p.add_argument("--out", type=Path, required=True, help="intrinsics file to write (.yaml)")
     p.add_argument("--force", action="store_true", help="replace --out if it exists")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from common.arguments import OneLineParser, VersionAction
+from common.arguments import OneLineParser, VersionAction, size
 from common.units import Typed, positive_duration, positive_length
 
 DESCRIPTION = "Plan, move, measure and record a calibration session, then identify the robot from it."
@@ -61,9 +61,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime", action="store_true", help="mock mode at the speed of a real run")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--log", type=Path, metavar="FILE", help="log every step and event to FILE")
-    p.add_argument("--steps", type=int, help="steps per sweep (site default 36)")
-    p.add_argument("--samples", type=int, help="tracker samples per step (site default)")
-    p.add_argument("--free-poses", type=int, help="free poses added for the fit and validation")
+    p.add_argument("--steps", type=size("steps"), help="steps per sweep (site default 36)")
+    p.add_argument("--samples", type=size("samples"), help="tracker samples per step (site default)")
+    p.add_argument("--free-poses", type=size("free_poses"), help="free poses added for the fit and validation")
     p.add_argument("--noise", action=Typed, convert=positive_length, metavar="LENGTH",
                    help="tracker noise per axis (1 sigma) for the predicted accuracy, e.g. 0.05mm or 50um (a bare "
                         "number is metres)")
@@ -76,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "seconds); alone: the most accurate candidate plan within it")
     p.add_argument("--probe", action="store_true",
                    help="open the tracker, take --count readings, print them with their spread, and exit")
-    p.add_argument("--count", type=int, default=10, help="readings taken by --probe (10)")
+    p.add_argument("--count", type=size("count"), default=10, help="readings taken by --probe (10)")
     p.add_argument("--json", action="store_true",
                    help="with --probe: one JSON object per reading; with --dry-run: the plan as one JSON object")
     p.add_argument("--speed-fraction", type=float, metavar="F",

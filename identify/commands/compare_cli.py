@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from common import fit_width
-from common.arguments import OneLineParser
+from common.arguments import OneLineParser, size
 from common.errors import InputError
 from common.help_text import description as _description
 from common.outputs import check_outputs, same_file, write_output
@@ -36,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", metavar="MODEL", help="nominal model (joint limits of the displacement poses; default: "
                    "the inputs')")
     p.add_argument("--alpha", type=float, default=ALPHA, help=f"family-wise false-alarm rate ({ALPHA})")
-    p.add_argument("--poses", type=int, default=POSES, help=f"random poses for the TP displacement ({POSES})")
+    p.add_argument("--poses", type=size("poses"), default=POSES, help=f"random poses for the TP displacement ({POSES})")
     p.add_argument("--seed", type=int, default=0, help="seed of those poses (0)")
     p.add_argument("--html", metavar="FILE", help="write the trend page (needs matplotlib)")
     p.add_argument("--json", action="store_true", help="print the comparison as one JSON object")
