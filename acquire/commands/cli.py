@@ -201,7 +201,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
                 print(f"plan: {line}")
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
-                      "command": " ".join(sys.argv)}
+                      "command": " ".join(sys.argv),
+                      **({"robot_model": robot_model.document} if robot_model.document is not None else {})}
             session = Session.create(path, plan, config, robot.identity(), tracker.identity(), robot_model.coupling)
         elif changes:
             session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))

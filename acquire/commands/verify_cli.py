@@ -198,7 +198,8 @@ def run(args: argparse.Namespace) -> int:
     path = args.session or _default_path(robot.name)
     confirm(robot_spec, args, plan, f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: ")
     config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
-              "command": " ".join(sys.argv), "verification": info}
+              "command": " ".join(sys.argv), "verification": info,
+              **({"robot_model": robot.document} if robot.document is not None else {})}
     return _measure(args, None, path, plan, robot_spec, tracker_spec, site, robot, config)
 
 

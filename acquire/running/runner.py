@@ -113,7 +113,7 @@ def identify_session(session: Session, session_path: Path, robot: RobotModel) ->
     reference, note = factory_reference(calibration, why, robot.joint_types)
     if reference is not None or note:
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
-    doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path))
+    doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path), nominal_model=robot.document)
     if section := controller_section(calibration, robot.joint_types):  # what the arm runs today ("before")
         doc["controller"] = section
     out = session_path.with_suffix(".result.yaml")

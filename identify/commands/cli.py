@@ -21,7 +21,7 @@ from common import __version__, fit_width
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from config.robots import RobotModel
-from identify.applications.calibrated import robot_model
+from identify.applications.calibrated import recorded_model, robot_model
 from identify.commands.options import SUBCOMMANDS, build_parser
 from identify.estimator.measurements import Measurements
 from identify.io.csvio import format_measurements, read_measurements
@@ -188,7 +188,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     meas = _rows(split_holdout(content.measurements, args.holdout, args.seed), args.rows)
     # a session knows its robot; --robot '' is refused, not taken for no --robot
     robot_name = args.robot if args.robot is not None else (header or {}).get("robot_model")
-    robot = robot_model(robot_name)
+    recorded = (recorded_model(header), str(args.input)) if args.robot is None and header is not None else (None, None)
+    robot = robot_model(robot_name, *recorded)
     nominal, nominal_name = (robot.nominal, robot.name) if robot else (None, None)
     if nominal is not None and nominal.joint_types != meas.joint_types:
         raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
@@ -203,7 +204,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         ident = replace(ident, verdict=checks.with_session_check(ident.verdict,
                                                                   checks.missing_steps(*header["missing_steps"])))
-    doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
+    doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input),
+                         nominal_model=robot.document if robot else None)
     if header is not None:  # the controller's own calibration: what the arm runs today ("before")
         from identify.applications.controller import controller_section
         from session.rows import factory_calibration

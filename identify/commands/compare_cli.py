@@ -22,7 +22,7 @@ from common.arguments import OneLineParser, size
 from common.errors import InputError
 from common.help_text import description as _description
 from common.outputs import check_outputs, same_file, write_output
-from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
+from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, recorded_model, robot_model
 from identify.applications.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
 from identify.io.result_io import load_result
 from session.schema import is_session_file
@@ -44,8 +44,9 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, float | None]:
-    """The model of a result or session, its robot name, robot serial and time (s since the epoch, or None)."""
+def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, float | None, dict[str, Any] | None]:
+    """The model of a result or session, its robot name, robot serial, time (s since the epoch, or None) and the
+    robot model it records (a model that is not bundled; else None)."""
     p = Path(path)
     if not p.exists():
         raise InputError(f"{path}: no such result or session")
@@ -56,8 +57,8 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
             raise InputError(str(exc)) from None
         if (doc.get("verdict") or {}).get("status") == "fail":
             raise InputError(f"{path} fails its verdict: its model cannot be compared")
-        return model, nominal_name(doc), None, p.stat().st_mtime
-    from config.robots import ConfigError, load_robot
+        return model, nominal_name(doc), None, p.stat().st_mtime, recorded_model(doc)
+    from config.robots import ConfigError
     from identify.io.session_measurements import session_measurements
     from identify.results.pipeline import identify
     from session.schema import SessionError
@@ -69,14 +70,15 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
             if "verification" in (header.get("config") or {}):
                 raise InputError(f"{path} is a verification session (acquire verify): compare calibrations")
             meas, robot_name = session_measurements(session), session.plan.robot
-        robot = load_robot(robot_name)
+        robot = robot_model(robot_name, recorded_model(header), path)
     except (SessionError, ConfigError) as exc:
         raise InputError(str(exc)) from None
     ident = identify(meas, robot.nominal, links=robot.links)  # as acquire identifies its sessions
     if ident.verdict.status == "fail":
         raise InputError(f"{path}: its identification fails its verdict ({ident.verdict.summary()})")
     serial = (header.get("robot") or {}).get("serial") or None
-    return CalibratedModel.from_identification(ident, p.stem), robot.name, serial, header.get("created")
+    return (CalibratedModel.from_identification(ident, p.stem), robot.name, serial, header.get("created"),
+            robot.document)
 
 
 def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
@@ -98,11 +100,13 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
         check_same_robot(models, [r for _, r, *_ in loaded], labels)
     except CompareError as exc:
         raise InputError(str(exc)) from None
-    serials = {(s, label) for (_, _, s, _), label in zip(loaded, labels, strict=True) if s}
+    serials = {(s, label) for (_, _, s, *_), label in zip(loaded, labels, strict=True) if s}
     if len({s for s, _ in serials}) > 1:
         a, b = sorted(serials)[:2]
         raise InputError(f"{a[1]} is robot serial {a[0]}, {b[1]} serial {b[0]}: different robots cannot be compared")
-    robot = robot_model(args.robot if args.robot is not None else next((r for _, r, *_ in loaded if r), None))
+    named = next(((r, doc, path) for (_, r, _, _, doc), path in zip(loaded, args.inputs, strict=True) if r),
+                 (None, None, None))
+    robot = robot_model(args.robot) if args.robot is not None else robot_model(*named)
     if robot is not None and robot.joint_types != models[0].model.joint_types:
         raise InputError(f"--robot {robot.name} has joints {robot.joint_types}, the inputs "
                          f"{models[0].model.joint_types}")
@@ -110,7 +114,7 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
         result = compare(models, labels, None if robot is None else robot.limits, args.alpha, args.poses, args.seed)
     except CompareError as exc:
         raise InputError(str(exc)) from None
-    times = [t for *_, t in loaded]
+    times = [t for _, _, _, t, _ in loaded]
     if args.html:
         from identify.report.compare_html import compare_html
 

@@ -51,7 +51,7 @@ from common.arguments import OneLineParser, comma_numbers
 from common.errors import InputError
 from common.help_text import description as _description
 from common.outputs import check_outputs, write_output
-from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
+from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, recorded_model, robot_model
 from identify.applications.compensate import (
     Compensation,
     compensate,
@@ -150,7 +150,8 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     status = (doc.get("verdict") or {}).get("status")
     if status == "fail":
         raise InputError(f"{args.result} fails its verdict: its model must not be used (see the result's checks)")
-    robot = robot_model(args.robot if args.robot is not None else nominal_name(doc))
+    robot = (robot_model(args.robot) if args.robot is not None
+             else robot_model(nominal_name(doc), recorded_model(doc), str(args.result)))
     n = identified.n_joints
     misfit = None
     if robot is not None:  # another robot model's joint values mean another arm: refused before any work

@@ -34,8 +34,10 @@ def _floats(values: Any) -> Any:
 
 
 def result_to_dict(ident: Identification, nominal: DHModel | None = None, nominal_name: str | None = None,
-                   source: str | None = None) -> dict[str, Any]:
-    """Everything the identification knows, contract keys first."""
+                   source: str | None = None, nominal_model: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Everything the identification knows, contract keys first. ``nominal_model``: the robot model's document
+    when it is not bundled (config/robots.py ``model_document``), recorded as ``nominal.model`` so that the result
+    reads where the model's file is not."""
     ref = ident.refinement
     n = ident.model.n_joints
     std = ident.std
@@ -119,6 +121,8 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
         doc["nominal"] = {"name": nominal_name, "delta": [dict(zip(DH_NAMES, map(float, row), strict=True))
                                                          for row in delta]}
+        if nominal_model is not None:
+            doc["nominal"]["model"] = nominal_model
     doc["warnings"] = list(ident.warnings) + list(ref.notes)
     doc["software"] = {"name": "dh-calib", "version": __version__}
     if source:
