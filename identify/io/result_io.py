@@ -127,6 +127,7 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
     doc["software"] = {"name": "dh-calib", "version": __version__}
     if source:
         doc["source"] = source
+        doc["source_path"] = str(Path(source).resolve())  # what the file is, wherever the result is read from
     return finite(doc)
 
 

@@ -55,6 +55,7 @@ def test_a_session_and_its_result_read_their_recorded_custom_model(tmp_path, cap
     assert main([str(one), "--out", str(result)]) in (0, 3)  # no test-arm.yaml anywhere: the session's own model
     doc = yaml.safe_load(result.read_text())
     assert doc["nominal"]["name"] == "test-arm" and doc["nominal"]["model"]["dh"][0]["d"] == pytest.approx(0.3)
+    assert doc["source_path"] == str(one.resolve())  # what the data file is, for --verification (item 5)
     capsys.readouterr()
     assert main(["compare", str(one), str(two)]) in (0, 3)
     assert "unknown name" not in capsys.readouterr().err
