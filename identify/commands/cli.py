@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from common import __version__, fit_width
+from common import __version__, fit_width, stop_signals
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from config.robots import RobotModel
@@ -317,6 +317,7 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader of stdout went away (| head): the entry point stops quietly
         raise
     except Exception as exc:  # numerical failure: one line, not a traceback; --debug-free by design
+        stop_signals.raise_pending()  # unless a stop signal became this error (an interrupted import)
         print(f"identify: error: identification failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
     if doc["verdict"]["status"] == "fail":
