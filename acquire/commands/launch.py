@@ -50,6 +50,10 @@ def _main(argv: list[str]) -> int:
             from acquire.commands.verify_options import build_parser
 
             build_parser().parse_args(argv[1:])  # prints the help and exits 0
+        if argv[:1] in (["calibrate-camera"], ["print-board"]):  # help and usage errors before OpenCV's imports
+            from acquire.commands.camera_options import calibrate_parser, print_parser
+
+            (calibrate_parser if argv[0] == "calibrate-camera" else print_parser)().parse_args(argv[1:])
         if not argv[:1] or argv[0] not in SUBCOMMANDS:
             refusal = _quick_refusal(argv)  # --help, --version, a bad option or spec: before the heavy imports
             if refusal is not None:

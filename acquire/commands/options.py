@@ -10,39 +10,48 @@ import argparse
 from pathlib import Path
 
 from common.arguments import OneLineParser, VersionAction, size
+from common.help_text import Formatter as HelpFormatter
 from common.units import Typed, positive_duration, positive_length
 
 DESCRIPTION = "Plan, move, measure and record a calibration session, then identify the robot from it."
 
 EPILOG = """\
 examples:
-  acquire --robot mock:ur5e --tracker mock            rehearsal with the simulated robot and tracker
-  acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
-  acquire --robot ur5e --tracker mock --dry-run       the plan, its duration and accuracy; nothing moves
-  acquire --robot ur5e --dry-run --target-accuracy 0.02mm --max-robot-time 2min
-                                                      the quickest plan predicted to reach 0.02 mm
-  acquire --robot ur5e@192.168.1.10 --tracker none    the plan's motion at 25 % speed, measuring nothing
-  acquire --resume SESSION                            continue an interrupted session
-  acquire --tracker 'serial:/dev/ttyUSB0?protocol=polled-xyz' --probe    check the tracker on site
+  acquire --robot mock:ur5e --tracker mock     a rehearsal, all simulated
+  acquire --robot ur5e --tracker mock --dry-run
+      the plan, its duration and accuracy; nothing moves
+  acquire --dry-run --target-accuracy 0.02mm --max-robot-time 2min
+      the quickest plan predicted to reach 0.02 mm
+  acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 \\
+      --config site.yaml                       a real arm and tracker
+  acquire --robot ur5e@192.168.1.10 --tracker none
+      the plan's motion at 25 % speed, measuring nothing
+  acquire --resume SESSION                     continue an interrupted session
+  acquire --tracker 'serial:/dev/ttyUSB0?protocol=polled-xyz' --probe
+      check the tracker on site
 
 subcommands (each has its own --help):
-  export SESSION --csv OUT.csv      the session's measurements as a CSV
-  backup SESSION COPY               a safe copy of a session, even while it is written
-  verify --result RESULT            ISO 9283-style accuracy before and after compensation
-  calibrate-camera IMAGES --out F   a camera's intrinsics from ChArUco board views
-  print-board --out F               a marker or board to print at true scale
+  export SESSION --csv OUT.csv     the session's measurements as a CSV
+  backup SESSION COPY              a safe copy, even of a session being written
+  verify --result RESULT           ISO 9283-style accuracy, before and after
+                                   compensation
+  calibrate-camera IMAGES --out F  a camera's intrinsics from ChArUco views
+  print-board --out F              a marker or board to print at true scale
 
 exit codes:
   0    complete (the identification passes, or passes with warnings)
   1    the run failed: robot fault, lost connection, timeout (resumable)
-  2    bad input, or a plan that breaks a limit or comes too close to the cell (one line)
-  3    complete, but the identification fails its verdict (do not use the model)
-  130  stopped by Ctrl-C, SIGTERM or SIGHUP: the motion stops, the run is recorded as aborted (resumable)
+  2    bad input, or a plan that breaks a limit or comes too close to the cell
+       (one line)
+  3    complete, but the identification fails its verdict (do not use the
+       model)
+  130  stopped by Ctrl-C, SIGTERM or SIGHUP: the motion stops, the run is
+       recorded as aborted (resumable)
 """
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(prog="acquire", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = OneLineParser(prog="acquire", description=DESCRIPTION, formatter_class=HelpFormatter,
                 epilog=EPILOG)
     p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e; the model may be a robot YAML file: "
                    "mock:my_arm.yaml, my_arm.yaml@HOST (mock:ur5e; on --resume: the session's, whose address may "

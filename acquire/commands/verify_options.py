@@ -23,6 +23,7 @@ import argparse
 from pathlib import Path
 
 from common.arguments import OneLineParser, size
+from common.help_text import Formatter as HelpFormatter
 from common.help_text import description as _description
 
 
@@ -30,7 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     assert __doc__ is not None
     first, rest = __doc__.split("\n\n", 1)
     p = OneLineParser(prog="acquire verify", description=_description(first),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
+                formatter_class=HelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("--result", type=Path, help="the calibration to verify (result YAML, with its covariance)")
     p.add_argument("--robot", help="robot spec (default: mock:<the result's robot>, the simulated rig)")
     p.add_argument("--tracker", help="tracker spec (default mock)")

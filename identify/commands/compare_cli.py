@@ -1,11 +1,6 @@
 """``identify compare A B [C ...]``: has the robot changed between calibrations? (the edge where files are read)
 
-Each input is a result YAML (``identify --out``, with its covariance) or an acquisition session (identified here
-against its robot's nominal model), oldest first. Results of different robots or joint types are refused. Prints
-one verdict line, then per consecutive pair the test of every DH parameter and the predicted TP displacement
-(see identify/applications/compare.py); ``--html FILE`` writes the trend of every significant parameter over the inputs.
-
-Exit codes: 0 no significant change, 3 a significant change, 2 bad input (one line).
+Its options and help: identify/commands/sub_options.py (light, so that --help answers at once).
 """
 
 from __future__ import annotations
@@ -18,30 +13,13 @@ from pathlib import Path
 from typing import Any
 
 from common import fit_width
-from common.arguments import OneLineParser, size
 from common.errors import InputError
-from common.help_text import description as _description
 from common.outputs import check_outputs, same_file, write_output
 from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, recorded_model, robot_model
-from identify.applications.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
+from identify.applications.compare import CompareError, Comparison, check_same_robot, compare
+from identify.commands.sub_options import compare_parser as build_parser
 from identify.io.result_io import load_result
 from session.schema import is_session_file
-
-
-def build_parser() -> argparse.ArgumentParser:
-    first, rest = __doc__.split("\n\n", 1)
-    p = OneLineParser(prog="identify compare", description=_description(first),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
-    p.add_argument("inputs", nargs="+", metavar="RESULT_OR_SESSION", help="two or more, oldest first")
-    p.add_argument("--robot", metavar="MODEL", help="nominal model (joint limits of the displacement poses; default: "
-                   "the inputs')")
-    p.add_argument("--alpha", type=float, default=ALPHA, help=f"family-wise false-alarm rate ({ALPHA})")
-    p.add_argument("--poses", type=size("poses"), default=POSES, help=f"random poses for the TP displacement ({POSES})")
-    p.add_argument("--seed", type=int, default=0, help="seed of those poses (0)")
-    p.add_argument("--html", metavar="FILE", help="write the trend page (needs matplotlib)")
-    p.add_argument("--json", action="store_true", help="print the comparison as one JSON object")
-    p.add_argument("--force", action="store_true", help="replace --html if it exists")
-    return p
 
 
 def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, float | None, dict[str, Any] | None]:

@@ -28,6 +28,10 @@ def _main(argv: list[str]) -> int:
             if not Path(args.input).exists():
                 print(f"identify: error: {args.input}: no such file", file=sys.stderr)
                 return 2
+        else:  # a subcommand's --help and usage errors too, before its imports
+            from identify.commands import sub_options
+
+            getattr(sub_options, f"{argv[0]}_parser")().parse_args(argv[1:])
         from importlib import import_module
 
         from identify.commands.cli import main as full_main

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 
 from common.arguments import OneLineParser, VersionAction
+from common.help_text import Formatter as HelpFormatter
 from common.units import Typed, length, positive_length
 
 DEFAULT_PARALLEL_TOL = 0.01  # rad: identify.estimator.cpa.DEFAULT_PARALLEL_TOL
@@ -27,9 +28,12 @@ examples:
   identify measurements.csv --json
 
 subcommands (each has its own --help):
-  compare A B [C ...]               has the robot changed between calibrations (results or sessions)?
+  compare A B [C ...]    has the robot changed between calibrations (results
+                         or sessions)?
   compensate RESULT --targets F --out F
-                                    joint values that bring the real arm to given targets
+                         joint values that bring the real arm to given targets
+                         (or --program F: a robot program filtered)
+  check RESULT DATA      does a calibration still hold on new data of the arm?
 
 exit codes:
   0    a result that passes its verdict, or passes with warnings
@@ -42,7 +46,7 @@ exit codes:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="identify", description=DESCRIPTION, epilog=EPILOG,
-                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                     formatter_class=HelpFormatter)
     parser.add_argument("input", help="measurement CSV (sweep,joint,q1..qN,x,y,z) or an acquisition session file")
     parser.add_argument("--out", metavar="FILE", help="write the result YAML to FILE (README.md: File contracts)")
     parser.add_argument("--json", action="store_true", help="print the full result as JSON instead of a table")
