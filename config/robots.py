@@ -1,7 +1,7 @@
 """Nominal robot models: the YAML files in ``config/robots/`` and their loader.
 
 A model file (schema 1) holds exactly the keys in :data:`KEYS`; ``dh`` is a standard DH table, base to tip,
-for the forward model of DESIGN.md (``theta``, ``alpha`` in radians; ``d``, ``a`` in metres). Per-joint values
+for the forward model of kinematics/dh.py (``theta``, ``alpha`` in radians; ``d``, ``a`` in metres). Per-joint values
 are radians for revolute joints and metres for prismatic ones: ``limits`` and ``home`` in rad / m,
 ``max_speed`` and ``default_speed`` in rad/s / m/s, ``default_acceleration`` in rad/s² / m/s².
 

@@ -69,7 +69,7 @@ class Result:
 
 
 def load_measurements(path: str | Path, joints: str | None = None, units: str | None = None) -> Measurements:
-    """The measurements of a CSV (the contract of DESIGN.md; ``joints``/``units`` as ``identify --joints/--units``)
+    """The measurements of a CSV (README.md, File contracts; ``joints``/``units`` as ``identify --joints/--units``)
     or of an acquisition session."""
     from identify.io.csvio import read_measurements
     from identify.io.session_measurements import read_session

@@ -32,6 +32,7 @@ from drivers.spec import RobotSpec, TrackerSpec
 from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name
 from identify.applications.controller import check_same_robot, controller_model
 from identify.applications.holds import ModelCheck
+from identify.applications.iso9283 import ISO_CYCLES
 from identify.io.result_io import load_result
 from identify.report.verify_rows import iso_rows, orientation_rows, pose_cells
 from session.schema import SessionError
@@ -73,6 +74,9 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
              f"test cube: centre {', '.join(f'{v * MM:.1f}' for v in info['centre'])} mm, edge {info['edge'] * MM:.0f} "
              "mm (base frame); per pose: its target, the joints commanded before compensation, and the AP "
              "predicted before / after [mm]"]
+    if info["cycles"] < ISO_CYCLES:
+        lines.insert(1, f"note: {info['cycles']} cycles per pose; ISO 9283 asks for {ISO_CYCLES} (fewer: a quicker "
+                        "test, its AP and RP less certain: see their uncertainties)")
     rows = [[f"P{k + 1}", *(f"{v:.1f}" for v in targets[k]),
              ", ".join(f"{np.degrees(v):.1f}" for v in info["q"]["before"][k]),
              f"{info['predicted']['before'][k] * MM:.3f} / 0 ± {info['expected'][k] * MM:.3f}"] for k in range(5)]

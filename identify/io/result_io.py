@@ -1,5 +1,5 @@
-"""The result document of DESIGN.md (``joints``, ``base``, ``tool``) plus its evidence, as plain data, and the result
-YAML read back (:func:`load_result`).
+"""The result document (README.md, File contracts: ``joints``, ``base``, ``tool``) plus its evidence, as plain
+data, and the result YAML read back (:func:`load_result`).
 
 Units follow the contract: metres and radians. The dict is ready for ``yaml.safe_dump`` or ``json``.
 """
@@ -22,7 +22,7 @@ from identify.results.written import WrittenModel
 from kinematics.dh import DH_NAMES, DHModel, model_to_dict
 
 CONVENTION = (
-    "standard DH (DESIGN.md forward model). Frame 0: z0 on joint 1's axis, theta1 and d1 conventional, the "
+    "standard DH (the forward model of README.md). Frame 0: z0 on joint 1's axis, theta1 and d1 conventional, the "
     "base absorbs the rest. Frame n: the last link's theta, d, a, alpha conventional, the tool carries the TP. "
     "Consecutive axes parallel within parallel_tol: the common normal passes where d takes its conventional "
     "value. Prismatic axes meet the next axis (a = 0). Conventional values: the nominal model's, or zero."
