@@ -40,13 +40,17 @@ class VersionAction(argparse.Action):
         parser.exit(0, f"{parser.prog} (dh-calib) {__version__}\n")
 
 
-def comma_numbers(text: str, what: str, counts: tuple[int, ...]) -> list[float]:
-    """The finite numbers of an option given as ``x,y,z`` (``what`` names it in the message); InputError unless
-    there are as many as one of ``counts``."""
+def comma_numbers(text: str, what: str, counts: tuple[int, ...], lengths: int = 0) -> list[float]:
+    """The finite numbers of an option given as ``x,y,z`` (``what`` names it in the message); the first ``lengths``
+    are lengths that may carry a unit (``0,0,100mm``; bare: metres), returned in metres. InputError unless there
+    are as many as one of ``counts``."""
+    from common.units import parse_length
+
     try:
-        values = [float(v) for v in text.split(",")]
+        values = [parse_length(v) if i < lengths else float(v) for i, v in enumerate(text.split(","))]
     except ValueError:
-        raise InputError(f"{what} must be comma-separated numbers, got {text!r}") from None
+        kind = f" (the first {lengths} lengths, e.g. 0,0,100mm; a bare number is metres)" if lengths else ""
+        raise InputError(f"{what} must be comma-separated numbers{kind}, got {text!r}") from None
     if len(values) not in counts or not all(math.isfinite(v) for v in values):
         raise InputError(f"{what} needs {' or '.join(map(str, counts))} finite numbers, got {text!r}")
     return values

@@ -107,7 +107,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
         raise InputError("--as controller-pose needs the controller's model: give --robot (the result names none)")
     tcp, tcp_rot = identified.tool(), np.eye(3)
     if args.tool:
-        values = comma_numbers(args.tool, "--tool", (3, 6))
+        values = comma_numbers(args.tool, "--tool", (3, 6), lengths=3)
         tcp = np.array(values[:3])
         if len(values) == 6:
             tcp_rot = pose_matrices(np.zeros(3), np.array(values[3:]))[0, :3, :3]

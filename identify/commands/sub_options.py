@@ -136,7 +136,8 @@ def compensate_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", metavar="MODEL",
                    help="nominal model (limits, home, the controller's model); default: the result's")
     p.add_argument("--tool", metavar="X,Y,Z[,RX,RY,RZ]",
-                   help="tool centre point in the flange frame, m and UR axis-angle rad (default: the identified TP)")
+                   help="tool centre point in the flange frame: X,Y,Z lengths (e.g. 0,0,100mm; a bare number is "
+                   "metres), UR axis-angle rad (default: the identified TP)")
     p.add_argument("--language", choices=("urscript",), default="urscript", help="language of --program")
     p.add_argument("--config", metavar="SITE",
                    help="site file whose cell the compensated program targets are checked against (default: the "

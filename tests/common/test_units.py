@@ -88,3 +88,13 @@ def test_identify_check_noise_takes_units():
     from identify.commands.check_cli import build_parser as check_parser
 
     assert check_parser().parse_args(["r.yaml", "d.csv", "--noise", "50um"]).noise == pytest.approx(5e-5, rel=1e-12)
+
+
+def test_the_tool_option_takes_lengths_with_units():
+    from common.arguments import comma_numbers
+    from common.errors import InputError
+
+    assert comma_numbers("0,0,100mm", "--tool", (3, 6), lengths=3) == pytest.approx([0.0, 0.0, 0.1], rel=1e-12)
+    assert comma_numbers("1cm,0,0.1,0,0,1.5", "--tool", (3, 6), lengths=3)[::5] == pytest.approx([0.01, 1.5])
+    with pytest.raises(InputError, match="0,0,100mm"):
+        comma_numbers("0,0,100mm,0,0,1rad", "--tool", (3, 6), lengths=3)  # rotations are radians, bare
