@@ -35,6 +35,7 @@ from common.arguments import OneLineParser
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from identify.applications.calibrated import ResultError
+from identify.applications.domain import result_outside
 from identify.applications.holds import Check, check_models
 from identify.applications.result_models import ResultModels, result_models
 from identify.estimator.measurements import Measurements
@@ -101,6 +102,10 @@ def run(args: argparse.Namespace) -> tuple[Check, ResultModels, Measurements, li
         check = check_models(meas.points, meas.q, meas.tp, models.models, models.use, args.refit_tool)
     except (ResultError, ValueError) as exc:
         raise InputError(f"{args.result} on {args.data}: {exc}") from None
+    found, line = result_outside(doc, meas.q)
+    notes.append(line)
+    if found is not None and found.count:
+        notes.append("the check's figures pool the poses inside and outside the domain")
     return check, models, meas, notes
 
 

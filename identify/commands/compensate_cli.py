@@ -61,6 +61,7 @@ from identify.applications.compensate import (
     why_not,
 )
 from identify.applications.controller import check_same_robot, controller_model
+from identify.applications.domain import result_outside
 from identify.io.result_io import load_result
 
 MAX_COORDINATE = 10.0  # m: a target farther than this from the origin is almost surely in millimetres
@@ -210,6 +211,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     write_output(args.out, text, force=args.force)
     summary = _summary(result, args, status, robot)
     summary["before"] = before
+    summary["domain"] = result_outside(doc, result.solution.q[result.solution.reached])[1]
     return summary, 0 if bool(np.all(result.solution.reached)) else 3
 
 
@@ -285,6 +287,8 @@ def format_summary(s: dict[str, Any]) -> str:
                      f"max {s['change_from_nominal_max'] * 1e3:.4f} mrad (mm for prismatic joints)")
     if s.get("note"):
         lines.append(f"note: {s['note']}")
+    if s.get("domain"):
+        lines.append(f"domain: {s['domain']}")
     if s["reached"] < s["targets"]:
         lines.append(f"{s['targets'] - s['reached']} target(s) NOT reached: see the status column")
     lines.append(f"written to {s['out']}")
