@@ -15,6 +15,11 @@ connect; ``temperature`` (°C), ``pressure`` (mbar), ``humidity`` (%RH): environ
 them the server's own, e.g. its weather station's, are read and recorded); ``trace``: a file logging every byte.
 The site file's ``tracker.settings`` give the same keys; the spec's options win.
 
+Mock mode: ``emscon:sim[?noise=M&seed=N&fault=NAME[@N][xK],...&...]`` with ``--robot mock:MODEL`` runs this client
+against the simulated emScon server of drivers/trackers/emscon_sim.py on loopback, which measures the mock robot's
+rig (``noise`` m per axis, default 5e-5; ``seed`` of the noise, default the robot's; ``fault``: the server's
+faults from measurement N on); every other option is the real tracker's.
+
 What the client does at connect (drivers/trackers/emscon_protocol.py speaks the packets): ``GetSystemStatus``
 (server version, tracker serial number, initialised or not), ``Initialize`` when needed, then everything a reading
 depends on is set explicitly and read back: units (metre, radian, °C, mbar, %RH), the coordinate system type (right-
@@ -38,6 +43,7 @@ import logging
 import math
 import socket
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
@@ -52,6 +58,7 @@ from drivers.trackers import emscon_protocol as es
 DEFAULT_PORT = 700
 OPTIONS = ("timeout", "init_timeout", "retries", "meas_time", "reflector", "initialize", "temperature", "pressure",
            "humidity", "trace")
+SIM_OPTIONS = ("noise", "seed", "fault")  # emscon:sim only
 FORM = ("emscon:HOST[:PORT][?timeout=S&init_timeout=S&retries=N&meas_time=S&reflector=NAME|ID&initialize=auto|always"
         "&temperature=C&pressure=MBAR&humidity=PERCENT&trace=FILE]")
 #: plausible environment parameters (°C, mbar, %RH): the server refuses others (meteo data out of range)
@@ -85,7 +92,7 @@ class EmsconTracker:
     def __init__(self, host: str, port: int = DEFAULT_PORT, *, timeout: float = 3.0, init_timeout: float = 120.0,
                  retries: int = 2, meas_time: float = 1.0, reflector: str | None = None, initialize: str = "auto",
                  environment: tuple[float, float, float] | None = None,
-                 trace_io: str | Path | IO[str] | None = None) -> None:
+                 trace_io: str | Path | IO[str] | None = None, simulator: Callable[[], Any] | None = None) -> None:
         if initialize not in ("auto", "always"):
             raise ValueError(f"initialize must be auto or always, got {initialize!r}")
         self.host, self.port = host, port
@@ -104,6 +111,7 @@ class EmsconTracker:
         self.events: list[tuple[float, str]] = []
         self.meas_status = ""  # the last measurement status change: ready, busy, not ready
         self.reconnects = 0
+        self._simulator, self.server = simulator, None  # emscon:sim: starts the simulated server at connect
 
     @property
     def where(self) -> str:
@@ -115,6 +123,9 @@ class EmsconTracker:
         """Open the link and set the tracker up (module doc); ConnectionFailed in one line when it cannot be."""
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
+        if self._simulator is not None and self.server is None:
+            self.server = self._simulator()
+            self.port = self.server.port
         self._trace.open()
         self._open(time.monotonic() + timeout)
         self._connected_once = True
@@ -122,6 +133,9 @@ class EmsconTracker:
     def close(self) -> None:
         self._drop()
         self._trace.close()
+        server, self.server = self.server, None
+        if server is not None:
+            server.stop()
 
     def identity(self) -> DeviceIdentity:
         rid, name, kind, offset = self.reflector
@@ -134,8 +148,11 @@ class EmsconTracker:
                                   + (" (set)" if self.wanted_environment else " (the server's)"),
                    "measurement": f"stationary, {self.meas_time_ms} ms",
                    "initialized": "by this client" if self.initialized_by_us else "already"}
-        return DeviceIdentity("tracker", "Leica emScon tracker", serial=self.serial, firmware=self.version,
-                              details=details)
+        model = "Leica emScon tracker"
+        if self.server is not None:
+            model += " (simulated: emscon:sim)"
+            details["noise"] = f"{self.server.noise:g}"
+        return DeviceIdentity("tracker", model, serial=self.serial, firmware=self.version, details=details)
 
     def measure(self, count: int, timeout: float) -> list[TrackerReading]:
         """``count`` stationary readings of the reflector (m, tracker frame; ``sigma`` the server's standard
@@ -381,10 +398,14 @@ def open_tracker(spec: TrackerSpec | str, rig: Any = None, site: Any = None, *,
     def bad(key: str, need: str) -> SpecError:
         return SpecError(f"tracker spec {str(spec)!r}: option {key}={raw[key]} must be {need}; expected {FORM}")
 
+    simulated = spec.target == "sim"
+    known = OPTIONS + (SIM_OPTIONS if simulated else ())
     for key in raw:
-        if key not in OPTIONS:
-            raise SpecError(f"tracker spec {str(spec)!r}: unknown option {key!r} (known: {', '.join(OPTIONS)}); "
+        if key not in known:
+            extra = " (only for emscon:sim)" if key in SIM_OPTIONS else ""
+            raise SpecError(f"tracker spec {str(spec)!r}: unknown option {key!r}{extra} (known: {', '.join(known)}); "
                             f"expected {FORM}")
+    simulator = _simulator(spec, raw, rig) if simulated else None
     values: dict[str, Any] = {"timeout": 3.0, "init_timeout": 120.0, "retries": 2, "meas_time": 1.0}
     limits = {"timeout": (0.0, 3600.0), "init_timeout": (0.0, 3600.0), "meas_time": (0.0, 600.0)}
     for key in values:
@@ -420,8 +441,26 @@ def open_tracker(spec: TrackerSpec | str, rig: Any = None, site: Any = None, *,
     if initialize not in ("auto", "always"):
         raise bad("initialize", "auto or always")
     reflector = None if raw.get("reflector") is None else str(raw["reflector"])
-    host, port = spec.address
+    host, port = ("127.0.0.1", 0) if simulated else spec.address
     return EmsconTracker(host, port or DEFAULT_PORT, timeout=values["timeout"], init_timeout=values["init_timeout"],
                          retries=values["retries"], meas_time=values["meas_time"], reflector=reflector,
                          initialize=initialize, environment=environment,
-                         trace_io=trace_io if trace_io is not None else raw.get("trace"))
+                         trace_io=trace_io if trace_io is not None else raw.get("trace"), simulator=simulator)
+
+
+def _simulator(spec: TrackerSpec, raw: dict[str, Any], rig: Any) -> Callable[[], Any]:
+    """What starts the simulated server of ``emscon:sim`` on ``rig`` (required: the mock robot's)."""
+    if rig is None:
+        raise SpecError(f"tracker spec {str(spec)!r}: emscon:sim measures a simulated robot: use it with "
+                        "--robot mock:MODEL")
+    try:
+        noise = float(raw.get("noise", 5e-5))
+        seed = int(str(raw.get("seed", rig.tracker_seed)))
+        from drivers.trackers.emscon_sim import EmsconSimServer, parse_faults
+
+        faults = parse_faults(str(raw["fault"])) if "fault" in raw else ()
+        if not (math.isfinite(noise) and noise >= 0 and seed >= 0):
+            raise ValueError(f"noise={raw.get('noise')} must be >= 0 m and seed={raw.get('seed')} an integer >= 0")
+    except ValueError as exc:
+        raise SpecError(f"tracker spec {str(spec)!r}: {' '.join(str(exc).split())}; expected {FORM}") from None
+    return lambda: EmsconSimServer(rig, noise=noise, seed=seed, faults=faults)
