@@ -281,12 +281,12 @@ class EmsconSimServer:
         values = tuple(float(v) for v in point * scale)
         std = (self.noise * scale,) * 3
         packet = es.single_result(values, std, self.environment)  # type: ignore[arg-type]
+        self.measurements += 1  # counted before it leaves: a client may read the truth as soon as it has the result
+        self.truths.append(true)
         if fault == "split":
             for piece in (packet[:5], packet[5:60], packet[60:]):
                 conn.sendall(piece)
                 time.sleep(0.01)
         else:
             conn.sendall(packet)
-        self.measurements += 1
-        self.truths.append(true)
         return True

@@ -4,6 +4,7 @@ and a damaged, dropped or silent link."""
 
 from __future__ import annotations
 
+import re
 import time
 from types import SimpleNamespace
 
@@ -204,7 +205,10 @@ def test_default_port_and_option_checks() -> None:
     for bad, words in (("speed=3", "unknown option 'speed'"), ("timeout=-1", "timeout=-1"),
                        ("retries=x", "retries=x"), ("meas_time=0", "meas_time=0"),
                        ("initialize=never", "auto or always"), ("temperature=20", "go together"),
-                       ("temperature=20&pressure=100&humidity=50", "pressure=100 must be a number in [500, 1200]")):
-        with pytest.raises(SpecError, match=words.replace("[", r"\[").replace("]", r"\]")) as info:
+                       ("temperature=20&pressure=100&humidity=50", "pressure=100 must be a number in [500, 1200]"),
+                       ("noise=1e-5", "unknown option 'noise' (only for emscon:sim)")):
+        with pytest.raises(SpecError, match=re.escape(words)) as info:
             open_tracker(f"emscon:host?{bad}")
         assert "\n" not in str(info.value)
+    with pytest.raises(SpecError, match="use it with --robot mock:MODEL"):
+        open_tracker("emscon:sim")
