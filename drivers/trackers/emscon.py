@@ -50,19 +50,13 @@ from typing import IO, Any
 import numpy as np
 
 from drivers.base import DeviceIdentity, TrackerReading, check_measure_request
-from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, SpecError, TargetLost
+from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, MeasurementError, TargetLost
 from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 from drivers.trackers import emscon_protocol as es
+from drivers.trackers.emscon_options import DEFAULT_PORT, parse_settings
 
-DEFAULT_PORT = 700
-OPTIONS = ("timeout", "init_timeout", "retries", "meas_time", "reflector", "initialize", "temperature", "pressure",
-           "humidity", "trace")
-SIM_OPTIONS = ("noise", "seed", "fault")  # emscon:sim only
-FORM = ("emscon:HOST[:PORT][?timeout=S&init_timeout=S&retries=N&meas_time=S&reflector=NAME|ID&initialize=auto|always"
-        "&temperature=C&pressure=MBAR&humidity=PERCENT&trace=FILE]")
-#: plausible environment parameters (°C, mbar, %RH): the server refuses others (meteo data out of range)
-ENVIRONMENT_RANGE = {"temperature": (-20.0, 60.0), "pressure": (500.0, 1200.0), "humidity": (0.0, 100.0)}
+__all__ = ["DEFAULT_PORT", "BeamLost", "EmsconStatus", "EmsconTracker", "TrackerNotReady", "open_tracker"]
 
 log = logging.getLogger("drivers.trackers.emscon")
 
@@ -385,82 +379,13 @@ class EmsconTracker:
 
 def open_tracker(spec: TrackerSpec | str, rig: Any = None, site: Any = None, *,
                  trace_io: str | Path | IO[str] | None = None) -> EmsconTracker:
-    """An unconnected :class:`EmsconTracker` for ``emscon:HOST[:PORT]?...``; ``rig`` is not used (a real device),
-    ``site.tracker_settings`` gives option defaults, ``trace_io`` overrides the ``trace`` option."""
+    """An unconnected :class:`EmsconTracker` for ``emscon:HOST[:PORT]?...`` (options: drivers/trackers/
+    emscon_options.py); ``rig`` is only for ``emscon:sim`` (the mock robot's), ``site.tracker_settings`` gives
+    option defaults, ``trace_io`` overrides the ``trace`` option. SpecError in one line for a bad option."""
     spec = spec if isinstance(spec, TrackerSpec) else TrackerSpec.parse(spec)
-    if spec.backend != "emscon":
-        raise SpecError(f"drivers.trackers.emscon opens emscon:HOST[:PORT] trackers, got {str(spec)!r}; "
-                        f"expected {FORM}")
-    raw: dict[str, Any] = {k: v for k, v in dict(getattr(site, "tracker_settings", None) or {}).items()
-                           if v is not None}
-    raw.update(spec.options)
-
-    def bad(key: str, need: str) -> SpecError:
-        return SpecError(f"tracker spec {str(spec)!r}: option {key}={raw[key]} must be {need}; expected {FORM}")
-
-    simulated = spec.target == "sim"
-    known = OPTIONS + (SIM_OPTIONS if simulated else ())
-    for key in raw:
-        if key not in known:
-            extra = " (only for emscon:sim)" if key in SIM_OPTIONS else ""
-            raise SpecError(f"tracker spec {str(spec)!r}: unknown option {key!r}{extra} (known: {', '.join(known)}); "
-                            f"expected {FORM}")
-    simulator = _simulator(spec, raw, rig) if simulated else None
-    values: dict[str, Any] = {"timeout": 3.0, "init_timeout": 120.0, "retries": 2, "meas_time": 1.0}
-    limits = {"timeout": (0.0, 3600.0), "init_timeout": (0.0, 3600.0), "meas_time": (0.0, 600.0)}
-    for key in values:
-        if key not in raw:
-            continue
-        try:
-            number = float(raw[key]) if key != "retries" else int(str(raw[key]))
-        except (TypeError, ValueError):
-            number = math.nan
-        if key == "retries":
-            if not (number >= 0 and number == number):
-                raise bad(key, "an integer >= 0")
-        elif not (limits[key][0] < number <= limits[key][1]):
-            raise bad(key, f"a number of seconds in (0, {limits[key][1]:g}]")
-        values[key] = number
-    given = [key for key in ENVIRONMENT_RANGE if key in raw]
-    environment = None
-    if given:
-        if len(given) != 3:
-            raise SpecError(f"tracker spec {str(spec)!r}: temperature, pressure and humidity go together (got only "
-                            f"{', '.join(given)}); expected {FORM}")
-        env = []
-        for key, (low, high) in ENVIRONMENT_RANGE.items():
-            try:
-                number = float(raw[key])
-            except (TypeError, ValueError):
-                number = math.nan
-            if not low <= number <= high:
-                raise bad(key, f"a number in [{low:g}, {high:g}]")
-            env.append(number)
-        environment = (env[0], env[1], env[2])
-    initialize = str(raw.get("initialize", "auto"))
-    if initialize not in ("auto", "always"):
-        raise bad("initialize", "auto or always")
-    reflector = None if raw.get("reflector") is None else str(raw["reflector"])
-    host, port = ("127.0.0.1", 0) if simulated else spec.address
-    return EmsconTracker(host, port or DEFAULT_PORT, timeout=values["timeout"], init_timeout=values["init_timeout"],
-                         retries=values["retries"], meas_time=values["meas_time"], reflector=reflector,
-                         initialize=initialize, environment=environment,
-                         trace_io=trace_io if trace_io is not None else raw.get("trace"), simulator=simulator)
-
-
-def _simulator(spec: TrackerSpec, raw: dict[str, Any], rig: Any) -> Callable[[], Any]:
-    """What starts the simulated server of ``emscon:sim`` on ``rig`` (required: the mock robot's)."""
-    if rig is None:
-        raise SpecError(f"tracker spec {str(spec)!r}: emscon:sim measures a simulated robot: use it with "
-                        "--robot mock:MODEL")
-    try:
-        noise = float(raw.get("noise", 5e-5))
-        seed = int(str(raw.get("seed", rig.tracker_seed)))
-        from drivers.trackers.emscon_sim import EmsconSimServer, parse_faults
-
-        faults = parse_faults(str(raw["fault"])) if "fault" in raw else ()
-        if not (math.isfinite(noise) and noise >= 0 and seed >= 0):
-            raise ValueError(f"noise={raw.get('noise')} must be >= 0 m and seed={raw.get('seed')} an integer >= 0")
-    except ValueError as exc:
-        raise SpecError(f"tracker spec {str(spec)!r}: {' '.join(str(exc).split())}; expected {FORM}") from None
-    return lambda: EmsconSimServer(rig, noise=noise, seed=seed, faults=faults)
+    settings = parse_settings(spec, site)
+    simulator = settings.simulator(spec, rig) if settings.simulated else None
+    return EmsconTracker(settings.host, settings.port, timeout=settings.timeout, init_timeout=settings.init_timeout,
+                         retries=settings.retries, meas_time=settings.meas_time, reflector=settings.reflector,
+                         initialize=settings.initialize, environment=settings.environment,
+                         trace_io=trace_io if trace_io is not None else settings.trace, simulator=simulator)
