@@ -47,8 +47,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e; the model may be a robot YAML file: "
                    "mock:my_arm.yaml, my_arm.yaml@HOST (mock:ur5e; on --resume: the session's, whose address may "
                    "change)")
-    p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock, or none (motion "
-                   "rehearsal) (mock; on --resume: the session's, whose port or host may change)")
+    p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, emscon:HOST[:PORT]?... (a Leica "
+                   "laser tracker's emScon server, port 700; emscon:sim with a mock robot), aruco:..., mock, or none "
+                   "(motion rehearsal) (mock; on --resume: the session's, whose port or host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
     p.add_argument("--session", type=Path, help="session file to create (default sessions/<robot>-<time>.session)")
     p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this session where it stopped")

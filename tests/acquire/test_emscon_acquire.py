@@ -56,3 +56,18 @@ def test_emscon_sim_options_are_checked_in_one_line(tmp_path, capsys):
         code = main(["--robot", ROBOT, "--tracker", tracker, "--session", str(tmp_path / "x.session"), *SMALL])
         err = capsys.readouterr().err
         assert code == 2 and words in err and err.count("\n") == 1, err
+
+
+def test_dry_run_says_what_the_tracker_will_be_asked(tmp_path, capsys):
+    site = tmp_path / "site.yaml"
+    site.write_text("schema: 1\ntracker:\n  settings: {temperature: 21.5, pressure: 990, humidity: 40, "
+                    "reflector: RRR 0.5in, meas_time: 2.5}\n")
+    assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1", "--config", str(site), "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "tracker: Leica emScon TPI at 192.168.0.1:700" in out
+    assert "environment: set to 21.5 degC, 990 mbar, 40 %RH" in out and "reflector: 'RRR 0.5in'" in out
+    assert "measure stationary points of 2.5 s: 5 per step" in out
+    assert "more than the site's measure timeout (10 s)" in out  # 5 x 2.5 s do not fit in 10 s
+    assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1?meas_time=1", "--config", str(site),
+                 "--dry-run"]) == 0
+    assert "measure timeout" not in capsys.readouterr().out  # the spec's option wins over the site file's
