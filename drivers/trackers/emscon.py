@@ -126,6 +126,7 @@ class EmsconTracker:
 
     def close(self) -> None:
         self._drop()
+        self._connected_once = False  # a closed tracker measures again only after connect()
         self._trace.close()
         server, self.server = self.server, None
         if server is not None:
@@ -149,9 +150,9 @@ class EmsconTracker:
         return DeviceIdentity("tracker", model, serial=self.serial, firmware=self.version, details=details)
 
     def measure(self, count: int, timeout: float) -> list[TrackerReading]:
-        """``count`` stationary readings of the reflector (m, tracker frame; ``sigma`` the server's standard
-        deviation per axis); ``timeout`` bounds the call. Raises BeamLost (a TargetLost), TrackerNotReady,
-        BadReading, DeviceTimeout, ConnectionFailed (module doc)."""
+        """``count`` stationary readings of the reflector (m, tracker frame; ``sigma`` the RMS of the server's
+        three standard deviations, m per axis; ``timestamp`` the host's receive time); ``timeout`` bounds the call.
+        Raises BeamLost (a TargetLost), TrackerNotReady, BadReading, DeviceTimeout, ConnectionFailed (module doc)."""
         check_measure_request(count, timeout)
         if not self._connected_once:
             raise ConnectionFailed(f"emScon tracker {self.where} is not connected (call connect())")

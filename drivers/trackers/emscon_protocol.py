@@ -70,7 +70,7 @@ STATUS = {
     10015: "communication with sensor failed",
 }
 #: statuses that mean the beam does not reach the reflector (broken beam, reflector lost): TargetLost
-BEAM_STATUSES = frozenset({23, 10004, 10009})
+BEAM_STATUSES = frozenset({10004, 10009})
 #: statuses that mean the tracker cannot measure yet (warming up, not initialised, unstable): retry later
 NOT_READY_STATUSES = frozenset({1, 39, 10005, 10010, 10012, 10013, 10014})
 

@@ -92,13 +92,31 @@ def test_an_unknown_reflector_is_refused_in_one_line(rig: SimulatedRig) -> None:
     assert "\n" not in message
 
 
-def test_an_uninitialised_tracker_is_initialised(rig: SimulatedRig) -> None:
-    with EmsconServer(rig, initialized=False) as server:
-        tracker = open_emscon(server)
+@pytest.mark.parametrize(("initialized", "option", "inits"), [(False, "auto", 1), (True, "auto", 0),
+                                                               (True, "always", 1)])
+def test_the_tracker_is_initialised_when_it_needs_it_or_when_asked(rig: SimulatedRig, initialized: bool, option: str,
+                                                                   inits: int) -> None:
+    with EmsconServer(rig, initialized=initialized) as server:
+        tracker = open_emscon(server, initialize=option)
         ident = tracker.identity()
         tracker.close()
-        assert server.initialized and server.commands.count(es.C_INITIALIZE) == 1
-    assert ident.details["initialized"] == "by this client"
+        assert server.initialized and server.commands.count(es.C_INITIALIZE) == inits
+    assert ident.details["initialized"] == ("by this client" if inits else "already")
+
+
+def test_a_closed_tracker_does_not_reconnect_by_itself_and_the_trace_logs_bytes(rig: SimulatedRig, tmp_path) -> None:
+    trace = tmp_path / "bytes.log"
+    with EmsconServer(rig) as server:
+        tracker = open_emscon(server, trace=str(trace))
+        tracker.measure(1, 2.0)
+        tracker.close()
+        with pytest.raises(ConnectionFailed, match="not connected"):
+            tracker.measure(1, 2.0)
+        assert server.connections == 1
+    text = trace.read_text()
+    assert f"# connect emscon:127.0.0.1:{server.port}" in text
+    assert "> b'\\x0c\\x00\\x00\\x00\\x00\\x00\\x00\\x00\\x01\\x00\\x00\\x00'" in text  # GetSystemStatus
+    assert text.count(" < b'") >= 14 and "disconnected" in text
 
 
 def test_a_broken_beam_is_target_lost_then_measured_again(rig: SimulatedRig) -> None:
