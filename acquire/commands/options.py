@@ -19,6 +19,8 @@ examples:
   acquire --robot mock:ur5e --tracker mock            rehearsal with the simulated robot and tracker
   acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
   acquire --robot ur5e --tracker mock --dry-run       the plan, its duration and accuracy; nothing moves
+  acquire --robot ur5e@192.168.1.10 --tracker emscon:192.168.0.1 --config site.yaml
+                                                      a Leica laser tracker through its emScon server (port 700)
   acquire --robot ur5e --dry-run --target-accuracy 0.02mm --max-robot-time 2min
                                                       the quickest plan predicted to reach 0.02 mm
   acquire --robot ur5e@192.168.1.10 --tracker none    the plan's motion at 25 % speed, measuring nothing
