@@ -28,12 +28,19 @@ tracker's own frame; unsolicited status messages on; no try mode), the environme
 measurement mode (stationary) and its time. The identity (the session header) records all of them.
 
 A reading is one ``StartMeasurement`` answered by a stationary result (X, Y, Z m, their standard deviations; the
-timestamp is the host's receive time). Faults: a status saying the beam does not reach the reflector (broken beam,
+timestamp is the host's receive time). Each result carries the environment it was corrected with: when that differs
+from the one recorded at connect (the server's weather station moved on), the reading's ``status`` says it
+(``ok, environment 20.6 degC, 1012.9 mbar, 48 %RH``), so the session keeps it with the reading.
+
+Faults: a status saying the beam does not reach the reflector (broken beam,
 reflector lost: :data:`~drivers.trackers.emscon_protocol.BEAM_STATUSES`) raises TargetLost; one saying the tracker
 cannot measure yet (warming up, not initialised, unstable) raises :class:`TrackerNotReady`; both are measurement
 errors the orchestrator retries. A dropped connection, a damaged byte stream (BadReading) or a server that stays
 silent (DeviceTimeout) closes the link; the reading is then retried on a new connection (set up again as at
 connect) up to ``retries`` times, so the step is not lost. Unsolicited status changes are kept in ``events``.
+
+Not implemented: continuous measurement (``ES_MM_ContinuousTime``; the tracker is not a ``StreamingTracker``, so
+``--mode continuous`` is refused before anything moves) and 6-DoF probe results.
 """
 
 from __future__ import annotations
@@ -55,6 +62,9 @@ from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 from drivers.trackers import emscon_protocol as es
 from drivers.trackers.emscon_options import DEFAULT_PORT, parse_settings
+
+#: changes of the environment a result was corrected with (degC, mbar, %RH) that a reading's status reports
+ENVIRONMENT_STEP = (0.05, 0.1, 0.5)
 
 __all__ = ["DEFAULT_PORT", "BeamLost", "EmsconStatus", "EmsconTracker", "TrackerNotReady", "open_tracker"]
 
@@ -100,6 +110,7 @@ class EmsconTracker:
         self.version = ""
         self.serial = ""
         self.environment: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+        self.recorded_environment = self.environment
         self.reflector: tuple[int, str, str, float] = (0, "", "", 0.0)
         self.initialized_by_us = False
         self.events: list[tuple[float, str]] = []
@@ -134,7 +145,7 @@ class EmsconTracker:
 
     def identity(self) -> DeviceIdentity:
         rid, name, kind, offset = self.reflector
-        t, p, h = self.environment
+        t, p, h = self.recorded_environment
         details = {"address": self.where, "protocol": "emScon TPI", "units": "m, rad, degC, mbar, %RH",
                    "coordinate_system": "right-handed rectangular, tracker frame (no transformation, no station "
                                         "orientation)",
@@ -203,6 +214,12 @@ class EmsconTracker:
         std = np.array(packet.std, dtype=float)
         sigma = float(np.sqrt(np.mean(std**2))) if np.all(np.isfinite(std)) and std.max() > 0 else None
         status = "ok" if not packet.try_mode else "ok, try mode"
+        used = (packet.temperature, packet.pressure, packet.humidity)
+        if any(abs(a - b) > tol for a, b, tol in zip(used, self.environment, ENVIRONMENT_STEP, strict=True)):
+            self.environment = used  # the server's weather station moved on: the readings say so from here on
+            self._trace.event(f"environment now {used}")
+        if used != self.recorded_environment:
+            status += ", environment {:g} degC, {:g} mbar, {:g} %RH".format(*used)
         return TrackerReading(values, stamp, sigma, status)
 
     # --- set-up -------------------------------------------------------------------------------------------
@@ -247,6 +264,8 @@ class EmsconTracker:
         if self.wanted_environment is not None:
             self._call(es.set_environment(*self.wanted_environment), es.C_SET_ENVIRONMENT, deadline)
         self.environment = es.environment(self._ask(es.C_GET_ENVIRONMENT, deadline))
+        if not self._connected_once:  # what the session header records (identity); later changes: readings' status
+            self.recorded_environment = self.environment
         self._choose_reflector(deadline)
         self._call(es.set_measurement_mode(es.MM_STATIONARY), es.C_SET_MEAS_MODE, deadline)
         self._call(es.set_stationary_params(self.meas_time_ms), es.C_SET_STATIONARY, deadline)

@@ -107,6 +107,10 @@ class EmsconSimServer:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
+    def change_environment(self, values: tuple[float, float, float]) -> None:
+        """The weather station's new reading (degC, mbar, %RH): used from the next result on."""
+        self.environment = tuple(float(v) for v in values)  # type: ignore[assignment]
+
     def inject(self, fault: str, count: int = 1) -> None:
         if fault not in EMSCON_FAULTS:
             raise ValueError(f"unknown fault {fault!r} (known: {', '.join(EMSCON_FAULTS)})")

@@ -230,3 +230,16 @@ def test_default_port_and_option_checks() -> None:
         assert "\n" not in str(info.value)
     with pytest.raises(SpecError, match="use it with --robot mock:MODEL"):
         open_tracker("emscon:sim")
+
+
+def test_a_changed_environment_is_kept_with_the_readings(rig: SimulatedRig) -> None:
+    with EmsconServer(rig) as server:
+        tracker = open_emscon(server)
+        before = tracker.measure(1, 2.0)[0]
+        server.change_environment((20.6, 1012.9, 48.0))  # the weather station moved on
+        after = tracker.measure(2, 2.0)
+        ident = tracker.identity()
+        tracker.close()
+    assert before.status == "ok"
+    assert [r.status for r in after] == ["ok, environment 20.6 degC, 1012.9 mbar, 48 %RH"] * 2
+    assert ident.details["environment"].startswith("20 degC, 1013.25 mbar, 50 %RH")  # the header: at connect
