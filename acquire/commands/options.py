@@ -91,6 +91,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "continuous one (the stop-and-go sweeps need no clock: they anchor the streams' timing and can "
                         "check it; --steps sets their size); the dry run compares the three")
     p.add_argument("--trace-io", type=Path, metavar="FILE",
-                   help="log every byte to and from the tracker (serial and I++ trackers)")
+                   help="log every byte to and from the tracker (serial, I++ and emScon trackers)")
     p.add_argument("--version", action=VersionAction)
     return p
