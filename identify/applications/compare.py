@@ -108,6 +108,8 @@ class Comparison:
     pairs: tuple[PairComparison, ...]
     alpha: float
     verdict: str = field(default="")
+    poses: Array | None = None  # (k, n) readings the TP displacement was computed at
+    notes: tuple[str, ...] = ()  # where the poses lie against each input's domain
 
     @property
     def significant(self) -> bool:
@@ -270,7 +272,7 @@ def compare(models: list[CalibratedModel], labels: list[str], limits: Array | No
         verdict = ("SIGNIFICANT CHANGE " + "; ".join(f"{p.a} -> {p.b} (largest: {w})" for p, w in
                                                       zip(changed, largest, strict=True))
                    + f"; family-wise false-alarm rate {alpha:g}; each pair's test below")
-    return Comparison(tuple(labels), pairs, alpha, verdict)
+    return Comparison(tuple(labels), pairs, alpha, verdict, q)
 
 
 def dh_label(name: str) -> str:

@@ -20,6 +20,7 @@ from common.errors import InputError
 from common.outputs import check_outputs, write_output
 from common.units import as_typed, mm, slip_hint
 from identify.applications.calibrated import ResultError
+from identify.applications.domain import result_outside
 from identify.applications.holds import Check, check_models
 from identify.applications.result_models import ResultModels, result_models
 from identify.commands.sub_options import check_parser as build_parser
@@ -70,6 +71,10 @@ def run(args: argparse.Namespace) -> tuple[Check, ResultModels, Measurements, li
         check = check_models(meas.points, meas.q, meas.tp, models.models, models.use, args.refit_tool)
     except (ResultError, ValueError) as exc:
         raise InputError(f"{args.result} on {args.data}: {exc}") from None
+    found, line = result_outside(doc, meas.q)
+    notes.append(line)
+    if found is not None and found.count:
+        notes.append("the check's figures pool the poses inside and outside the domain")
     return check, models, meas, notes
 
 

@@ -9,22 +9,28 @@ import argparse
 import json
 import math
 import sys
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from common import fit_width
 from common.errors import InputError
 from common.outputs import check_outputs, same_file, write_output
 from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, recorded_model, robot_model
 from identify.applications.compare import CompareError, Comparison, check_same_robot, compare
+from identify.applications.domain import domain_from_document, outside
 from identify.commands.sub_options import compare_parser as build_parser
 from identify.io.result_io import load_result
 from session.schema import is_session_file
 
 
-def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, float | None, dict[str, Any] | None]:
-    """The model of a result or session, its robot name, robot serial, time (s since the epoch, or None) and the
-    robot model it records (a model that is not bundled; else None)."""
+def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, float | None, np.ndarray | None,
+                                   dict[str, Any] | None]:
+    """The model of a result or session, its robot name, robot serial, time (s since the epoch, or None), domain
+    (n, 2: the DH joint ranges it was fitted on, None when a result records none) and the robot model it records
+    (a model that is not bundled; else None)."""
     p = Path(path)
     if not p.exists():
         raise InputError(f"{path}: no such result or session")
@@ -35,7 +41,7 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
             raise InputError(str(exc)) from None
         if (doc.get("verdict") or {}).get("status") == "fail":
             raise InputError(f"{path} fails its verdict: its model cannot be compared")
-        return model, nominal_name(doc), None, p.stat().st_mtime, recorded_model(doc)
+        return model, nominal_name(doc), None, p.stat().st_mtime, domain_from_document(doc), recorded_model(doc)
     from config.robots import ConfigError
     from identify.io.session_measurements import session_measurements
     from identify.results.pipeline import identify
@@ -56,7 +62,7 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
         raise InputError(f"{path}: its identification fails its verdict ({ident.verdict.summary()})")
     serial = (header.get("robot") or {}).get("serial") or None
     return (CalibratedModel.from_identification(ident, p.stem), robot.name, serial, header.get("created"),
-            robot.document)
+            ident.domain, robot.document)
 
 
 def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
@@ -82,7 +88,7 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
     if len({s for s, _ in serials}) > 1:
         a, b = sorted(serials)[:2]
         raise InputError(f"{a[1]} is robot serial {a[0]}, {b[1]} serial {b[0]}: different robots cannot be compared")
-    named = next(((r, doc, path) for (_, r, _, _, doc), path in zip(loaded, args.inputs, strict=True) if r),
+    named = next(((r, doc, path) for (_, r, _, _, _, doc), path in zip(loaded, args.inputs, strict=True) if r),
                  (None, None, None))
     robot = robot_model(args.robot) if args.robot is not None else robot_model(*named)
     if robot is not None and robot.joint_types != models[0].model.joint_types:
@@ -92,12 +98,31 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
         result = compare(models, labels, None if robot is None else robot.limits, args.alpha, args.poses, args.seed)
     except CompareError as exc:
         raise InputError(str(exc)) from None
-    times = [t for _, _, _, t, _ in loaded]
+    times = [t for _, _, _, t, _, _ in loaded]
     if args.html:
         from identify.report.compare_html import compare_html
 
         write_output(args.html, compare_html(result, models, times), force=args.force)
+    notes = _domains(result, models, [d for _, _, _, _, d, _ in loaded])
+    result = replace(result, notes=notes)
     return result, as_dict(result)
+
+
+def _domains(result: Comparison, models: list[CalibratedModel], domains: list[np.ndarray | None]) -> tuple[str, ...]:
+    """For each input, how many of the poses the displacement was computed at lie outside its domain."""
+    out = []
+    q = result.poses
+    for label, model, domain in zip(result.labels, models, domains, strict=True):
+        if q is None:
+            break
+        if domain is None:
+            out.append(f"{label}: records no domain (written before results did): where it holds is not known")
+            continue
+        found = outside(domain, model.dh_values(q), model.model.joint_types)
+        if found.count:
+            out.append(f"{label}: {found.count} of the {found.total} displacement poses lie outside its fitted joint "
+                       "ranges (its domain): the displacement there extrapolates its fit")
+    return tuple(out)
 
 
 def _labels(paths: list[str]) -> list[str]:
@@ -109,6 +134,7 @@ def _labels(paths: list[str]) -> list[str]:
 def as_dict(c: Comparison) -> dict[str, Any]:
     """The comparison as plain data (m, rad)."""
     return {"verdict": c.verdict, "significant": c.significant, "alpha": c.alpha, "inputs": list(c.labels),
+            "domain_notes": list(c.notes),
             "pairs": [{"a": p.a, "b": p.b, "significant": p.significant, "statistic": p.statistic, "dof": p.dof,
                        "p_value": p.p_value, "alpha": p.alpha, "displacement_rms": p.displacement_rms,
                        "displacement_max": p.displacement_max, "expected_rms": p.expected_rms,
@@ -131,6 +157,7 @@ def format_comparison(c: Comparison) -> str:
         lines += [f"note: {e}" for e in p.excluded]
         lines.append(f"cell: base moved {p.base_shift * 1e3:.3f} mm and turned {math.degrees(p.base_turn):.4f} deg "
                      f"relative to the tracker; TP {p.tool_shift * 1e3:.3f} mm on the flange (not the robot)")
+    lines += [f"domain: {n}" for n in c.notes]
     return "\n".join(fit_width.wrap_lines(lines))  # within the terminal's width
 
 

@@ -32,6 +32,7 @@ from identify.applications.compensate import (
     why_not,
 )
 from identify.applications.controller import check_same_robot, controller_model
+from identify.applications.domain import result_outside
 from identify.commands.sub_options import compensate_parser as build_parser
 from identify.io.result_io import load_result
 
@@ -159,6 +160,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     if misfit is not None:
         summary["note"] = (f"the result records no robot model: {robot.name} taken as its nominal (it fits the "
                            f"identified arm within {misfit * 1e3:.2g} mm RMS)")
+    summary["domain"] = result_outside(doc, result.solution.q[result.solution.reached])[1]
     return summary, 0 if bool(np.all(result.solution.reached)) else 3
 
 
@@ -234,6 +236,8 @@ def format_summary(s: dict[str, Any]) -> str:
                      f"max {s['change_from_nominal_max'] * 1e3:.4f} mrad (mm for prismatic joints)")
     if s.get("note"):
         lines.append(f"note: {s['note']}")
+    if s.get("domain"):
+        lines.append(f"domain: {s['domain']}")
     if s["reached"] < s["targets"]:
         lines.append(f"{s['targets'] - s['reached']} target(s) NOT reached: see the status column")
     lines.append(f"written to {s['out']}")

@@ -20,6 +20,7 @@ from common.outputs import write_output
 from identify.applications.calibrated import CalibratedModel
 from identify.applications.compensate import pose_matrices
 from identify.applications.controller import controller_model
+from identify.applications.domain import result_outside
 from identify.programs import urscript
 from identify.programs.filter import Outcome, filter_targets, filtered_text
 
@@ -74,6 +75,9 @@ def run_program(args: argparse.Namespace, identified: CalibratedModel, doc: dict
     write_output(args.out, filtered_text(parsed, outcomes, language).encode("utf-8"), force=args.force)
     summary, code = _summary(args, parsed, outcomes, before, tool_source, verdict)
     summary["cell"] = cell_note
+    done = [o.q_after for o in outcomes if o.literal is not None]
+    if done:
+        summary["domain"] = result_outside(doc, np.array(done))[1]
     return summary, code
 
 
@@ -138,5 +142,7 @@ def format_program_summary(s: dict[str, Any]) -> str:
     if s["kept"]:
         lines.append(f"{len(s['kept'])} motion line(s) kept as written (NOT compensated):")
         lines += [f"  line {k['line']}: {k['reason']}: {k['text'].strip()}" for k in s["kept"]]
+    if s.get("domain"):
+        lines.append(f"domain: {s['domain']}")
     lines.append(f"written to {s['out']}")
     return "\n".join(lines)

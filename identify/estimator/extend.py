@@ -25,15 +25,16 @@ from identify.estimator.poe import JointTerms, LeastSquares
 
 Array = NDArray[np.float64]
 
-FOLDS = 5  # cross-validation blocks: each sweep cut into this many arcs, the free poses dealt into as many groups
+FOLDS = 5  # cross-validation blocks: each sweep cut into this many arcs, the free poses into as many regions
 MIN_FOLD_ROWS = 3  # rows a block must have for the cross-validation to use it
 
 
 def cv_folds(rows: FitData, filled: Array, folds: int = FOLDS) -> NDArray[np.int64]:
     """The block (0 .. folds-1) of each row: every sweep (and tracked point) cut into ``folds`` contiguous arcs
     along the joint it moves, so a block leaves a stretch of arc out rather than single samples between
-    neighbours that would still pin it; free poses dealt round-robin by pose, every tracked point of a pose in
-    the same block. ``filled`` (m, n): joint values with the unread ones solved."""
+    neighbours that would still pin it; free poses cut into as many regions of the joint space
+    (:func:`_regions`), every tracked point of a pose in the same block. ``filled`` (m, n): joint values with the
+    unread ones solved."""
     out = np.zeros(len(rows.q), dtype=np.int64)
     key = along_arc(filled, rows.joint)
     for g in np.unique(rows.group[rows.group > 0]):
@@ -43,9 +44,24 @@ def cv_folds(rows: FitData, filled: Array, folds: int = FOLDS) -> NDArray[np.int
         out[idx] = rank * folds // max(len(idx), 1)
     free = np.flatnonzero(rows.group == 0)
     if len(free):
-        _, pose = np.unique(np.round(filled[free], 12), axis=0, return_inverse=True)
-        out[free] = pose.ravel() % folds
+        poses, pose = np.unique(np.round(filled[free], 12), axis=0, return_inverse=True)
+        out[free] = _regions(poses, folds)[pose.ravel()]
     return out
+
+
+def _regions(poses: Array, folds: int) -> NDArray[np.int64]:
+    """The block of each free pose (k, n joint values): ``folds`` contiguous regions along the direction in which
+    the poses spread most (their first principal component, each joint scaled by its spread), so a block at
+    either end is predicted from poses that all lie on one side of it: a term must extrapolate to win there."""
+    if len(poses) < 2:
+        return np.zeros(len(poses), dtype=np.int64)
+    centred = poses - poses.mean(axis=0)
+    spread = centred.std(axis=0)
+    scaled = centred / np.where(spread > 0, spread, 1.0)
+    direction = np.linalg.svd(scaled, full_matrices=False)[2][0]
+    rank = np.empty(len(poses), dtype=np.int64)
+    rank[np.argsort(scaled @ direction, kind="stable")] = np.arange(len(poses))
+    return rank * folds // len(poses)
 
 
 def select_terms(best: LinesFit, data: FitData, empty: TermSet, pool: list[Candidate], variance: float

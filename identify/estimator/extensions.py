@@ -37,7 +37,17 @@ Array = NDArray[np.float64]
 FAMILY_WISE = 0.05  # chance of selecting any term when the data hold none
 MIN_INDEPENDENT = 1e-6  # a candidate whose columns the lines absorb to this fraction is not identifiable
 ROWS_PER_TERM = 10  # residual degrees of freedom (3 per row, less the lines') per joint-error coefficient
-PLAUSIBLE = {"scale": 1e-2, "eccentricity": 1e-2, "compliance": 1e-3}  # beyond these a term hides another error
+# The largest size a real drive shows, beyond which a term stands in for another error (or for a pair of terms that
+# only cancel inside the fitted range: a -6,400 ppm scale against a +1,300 arcsec once-per-turn error on a UR5 joint
+# that turned 80 degrees, which extrapolated to -0.9 degrees at the far side of the joint):
+# - scale (gear ratio, 1): a reading scale of 1,000 ppm. Identified gear-ratio errors of industrial arms and cobots
+#   are a few hundred ppm at most (the encoder sits on the motor; the ratio is exact up to the output stage's
+#   wind-up and the belt or wave generator's slip), so 1e-3 leaves a factor of three;
+# - eccentricity (rad, amplitude of each of sin and cos): 1e-3 rad (206 arcsec). Harmonic and cycloid reducers are
+#   sold with a transmission error of 1-1.5 arcmin peak to peak (0.3-0.44 mrad), and once-per-turn errors of
+#   output encoders are tens of arcsec; 1 mrad is twice the worst of these;
+# - compliance (rad/(N m)): 1e-3, a joint stiffness of 1,000 N m/rad, ten times softer than the softest cobot joint.
+PLAUSIBLE = {"scale": 1e-3, "eccentricity": 1e-3, "compliance": 1e-3}
 UNITS = {"scale": "1", "ecc_sin": "rad", "ecc_cos": "rad", "compliance": "rad/(N m)"}
 EQUATIONS = {
     "scale": "dq_i = scale_i * (q_i - home_i)",
@@ -225,10 +235,9 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
         if ratio <= limit:
             decisions.append(Decision(best, best_score, ratio, limit, None, False, "likelihood ratio below the limit"))
             continue
-        size = float(np.max(np.abs(trial.terms.coefs[-best.dof:])))
-        if size > PLAUSIBLE[best.family]:
-            decisions.append(Decision(best, best_score, ratio, limit, None, False,
-                                      f"implausible size {size:.3g} (> {PLAUSIBLE[best.family]:g}): another error"))
+        beyond = _implausible(trial_terms, trial.terms.coefs)
+        if beyond:
+            decisions.append(Decision(best, best_score, ratio, limit, None, False, f"implausible size: {beyond}"))
             continue
         decisions.append(Decision(best, best_score, ratio, limit, None, True, "selected"))
         chosen, current = trial_terms, trial
@@ -254,6 +263,20 @@ def select(base: LeastSquares, pool: list[Candidate], empty: TermSet, refit: Ref
         decisions = [replace(d, selected=False, reason=why) if d.candidate == dropped and d.selected else d
                      for d in decisions]
     return empty, base, decisions
+
+
+def _implausible(terms: TermSet, coefs: Array) -> str:
+    """The coefficients of ``terms`` beyond what a real drive shows (:data:`PLAUSIBLE`), said in words ('' when
+    none is): the term just added may push one that entered before it (two terms that cancel inside the fitted
+    range grow together), so every coefficient is tested, not only the new one's."""
+    out = []
+    k = 0
+    for c in terms.candidates:
+        size = float(np.max(np.abs(coefs[k:k + c.dof])))
+        if size > PLAUSIBLE[c.family]:
+            out.append(f"{'/'.join(c.names)} {size:.3g} (> {PLAUSIBLE[c.family]:g}): another error")
+        k += c.dof
+    return "; ".join(out)
 
 
 def _backward(chosen: TermSet, current: LeastSquares, fits: list[LeastSquares], decisions: list[Decision],

@@ -20,10 +20,10 @@ shared by neighbouring samples. Only the first are outliers. So a sample is reje
    residual beyond GROSS_FACTOR times the largest kept in its scale group. Systematic errors of thin sweeps
    (four to six samples over a turn, too far apart for the neighbour test) and of free poses far from home
    reach a size of their own; a sample within it is not gross, whatever the bulk's scale;
-5. and never as the greater part of one sweep: a beam break or a wrong reflector spoils a sample or a few, while
-   an error that follows the joints (an elastic joint under the gravity torque, a gear) moves a whole sweep. A
-   sweep whose samples would mostly be rejected keeps them all, and its error is the model's to show (the
-   ``model_fit`` check), not a loss of that joint's data.
+5. and never as half or more of one sweep: a beam break or a wrong reflector spoils a sample or a few, while an
+   error that follows the joints (an elastic joint under the gravity torque, a gear) moves a whole sweep. Such a
+   sweep keeps them all, and its error is the model's to show (the ``model_fit`` check), not a loss of that
+   joint's data (a real FANUC arm's 4-sample sweeps lost 2 clean samples each, and its verdict failed).
 """
 
 from __future__ import annotations
@@ -170,7 +170,8 @@ def outlier_free(res: Array, leverage: Array, group: NDArray[np.int64], key: Arr
             keep[rows[size[rows] <= GROSS_FACTOR * size[kept].max()]] = True
     for g in np.unique(group[group > 0]):  # test 5
         rows = group == g
-        if 2 * np.count_nonzero(~keep[rows]) > np.count_nonzero(rows):
+        rejected, samples = np.count_nonzero(~keep[rows]), np.count_nonzero(rows)
+        if 2 * rejected >= samples:
             keep[rows] = True
     return keep
 

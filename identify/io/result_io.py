@@ -14,6 +14,7 @@ import yaml
 
 from common import __version__
 from identify.applications.calibrated import CalibratedModel, ResultError
+from identify.applications.domain import domain_to_dict
 from identify.estimator.extensions import EQUATIONS, UNITS
 from identify.estimator.poe import AxisLines
 from identify.estimator.refine import parameter_names
@@ -103,6 +104,7 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "use": ident.use,
         **{name: v.as_dict() for name, v in ident.validations.items()},
     }
+    doc["domain"] = domain_to_dict(ident.domain)
     geo = ident.geometric
     doc["geometric_step"] = None if geo is None else {
         "home": _floats(geo.home),

@@ -57,9 +57,11 @@ def _axis_angle(lines: AxisLines, i: int) -> float:
 
 def near_parallel(lines: AxisLines, covariance: Array, conventional: Array, reference: DHModel | None,
                   parallel_tol: float, max_offset: float) -> tuple[dict[int, float], dict[int, float]]:
-    """Links (1-based) whose axes the data cannot tell from parallel: angle within ``parallel_tol`` rad or
-    within PARALLEL_SIGMAS standard uncertainties (from the lines' ``covariance``), each with the shift of
-    ``d`` from its conventional value that exact DH needs (m); and those of them beyond ``max_offset``."""
+    """Links (1-based) whose axes the data cannot tell from parallel (angle within ``parallel_tol`` rad or
+    within PARALLEL_SIGMAS standard uncertainties, from the lines' ``covariance``) or, for two revolute axes, whose
+    exact ``d`` would move beyond ``max_offset`` whatever their angle (no table beyond the robot's reach), each with
+    the shift of ``d`` from its conventional value that exact DH needs (m); and those of them beyond
+    ``max_offset``."""
     exact = _convert(lines, conventional, reference, ())
     problem = LineProblem(lines, np.zeros((0, len(lines.home))), np.zeros((0, 3)), np.zeros(0))
     starts = np.cumsum([0] + [4 if t == "R" else 2 for t in lines.joint_types])  # first parameter of each joint
@@ -73,9 +75,26 @@ def near_parallel(lines: AxisLines, covariance: Array, conventional: Array, refe
             grad[k] = (_axis_angle(problem.lines(x)[0], i - 1) - angle) / STEP
         sigma = float(np.sqrt(max(grad @ covariance @ grad, 0.0)))
         if angle < max(parallel_tol, PARALLEL_SIGMAS * sigma):
-            shift = abs(exact.d[i] - conventional[i, 1])
-            near[i] = float(shift) if np.isfinite(shift) else float("inf")
+            near[i] = _shift(exact, conventional, i)
+    # a pair of revolute axes beyond the tolerance whose exact d would still leave the robot's reach (a prismatic
+    # joint's d is its travel's zero, not a common normal): with the pairs above at the convention (a far common
+    # normal of one pair moves the next frame's origin too), one pair at a time
+    revolute = [i for i in range(1, exact.n_joints) if lines.joint_types[i - 1] == lines.joint_types[i] == "R"]
+    for _ in range(exact.n_joints):
+        placed = _convert(lines, conventional, reference, near)
+        far = {i: _shift(placed, conventional, i) for i in revolute if i not in near}
+        far = {i: v for i, v in far.items() if v > max_offset}
+        if not far:
+            break
+        i = max(far, key=far.__getitem__)
+        near[i] = far[i]
     return near, {i: v for i, v in near.items() if v > max_offset}
+
+
+def _shift(model: DHModel, conventional: Array, i: int) -> float:
+    """How far (m) ``model`` moves the ``d`` of link ``i`` (1-based; joint i+1's d) from its conventional value."""
+    shift = abs(model.d[i] - conventional[i, 1])
+    return float(shift) if np.isfinite(shift) else float("inf")
 
 
 def dh_output(lines: AxisLines, conventional: Array, reference: DHModel | None, capped: dict[int, float],

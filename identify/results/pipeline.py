@@ -31,10 +31,12 @@ from identify.results.stages import (
     checked_measurements,
     clock_fit,
     clock_tested,
+    fit_domain,
     fit_rows,
     fits_from_starts,
     held_out,
     joint_errors,
+    recommended,
     sweep_fits,
     verdict_of,
     written_models,
@@ -53,10 +55,12 @@ class Identification:
 
     ``models``: ``plain`` (standard DH, no joint errors: the result's top-level model) and, when the data support
     joint errors, ``extended`` (:class:`identify.results.written.WrittenModel`); ``use`` names the one the result
-    recommends (the extended one when it was selected) and ``validations`` holds each one's held-out figure from
+    recommends (the extended one only when the held-out rows validate it: :func:`identify.results.stages.recommended`)
+    and ``validations`` holds each one's held-out figure from
     its written numbers. ``model``, ``std``, ``fixed``, ``lines``, ``tools``, ``refinement`` are the plain
     model's (what a plain reader of the result gets); ``predictor``, ``adequacy`` and ``validation`` the
-    recommended one's (what compensation and verification use)."""
+    recommended one's (what compensation and verification use). ``domain`` (n, 2): each DH joint value's range over
+    the recommended model's fit rows (rad or m), where its stated accuracies hold."""
 
     models: dict[str, WrittenModel]
     use: str
@@ -71,6 +75,7 @@ class Identification:
     decisions: list[Decision] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     clock: ClockFit | None = None
+    domain: Array | None = None
 
     @property
     def plain(self) -> WrittenModel:
@@ -244,12 +249,13 @@ def identify(
     best, adequacy, extended, decisions = (joint_errors(best, adequacy, rows, empty) if extensions
                                            else (best, adequacy, None, []))
     models = written_models(write, rows, best, adequacy, empty, extended)
-    use = "extended" if "extended" in models else "plain"
     check_rows = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))  # held out, every joint read
     validations = held_out(models, check_rows, meas.tp_ids)
+    use, why_plain = recommended(models, validations, check_rows, meas.tp_ids)
     sweeps = sweep_fits(rows, models[use].refinement, warnings)
     clock = clock_fit(models[use], meas.clock_offset, clock_test)
-    verdict = verdict_of(models, use, decisions, validations, sweeps, clock, rows, check_rows, nominal, meas.tp_ids)
+    verdict = verdict_of(models, use, decisions, validations, sweeps, clock, rows, check_rows, nominal, meas.tp_ids,
+                         why_plain)
     add_notes(models, use, decisions, len(fits), rows, warnings)
     return Identification(
         models=models,
@@ -265,6 +271,7 @@ def identify(
         decisions=decisions,
         warnings=warnings,
         clock=clock,
+        domain=fit_domain(rows.meas.q[models[use].fit.inliers]),
     )
 
 

@@ -85,6 +85,18 @@ class FitRows:
     declared: float | None
 
 
+def fit_domain(q: Array) -> Array | None:
+    """The domain (n, 2) of DH joint values ``q`` (m, n): each joint's [min, max] over the rows that read it
+    (NaN for a joint no row reads); None without rows."""
+    q = np.asarray(q, dtype=float)
+    if q.ndim != 2 or not len(q):
+        return None
+    read = np.isfinite(q)
+    domain = np.stack([np.where(read, q, np.inf).min(axis=0), np.where(read, q, -np.inf).max(axis=0)], axis=1)
+    domain[~read.any(axis=0)] = np.nan
+    return domain
+
+
 def checked_measurements(meas: Measurements, nominal: DHModel | None) -> tuple[Measurements, list[str]]:
     """``meas`` in DH joints (its coupling applied, sweeps relabelled by the joint they move), checked; and the
     warnings so far. Raises InputError (unusable data) or ValueError (``nominal``'s joints are not the data's)."""
@@ -208,16 +220,31 @@ def clock_fit(model: WrittenModel, offset: float, test: ClockSplit | None) -> Cl
     return ClockFit(mean, float(np.max(std[:k])), drift, drift_std, timing.t_ref, rows, test, sweeps)
 
 
+def recommended(models: dict[str, WrittenModel], validations: dict[str, Validation], check_rows: Measurements,
+                tp_ids: list[int]) -> tuple[str, str]:
+    """The model the held-out rows support (``plain`` or ``extended``) and, when the joint errors are not it, why
+    (:func:`identify.results.verdict.recommended`)."""
+    plain, ext = validations.get("plain"), validations.get("extended")
+    if "extended" not in models:
+        return "plain", ""
+    if plain is None or ext is None:
+        return checks.recommended((0.0, 0.0), (0.0, 0.0), 0, None)
+    return checks.recommended((plain.rms, plain.expected), (ext.rms, ext.expected), ext.samples,
+                              _moved(models, tp_ids, check_rows))
+
+
 def verdict_of(models: dict[str, WrittenModel], use: str, decisions: list[Decision], validations: dict[str, Validation],
                sweeps: list[SweepFit], clock: ClockFit | None, rows: FitRows, check_rows: Measurements,
-               nominal: DHModel | None, tp_ids: list[int]) -> checks.Verdict:
+               nominal: DHModel | None, tp_ids: list[int], why_plain: str = "") -> checks.Verdict:
     """The checks of the recommended model ``models[use]`` (:mod:`identify.results.verdict`): fit, conditioning,
-    outliers, the DH table; then, when they apply, the clock, the held-out rows and the nominal model."""
+    outliers, the DH table; then, when they apply, the clock and the nominal model; and the held-out rows, or
+    that nothing was held out. ``why_plain``: why joint errors in ``models`` are not recommended."""
     used, plain = models[use], models["plain"]
     inl = used.fit.inliers
+    size = robot_size(plain.lines, rows.meas.points)
     found = [
         checks.model_fit(used.fit_rms, used.adequacy, _cause(models, decisions)),
-        checks.conditioning(used.condition, _identifiability(used, robot_size(plain.lines, rows.meas.points))),
+        checks.conditioning(used.condition, _identifiability(used, size)),
         checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
         plain.dh_check,
     ]
@@ -228,12 +255,13 @@ def verdict_of(models: dict[str, WrittenModel], use: str, decisions: list[Decisi
     if validations:
         v = validations[use]
         others = {k: (w.rms, w.expected) for k, w in validations.items() if k != use}
-        found.append(checks.holdout(v.samples, v.rms, v.expected, use, others, _moved(models, tp_ids, check_rows)))
-    elif use == "extended" and not np.any(rows.meas.joint == 0):
-        found.append(checks.sweeps_only_extension())
+        found.append(checks.holdout(v.samples, v.rms, v.expected, use, others, _moved(models, tp_ids, check_rows),
+                                    why_plain))
+    else:
+        found.append(checks.not_validated("extended" in models))
     known = rows.data.unknown < 0
     if nominal is not None and np.sum(known) >= 3:
-        found.append(checks.nominal("model", _nominal_gap(nominal, plain, known)))
+        found.append(checks.nominal("model", _nominal_gap(nominal, plain, known), size, plain.expected))
     return checks.Verdict(tuple(found))
 
 

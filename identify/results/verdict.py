@@ -30,7 +30,9 @@ HOLDOUT_ALARM = 1e-3  # false-alarm rate of the held-out test
 HOLDOUT_FAIL = 3.0  # held-out RMS over its expectation beyond which the model is wrong, not just optimistic
 REJECTED_WARN = 0.05  # share of samples rejected as outliers above which the data deserve a look
 MISSING_WARN = 0.05  # share of the plan's steps recorded missing above which the data are not what was planned
-NOMINAL_TOLERANCE = 0.01  # m RMS: an arm differs from its catalogue model by millimetres, not centimetres
+NOMINAL_TOLERANCE = 0.01  # of the robot's size, RMS: an arm differs from its catalogue model by millimetres per metre
+#                          of reach (a UR5e: 10 mm; a 4 m arm on a lifting column: 40 mm); a wrong model, a unit or a
+#                          joint-order slip misses by tens of percent
 UNIT_SLIP = 10.0  # residuals this many times below the declared noise: no fit beats its tracker tenfold, a noise
 #                  declared in the wrong unit does (a value meant in mm read as metres is 1000x)
 
@@ -155,14 +157,15 @@ MODEL_NAMES = {"plain": "plain model (DH)", "extended": "extended model (DH + jo
 
 
 def holdout(samples: int, rms: float, expected: float, model: str = "plain",
-            others: dict[str, tuple[float, float]] | None = None, differ: float | None = None) -> Check:
-    """Held-out RMS of the written ``model`` (``plain`` or ``extended``) against the RMS its uncertainty and the
-    noise predict (chi-square on 3k); ``others``: the other written models' held-out and expected RMS (m). Another
-    model in the file that misses its own expectation warns: a reader who takes it (a DH-only reader takes the
-    plain table) would get worse than the file says. ``differ`` (m): with the extended model recommended, the RMS
-    distance between the two models' predictions at the held-out poses. The check shows an error only when it
-    reaches :func:`holdout_resolution`; when the joint errors move the predictions there by less, the poses cannot
-    tell the models apart and the joint errors are not validated (warn)."""
+            others: dict[str, tuple[float, float]] | None = None, differ: float | None = None,
+            unvalidated: str = "") -> Check:
+    """Held-out RMS of the recommended written ``model`` (``plain`` or ``extended``) against the RMS its uncertainty
+    and the noise predict (chi-square on 3k); ``others``: the other written models' held-out and expected RMS (m).
+    Another model in the file that misses its own expectation warns: a reader who takes it (a DH-only reader takes
+    the plain table) would get worse than the file says. ``differ`` (m): the RMS distance between the two models'
+    predictions at the held-out poses (None without joint errors): the check shows an error only when it reaches
+    :func:`holdout_resolution`. ``unvalidated``: why the joint errors in the file are not recommended (the plain
+    model is; see :func:`recommended`), '' when they are or there are none."""
     limit = _holdout_limit(expected, samples)
     ratio = rms / expected if expected > 0 else float("inf")
     if rms > limit and ratio > HOLDOUT_FAIL:
@@ -178,19 +181,48 @@ def holdout(samples: int, rms: float, expected: float, model: str = "plain",
             status = "warn" if status == "pass" else status
             also += (f", {other / other_expected:.2f}x its expected {mm(other_expected)}: do not use it"
                      + (" (the top-level table a DH-only reader takes)" if name == "plain" else ""))
-    if differ is not None and model == "extended":
-        resolution = holdout_resolution(expected, samples)
-        if differ < resolution:
-            status = "warn" if status == "pass" else status
-            also += (f"; the joint errors move the predictions at these poses by {mm(differ)} RMS, less than the "
-                     f"{mm(resolution)} an error must reach for {samples} poses to show it: they are not validated "
-                     "(the plain model is; add check poses)")
-        else:
-            also += (f"; the joint errors move the predictions there by {mm(differ)} RMS, beyond the {mm(resolution)} "
-                     f"the {samples} poses resolve")
+    if unvalidated:
+        also += f"; the joint errors are not recommended: {unvalidated}"
+    elif differ is not None and model == "extended":
+        also += (f"; the joint errors move the predictions there by {mm(differ)} RMS, beyond the "
+                 f"{mm(holdout_resolution(expected, samples))} the {samples} poses resolve")
     return Check("holdout", status, rms, limit,
                  f"{MODEL_NAMES.get(model, model)}: held-out RMS {mm(rms)} over {samples} poses vs expected "
                  f"{mm(expected)} ({ratio:.2f}x){also}")
+
+
+def recommended(plain: tuple[float, float], extended: tuple[float, float] | None, samples: int,
+                differ: float | None) -> tuple[str, str]:
+    """The model the held-out evidence supports, and why the joint errors are not it ('' when they are, or when the
+    file has none). ``plain``, ``extended``: each model's held-out and expected RMS (m) over ``samples`` check poses
+    (``extended`` None without joint errors, ``samples`` 0 without check rows); ``differ`` (m): the RMS distance
+    between their predictions there. The extended model is recommended only when the check poses tell the models
+    apart (``differ`` at least :func:`holdout_resolution`) and it predicts them better: joint errors chosen on the fit
+    rows alone were never tested where they extrapolate."""
+    if extended is None:
+        return "plain", ""
+    if samples == 0:
+        return "plain", "no pose was held out to test them (the plain model is recommended; add check poses)"
+    resolution = holdout_resolution(extended[1], samples)
+    if differ is not None and differ < resolution:
+        return "plain", (f"they move the predictions at the {samples} held-out poses by {mm(differ)} RMS, less than "
+                         f"the {mm(resolution)} an error must reach for these poses to show it: not validated (the "
+                         "plain model is recommended; add check poses where the joints go beyond the fitted range)")
+    if extended[0] >= plain[0]:
+        return "plain", (f"the extended model predicts the held-out poses to {mm(extended[0])} RMS, no better than "
+                         f"the plain model's {mm(plain[0])}: not validated (the plain model is recommended)")
+    return "extended", ""
+
+
+def not_validated(extended: bool) -> Check:
+    """The holdout check of a result with no pose held out: nothing tested the stated accuracy away from the fit
+    rows, so the result is not a pass (``extended``: joint errors were selected and are not recommended)."""
+    joint_errors = (" The joint errors selected on the fit rows are not recommended either: nothing tested them "
+                    "where they extrapolate (the plain model is)." if extended else "")
+    return Check("holdout", "warn", None, None,
+                 "no pose held out: the stated accuracy is not validated. Validate it with check poses: rows with "
+                 "role check, --holdout with free poses, or `identify check RESULT OTHER.session` on poses measured "
+                 "apart from these." + joint_errors)
 
 
 def holdout_resolution(expected: float, samples: int) -> float:
@@ -198,16 +230,6 @@ def holdout_resolution(expected: float, samples: int) -> float:
     time: the one that brings the expected held-out RMS to the test's limit."""
     limit = _holdout_limit(expected, samples)
     return float(max(limit**2 - expected**2, 0.0) ** 0.5)
-
-
-def sweeps_only_extension() -> Check:
-    """The holdout check of a result whose joint errors were selected from sweeps alone, with no pose held out:
-    every sweep holds the other joints still, so an error that depends on them (gravity through the arm's
-    configuration) fits the same terms as an error of the joint itself, and nothing tested the difference."""
-    return Check("holdout", "warn", None, None,
-                 "no held-out poses, and no free poses among the fitted: the joint errors were fitted along "
-                 "single-joint sweeps, where an error that depends on the other joints (gravity sag) looks like one of "
-                 "the moved joint; the stated accuracy is not validated away from the sweeps (add free poses)")
 
 
 def _holdout_limit(expected: float, samples: int) -> float:
@@ -246,11 +268,16 @@ def with_session_check(verdict: Verdict, check: Check) -> Verdict:
     return Verdict((*verdict.checks, check))
 
 
-def nominal(name: str, rms: float) -> Check:
-    status = "fail" if rms > NOMINAL_TOLERANCE else "pass"
+def nominal(name: str, rms: float, size: float, expected: float = 0.0) -> Check:
+    """The nominal model placed on the data against the identified one: ``rms`` (m) their RMS distance at the fitted
+    poses, ``size`` (m) the robot's size, ``expected`` (m) the identified model's own accuracy there. The limit
+    follows the arm (:data:`NOMINAL_TOLERANCE` of its size) and the data (three times their accuracy)."""
+    limit = NOMINAL_TOLERANCE * size + 3.0 * expected
+    status = "fail" if rms > limit else "pass"
     text = "the data contradict the nominal model" if status == "fail" else "consistent with the nominal model"
-    return Check("nominal", status, rms, NOMINAL_TOLERANCE,
-                 f"nominal {name} placed on the data misses them by {mm(rms)} RMS: {text}")
+    return Check("nominal", status, rms, limit,
+                 f"nominal {name} placed on the data misses them by {mm(rms)} RMS (limit {mm(limit)}: "
+                 f"{100 * NOMINAL_TOLERANCE:g} % of the robot's size {size:.3g} m): {text}")
 
 
 def timing(offset_std: float, speed: float, noise: float, split: ClockSplit | None = None,

@@ -236,10 +236,14 @@ UNDETERMINED = ("not determined by these data (redundant with other parameters, 
 def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
     joint = int("".join(ch for ch in name if ch.isdigit()) or 0)
     if joint in capped and name.startswith("d"):
-        return (f"axes {joint} and {joint + 1} are parallel within tolerance or their uncertainty: the common "
-                f"normal is placed by convention (exact DH would move d{joint} by {capped[joint]:.3g} m)")
+        return (f"axes {joint} and {joint + 1} are parallel within tolerance or their uncertainty, or exact DH would "
+                f"move d{joint} by {capped[joint]:.3g} m, beyond the robot's reach: the common normal is placed by "
+                "convention")
     if joint == 1 and name[:-1] in ("theta", "d"):
         return "redundant with the base pose (frame 0 is placed by convention)"
+    if name.startswith("d") and joint > 1 and set(types[: joint - 1]) == {"P"}:
+        return (f"redundant with the base position: joints 1-{joint - 1} only translate, so a shift along axis "
+                f"{joint} is a shift of the base (a convention of the robot's structure, not a gap in the data)")
     if joint == n:
         return "redundant with the tool: frame n is placed by convention and the tool carries the TP"
     if types[joint - 1] == "P" and name[:-1] in ("a", "d"):

@@ -45,3 +45,16 @@ def test_isolated_gross_errors_are_still_rejected(seed: int) -> None:
     res[bad] += _away(rng, len(bad), 1.0) * rng.uniform(5e-3, 2e-2, (len(bad), 1))
     keep = outlier_free(res, np.zeros(len(res)), group, key)
     assert np.array_equal(np.flatnonzero(~keep), bad)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_half_of_a_thin_sweep_is_never_rejected(seed: int) -> None:
+    """A real FANUC arm's 4-sample sweeps lost 2 clean samples each to the beam-break test: a sweep never loses half
+    of its samples; the error that moves them is the model's to show."""
+    res, group, key, rng = _residuals(seed)
+    sweep = np.flatnonzero(group == 4)[:4]
+    thin = group.copy()
+    thin[np.flatnonzero(group == 4)[4:]] = 0  # the sweep keeps 4 samples; its other rows become free poses
+    res[sweep[:2]] += _away(rng, 2, 1.0) * 15 * SIGMA
+    keep = outlier_free(res, np.zeros(len(res)), thin, key)
+    assert keep[sweep].all()
