@@ -15,8 +15,8 @@ import time
 import numpy as np
 import pytest
 
-pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
-pytest.importorskip("rtde_receive", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
+pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
+pytest.importorskip("rtde_receive", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
 
 from config.robots import load_robot
 from drivers.base import Robot, RobotState
