@@ -66,3 +66,15 @@ def test_a_yaml_given_as_measurements_is_named(tmp_path, capsys, name, says):
     assert main([str(tmp_path / name)]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and says in err, err
+
+
+def test_every_install_hint_names_a_requirement_of_its_extra():
+    """Messages say what to install (``pip install 'matplotlib>=3.8,<4' (the report extra)``), not a package name
+    that no index has (``pip install 'dh-calib[report]'``)."""
+    from common.errors import EXTRAS
+
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    assert all(requirement in extras[extra] for extra, requirement in EXTRAS.items())
+    shipped = [p for package in ("common", "config", "drivers", "session", "identify", "acquire")
+               for p in (ROOT / package).rglob("*.py") if "dh-calib[" in p.read_text(encoding="utf-8")]
+    assert shipped == []

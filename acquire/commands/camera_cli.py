@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from acquire.commands.camera_options import calibrate_parser, print_parser
+from common.errors import install_hint
 from common.outputs import check_outputs, commit_file, write_output
 from drivers.camera.intrinsics import CameraIntrinsics, write_intrinsics
 from drivers.camera.targets import Target, charuco_board, dictionary_id, grid_board, single_marker
@@ -214,7 +215,7 @@ def pdf(path: Path, image: np.ndarray, dpi: int) -> bytes:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        raise CameraToolError("PDF output needs matplotlib (pip install 'dh-calib[report]'); write .png") from None
+        raise CameraToolError(f"PDF output needs matplotlib ({install_hint('report')}); write .png") from None
     h, w = image.shape[:2]
     fig = plt.figure(figsize=(w / dpi, h / dpi))
     ax = fig.add_axes((0, 0, 1, 1))

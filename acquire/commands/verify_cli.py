@@ -23,7 +23,7 @@ from acquire.running.session import Session
 from acquire.verification.verify import MODES, VerifyError, build, design, header, problems
 from acquire.verification.verify_analysis import UNCERTAINTY, Outcome, analyse
 from common import fit_width
-from common.errors import InputError
+from common.errors import InputError, install_hint
 from common.fit_width import say
 from common.outputs import check_outputs, check_target, write_output
 from common.units import hms
@@ -146,7 +146,7 @@ def _finish(session: Session, path: Path, robot: RobotModel) -> tuple[Outcome, d
     try:
         from identify.report.verify_html import verification_html
     except ImportError:
-        print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
+        print(f"note: no HTML report (it needs matplotlib: {install_hint('report')})")
         return outcome, summary
     write_output(report_path, verification_html(summary, session.header, str(path), session), force=True)
     print(f"report written to {report_path}")

@@ -18,7 +18,7 @@ import numpy as np
 import yaml
 
 from common import __version__, fit_width, stop_signals
-from common.errors import InputError
+from common.errors import InputError, install_hint
 from common.outputs import check_outputs, write_output
 from common.units import as_typed, slip_hint
 from config.robots import RobotModel
@@ -47,7 +47,7 @@ def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
         try:
             import identify.report.html  # noqa: F401
         except ImportError:
-            raise InputError("--report needs matplotlib: pip install 'dh-calib[report]'") from None
+            raise InputError(f"--report needs matplotlib: {install_hint('report')}") from None
 
 
 def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measurements, doc: dict[str, Any],
