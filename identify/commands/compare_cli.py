@@ -110,11 +110,11 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
 
 def _domains(result: Comparison, models: list[CalibratedModel], domains: list[np.ndarray | None]) -> tuple[str, ...]:
     """For each input, how many of the poses the displacement was computed at lie outside its domain."""
-    out = []
     q = result.poses
+    if q is None:
+        return ()
+    out = []
     for label, model, domain in zip(result.labels, models, domains, strict=True):
-        if q is None:
-            break
         if domain is None:
             out.append(f"{label}: records no domain (written before results did): where it holds is not known")
             continue
