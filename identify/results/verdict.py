@@ -1,6 +1,7 @@
 """Whether a result can be trusted: named checks with their numbers, and the verdict they add up to.
 
-Shape fixed in DESIGN.md: ``{status: pass | warn | fail, checks: [{name, status, value, limit, message}]}``.
+Its shape in the result YAML is fixed (other tools read it; README, "The verdict"):
+``{status: pass | warn | fail, checks: [{name, status, value, limit, message}]}``.
 A check passes, warns (the result is usable with the caveat its message states in numbers) or fails (do
 not use the model). The verdict is the worst of its checks. Limits are stated as constants with why.
 """
