@@ -23,10 +23,12 @@ demo: $(STAMP)
 	$(BIN)/acquire verify --result $$s.result.yaml --robot mock:ur5e \
 	    --tracker mock --session $$s-verify.session
 
-# the 15 slowest tests are listed at the end, so that the suite's cost stays visible where it runs (CI included)
+# every test, on two workers (tests/conftest.py: one BLAS thread each; the timing-sensitive modules share one
+# worker, their xdist_group); the 15 slowest are listed at the end, so that the suite's cost stays visible where it
+# runs (CI included). The fast subset: $(BIN)/pytest -m "not slow"
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/pytest --durations=15
+	$(BIN)/pytest -n 2 --dist loadgroup --durations=15
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

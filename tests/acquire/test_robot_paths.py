@@ -46,6 +46,7 @@ def test_a_bad_model_or_an_empty_spec_is_refused(text):
         RobotSpec.parse(text)
 
 
+@pytest.mark.slow
 def test_a_mock_session_of_a_model_file_records_it_and_resumes_from_another_folder(tmp_path, monkeypatch, capsys):
     """Named relative to the working folder; the session keeps the absolute path, so a dry-run resume from another
     folder plans with the same model."""

@@ -13,6 +13,8 @@ import pytest
 
 from common import stop_signals
 
+pytestmark = pytest.mark.xdist_group("realtime")  # timing-sensitive: these modules share one worker (make test)
+
 
 def _send(signum: int) -> None:
     """``signum`` to this process: its Python handler runs as this call returns."""

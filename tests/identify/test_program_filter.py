@@ -27,6 +27,7 @@ ROBOT = load_robot("ur5e")
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 def test_a_filtered_program_of_50_targets_lands_where_it_was_meant_on_the_true_arm() -> None:
     """Four simulated arms, each with a 50-target program (poses, joint lists, named ones): the true TP lands within
     1.2x the predicted RMS pooled over the draws, each target within 3x its own prediction; the identified model at
@@ -174,6 +175,7 @@ def test_before_is_the_controller_s_factory_calibration_when_the_result_records_
     assert "controller model (before): factory calibration" in csv_out.read_text()
 
 
+@pytest.mark.slow
 def test_the_readme_s_program_filter_runs_as_written(tmp_path) -> None:
     """The README's example: identify the sample, filter the example program; the kept lines are listed."""
     import os
