@@ -73,6 +73,16 @@ class Converted:
         return self.q if self.coupling is None else self.q @ self.coupling.T
 
 
+def free_poses(joints: str, q: Array, points: Array, source: str, hold_every: int = 4,
+               sigma: Array | None = None) -> Converted:
+    """Free poses (``joint`` 0, one sweep id each) of one tracked point, every ``hold_every``-th (0-based index
+    hold_every - 1, 2 hold_every - 1, ...) held out; ``source`` goes into the CSV's metadata."""
+    m = len(q)
+    check = np.arange(m) % hold_every == hold_every - 1
+    return Converted(joints, q, points, np.arange(1, m + 1), np.zeros(m, dtype=np.int64), check,
+                     np.ones(m, dtype=np.int64), sigma=sigma, metadata={"source": source})
+
+
 def no_sessions(folder: Path) -> dict[str, Converted]:
     return {}
 

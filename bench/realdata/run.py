@@ -37,10 +37,11 @@ import numpy as np
 import yaml
 from scipy.stats import chi2
 
-from bench.realdata import baseline, boby2021, hust2022, score, splits, zhang2016
+from bench.realdata import baseline, boby2021, ctu_motoman, hust2022, keti_panda, rokae, score, splits, zhang2016
 from bench.realdata.common import Converted, DataError, Source, rigid_fit
 
-SOURCES: dict[str, Source] = {m.SOURCE.name: m.SOURCE for m in (boby2021, hust2022, zhang2016)}
+SOURCES: dict[str, Source] = {s.name: s for s in (boby2021.SOURCE, hust2022.SOURCE, zhang2016.SOURCE,
+                                                   ctu_motoman.SOURCE, *keti_panda.SOURCES, *rokae.SOURCES)}
 HELD_OUT = "held out"
 BASELINE_TARGET = 1.02
 FALSE_ALARM = 1e-3  # a stated figure is missed when the check RMS exceeds it beyond its chi-square spread at this rate
