@@ -31,8 +31,9 @@ NOMINAL = Path(__file__).with_name("robots") / "franka_panda.yaml"
 
 def load(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Readings (rad) and points (m) of one arm's file."""
+    require(path)
     try:
-        data = np.loadtxt(require(path), ndmin=2)
+        data = np.loadtxt(path, ndmin=2)
     except ValueError as exc:
         raise DataError(f"{path}: not a table of numbers ({exc})") from None
     if data.shape[1] != 10 or not np.all(np.isfinite(data)):

@@ -47,8 +47,9 @@ NOMINAL = Path(__file__).with_name("robots") / "iiwa7_a1a2.yaml"
 
 def load(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Readings of A1, A2 (rad) and tracked points (m) of one run, the home row dropped."""
+    require(path)
     try:
-        data = np.loadtxt(require(path), delimiter=",", skiprows=1, ndmin=2)
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     except ValueError as exc:
         raise DataError(f"{path}: not the comma-separated run this converter reads ({exc})") from None
     if data.shape[1] != 31:

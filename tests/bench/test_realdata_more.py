@@ -87,6 +87,9 @@ def test_panda_converter_reads_degrees_and_metres_per_arm(tmp_path: Path) -> Non
         q, points = truth[source.name.rsplit("_", 1)[1]]
         assert data.joints == "RRRRRRR" and np.allclose(data.q, q, atol=1e-12) and np.array_equal(data.points, points)
         assert np.array_equal(np.flatnonzero(data.check), [3, 7, 11])
+    (folder / "panda_top.txt").unlink()
+    with pytest.raises(DataError, match=r"panda_top\.txt: missing \(see"):
+        keti_panda.SOURCES[2].convert(folder)
     (folder / "panda_top.txt").write_text("1 2 3\n")
     with pytest.raises(DataError, match="3 columns, expected 10"):
         keti_panda.SOURCES[2].convert(folder)
