@@ -16,7 +16,7 @@ from acquire.commands.cli import main
 from acquire.running.session import Session
 from tests._session_steps import recorded_steps
 
-pytestmark = pytest.mark.xdist_group("realtime")  # timing-sensitive: these modules share one worker (make test)
+pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
 ROBOT = "mock:ur5e?seed=3"
 SMALL = ["--steps", "12", "--samples", "3", "--free-poses", "6", "--quiet"]
 COMMAND = [str(Path(sys.executable).with_name("acquire"))]

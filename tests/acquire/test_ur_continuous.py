@@ -43,7 +43,7 @@ from identify.simulators.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from tests.ur_emulator import CMD_STOPJ, EmulatorProcess, connected_robot
 
-pytestmark = pytest.mark.xdist_group("realtime")  # timing-sensitive: these modules share one worker (make test)
+pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
 SCALE, RATE = 4.0, 125.0  # emulated s per wall s; RTDE packages per emulated s
 PERIOD = 0.008  # emulated s between the tracker's streamed lines
 NOISE = 5e-5  # m per axis: the stream-csv profile's stated sigma, which the simulated device keeps

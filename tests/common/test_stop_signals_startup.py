@@ -13,7 +13,7 @@ import pytest
 
 from common import stop_signals
 
-pytestmark = pytest.mark.xdist_group("realtime")  # timing-sensitive: these modules share one worker (make test)
+pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
 
 
 def _send(signum: int) -> None:

@@ -31,7 +31,7 @@ from tests._acquire_writer import ROOT, Writer
 
 pytestmark = [pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not hasattr(os, "fork"),
                                  reason="needs SIGKILL and fork"),
-              pytest.mark.xdist_group("realtime")]  # timing-sensitive: these modules share one worker (make test)
+              pytest.mark.realtime]  # timing-sensitive: make test runs these alone, after the rest
 
 # quick stop-and-go moves (no settling), so the first sweep starts within a second or two; the sweeps themselves
 # run at their planned speed (1 rad/s: each sweep takes 3.5-7 s)

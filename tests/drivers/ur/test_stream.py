@@ -23,7 +23,7 @@ from drivers.registry import open_robot
 from tests.ur_emulator import CMD_STOPJ, EmulatorProcess
 from tests.ur_emulator import connected_robot as connected
 
-pytestmark = pytest.mark.xdist_group("realtime")  # timing-sensitive: these modules share one worker (make test)
+pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
 HOME = np.array(load_robot("ur5e").home, dtype=float)
 SCALE, RATE = 4.0, 125.0  # emulated s per wall s; RTDE packages per emulated s
 PERIOD = 1.0 / RATE
