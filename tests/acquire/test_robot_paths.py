@@ -70,6 +70,7 @@ def test_a_mock_session_of_a_model_file_records_it_and_resumes_from_another_fold
     assert "cell7_arm" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_a_resume_uses_the_model_the_session_records_when_the_file_has_moved_or_changed(tmp_path, capsys):
     """The plan was checked with the recorded model: a resume drives with it, saying why in one line."""
     arm = _arm(tmp_path)
