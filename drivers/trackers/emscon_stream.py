@@ -45,6 +45,7 @@ from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, DriverEr
 from drivers.stream_buffer import BufferedStreaming
 from drivers.trace import one_line
 from drivers.trackers import emscon_protocol as es
+from drivers.trackers.emscon_options import continuous_separation
 
 GAP_FACTOR = 1.5  # a step above this many time separations between kept points is a gap
 STEP_TOLERANCE = 0.5  # a packet's median step between points off the separation by more than this: misread stamps
@@ -98,7 +99,7 @@ class ContinuousMeasurement(BufferedStreaming):
         deadline = time.monotonic() + timeout
         if self._sock is None:
             self._open(deadline)
-        lost = self._begin(max(1, round(1000.0 / rate)), deadline)
+        lost = self._begin(continuous_separation(rate), deadline)
         self._reader = threading.Thread(target=self._read_loop, args=(lost,), daemon=True,
                                         name=f"emscon-stream-{self.where}")
         self._reader.start()

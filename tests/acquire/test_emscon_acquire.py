@@ -105,3 +105,15 @@ def test_emscon_sim_continuous_session_with_faults_identifies_the_truth(tmp_path
     rms = np.sqrt(np.mean(np.sum(err**2, axis=1)))
     bound = prediction_rms_bound(truth, meas.q[~meas.check], q_check, NOISE)
     assert rms < 2.5 * bound, (rms, bound)
+
+
+def test_dry_run_of_a_continuous_plan_says_the_time_separation(tmp_path, capsys):
+    site = tmp_path / "site.yaml"
+    site.write_text("schema: 1\nplan:\n  stream_rate: 300\n")
+    assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1", "--mode", "continuous", "--config", str(site),
+                 "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "measure continuously by time during each of the 6 sweeps: a point every 3 ms (333.333 per second)" in out
+    assert "stamped with the tracker's own clock" in out and "a gap, and the measurement started again" in out
+    assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1", "--mode", "step", "--dry-run"]) == 0
+    assert "continuously" not in capsys.readouterr().out  # a stop-and-go plan streams nothing
