@@ -42,7 +42,8 @@ connect) up to ``retries`` times, so the step is not lost. Unsolicited status ch
 Continuous sweeps (``--mode continuous``): the tracker streams by continuous measurement by time, each point stamped
 with the tracker's own time (drivers/trackers/emscon_stream.py: the exchange, the stamps, its faults as gaps).
 
-Not implemented: 6-DoF probe results in a session.
+6-DoF probes (T-Mac class): :meth:`~drivers.trackers.emscon_probe.ProbeMeasurement.measure_pose` takes one stationary
+6-DoF measurement as a pose (drivers/trackers/emscon_probe.py); sessions do not use it yet.
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 from drivers.trackers import emscon_protocol as es
 from drivers.trackers.emscon_options import DEFAULT_PORT, parse_settings
+from drivers.trackers.emscon_probe import ProbeMeasurement
 from drivers.trackers.emscon_stream import ContinuousMeasurement
 from drivers.trackers.socket_reads import receive
 
@@ -91,12 +93,12 @@ class BeamLost(EmsconStatus, TargetLost):
     """The beam does not reach the reflector (broken beam, reflector lost); re-lock it on the reflector."""
 
 
-class EmsconTracker(ContinuousMeasurement):
+class EmsconTracker(ContinuousMeasurement, ProbeMeasurement):
     """An emScon server as a tracker (implements :class:`drivers.base.Tracker` and ``StreamingTracker``). After
     :meth:`connect`: ``version`` (server), ``serial`` (tracker), ``environment`` (°C, mbar, %RH in force),
     ``reflector`` (id, name, target type, surface offset m), ``meas_time_ms`` (the stationary measurement time in
     force); ``events`` holds every unsolicited status change (time, text); ``reconnects`` counts links re-opened by
-    :meth:`measure` (a stream's: ``stream_counts``)."""
+    :meth:`measure` (a stream's: ``stream_counts``). ``measure_pose``: a 6-DoF probe's pose (not used by sessions)."""
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, *, timeout: float = 3.0, init_timeout: float = 120.0,
                  retries: int = 2, meas_time: float = 1.0, reflector: str | None = None, initialize: str = "auto",
@@ -122,6 +124,7 @@ class EmsconTracker(ContinuousMeasurement):
         self.meas_status = ""  # the last measurement status change: ready, busy, not ready
         self.reconnects = 0
         self._simulator, self.server = simulator, None  # emscon:sim: starts the simulated server at connect
+        self.measurement_mode = es.MM_STATIONARY  # the mode set on the server (stationary, continuous, 6-DoF)
         self._init_stream()
 
     @property
@@ -190,9 +193,9 @@ class EmsconTracker(ContinuousMeasurement):
                     self.reconnects += 1
                     self._trace.event("reconnecting")
                     self._open(deadline)
-                if self.continuous_mode:  # after a continuous measurement on this link
+                if self.measurement_mode != es.MM_STATIONARY:  # after a continuous or 6-DoF one on this link
                     self._call(es.set_measurement_mode(es.MM_STATIONARY), es.C_SET_MEAS_MODE, deadline)
-                    self.continuous_mode = False
+                    self.measurement_mode = es.MM_STATIONARY
                 return self._stationary(deadline)
             except EmsconStatus:
                 raise  # the tracker's own state: nothing a new link repairs
@@ -279,7 +282,7 @@ class EmsconTracker(ContinuousMeasurement):
             self.recorded_environment = self.environment
         self._choose_reflector(deadline)
         self._call(es.set_measurement_mode(es.MM_STATIONARY), es.C_SET_MEAS_MODE, deadline)
-        self.continuous_mode = False
+        self.measurement_mode = es.MM_STATIONARY
         self._call(es.set_stationary_params(self.meas_time_ms), es.C_SET_STATIONARY, deadline)
         time_ms, _ = es.stationary_params(self._ask(es.C_GET_STATIONARY, deadline))
         if time_ms != self.meas_time_ms:

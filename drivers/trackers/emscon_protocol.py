@@ -44,7 +44,7 @@ MAX_PACKET = 1 << 18  # bytes: above the longest packet this client reads (a con
 
 #: ES_DataType
 DT_COMMAND, DT_ERROR, DT_SINGLE, DT_MULTI, DT_NIVEL, DT_REFLECTOR_POS, DT_STATUS_CHANGE = 0, 1, 2, 3, 6, 7, 8
-DT_SINGLE2, DT_MULTI2 = 9, 10
+DT_PROBE_STATIONARY, DT_SINGLE2, DT_MULTI2 = 4, 9, 10
 
 #: ES_Command values the client and the emulator use
 C_GET_SYSTEM_STATUS, C_GET_TRACKER_STATUS, C_SET_UNITS, C_GET_UNITS, C_INITIALIZE = 1, 2, 5, 6, 7
@@ -72,7 +72,7 @@ COMMAND_NAMES = {
 #: ES_LengthUnit meter, ES_AngleUnit radian, ES_TemperatureUnit Celsius, ES_PressureUnit mbar, ES_HumidityUnit %RH
 UNITS_SI = (0, 0, 0, 0, 0)
 CS_RHR = 0  # ES_CoordinateSystemType: right-handed rectangular (X, Y, Z)
-MM_STATIONARY, MM_CONTINUOUS_TIME = 0, 1  # ES_MeasMode
+MM_STATIONARY, MM_CONTINUOUS_TIME, MM_6D_STATIONARY = 0, 1, 6  # ES_MeasMode
 #: ES_MeasurementStatus of each point of a continuous result (0 all OK; others "should be treated with care")
 POINT_STATUS = {0: "all OK", 1: "speed warning", 2: "speed exceeded", 3: "prism error", 4: "trigger time violation"}
 TPS_INITIALIZED = 5  # ES_TrackerProcessorStatus
@@ -109,6 +109,11 @@ SSC_NOT_READY, SSC_BUSY, SSC_READY = 25, 26, 27
 _SINGLE = struct.Struct("<IIi17d")  # status, measMode, bIsTryMode, 17 doubles
 _SINGLE2 = struct.Struct("<IIi23d")
 _MULTI = struct.Struct("<IiIi3d")  # status, lNumberOfResults, measMode, bIsTryMode, environment
+#: ProbeStationaryResultT after the header: status, measMode, bIsTryMode, triggerStatus, lRotationStatus, probe id,
+#: field number, tipStatus, tip adapter id and interface, then 41 doubles (positions 0-16: the tip's position, its
+#: deviations, total, covariances and a-priori ones; 17-20: the quaternion; 21-23: rotation angles; 24-37 their
+#: deviations and covariances; 38-40: the environment): 376 bytes in all
+_PROBE_STATIONARY = struct.Struct("<IIiIiiiIii41d")
 _CONTINUOUS_TIME = struct.Struct("<iiiI")  # lTimeSeparation (ms), lNumberOfPoints, bUseRegion, regionType
 _VERSION = struct.Struct("<iii")
 _UNITS = struct.Struct("<5I")
@@ -220,7 +225,32 @@ class OtherPacket:
     data: bytes
 
 
-Packet = Reply | ErrorPacket | StatusChange | SingleResult | MultiResult | OtherPacket
+@dataclass(frozen=True)
+class ProbeResult:
+    """A 6-DoF stationary probe result (``ES_DT_StationaryProbeMeasResult``, T-Mac class probes): the measuring
+    tip's ``position`` (3,) and its standard deviations ``position_std`` (3,) in the units and coordinate system set,
+    the probe's orientation as ``quaternion`` (q0, q1, q2, q3) and as ``angles`` (rotation angles X, Y, Z) with
+    their standard deviations ``angles_std``, the ``rotation_status`` bits, probe and tip ids, the environment."""
+
+    status: int
+    mode: int
+    try_mode: bool
+    trigger: int
+    rotation_status: int
+    probe_id: int
+    tip_status: int
+    tip_adapter_id: int
+    position: tuple[float, float, float]
+    position_std: tuple[float, float, float]
+    quaternion: tuple[float, float, float, float]
+    angles: tuple[float, float, float]
+    angles_std: tuple[float, float, float]
+    temperature: float
+    pressure: float
+    humidity: float
+
+
+Packet = Reply | ErrorPacket | StatusChange | SingleResult | MultiResult | ProbeResult | OtherPacket
 
 
 def frame(buffer: bytes) -> tuple[list[bytes], bytes]:
@@ -273,6 +303,14 @@ def decode(packet: bytes) -> Packet:
                             d[-3], d[-2], d[-1])
     if kind in (DT_MULTI, DT_MULTI2):
         return _multi_result(kind, body)
+    if kind == DT_PROBE_STATIONARY:
+        if len(body) != _PROBE_STATIONARY.size:
+            raise BadReading(f"a 6-DoF probe result of {size} bytes ({HEADER.size + _PROBE_STATIONARY.size} expected)")
+        v = _PROBE_STATIONARY.unpack(body)
+        d = v[10:]
+        return ProbeResult(v[0], v[1], bool(v[2]), v[3], v[4], v[5], v[7], v[8], (d[0], d[1], d[2]),
+                           (d[3], d[4], d[5]), (d[17], d[18], d[19], d[20]), (d[21], d[22], d[23]),
+                           (d[24], d[25], d[26]), d[38], d[39], d[40])
     if kind in (DT_NIVEL, DT_REFLECTOR_POS):
         return OtherPacket(kind, packet)
     raise BadReading(f"a packet of unknown type {kind} ({size} bytes)")
@@ -465,6 +503,21 @@ def multi_result(point_status: Any, time1: Any, time2: Any, values: Any, environ
         rows["total"] = np.sqrt(np.sum(np.square(std), axis=1))
     head = _MULTI.pack(status, len(rows), mode, 0, *environment_)
     return HEADER.pack(HEADER.size + len(head) + rows.nbytes, kind) + head + rows.tobytes()
+
+
+def probe_stationary_result(position: tuple[float, float, float], position_std: tuple[float, float, float],
+                            quaternion: tuple[float, float, float, float], angles: tuple[float, float, float],
+                            angles_std: tuple[float, float, float], environment_: tuple[float, float, float],
+                            probe_id: int = 1, status: int = 0) -> bytes:
+    """An ``ES_DT_StationaryProbeMeasResult`` (totals from the deviations, covariances and a-priori values zero,
+    trigger not pressed, rotation status 1: valid, tip OK, tip adapter 1)."""
+    total = float(sum(x * x for x in position_std) ** 0.5)
+    angle_total = float(sum(x * x for x in angles_std) ** 0.5)
+    doubles = (*position, *position_std, total, 0.0, 0.0, 0.0, *position_std, total, 0.0, 0.0, 0.0, *quaternion,
+               *angles, *angles_std, angle_total, 0.0, 0.0, 0.0, *angles_std, angle_total, 0.0, 0.0, 0.0,
+               *environment_)
+    body = _PROBE_STATIONARY.pack(status, MM_6D_STATIONARY, 0, 0, 1, probe_id, 0, 0, 1, 0, *doubles)
+    return HEADER.pack(HEADER.size + len(body), DT_PROBE_STATIONARY) + body
 
 
 def text_field(text: str) -> bytes:

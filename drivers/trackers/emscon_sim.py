@@ -5,9 +5,11 @@ robot's rig) and the tests (tests/emscon_device.py; tests/drivers/trackers/test_
 independent CESAPI client). It speaks the subset a calibration needs: GetSystemStatus, Initialize, Set/GetUnits,
 Set/GetCoordinateSystemType (right-handed rectangular only; others: status 2, not implemented),
 Set/GetSystemSettings, Set/GetEnvironmentParams, GetReflectors / Set/GetReflector, Set/GetMeasurementMode
-(stationary and continuous by time), Set/GetStationaryModeParams, Set/GetContinuousTimeModeParams, StartMeasurement
-(stationary: the answer, then one ``ES_DT_SingleMeasResult`` after the measurement time on the rig's clock;
-continuous: the answer, then ``ES_DT_MultiMeasResult`` packets), StopMeasurement, GetTrackerStatus,
+(stationary, continuous by time, 6-DoF stationary), Set/GetStationaryModeParams, Set/GetContinuousTimeModeParams,
+StartMeasurement (stationary: the answer, then one ``ES_DT_SingleMeasResult`` after the measurement time on the
+rig's clock; continuous: the answer, then ``ES_DT_MultiMeasResult`` packets; 6-DoF: one
+``ES_DT_StationaryProbeMeasResult`` of a probe whose frame is the flange's moved to the TP, its quaternion (q0
+scalar) taking probe-frame vectors to the tracker frame), StopMeasurement, GetTrackerStatus,
 GetSystemSoftwareVersion; any other command is answered with status 2 (not implemented).
 
 Continuous by time: the points are the rig's true TP at times ``lTimeSeparation`` ms apart on the rig's clock (the
@@ -52,6 +54,7 @@ import time
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from drivers.trackers import emscon_protocol as es
 from drivers.trackers.socket_reads import accept_each
@@ -91,12 +94,14 @@ class EmsconSimServer:
     the tracker frame; ``rig`` is a :class:`drivers.sim.rig.SimulatedRig`) plus Gaussian noise ``noise`` (m per axis),
     reported with ``noise`` as each axis's standard deviation; the measurement time passes on ``rig.clock``.
     ``initialized=False``: the tracker needs an Initialize (which takes ``init_time`` s); ``drift``: the tracker
-    clock's relative drift (continuous stamps, module doc). ``stop()`` ends it."""
+    clock's relative drift (continuous stamps, module doc); ``angle_noise``: rad per axis of a 6-DoF probe's
+    orientation. ``stop()`` ends it."""
 
     def __init__(self, rig: Any, *, noise: float = 2e-5, seed: int = 0, initialized: bool = True,
-                 init_time: float = 0.05, faults: tuple[tuple[str, int, int], ...] = (), drift: float = 0.0) -> None:
+                 init_time: float = 0.05, faults: tuple[tuple[str, int, int], ...] = (), drift: float = 0.0,
+                 angle_noise: float = 2e-5) -> None:
         self.rig = rig
-        self.noise, self.init_time, self.drift = noise, init_time, drift
+        self.noise, self.init_time, self.drift, self.angle_noise = noise, init_time, drift, angle_noise
         self.rng = np.random.default_rng(seed)
         self._server = socket.create_server(("127.0.0.1", 0))
         self.host, self.port = "127.0.0.1", self._server.getsockname()[1]
@@ -119,6 +124,7 @@ class EmsconSimServer:
         self.truths: list[np.ndarray] = []  # the true point (m, tracker frame) of every result sent
         self.started = 0  # StartMeasurement commands so far
         self.packets = 0  # continuous result packets so far (sent or replaced by a fault)
+        self.probe_truths: list[np.ndarray] = []  # the true pose (4x4, tracker <- probe) of every 6-DoF result sent
         self.streamed: list[tuple[float, np.ndarray]] = []  # (rig time, true point m) of every streamed point sent
         self._schedule = list(faults)
         self._lock = threading.Lock()
@@ -258,7 +264,7 @@ class EmsconSimServer:
             return ok(struct.pack("<i", self.reflector))
         if code == es.C_SET_MEAS_MODE:
             mode = struct.unpack("<I", payload)[0]
-            if mode not in (es.MM_STATIONARY, es.MM_CONTINUOUS_TIME):
+            if mode not in (es.MM_STATIONARY, es.MM_CONTINUOUS_TIME, es.MM_6D_STATIONARY):
                 return refuse(2)
             self.mode = mode
             return ok(change=17)
@@ -327,6 +333,8 @@ class EmsconSimServer:
         if fault == "lost_during":
             send(es.error_packet(code, 10009))
             return True
+        if self.mode == es.MM_6D_STATIONARY:
+            return self._probe(link)
         if fault == "garbage":
             send(b"\xff\xff\xff\x7f" + bytes(self.rng.integers(0, 256, 36, dtype=np.uint8)))
             return True
@@ -342,6 +350,23 @@ class EmsconSimServer:
                 time.sleep(0.01)
         else:
             send(packet)
+        return True
+
+    def _probe(self, link: _Link) -> bool:
+        """A 6-DoF stationary result: the probe is the flange's frame moved to the TP (its measuring tip); the tip
+        with the noise, the orientation turned by a random rotation of ``angle_noise`` rad per axis."""
+        self.rig.clock.sleep(self.stationary[0] / 1000)
+        pose = np.asarray(self.rig.flange_pose(), dtype=float).copy()
+        pose[:3, 3] = self.rig.true_point()
+        values, std = self._reported(pose[None, :3, 3])
+        turn = Rotation.from_rotvec(self.rng.normal(0.0, self.angle_noise, 3))
+        rotation = turn * Rotation.from_matrix(pose[:3, :3])
+        x, y, z, w = rotation.as_quat()
+        angles = tuple(float(a) for a in rotation.as_euler("xyz"))
+        self.measurements += 1  # counted before it leaves, as a stationary result
+        self.probe_truths.append(pose)
+        link.send(es.probe_stationary_result(tuple(values[0]), std, (w, x, y, z), angles,  # type: ignore[arg-type]
+                                             (self.angle_noise,) * 3, self.environment))
         return True
 
     def _reported(self, true: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float]]:

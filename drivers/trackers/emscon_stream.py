@@ -67,6 +67,7 @@ class ContinuousMeasurement(BufferedStreaming):
     reply_timeout: float
     events: list[tuple[float, str]]
     recorded_environment: tuple[float, float, float]
+    measurement_mode: int
     _sock: Any
     _trace: Any
     _connected_once: bool
@@ -82,7 +83,6 @@ class ContinuousMeasurement(BufferedStreaming):
     def _init_stream(self) -> None:
         self._init_buffer()
         self.separation_ms = getattr(self, "separation_ms", 0)
-        self.continuous_mode = getattr(self, "continuous_mode", False)  # the server is in continuous mode
         self.stream_counts = {"points": 0, "flagged": 0, "gaps": 0, "beam_lost": 0, "relocks": 0, "reconnects": 0}
 
     def start_stream(self, rate: float, timeout: float) -> float:
@@ -116,7 +116,7 @@ class ContinuousMeasurement(BufferedStreaming):
         """Continuous mode, its time separation (read back), StartMeasurement; True when the beam does not reach
         the reflector yet (the measurement did not start)."""
         self._call(es.set_measurement_mode(es.MM_CONTINUOUS_TIME), es.C_SET_MEAS_MODE, deadline)
-        self.continuous_mode = True
+        self.measurement_mode = es.MM_CONTINUOUS_TIME
         self._call(es.set_continuous_time_params(separation_ms), es.C_SET_CONTINUOUS_TIME, deadline)
         taken = es.continuous_time_params(self._ask(es.C_GET_CONTINUOUS_TIME, deadline))[0]
         if taken != separation_ms:

@@ -253,6 +253,11 @@ class UREmulator(ControllerServers):
         self._ipp.append(server)
         return int(server.port)
 
+    def emscon_boot(self) -> float:
+        """The emulated time (s) at which the last simulated emScon tracker's clock read 0: a continuous point stamped
+        ``t`` by it was taken at controller time ``t + emscon_boot()`` (its drift is 0)."""
+        return float(self._emscon[-1].boot)
+
     def emscon_connections(self) -> int:
         """Connections the simulated emScon servers accepted so far (one per link the client opened)."""
         return sum(server.connections for server in self._emscon)

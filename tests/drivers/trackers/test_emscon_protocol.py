@@ -108,3 +108,17 @@ def test_continuous_result_layout_and_round_trip() -> None:
     assert es.decode(extended).std.tolist() == [[3e-6, 4e-6, 0.0]]
     with pytest.raises(BadReading, match="says it holds 3 points"):
         es.decode(packet[:12] + struct.pack("<i", 3) + packet[16:])
+
+
+def test_6dof_probe_result_layout_and_round_trip() -> None:
+    # ProbeStationaryResultT: 376 bytes; the tip at byte 48, the quaternion at 184, the environment at 352
+    packet = es.probe_stationary_result((1.0, 2.0, 3.0), (1e-5, 2e-5, 2e-5), (0.5, 0.5, 0.5, 0.5), (0.1, 0.2, 0.3),
+                                        (1e-4, 1e-4, 2e-4), (21.0, 990.0, 40.0), probe_id=7)
+    assert len(packet) == 376 and struct.unpack_from("<iI", packet) == (376, es.DT_PROBE_STATIONARY)
+    assert struct.unpack_from("<3d", packet, 48) == (1.0, 2.0, 3.0)
+    assert struct.unpack_from("<4d", packet, 184) == (0.5, 0.5, 0.5, 0.5)
+    assert struct.unpack_from("<3d", packet, 352) == (21.0, 990.0, 40.0)
+    result = es.decode(packet)
+    assert isinstance(result, es.ProbeResult) and result.probe_id == 7 and result.mode == es.MM_6D_STATIONARY
+    assert result.quaternion == (0.5, 0.5, 0.5, 0.5) and result.angles == (0.1, 0.2, 0.3)
+    assert result.position_std == (1e-5, 2e-5, 2e-5) and result.angles_std == (1e-4, 1e-4, 2e-4)

@@ -124,3 +124,25 @@ def test_stamps_that_are_not_seconds_and_microseconds_stop_the_stream(rig: Simul
             _collect(tracker, 0.5)
         assert "use --mode step" in str(failed.value)
         tracker.close()
+
+
+def test_a_6dof_probe_result_decodes_to_the_true_pose(rig: SimulatedRig) -> None:
+    """Not used by sessions yet: the emulator serves 6-DoF stationary results and the client turns them into
+    poses; the next stationary reading sets the stationary mode again."""
+    from drivers.trackers.emscon_probe import ProbePose
+
+    angle = 2e-5  # rad per axis
+    with EmsconServer(rig, noise=NOISE, seed=6, angle_noise=angle) as server:
+        tracker = open_emscon(server)
+        poses = [tracker.measure_pose(2.0) for _ in range(20)]
+        truths = list(server.probe_truths)
+        reading = tracker.measure(1, 2.0)[0]
+        tracker.close()
+    assert all(isinstance(p, ProbePose) for p in poses) and server.mode == es.MM_STATIONARY
+    position = np.array([p.matrix[:3, 3] - t[:3, 3] for p, t in zip(poses, truths, strict=True)])
+    turn = np.array([np.arccos(np.clip((np.trace(p.matrix[:3, :3].T @ t[:3, :3]) - 1) / 2, -1, 1))
+                     for p, t in zip(poses, truths, strict=True)])
+    assert np.abs(position).max() < TOL and np.abs(position).max() > 0  # the tip, with its noise
+    assert turn.max() < 5 * np.sqrt(3) * angle and turn.max() > 0  # the orientation, with its noise
+    assert np.allclose([p.matrix[3] for p in poses], [0, 0, 0, 1]) and poses[0].position_std.tolist() == [NOISE] * 3
+    assert np.abs(reading.position - server.truths[-1]).max() < TOL
