@@ -13,8 +13,8 @@ clock, read as the public ROS driver ``beckjac/emscon_ros`` reads them); the str
 session's timing model (identify/estimator/sync.py) fits the offset and drift between the tracker's clock and the
 controller's, as for a serial tracker with device times. No host receive time enters. The reading is checked on
 every packet: microseconds outside [0, 10^6), or points of one packet not one time separation apart (median step
-off by more than :data:`STEP_TOLERANCE`), stop the stream with BadReading in one line (use --mode step) instead of
-mis-timing it.
+off by more than :data:`STEP_TOLERANCE`), stop the stream with :class:`StampError` (a ConnectionFailed: the sweep
+stops) in one line (use --mode step) instead of mis-timing it.
 
 Faults, as gaps ``(t_before, t_after)`` in tracker seconds between the good points around them, the stream going on:
 
@@ -55,8 +55,9 @@ POLL = 0.05  # s the reader waits for a packet before it checks whether it must 
 log = logging.getLogger("drivers.trackers.emscon")
 
 
-class StampError(BadReading):
-    """The tracker's point times cannot be read as seconds and microseconds one time separation apart."""
+class StampError(ConnectionFailed):
+    """The tracker's point times cannot be read as seconds and microseconds one time separation apart: the stream is
+    unusable, as a lost link is (the sweep stops, the run ends resumable; a new session with --mode step works)."""
 
 
 class ContinuousMeasurement(BufferedStreaming):
@@ -165,7 +166,7 @@ class ContinuousMeasurement(BufferedStreaming):
                     continue
                 heard = time.monotonic()
                 self._take(packet)
-            except StampError as exc:
+            except StampError as exc:  # a new link would read the same stamps
                 self._fail(exc)
                 return
             except (ConnectionFailed, BadReading, DeviceTimeout) as exc:

@@ -12,7 +12,7 @@ import pytest
 
 from drivers.base import StreamingTracker
 from drivers.clock import WallClock
-from drivers.errors import BadReading, ConnectionFailed
+from drivers.errors import ConnectionFailed
 from drivers.sim.rig import SimulatedRig
 from drivers.trackers import emscon_protocol as es
 from drivers.trackers.emscon_stream import GAP_FACTOR
@@ -120,7 +120,7 @@ def test_stamps_that_are_not_seconds_and_microseconds_stop_the_stream(rig: Simul
     with MillisecondServer(rig, noise=NOISE) as server:
         tracker = open_emscon(server)
         tracker.start_stream(250.0, 2.0)
-        with pytest.raises(BadReading, match="4000 ms apart by their time stamps, not the 4 ms asked") as failed:
+        with pytest.raises(ConnectionFailed, match="4000 ms apart by their time stamps, not the 4 ms asked") as failed:
             _collect(tracker, 0.5)
         assert "use --mode step" in str(failed.value)
         tracker.close()
