@@ -253,6 +253,11 @@ class UREmulator(ControllerServers):
         self._ipp.append(server)
         return int(server.port)
 
+    def inject_emscon(self, fault: str, count: int = 1) -> None:
+        """The last simulated emScon server's ``inject`` (drivers/trackers/emscon_sim.py): a fault on its next
+        measurement, or for a ``stream_`` fault its next continuous packet."""
+        self._emscon[-1].inject(fault, count)
+
     def emscon_boot(self) -> float:
         """The emulated time (s) at which the last simulated emScon tracker's clock read 0: a continuous point stamped
         ``t`` by it was taken at controller time ``t + emscon_boot()`` (its drift is 0)."""
