@@ -82,7 +82,9 @@ def test_emscon_sim_continuous_session_with_faults_identifies_the_truth(tmp_path
     site = tmp_path / "site.yaml"
     site.write_text("schema: 1\nplan:\n  check_poses: 4\n  stream_rate: 50\n")
     path = tmp_path / "c.session"
-    tracker = "emscon:sim?timeout=0.5&fault=stream_prism@40,stream_drop@80,stream_garbage@120"
+    # packets (10 per virtual s) 2-59 stream the first sweep, 60-140 the second: each fault well inside a sweep, the
+    # garbage 35 packets from the second one's end (a reconnect's wall time lets virtual time pass unstreamed)
+    tracker = "emscon:sim?timeout=0.5&fault=stream_prism@30,stream_drop@75,stream_garbage@105"
     assert main(["--robot", ROBOT, "--tracker", tracker, "--mode", "continuous", "--config", str(site),
                  "--session", str(path), "--quiet"]) == 0
     capsys.readouterr()
