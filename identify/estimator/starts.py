@@ -28,7 +28,8 @@ def starts(meas: Measurements, q: Array, unknown: NDArray[np.int64], tp_index: N
     the fit rows' prepared readings, unread joints and tracked points (see :mod:`identify.estimator.poe`)."""
     found: list[tuple[str, AxisLines]] = []
     geo = None
-    first = meas.subset(tp_index == 0)
+    positions = ~meas.oriented  # (orientation rows repeat their position rows' readings)
+    first = meas.subset((tp_index == 0) & positions)
     if all(first.sweeps_of(j) for j in range(1, meas.n_joints + 1)):
         try:
             geo = geometric_step(first, conventional, parallel_tol, nominal)
@@ -40,7 +41,8 @@ def starts(meas: Measurements, q: Array, unknown: NDArray[np.int64], tp_index: N
                 raise
             warnings.append(f"geometric step skipped ({exc}); started from the nominal model")
     if nominal is not None and np.sum(unknown < 0) >= 3:
-        found.append(("nominal", nominal_start(nominal, q, meas.points, unknown, home, tp_index)))
+        found.append(("nominal", nominal_start(nominal, q[positions], meas.points[positions], unknown[positions], home,
+                                               tp_index[positions])))
     if not found:
         raise InputError("no start for the fit: sweep every joint, or give a nominal model and free poses")
     return geo, found
