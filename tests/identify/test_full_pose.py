@@ -14,7 +14,12 @@ from scipy.stats import chi2
 
 from common.errors import InputError
 from config.robots import load_robot
+from identify.estimator.cpa import geometric_step
+from identify.estimator.measurements import orientation_rows
 from identify.estimator.orientation import matrices_from_rotvecs, rotation_residuals
+from identify.estimator.poe import lines_from_model
+from identify.estimator.rotation_axes import lines_from_rotations
+from identify.estimator.starts import starts
 from identify.io.csvio import format_measurements, parse_measurements
 from identify.io.result_io import result_to_dict
 from identify.results.pipeline import identify
@@ -76,7 +81,7 @@ def test_orientations_need_the_positions_sigma():
 
 
 def test_six_dof_fit_is_consistent_with_both_noises_and_beats_positions_only():
-    truth, frame, meas, six = _data(check=8)
+    _, _, meas, six = _data(check=8)
     positions = identify(replace(meas, sigma=np.full(len(meas), NOISE)), nominal=ROBOT.nominal)
     full = identify(six, nominal=ROBOT.nominal)
     fit = full.used.fit
@@ -119,3 +124,29 @@ def test_a_bad_orientation_with_a_good_position_is_rejected_alone():
     assert rejected.tolist() == [len(six) + bad]  # the orientation row (after the position rows), not its position
     assert full.rejected_rows == []
     assert any("1 orientation(s) rejected as outliers, their positions kept: line(s) 18" in w for w in full.warnings)
+
+
+def test_relative_rotations_give_each_axis_on_short_arcs_within_their_noise():
+    # sweeps of home ± 5°: the circles' directions err by degrees; the rotations' by sigma_r / the turn's spread
+    rng = np.random.default_rng(11)
+    home = np.asarray(ROBOT.home, dtype=float)
+    truth = random_truth(ROBOT.nominal, home, rng)
+    meas, _ = simulate(truth, home, np.asarray(ROBOT.limits, dtype=float), rng, noise=NOISE, steps=12,
+                       arc=np.radians(5))
+    six = with_orientations(meas, truth, np.eye(3), rng, NOISE, NOISE_R)
+    rows, _ = orientation_rows(six)
+    lines = lines_from_rotations(rows, home)
+    true = lines_from_model(truth, home)
+    error = np.arccos(np.clip(np.sum(lines.directions * true.directions, axis=1), -1.0, 1.0))
+    turns = meas.q[meas.joint > 0, meas.joint[meas.joint > 0] - 1].reshape(6, -1)
+    spread = np.sqrt(np.sum((turns - np.median(turns, axis=1, keepdims=True)) ** 2, axis=1))
+    # the direction's two components across the axis, each NOISE_R / spread: the angle's RMS sqrt(2) of that
+    assert np.all(error < 4.0 * np.sqrt(2.0) * NOISE_R / spread)
+    geo = geometric_step(meas)
+    circles = np.arccos(np.clip(np.abs(np.sum([a.direction for a in geo.axes] * true.directions, axis=1)), -1, 1))
+    assert np.median(circles / error) > 3.0
+    # and the fit starts from them
+    assert "axes from the relative rotations" in {label for label, _ in
+                                                  starts(rows, rows.q, np.full(len(rows), -1),
+                                                         np.zeros(len(rows), dtype=np.int64), home, None,
+                                                         np.zeros((6, 4)), np.radians(1.0), [])[1]}

@@ -1,8 +1,8 @@
 """The lines model's Jacobian blocks (identify.estimator.poe.LineProblem.jacobian_blocks): equal to central differences
 of the residuals, and the same whether the rows are formed in one block or in many (the chunks that bound the memory
 of large sessions), with every kind of column present: streamed rows with their clock, joint-error terms, unread
-joints, two tracked points, and orientation rows (a 6-DoF target's rotation residuals, :mod:`identify.estimator.orientation`)
-on prismatic and revolute arms."""
+joints, two tracked points, and orientation rows (a 6-DoF target's rotation residuals,
+:mod:`identify.estimator.orientation`)."""
 
 from __future__ import annotations
 
