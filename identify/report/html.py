@@ -75,8 +75,8 @@ def positions_view(ident: Identification, m: int) -> Identification:
     """``ident`` with its plain model's refinement record cut to the ``m`` position rows (orientation rows of
     full-pose data follow them and are summed up in ``ident.orientation``), for the figures in metres."""
     ref = ident.refinement
-    if len(ref.residuals) == m:
-        return ident
+    if ident.orientation is None or len(ref.residuals) - ident.orientation[0] != m:
+        return ident  # (the caller refuses measurements of another size)
     cut = replace(ref, residuals=ref.residuals[:m], inliers=ref.inliers[:m], q=ref.q[:m], points=ref.points[:m])
     return replace(ident, models={**ident.models, "plain": replace(ident.plain, refinement=cut)})
 

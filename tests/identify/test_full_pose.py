@@ -179,3 +179,17 @@ def test_joint_errors_are_selected_with_orientations_and_explain_both_kinds():
         dof = 3 * int(rows.sum()) - 20
         statistic = float(np.sum(fit.residuals[rows] ** 2)) / sigma**2
         assert chi2.ppf(5e-4, dof) < statistic < chi2.isf(5e-4, dof)
+
+
+def test_the_report_shows_the_orientation_rows_and_draws_the_positions_in_metres():
+    pytest.importorskip("matplotlib")
+    from identify.report.html import report_html
+
+    _, _, _, six = _data()
+    ident = identify(six, nominal=ROBOT.nominal)
+    text = report_html(ident, six, ROBOT.nominal, "ur5e")
+    count, rejected, rms = ident.orientation
+    assert f"orientations (full-pose readings): {count} fitted, {rejected} rejected" in text
+    assert 0.5 < rms / (np.sqrt(3) * NOISE_R) < 1.5  # the 3D RMS against its expectation
+    with pytest.raises(ValueError, match="fitted rows"):  # still refuses measurements it was not made from
+        report_html(ident, six.subset(np.arange(len(six)) > 3))
