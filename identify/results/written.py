@@ -20,7 +20,14 @@ from identify.estimator.estimate import FitData, LinesFit
 from identify.estimator.extensions import TermSet
 from identify.estimator.linalg import project_out, scaled_inverse
 from identify.estimator.poe import AxisLines, LineProblem, points_from_lines
-from identify.estimator.refine import Refinement, TableFit, fit_table, full_jacobian, parameter_names
+from identify.estimator.refine import (
+    Refinement,
+    TableFit,
+    fit_table,
+    full_jacobian,
+    orientation_blocks,
+    parameter_names,
+)
 from identify.results import verdict as checks
 from identify.results.dh_output import DHOutput, dh_output, near_parallel
 from identify.results.predict import Predictor
@@ -66,6 +73,7 @@ class WrittenModel:
     expected: float
     problem: LineProblem
     jacobian_blocks: Array
+    frames: Array | None = None  # each tracked point's target frame in frame n (k, 3, 3), NaN where not measured
 
     @property
     def lines(self) -> AxisLines:
@@ -73,8 +81,8 @@ class WrittenModel:
 
     @property
     def fit_rms(self) -> float:
-        """RMS 3D residual of the fitted inliers (m)."""
-        res = self.fit.residuals[self.fit.inliers]
+        """RMS 3D residual of the fitted inliers' positions (m)."""
+        res = self.fit.residuals[self.fit.inliers & self.fit.positions]
         return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
 
     @property
@@ -105,9 +113,24 @@ def robot_size(lines: AxisLines, points: Array) -> float:
 
 
 def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
-                  unknown: NDArray[np.int64]) -> Array:
+                  unknown: NDArray[np.int64], rotations: Array | None = None, frames: Array | None = None) -> Array:
     """Unit-variance covariance of the ``free`` DH values (weighted units), rows of unread joints (``unknown``,
-    0-based, -1 for none) projected on the complement of their nuisance joint value."""
+    0-based, -1 for none) projected on the complement of their nuisance joint value; orientation rows
+    (``rotations`` finite, of the first tracked point, whose target frame in frame n is ``frames[0]``) with the
+    frame's turn as a parameter fitted with them."""
+    if rotations is not None and np.any(_finite(rotations)):
+        t = _finite(rotations)
+        turns = orientation_blocks(model, free, q[t], rotations[t], frames[0], weights[t])
+        positions = np.zeros((int(np.sum(~t)), 3, turns.shape[2]))
+        positions[:, :, : int(free.sum())] = _position_blocks(model, free, q[~t], weights[~t], unknown[~t])
+        inverse = scaled_inverse(np.vstack([positions, turns]).reshape(-1, turns.shape[2]))[0]
+        return inverse[: int(free.sum()), : int(free.sum())]
+    return scaled_inverse(_position_blocks(model, free, q, weights, unknown).reshape(-1, int(free.sum())))[0]
+
+
+def _position_blocks(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
+                     unknown: NDArray[np.int64]) -> Array:
+    """The weighted position Jacobian (m, 3, free) of :func:`dh_covariance`, nuisance joint values projected out."""
     p, jac = full_jacobian(model, q)
     jac = np.compress(free, jac, axis=2)
     if np.any(weights != 1.0):
@@ -121,7 +144,7 @@ def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Ar
         revolute = model.revolute[j]
         g = np.where(revolute[:, None], np.cross(axis, p[rows] - origin), axis) * weights[rows, None]
         project_out(jac, rows, g)
-    return scaled_inverse(jac.reshape(-1, jac.shape[2]))[0]
+    return jac
 
 
 def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, terms: TermSet,
@@ -146,19 +169,20 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     tp_index = data.tp_index[inl]
     q_fit, weights = fit.q[inl], data.weights[inl]
     rows = _FitRows(q_fit, data.points[inl], None if sigma is None else sigma[inl], weights, tp_index, res_w,
-                    variance)
+                    variance, None if data.rotations is None else data.rotations[inl])
     out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise)
     if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
         # the data resolve the misalignment: exact DH wherever it stays within max_offset
         out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise)
     first = tp_index == 0
     if dh_fit is None:  # exact DH: the lines' covariance carried over
-        model = out.model
+        model, frames = out.model, target_frames_of(out.model, lines)
         free = np.any(out.jacobian != 0.0, axis=1)
         cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
-        model, free = dh_fit.model, dh_fit.free
-        cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first]) * variance
+        model, free, frames = dh_fit.model, dh_fit.free, dh_fit.frames
+        cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first],
+                                 rows.rotations_of(first), frames) * variance
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     n = model.n_joints
@@ -166,21 +190,21 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     vector = np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
     fixed = [FixedParameter(names[k], float(vector[k]), _reason(names[k], n, model.joint_types, out.capped))
              for k in np.flatnonzero(~free)]
-    kinematic = slice(0, problem.n_terms)  # the clock correction's parameters come last
-    predictor = Predictor(lines, covariance[kinematic, kinematic], terms, fit.terms.coefs, None, tp_ids)
+    kinematic = predictor_parameters(problem)
+    predictor = Predictor(lines, covariance[np.ix_(kinematic, kinematic)], terms, fit.terms.coefs, None, tp_ids)
     expected = _expected_accuracy(predictor, q_fit, np.asarray(tp_ids)[tp_index], adequacy)
     dh_check = checks.dh_table(gap[0], gap[1], expected, [f"d{i}" for i in out.capped])
     ref = Refinement(model, free, cov_free, adequacy.noise, inl, fit.residuals, condition,
                      float(np.sum(res_w**2)), fit.q, data.points, [], tools)
     return WrittenModel(name, fit, adequacy, model, tools, std, fixed, ref, dict(out.capped), dh_check, terms,
-                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks)
+                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks, frames)
 
 
 @dataclass(frozen=True)
 class _FitRows:
     """The inlier rows a DH table is written from: joint values ``q`` (with joint errors), ``points``, ``sigma``
     (or None), ``weights``, ``tp_index``, the lines' weighted residuals ``res_w`` and the noise ``variance``
-    (weighted units)."""
+    (weighted units); ``rotations`` the measured frames of orientation rows (NaN on position rows; None: none)."""
 
     q: Array
     points: Array
@@ -189,6 +213,18 @@ class _FitRows:
     tp_index: NDArray[np.int64]
     res_w: Array
     variance: float
+    rotations: Array | None = None
+
+    @property
+    def positions(self) -> NDArray[np.bool_]:
+        return np.ones(len(self.q), dtype=bool) if self.rotations is None else ~_finite(self.rotations)
+
+    def rotations_of(self, rows: NDArray[np.bool_]) -> Array | None:
+        return None if self.rotations is None else self.rotations[rows]
+
+
+def _finite(rotations: Array) -> NDArray[np.bool_]:
+    return np.all(np.isfinite(rotations), axis=(1, 2))
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
@@ -201,24 +237,41 @@ def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, 
     if not capped:
         return out, None, tools, _dh_gap(out.model, tools, lines, rows)
     dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False, 0.0,
-                       rows.tp_index, tools)
+                       rows.tp_index, tools, rows.rotations)
     return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows)
 
 
 def _dh_gap(model: DHModel, tools: Array, lines: AxisLines, rows: _FitRows) -> tuple[float, float]:
     """RMS difference (m) of the DH model's and the lines' predictions at the fitted rows, and the cost the DH
     model adds over the lines', in noise variances."""
-    dh = points_with_tools(model, tools, rows.q, rows.tp_index)
-    gap = dh - points_from_lines(lines, rows.q, rows.tp_index)
-    res_dh = (rows.points - dh) * rows.weights[:, None]
-    added = float(np.sum(res_dh**2) - np.sum(rows.res_w**2)) / max(rows.variance, 1e-300)
+    pos = rows.positions  # (orientation rows: their frame is fitted apart, and the gap is in positions)
+    q, tp = rows.q[pos], rows.tp_index[pos]
+    dh = points_with_tools(model, tools, q, tp)
+    gap = dh - points_from_lines(lines, q, tp)
+    res_dh = (rows.points[pos] - dh) * rows.weights[pos, None]
+    added = float(np.sum(res_dh**2) - np.sum(rows.res_w[pos] ** 2)) / max(rows.variance, 1e-300)
     return float(np.sqrt(np.mean(np.sum(gap**2, axis=1)))), added
+
+
+def target_frames_of(model: DHModel, lines: AxisLines) -> Array | None:
+    """Every tracked point's target frame (k, 3, 3) in the last DH frame of ``model`` (whose axes are ``lines``' at
+    home), NaN for a point whose orientation was not measured; None when none was."""
+    if lines.orientations is None:
+        return None
+    flange = frames_from_joints(model, lines.home[None, :])[0, -1]
+    return flange[:3, :3].T @ lines.orientations
 
 
 def _tools(model: DHModel, lines: AxisLines) -> Array:
     """Every tracked point (k, 3) in the last DH frame of ``model`` (whose axes are ``lines``' at home)."""
     flange = frames_from_joints(model, lines.home[None, :])[0, -1]
     return (lines.tps - flange[:3, 3]) @ flange[:3, :3]
+
+
+def predictor_parameters(problem: LineProblem) -> NDArray[np.int64]:
+    """Indices of the parameters a position predictor carries: lines, tracked points and joint-error coefficients
+    (the home orientations of full-pose targets and the clock correction left out; their covariance is marginal)."""
+    return np.r_[0:problem.start.n_parameters, problem.n_lines:problem.n_terms].astype(np.int64)
 
 
 def _expected_accuracy(predictor: Predictor, q: Array, tp: NDArray[np.int64], adequacy: Adequacy) -> float:
