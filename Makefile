@@ -48,6 +48,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.continuous || status=1; \
 	$(BIN)/python -m bench.second_session || status=1; \
 	$(BIN)/python -m bench.ur_continuous || status=1; \
+	$(BIN)/python -m bench.emscon_vs_ipp || status=1; \
 	$(BIN)/python -m bench.camera_stream || status=1; \
 	$(BIN)/python -m bench.timing_terms || status=1; \
 	$(BIN)/python -m bench.region_split || status=1; \
