@@ -20,6 +20,7 @@ from identify.estimator.adequacy import Adequacy
 from identify.estimator.cpa import DEFAULT_PARALLEL_TOL, GeometricResult
 from identify.estimator.estimate import best_start
 from identify.estimator.extensions import Decision, TermSet
+from identify.estimator.hold import nominal_lines
 from identify.estimator.measurements import Measurements
 from identify.estimator.poe import AxisLines
 from identify.estimator.refine import Refinement
@@ -242,10 +243,14 @@ def identify(
     # joint errors referenced to the readings' zero, not to this data set's home: the extended model's DH offsets
     # then mean the same on every data set of the arm (a home that moved with the split moved them by c·τ(home))
     empty = TermSet((), np.zeros(meas.n_joints), torques)
-    cap = robot_size(best.lines, rows.meas.points) if max_offset is None else max_offset  # size before joint errors
+    size = robot_size(best.lines, rows.meas.points)  # before joint errors
+    cap = size if max_offset is None else max_offset
+    inl = best.inliers  # what the data do not determine is held at the nominal placed on them
+    reference = None if nominal is None else nominal_lines(nominal, best.q[inl], rows.data.points[inl],
+                                                           rows.data.tp_index[inl], best.lines.home)
     write = partial(written_model, tp_ids=tuple(meas.tp_ids), conventional=conventional, nominal=nominal,
                     parallel_tol=parallel_tol, max_offset=cap, unit=rows.unit, declared=rows.declared,
-                    sigma=rows.meas.sigma)
+                    sigma=rows.meas.sigma, reference=reference, size=size)
     best, adequacy, extended, decisions = (joint_errors(best, adequacy, rows, empty) if extensions
                                            else (best, adequacy, None, []))
     models = written_models(write, rows, best, adequacy, empty, extended)

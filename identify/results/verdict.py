@@ -119,9 +119,10 @@ def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None) -> Ch
                  f"residuals {mm(a.residual)} per axis, consistent with {reference}")
 
 
-def conditioning(condition: float, found: Identifiability | None = None) -> Check:
+def conditioning(condition: float, found: Identifiability | None = None, at_nominal: tuple[str, ...] = ()) -> Check:
     """Whether the data determine the written parameters. ``found`` speaks of each parameter (its σ against its
     own scale, near redundancies, parameters held because the data do not separate them, a model error's reach);
+    ``at_nominal``: what was held at the nominal because the data did not determine it;
     the condition number of the scaled axis-line fit only fails a numerically singular problem (and decides alone
     when ``found`` is None)."""
     if not condition < CONDITION_FAIL:
@@ -144,13 +145,15 @@ def conditioning(condition: float, found: Identifiability | None = None) -> Chec
     if found.held:
         parts.append(f"{', '.join(found.held)} not separated by the data from other parameters: held at their "
                      "conventional values")
+    held = ("; held at the nominal (placed on the data) where the data do not determine the model: "
+            + ", ".join(dict.fromkeys(at_nominal)) + " (see fixed)") if at_nominal else ""
     if parts:
-        return Check("conditioning", "warn", condition, CONDITION_FAIL, "; ".join(parts) + number)
+        return Check("conditioning", "warn", condition, CONDITION_FAIL, "; ".join(parts) + held + number)
     w = found.worst
     text = "every parameter is determined" + ("" if w is None else
                                               f"; the least, {w.text()}, moves the tracked point "
                                               f"{100 * w.reach:.2g} % of the robot's size at 3 sigma")
-    return Check("conditioning", "pass", condition, CONDITION_FAIL, text + number)
+    return Check("conditioning", "pass", condition, CONDITION_FAIL, text + held + number)
 
 
 MODEL_NAMES = {"plain": "plain model (DH)", "extended": "extended model (DH + joint errors)"}

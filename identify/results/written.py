@@ -14,13 +14,25 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import least_squares
+from scipy.spatial.transform import Rotation
 
 from identify.estimator.adequacy import Adequacy
 from identify.estimator.estimate import FitData, LinesFit
 from identify.estimator.extensions import TermSet
+from identify.estimator.hold import Hold, held_fit, increments, line_metric, line_names, table_metric, undetermined
+from identify.estimator.identifiability import LEVEL
 from identify.estimator.linalg import project_out, scaled_inverse
 from identify.estimator.poe import AxisLines, LineProblem, points_from_lines
-from identify.estimator.refine import Refinement, TableFit, fit_table, full_jacobian, parameter_names
+from identify.estimator.refine import (
+    Refinement,
+    TableFit,
+    TableProblem,
+    fit_table,
+    full_jacobian,
+    parameter_names,
+    vector_from_model,
+)
 from identify.results import verdict as checks
 from identify.results.dh_output import DHOutput, dh_output, near_parallel
 from identify.results.predict import Predictor
@@ -66,6 +78,7 @@ class WrittenModel:
     expected: float
     problem: LineProblem
     jacobian_blocks: Array
+    held: Hold | None = None
 
     @property
     def lines(self) -> AxisLines:
@@ -126,10 +139,13 @@ def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Ar
 
 def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, terms: TermSet,
                   tp_ids: tuple[int, ...], conventional: Array, nominal: DHModel | None, parallel_tol: float,
-                  max_offset: float, unit: float, declared: float | None, sigma: Array | None) -> WrittenModel:
+                  max_offset: float, unit: float, declared: float | None, sigma: Array | None,
+                  reference: AxisLines | None = None, size: float = 1.0) -> WrittenModel:
     """``fit`` (its inliers, joint errors ``terms``) written as DH with its covariance. ``data``: the fit rows
     (timed as ``fit``); ``unit``: the weights' scale (median sigma, or 1); ``declared``: the tracker noise
-    declared (m per axis) or None; ``sigma`` (m,) per-row uncertainties or None; the rest as in
+    declared (m per axis) or None; ``sigma`` (m,) per-row uncertainties or None; ``reference``: the nominal's
+    lines placed on the data (None without a nominal), where the directions the data do not determine for a
+    robot of ``size`` (m) are held (:mod:`identify.estimator.hold`); the rest as in
     :func:`identify.results.pipeline.identify`."""
     data = data.timed(fit.timing)
     lines, inl = fit.lines, fit.inliers
@@ -141,6 +157,21 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     # noise variance in weighted units (1 for a right sigma column), never below the declared noise
     variance = max(adequacy.residual, declared or 0.0) ** 2 / unit**2 * adequacy.inflation
     covariance = inv * variance
+    held = None
+    if reference is not None:
+        scale = max(adequacy.residual, declared or 0.0) * np.sqrt(adequacy.inflation)
+        bias = adequacy.model_error * np.sqrt(3 * int(inl.sum())) / scale if scale > 0 else 0.0
+        held = undetermined(covariance, line_metric(problem), size, line_names(problem), bias)
+        if len(held):  # moved there, then the covariance at the new lines with the nominal's own error
+            x = held.solve(problem, variance, covariance, increments(problem, reference))
+            fit = held_fit(fit, data, problem, x)
+            lines = fit.lines
+            problem = data.subset(inl).problem(lines, fit.terms.subset(inl))
+            jac_blocks = fit.jacobian_blocks(problem)
+            res_w = problem.residuals(x0).reshape(-1, 3)
+            inv, condition = scaled_inverse(jac_blocks.reshape(-1, problem.size))
+            held = undetermined(inv * variance, line_metric(problem), size, line_names(problem), bias, len(held))
+            covariance = held.update(inv * variance)
     lines_cov = covariance[: lines.n_parameters, : lines.n_parameters]
     near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
     tp_index = data.tp_index[inl]
@@ -159,6 +190,9 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
         model, free = dh_fit.model, dh_fit.free
         cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first]) * variance
+        if held is not None and len(held):  # the refit keeps what the lines held: at their DH conversion
+            model, tools, cov_free = _held_table(model, free, tools, cov_free, out.model, rows, size, bias,
+                                                 data.unknown[inl][first])
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     n = model.n_joints
@@ -166,6 +200,9 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     vector = np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
     fixed = [FixedParameter(names[k], float(vector[k]), _reason(names[k], n, model.joint_types, out.capped))
              for k in np.flatnonzero(~free)]
+    if held is not None:
+        fixed += [FixedParameter(f"held: {label}", float(std), _held_reason(float(std), held.tolerance, size))
+                  for label, std in zip(held.names, held.std, strict=True)]
     kinematic = slice(0, problem.n_terms)  # the clock correction's parameters come last
     predictor = Predictor(lines, covariance[kinematic, kinematic], terms, fit.terms.coefs, None, tp_ids)
     expected = _expected_accuracy(predictor, q_fit, np.asarray(tp_ids)[tp_index], adequacy)
@@ -173,7 +210,43 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     ref = Refinement(model, free, cov_free, adequacy.noise, inl, fit.residuals, condition,
                      float(np.sum(res_w**2)), fit.q, data.points, [], tools)
     return WrittenModel(name, fit, adequacy, model, tools, std, fixed, ref, dict(out.capped), dh_check, terms,
-                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks)
+                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks,
+                        held if held is not None and len(held) else None)
+
+
+def _held_table(model: DHModel, free: NDArray[np.bool_], tools: Array, covariance: Array, reference: DHModel,
+                rows: _FitRows, size: float, bias: float, unknown: NDArray[np.int64]) -> tuple[DHModel, Array, Array]:
+    """A DH table refitted to the data under the parallel-axis convention (its ``free`` parameters' ``covariance``,
+    every tracked point's ``tools``), refitted again with the directions the data do not determine brought to
+    ``reference`` (the held lines written as DH), as :mod:`identify.estimator.hold` does for the lines: the
+    maximum a posteriori table, its tools and its covariance. ``rows``: the fitted rows; ``bias``: the model
+    error's reach in sigma; ``unknown``: the first tracked point's rows' unread joints."""
+    names = [n for n, f in zip(parameter_names(model.n_joints), free, strict=True) if f]
+    hold = undetermined(covariance, table_metric(model, free), size, names, bias)
+    if not len(hold):
+        return model, tools, covariance
+    offset = vector_from_model(reference) - vector_from_model(model)
+    offset[:3] = Rotation.from_matrix(reference.base[:3, :3] @ model.base[:3, :3].T).as_rotvec()
+    for angles in (slice(9, None, 4), slice(12, None, 4)):  # theta, alpha
+        offset[angles] = np.angle(np.exp(1j * offset[angles]))
+    problem = TableProblem(model, rows.q, rows.points, rows.weights, free, rows.tp_index, tools)
+    extra = len(problem.x0) - int(free.sum())
+    directions = np.hstack([hold.directions, np.zeros((len(hold), extra))])
+    target = directions @ (problem.x0 + np.concatenate([offset[free], np.zeros(extra)]))
+    scale = float(np.sqrt(rows.variance))
+
+    def residuals(x: Array) -> Array:
+        return np.concatenate([problem.residuals(x) / scale, (directions @ x - target) / hold.tolerance])
+
+    def jacobian(x: Array) -> Array:
+        return np.vstack([problem.jacobian(x) / scale, directions / hold.tolerance])
+
+    x = least_squares(residuals, problem.x0, jac=jacobian, method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10).x
+    model, tools = problem.model(x), problem.tools(x)
+    first = rows.tp_index == 0
+    covariance = dh_covariance(model, free, rows.q[first], rows.weights[first], unknown) * rows.variance
+    again = undetermined(covariance, table_metric(model, free), size, names, bias, len(hold))
+    return model, tools, again.update(covariance)
 
 
 @dataclass(frozen=True)
@@ -231,6 +304,13 @@ def _expected_accuracy(predictor: Predictor, q: Array, tp: NDArray[np.int64], ad
 
 UNDETERMINED = ("not determined by these data (redundant with other parameters, e.g. joints that always move together):"
                 " held at its conventional value")
+
+
+def _held_reason(std: float, tolerance: float, size: float) -> str:
+    return (f"held at the nominal placed on the data, known to {tolerance * 1e3:.3g} mm (the nominal's own tolerance, "
+            f"carried by the uncertainties): 3 sigma of these data moved points on the end effector by {3e3 * std:.3g} "
+            f"mm over the joint space, beyond {100 * LEVEL:g} % of the robot's size ({size:.3g} m); the value is that "
+            "sigma, m")
 
 
 def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:

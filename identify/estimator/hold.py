@@ -1,0 +1,229 @@
+"""What the data do not determine is held at the nominal model, not written where the fit wandered.
+
+The lines fit (:mod:`identify.estimator.poe`) has a covariance over its minimal parameters (axis tilts and shifts,
+tracked points, joint-error coefficients, clock). Scaled by each parameter's lever arm (how far a unit of it moves
+the tracked point, RMS over the fitted poses), its eigenvectors are the directions the data know best and worst, in
+metres of tracked-point motion. A direction along which three standard uncertainties move the tracked point by more
+than :data:`identify.estimator.identifiability.LEVEL` of the robot's size is *not determined*: a model error the
+fit cannot hold, or the noise, puts it anywhere along that direction (a UR with one reflector next to axis 6 wrote
+a5 = 186 mm, alpha5 = -152 deg where the arm has 0 and -90, and a tool on the flange inherited centimetres).
+
+With a nominal model, such a direction is held at the nominal placed on the data: the reference is a measurement
+with the nominal's own uncertainty, :data:`HELD_TOLERANCE` of the robot's size along each held direction (a real
+arm's geometry differs from its catalogue model by a millimetre or two per metre of reach), combined with the fit by
+the linear minimum-variance (Kalman) update. The determined directions keep what the data say, the correlated
+parameters follow the held ones, and the covariance afterwards carries the nominal's own error, so every accuracy
+stated from it accounts for the held values. Units: m, rad; frames: tracker.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from identify.estimator.estimate import FitData, LinesFit, place_nominal
+from identify.estimator.geometry import perpendicular_basis
+from identify.estimator.identifiability import LEVEL
+from identify.estimator.poe import AxisLines, JointTerms, LineProblem, lines_from_model
+from identify.estimator.refine import full_jacobian
+from kinematics.dh import DHModel, frames_from_joints
+
+Array = NDArray[np.float64]
+
+HELD_TOLERANCE = 0.002  # of the robot's size, 1 sigma of TP motion: the nominal's own error along a held direction
+LOADING = 0.3  # loading of a held direction's (unit) vector on a parameter that names it
+
+
+@dataclass(frozen=True)
+class Hold:
+    """Directions held at the reference: ``directions`` (h, p) rows over the problem's parameters (scaled by the
+    lever arms, so ``directions @ x`` is metres of TP motion), their standard uncertainty before the hold ``std``
+    (h,) (m of TP motion), the ``tolerance`` (m) the reference is known to along each, and what each moves
+    (``names``, e.g. ``axis 6``, ``tracked point 1``)."""
+
+    directions: Array
+    std: Array
+    tolerance: float
+    names: tuple[str, ...]
+
+    def __len__(self) -> int:
+        return len(self.std)
+
+    def shift(self, covariance: Array, offset: Array) -> Array:
+        """The parameter change (p,) that brings the held directions to the reference ``offset`` (p,: the
+        reference's parameters as increments on the fit's), the others following by their correlation."""
+        gain = self._gain(covariance)
+        return gain @ (self.directions @ offset)
+
+    def solve(self, problem: LineProblem, variance: float, covariance: Array, offset: Array) -> Array:
+        """The parameters (p,) of ``problem`` (increments on its start) that best fit its rows (noise ``variance``,
+        weighted units) and the reference (``offset``: its parameters as increments) along the held directions, to
+        ``tolerance``: the maximum a posteriori fit, solved as a nonlinear least-squares problem from the linear
+        update (:meth:`shift`, with the fit's ``covariance``), so a long way along a held direction that is not
+        linear does not spoil the fit to the data."""
+        a, target, scale = self.directions, self.directions @ offset, float(np.sqrt(variance))
+
+        def residuals(x: Array) -> Array:
+            return np.concatenate([problem.residuals(x) / scale, (a @ x - target) / self.tolerance])
+
+        def jacobian(x: Array) -> Array:
+            return np.vstack([problem.jacobian(x) / scale, a / self.tolerance])
+
+        return least_squares(residuals, self.shift(covariance, offset), jac=jacobian, method="trf", x_scale="jac",
+                             xtol=1e-10, ftol=1e-10).x
+
+    def update(self, covariance: Array) -> Array:
+        """``covariance`` (p, p) after the held directions were measured at the reference to ``tolerance``."""
+        gain = self._gain(covariance)
+        return covariance - gain @ self.directions @ covariance
+
+    def _gain(self, covariance: Array) -> Array:
+        a = self.directions
+        innovation = a @ covariance @ a.T + self.tolerance**2 * np.eye(len(a))
+        return covariance @ a.T @ np.linalg.inv(innovation)
+
+
+def undetermined(covariance: Array, metric: Array, size: float, names: list[str], bias: float = 0.0,
+                 count: int | None = None) -> Hold:
+    """The directions of ``covariance`` (p, p; m and rad) not determined for a robot of ``size`` (m): 3 sigma of
+    motion of the end effector's points, plus ``bias`` sigma for a model error the fit cannot hold, beyond
+    :data:`LEVEL` of it (or the ``count`` least determined). ``metric`` (p, p): the mean square motion (m²) of those
+    points per unit change of the parameters (:func:`line_metric`, :func:`table_metric`); ``names`` (k <= p): what
+    each of the first k parameters is (e.g. ``axis 6``), the only ones held (the others, such as joint errors and
+    clock, follow them through their correlation). ``bias``: the worst least-squares shift a model error ε per axis
+    over N rows gives a direction of standard uncertainty σ is ``ε sqrt(3N) / s · σ`` (s the noise the covariance
+    is scaled to), as in :mod:`identify.estimator.identifiability`."""
+    k = len(names)
+    values, vectors = np.linalg.eigh((metric[:k, :k] + metric[:k, :k].T) / 2)
+    root = (vectors * np.sqrt(np.clip(values, 0.0, None))) @ vectors.T  # metric^(1/2), symmetric
+    scaled = root @ covariance[:k, :k] @ root
+    values, vectors = np.linalg.eigh((scaled + scaled.T) / 2)
+    if count is None:
+        far = (3.0 + bias) * np.sqrt(np.clip(values, 0.0, None)) > LEVEL * size
+    else:
+        far = np.arange(len(values)) >= len(values) - count
+    directions = np.zeros((int(far.sum()), len(covariance)))
+    directions[:, :k] = vectors[:, far].T @ root
+    lever = np.sqrt(np.clip(np.diag(metric)[:k], 0.0, None))
+    moved = [(covariance[:k, :k] @ a[:k]) * lever for a in directions]  # what each parameter moves along it
+    return Hold(directions, np.sqrt(np.clip(values[far], 0.0, None)), HELD_TOLERANCE * size,
+                tuple(_label(m / max(float(np.linalg.norm(m)), 1e-300), names) for m in moved))
+
+
+def _label(vector: Array, names: list[str]) -> str:
+    """The names a unit ``vector`` loads on (the norm of its entries under one name at least :data:`LOADING`)."""
+    weight: dict[str, float] = {}
+    for name, v in zip(names, vector, strict=True):
+        weight[name] = weight.get(name, 0.0) + v * v
+    return ", ".join(n for n, w in weight.items() if w >= LOADING**2) or "several parameters together"
+
+
+def line_names(problem: LineProblem) -> list[str]:
+    """What each of ``problem``'s line and tracked-point parameters moves: ``axis i`` or ``tracked point k``."""
+    out = []
+    for i, kind in enumerate(problem.types):
+        out += [f"axis {i + 1}"] * (4 if kind == "R" else 2)
+    for p in range(len(problem.start.tps)):
+        out += [f"tracked point {p + 1}"] * 3
+    return out
+
+
+PROBE = 0.1  # m: the end effector's points probed beside each tracked point, this far along three directions
+PROBE_POSES = 200  # poses over the joint space at which the probed points' motion is averaged
+
+
+def line_metric(problem: LineProblem, rng_seed: int = 0) -> Array:
+    """The mean square motion (m²) per unit change of ``problem``'s parameters (p, p) of points on the end effector:
+    each tracked point and points :data:`PROBE` beside it along the last axis and two directions across it (a tool
+    or a second reflector there moves with the last link), over :data:`PROBE_POSES` poses spanning the joint space
+    (home ± pi for revolute joints, ± 0.1 m for prismatic ones, seeded): what the data must determine for a model
+    used anywhere, not only the measured point at the measured poses."""
+    lines = problem.start
+    last = lines.directions[-1]
+    across = np.array(perpendicular_basis(last))
+    probes = (lines.tps[:, None, :] + PROBE * np.vstack([last, across])[None]).reshape(-1, 3)
+    probe = replace(lines, extra_tps=np.vstack([lines.extra_tps, probes]))
+    q = _spanning_poses(lines, rng_seed)
+    count = len(probe.tps)
+    q_all = np.repeat(q, count, axis=0)
+    tp_index = np.tile(np.arange(count), len(q))
+    prob = LineProblem(probe, q_all, np.zeros((len(q_all), 3)), np.ones(len(q_all)), tp_index=tp_index,
+                       terms=JointTerms(np.zeros((len(q_all), len(problem.terms))), problem.terms.joints,
+                                        problem.terms.coefs))
+    jac = prob.jacobian_blocks(np.zeros(prob.size), q_all, tp_index)
+    own = problem.n_lines  # the lines' and real tracked points' columns; the probes' own columns are dropped
+    columns = np.zeros((len(q_all), 3, problem.size))
+    columns[:, :, :own] = jac[:, :, :own]
+    flat = columns.reshape(-1, problem.size)
+    return flat.T @ flat / len(q_all)
+
+
+def table_metric(model: DHModel, free: NDArray[np.bool_], rng_seed: int = 0) -> Array:
+    """:func:`line_metric` for a DH ``model``'s ``free`` parameters (of the full vector of
+    :mod:`identify.estimator.refine`): its tool point and points :data:`PROBE` beside it along the last frame's
+    axes, over the same spanning poses (home: zero joint values)."""
+    half = np.array([np.pi if t == "R" else 0.1 for t in model.joint_types])
+    q = np.random.default_rng(rng_seed).uniform(-1.0, 1.0, (PROBE_POSES, len(half))) * half
+    blocks = []
+    for offset in (np.zeros(3), *(PROBE * np.eye(3))):
+        _, jac = full_jacobian(replace(model, tool=model.tool + offset), q)
+        if offset.any():
+            jac[:, :, 6:9] = 0.0  # a probe beside the tool point is not moved by the tool point's own values
+        blocks.append(np.compress(free, jac, axis=2).reshape(-1, int(free.sum())))
+    flat = np.vstack(blocks)
+    return flat.T @ flat / (len(flat) / 3)
+
+
+def _spanning_poses(lines: AxisLines, seed: int) -> Array:
+    """:data:`PROBE_POSES` joint values (k, n) about ``lines.home``: ± pi (revolute), ± 0.1 m (prismatic)."""
+    half = np.array([np.pi if t == "R" else 0.1 for t in lines.joint_types])
+    rng = np.random.default_rng(seed)
+    return lines.home + rng.uniform(-1.0, 1.0, (PROBE_POSES, len(half))) * half
+
+
+def increments(problem: LineProblem, reference: AxisLines) -> Array:
+    """The parameters (p,) that move ``problem``'s start lines onto ``reference`` (same joints, tracked points):
+    each axis tilted to the reference's direction and shifted, in the plane of the start's point perpendicular to
+    its direction, to where the reference line crosses it; each tracked point moved onto the reference's; zero for
+    joint errors and clock."""
+    start = problem.start
+    x = np.zeros(problem.size)
+    k = 0
+    for i, kind in enumerate(start.joint_types):
+        e, d0 = problem.bases[i], start.directions[i]
+        d = reference.directions[i] * (1.0 if reference.directions[i] @ d0 >= 0 else -1.0)
+        x[k:k + 2] = e @ d / (d @ d0)
+        if kind == "R":
+            crossing = reference.points[i] + d * ((start.points[i] - reference.points[i]) @ d0) / (d @ d0)
+            x[k + 2:k + 4] = e @ (crossing - start.points[i])
+            k += 4
+        else:
+            k += 2
+    x[k:problem.n_lines] = (reference.tps - start.tps).ravel()
+    return x
+
+
+def nominal_lines(nominal: DHModel, q: Array, points: Array, tp_index: NDArray[np.int64], home: Array) -> AxisLines:
+    """The axis lines (tracker frame, at joint values ``home``) of ``nominal`` placed on the fit rows (readings
+    ``q`` (m, n) with joint errors applied, measured ``points`` (m, 3), 0-based ``tp_index``), every tracked point
+    fitted on its flange (:func:`identify.estimator.estimate.place_nominal`)."""
+    placed, tools = place_nominal(nominal, q, points, tp_index)
+    lines = lines_from_model(placed, home)
+    flange = frames_from_joints(placed, home[None, :])[0, -1]
+    tps = tools @ flange[:3, :3].T + flange[:3, 3]
+    return replace(lines, tp_home=tps[0], extra_tps=tps[1:])
+
+
+def held_fit(fit: LinesFit, data: FitData, problem: LineProblem, x: Array) -> LinesFit:
+    """``fit`` moved by the parameters ``x`` of ``problem`` (its inlier rows): new lines, joint-error coefficients
+    and clock; the joint values and residuals of every row of ``data`` (the fit's rows, timed as it) recomputed."""
+    lines, _ = problem.lines(x)
+    terms = JointTerms(fit.terms.regressors, fit.terms.joints, problem.coefs(x))
+    timing = fit.timing if fit.timing is None else replace(fit.timing, tau=problem.tau(x))
+    every = data.timed(timing).problem(lines, terms)
+    q = every.joints(lines, terms.coefs, every.tau(np.zeros(every.size)))
+    predicted = every.residuals(np.zeros(every.size)).reshape(-1, 3) / data.weights[:, None] + data.points
+    return replace(fit, lines=lines, q=q, residuals=data.points - predicted, terms=terms, timing=timing, jacobian=None)
