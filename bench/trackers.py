@@ -12,6 +12,10 @@
    PortManager bridging loopback TCP to the pty): the overhead then includes the bridge's transit.
 3. I++ DME on loopback (no device latency): ms per reading for one ``Get(X(), Y(), Z())``, for a reading
    the client averages from ``--average`` points, and for one the server averages (its averaging property).
+4. Leica emScon on loopback (the simulated server of drivers/trackers/emscon_sim.py, its measurement time on a
+   virtual clock: no device latency): the set-up at connect, then per stationary reading (``StartMeasurement``,
+   its answer and its result) the median and 95th percentile latency and the readings per second, one reading per
+   ``measure`` call and ``--readings`` in one call. Target: < 1 ms per reading (the protocol's own cost).
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from typing import Any
 from drivers.registry import open_tracker
 from drivers.trackers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
 from drivers.trackers.ipp import IppTracker
+from tests.emscon_device import EmsconServer
 from tests.rfc2217_bridge import Rfc2217Bridge
 from tests.tracker_devices import AsciiDevice, IppServer
 
@@ -39,6 +44,7 @@ def _lines(name: str, n: int, rng: random.Random) -> bytes:
     for _ in range(n):
         values = {k: rng.uniform(-2.0, 2.0) / profile.scale for k in "xyz"}
         values["status"] = sim.get("ok", "OK")
+        values.update(seq=len(out) + 1, t=0.004 * len(out), tp=1)  # the fields of streaming and multi-point replies
         if "payload" in sim:
             payload = str(sim["payload"]).format(**values)
             line = str(sim["reply"]).format(payload=payload, checksum=checksum_of(payload, profile.checksum or "xor"))
@@ -98,6 +104,24 @@ def ipp_round_trip(readings: int, average: int = 1, server_averaging: bool = Fal
     return statistics.median(walls) * 1e3
 
 
+def emscon_loopback(readings: int) -> tuple[float, float, float, float, float]:
+    """(set-up ms, median ms and 95th percentile ms per single reading, readings/s one per call, readings/s
+    ``readings`` in one call) against the simulated emScon server on loopback."""
+    with EmsconServer(noise=2e-5) as server:
+        tracker = open_tracker(f"emscon:{server.host}:{server.port}?meas_time=0.001")
+        started = time.perf_counter()
+        tracker.connect(3.0)
+        setup = time.perf_counter() - started
+        _timed_measurements(tracker, 20)
+        walls = sorted(_timed_measurements(tracker, readings))
+        started = time.perf_counter()
+        tracker.measure(readings, 60.0)
+        batch = readings / (time.perf_counter() - started)
+        tracker.close()
+    return (setup * 1e3, statistics.median(walls) * 1e3, walls[int(0.95 * (len(walls) - 1))] * 1e3,
+            len(walls) / sum(walls), batch)
+
+
 def _timed_measurements(tracker: Any, count: int) -> list[float]:
     """Wall time (s) of each of ``count`` single measurements."""
     walls = []
@@ -140,6 +164,14 @@ def main() -> int:
           f"{ipp_round_trip(args.readings // 4, args.average):6.3f}")
     print(f"  server average of {args.average:3d} points      "
           f"{ipp_round_trip(args.readings, args.average, server_averaging=True):6.3f}")
+    setup, median, p95, single, batch = emscon_loopback(args.readings * 3)
+    missed |= median >= 1.0
+    print("Leica emScon on loopback (target < 1 ms per reading)")
+    print(f"  set-up at connect (13 commands)    {setup:6.3f} ms")
+    print(f"  one stationary reading             {median:6.3f} ms median, {p95:6.3f} ms 95th percentile  "
+          f"{'ok' if median < 1.0 else 'MISSED'}")
+    print(f"  readings per second                {single:6.0f} one per call, {batch:6.0f} with "
+          f"{args.readings * 3} in one call")
     return 1 if missed else 0
 
 

@@ -54,6 +54,7 @@ ROBOT_BACKENDS: dict[str, str] = {
 TRACKER_BACKENDS: dict[str, str] = {
     "serial": "drivers.trackers.serial_tracker:open_tracker",
     "ipp": "drivers.trackers.ipp:open_tracker",
+    "emscon": "drivers.trackers.emscon:open_tracker",
     "aruco": "drivers.camera.tracker:open_tracker",
     "mock": "drivers.sim.tracker:open_tracker",
 }

@@ -15,6 +15,7 @@ Tracker specs::
     serial:PORT[?opts]        PORT: /dev/ttyUSB0, COM3, socket://host:port, rfc2217://host:port, ...
                               e.g. serial:/dev/ttyUSB0?baud=115200&protocol=NAME
     ipp://HOST[:PORT][?opts]  an I++ DME server (port as given; the backend picks its default, 1294)
+    emscon:HOST[:PORT][?opts] a Leica emScon server (laser tracker; the backend's default port: 700)
     aruco:SOURCE[?opts]       camera index, video/image path or glob; e.g. aruco:0?marker=7&size=0.05
     mock[?opts]               the simulated tracker (drivers/sim/)
 
@@ -42,10 +43,11 @@ from config.model_path import names_a_file
 from drivers.errors import SpecError
 
 ROBOT_BACKENDS = ("ur", "mock")
-TRACKER_BACKENDS = ("serial", "ipp", "aruco", "mock")
+TRACKER_BACKENDS = ("serial", "ipp", "emscon", "aruco", "mock")
 ROBOT_FORMS = "MODEL, MODEL@HOST[:PORT] or mock:MODEL (e.g. ur5e, ur5e@192.168.1.10, mock:ur5e, mock:my_arm.yaml; " \
               "MODEL: a bundled name or a path to a robot YAML file), each with optional ?key=value&..."
-TRACKER_FORMS = "serial:PORT[?opts], ipp://HOST[:PORT], aruco:SOURCE[?opts] or mock[?opts]"
+TRACKER_FORMS = ("serial:PORT[?opts], ipp://HOST[:PORT], emscon:HOST[:PORT][?opts], aruco:SOURCE[?opts] or "
+                 "mock[?opts]")
 
 #: Faults of the simulated robot: at move N (see drivers/sim/rig.py for what each does).
 ROBOT_FAULTS = ("protective_stop", "emergency_stop", "disconnect", "slow", "unsettled")
@@ -408,10 +410,10 @@ class TrackerSpec:
                 raise _fail("the mock tracker takes no target", text, TRACKER_FORMS)
             self.mock_settings(text)
         elif not self.target:
-            what = {"serial": "a port", "ipp": "a host", "aruco": "a camera source"}[self.backend]
+            what = {"serial": "a port", "ipp": "a host", "emscon": "a host", "aruco": "a camera source"}[self.backend]
             prefix = "ipp://" if self.backend == "ipp" else f"{self.backend}:"
             raise _fail(f"{what} is missing after {prefix!r}", text, TRACKER_FORMS)
-        elif self.backend == "ipp":
+        elif self.backend in ("ipp", "emscon"):
             _host_port(self.target, text, TRACKER_FORMS)
 
     def mock_settings(self, text: str | None = None) -> dict[str, Any]:
@@ -424,8 +426,8 @@ class TrackerSpec:
 
     @property
     def address(self) -> tuple[str, int | None]:
-        """(host, port or None) of an ``ipp`` spec."""
-        if self.backend != "ipp":
+        """(host, port or None) of an ``ipp`` or ``emscon`` spec."""
+        if self.backend not in ("ipp", "emscon"):
             raise ValueError(f"{self} has no network address")
         return _host_port(self.target, str(self), TRACKER_FORMS)
 

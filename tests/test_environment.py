@@ -20,6 +20,7 @@ REQUIRED = {
     "matplotlib": "matplotlib",
     "yourdfpy": "yourdfpy",
     "hypothesis": "hypothesis",
+    "CESAPI": "CESAPI",
 }
 
 

@@ -120,6 +120,11 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if args.json and not args.dry_run:
         raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")
     rehearsal = tracker_spec is None
+    if tracker_spec is not None and tracker_spec.backend == "emscon":  # durations with the tracker's own time
+        from drivers.trackers.emscon_options import parse_settings
+
+        meas_time = parse_settings(tracker_spec, site).meas_time
+        site = site.with_overrides(measure_time=max(meas_time, site.measure_time))
     if not args.dry_run and not rehearsal:
         from drivers.sim.pairing import check_pairing
 
@@ -166,6 +171,11 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     say(format_plan(plan, robot_model, duration, accuracy, "camera" if camera is not None else "tracker"))
     if camera is not None:
         say("\n".join(["", *camera.lines(plan)]))
+    if tracker_spec is not None and tracker_spec.backend == "emscon":  # what the tracker will be asked to do
+        from drivers.trackers.emscon_options import describe
+
+        stops = sum(step.kind != "stream" for step in plan.steps)
+        say("\n".join(["", *describe(tracker_spec, site, plan.samples_per_step, stops)]))
     say(format_clearance(clearance, plan, site))
     if tradeoff is not None:
         say(tradeoff)

@@ -19,6 +19,8 @@ examples:
   acquire --robot mock:ur5e --tracker mock            rehearsal with the simulated robot and tracker
   acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
   acquire --robot ur5e --tracker mock --dry-run       the plan, its duration and accuracy; nothing moves
+  acquire --robot ur5e@192.168.1.10 --tracker emscon:192.168.0.1 --config site.yaml
+                                                      a Leica laser tracker through its emScon server (port 700)
   acquire --robot ur5e --dry-run --target-accuracy 0.02mm --max-robot-time 2min
                                                       the quickest plan predicted to reach 0.02 mm
   acquire --robot ur5e@192.168.1.10 --tracker none    the plan's motion at 25 % speed, measuring nothing
@@ -47,8 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e; the model may be a robot YAML file: "
                    "mock:my_arm.yaml, my_arm.yaml@HOST (mock:ur5e; on --resume: the session's, whose address may "
                    "change)")
-    p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, aruco:..., mock, or none (motion "
-                   "rehearsal) (mock; on --resume: the session's, whose port or host may change)")
+    p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, emscon:HOST[:PORT]?... (a Leica "
+                   "laser tracker's emScon server, port 700; emscon:sim with a mock robot), aruco:..., mock, or none "
+                   "(motion rehearsal) (mock; on --resume: the session's, whose port or host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
     p.add_argument("--session", type=Path, help="session file to create (default sessions/<robot>-<time>.session)")
     p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this session where it stopped")
@@ -88,6 +91,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "continuous one (the stop-and-go sweeps need no clock: they anchor the streams' timing and can "
                         "check it; --steps sets their size); the dry run compares the three")
     p.add_argument("--trace-io", type=Path, metavar="FILE",
-                   help="log every byte to and from the tracker (serial and I++ trackers)")
+                   help="log every byte to and from the tracker (serial, I++ and emScon trackers)")
     p.add_argument("--version", action=VersionAction)
     return p

@@ -64,17 +64,18 @@ def confirm(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, questio
         raise UsageError("not confirmed; nothing moved")
 
 
-TRACED_BACKENDS = ("serial", "ipp")  # trackers whose byte stream --trace-io can log
+TRACED_BACKENDS = ("serial", "ipp", "emscon")  # trackers whose byte stream --trace-io can log
 
 
 def open_traced_tracker(tracker_spec: TrackerSpec, rig: SimulatedRig | None, site: SiteConfig,
                         trace_io: Path | None) -> Tracker:
-    """The tracker opened (not yet connected), logging its bytes to ``trace_io`` when given (serial and I++ only:
-    UsageError otherwise)."""
+    """The tracker opened (not yet connected), logging its bytes to ``trace_io`` when given (serial, I++ and emScon
+    only: UsageError otherwise)."""
     from drivers.registry import open_tracker
 
     if trace_io is not None and tracker_spec.backend not in TRACED_BACKENDS:
-        raise UsageError(f"--trace-io logs the bytes of serial and I++ trackers, not of {tracker_spec.backend!r}")
+        raise UsageError(f"--trace-io logs the bytes of serial, I++ and emScon trackers, not of "
+                         f"{tracker_spec.backend!r}")
     extra = {"trace_io": trace_io} if trace_io is not None else {}
     return open_tracker(tracker_spec, rig=rig, site=site, **extra)
 

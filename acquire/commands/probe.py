@@ -24,7 +24,8 @@ def probe(args: argparse.Namespace) -> int:
     site = site_from_args(args)
     tracker_spec = TrackerSpec.parse(args.tracker or "mock")
     rig = None
-    if tracker_spec.backend == "mock" or str(tracker_spec).startswith("aruco:sim"):  # a simulated tracker
+    simulated = tracker_spec.backend in ("aruco", "emscon") and tracker_spec.target == "sim"
+    if tracker_spec.backend == "mock" or simulated:  # a simulated tracker
         # looks at a simulated robot standing at home
         from drivers.sim.rig import SimulatedRig
 

@@ -14,10 +14,15 @@ def is_simulated_camera(spec: TrackerSpec) -> bool:
     return spec.backend == "aruco" and spec.target == "sim"
 
 
+def is_simulated_emscon(spec: TrackerSpec) -> bool:
+    """True for ``emscon:sim?...``: the emScon client against a simulated server on the rig (drivers/trackers/)."""
+    return spec.backend == "emscon" and spec.target == "sim"
+
+
 def check_pairing(robot: RobotSpec, tracker: TrackerSpec) -> None:
     """SpecError unless the two devices are both simulated or both real: a simulated tracker cannot see a real
     arm, nor a real tracker a simulated one (one simulated world, :class:`SimulatedRig`)."""
-    simulated = (robot.is_mock, tracker.is_mock or is_simulated_camera(tracker))
+    simulated = (robot.is_mock, tracker.is_mock or is_simulated_camera(tracker) or is_simulated_emscon(tracker))
     if simulated[0] != simulated[1]:
         raise unpaired(robot, tracker)
 
@@ -40,5 +45,5 @@ def points_settings(robot: RobotSpec, tracker: TrackerSpec | None, r: dict[str, 
 
 def unpaired(robot: RobotSpec, tracker: TrackerSpec | None) -> SpecError:
     """The error for a simulated device paired with a real one."""
-    return SpecError(f"a simulated rig needs mock devices on both sides (mock:MODEL with mock or aruco:sim), got "
-                     f"{str(robot)!r} and {str(tracker)!r}")
+    return SpecError(f"a simulated rig needs mock devices on both sides (mock:MODEL with mock, aruco:sim or "
+                     f"emscon:sim), got {str(robot)!r} and {str(tracker)!r}")

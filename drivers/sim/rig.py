@@ -69,7 +69,7 @@ from drivers.errors import (
 )
 from drivers.motion import joint_durations as _durations
 from drivers.motion import profile_fraction as _fraction
-from drivers.sim.pairing import check_pairing, is_simulated_camera, points_settings, unpaired
+from drivers.sim.pairing import check_pairing, is_simulated_camera, is_simulated_emscon, points_settings, unpaired
 from drivers.sim.stream_model import StreamedMove, StreamSettings
 from drivers.sim.world import backlash_play, joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
@@ -188,7 +188,9 @@ class SimulatedRig:
             check_pairing(robot, tracker)
         camera = tracker is not None and is_simulated_camera(tracker)
         r = robot.mock_settings()
-        t = tracker.mock_settings() if tracker is not None and not camera else TrackerSpec("mock").mock_settings()
+        served = tracker is not None and is_simulated_emscon(tracker)  # its simulated server takes its own options
+        t = (tracker.mock_settings() if tracker is not None and not camera and not served
+             else TrackerSpec("mock").mock_settings())
         world = points_settings(robot, tracker, r, t)
         view = None
         if camera:  # only the camera's pixels are simulated: the rig takes its faults, seed and placement

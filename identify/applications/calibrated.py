@@ -261,7 +261,7 @@ def predictor_from_document(doc: dict[str, Any], model: DHModel, tp_ids: list[in
         coupling = Coupling(np.array(doc["coupling"]["matrix"], dtype=float),
                             np.array(doc["coupling"].get("offset") or np.zeros(model.n_joints), dtype=float))
     ext = doc.get("extensions") or {}
-    terms = ext.get("terms") or []
+    terms = (ext.get("terms") or []) if doc.get("use") != "plain" else []  # a plain model recommended: no terms
     candidates: list[Candidate] = []
     for term in terms:
         family, joint = term["name"].rsplit("_", 1)

@@ -61,18 +61,6 @@ def _amount(value: float, kind: str) -> str:
     return f"{math.degrees(value):.3g} deg" if kind == "R" else f"{value * 1e3:.3g} mm"
 
 
-def domain_from_joints(q: Array) -> Array | None:
-    """The domain (n, 2) of DH joint values ``q`` (m, n): each joint's [min, max] over the rows that read it
-    (NaN for a joint no row reads); None without rows."""
-    q = np.asarray(q, dtype=float)
-    if q.ndim != 2 or not len(q):
-        return None
-    read = np.isfinite(q)
-    low = np.where(read.any(axis=0), np.nanmin(np.where(read, q, np.inf), axis=0), np.nan)
-    high = np.where(read.any(axis=0), np.nanmax(np.where(read, q, -np.inf), axis=0), np.nan)
-    return np.stack([low, high], axis=1)
-
-
 def domain_to_dict(domain: Array | None) -> dict[str, Any] | None:
     """The result YAML's ``domain`` section."""
     if domain is None:

@@ -15,7 +15,6 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.applications.domain import domain_from_joints
 from identify.estimator.adequacy import Adequacy
 from identify.estimator.cpa import DEFAULT_PARALLEL_TOL, GeometricResult
 from identify.estimator.estimate import best_start
@@ -33,6 +32,7 @@ from identify.results.stages import (
     checked_measurements,
     clock_fit,
     clock_tested,
+    fit_domain,
     fit_rows,
     fits_from_starts,
     held_out,
@@ -276,7 +276,7 @@ def identify(
         decisions=decisions,
         warnings=warnings,
         clock=clock,
-        domain=domain_from_joints(rows.meas.q[models[use].fit.inliers]),
+        domain=fit_domain(rows.meas.q[models[use].fit.inliers]),
     )
 
 

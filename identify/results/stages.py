@@ -85,6 +85,18 @@ class FitRows:
     declared: float | None
 
 
+def fit_domain(q: Array) -> Array | None:
+    """The domain (n, 2) of DH joint values ``q`` (m, n): each joint's [min, max] over the rows that read it
+    (NaN for a joint no row reads); None without rows."""
+    q = np.asarray(q, dtype=float)
+    if q.ndim != 2 or not len(q):
+        return None
+    read = np.isfinite(q)
+    domain = np.stack([np.where(read, q, np.inf).min(axis=0), np.where(read, q, -np.inf).max(axis=0)], axis=1)
+    domain[~read.any(axis=0)] = np.nan
+    return domain
+
+
 def checked_measurements(meas: Measurements, nominal: DHModel | None) -> tuple[Measurements, list[str]]:
     """``meas`` in DH joints (its coupling applied, sweeps relabelled by the joint they move), checked; and the
     warnings so far. Raises InputError (unusable data) or ValueError (``nominal``'s joints are not the data's)."""

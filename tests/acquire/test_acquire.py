@@ -78,7 +78,7 @@ def test_dry_run_connects_nothing_and_refuses_plans_outside_limits(tmp_path, mon
 
 
 @pytest.mark.parametrize(("robot", "tracker"), [("ur5e@127.0.0.9", "mock"), ("mock:ur5e", "serial:/dev/ttyUSB9"),
-                                               ("ur5e@127.0.0.9", "aruco:sim")])
+                                               ("ur5e@127.0.0.9", "aruco:sim"), ("ur5e@127.0.0.9", "emscon:sim")])
 def test_simulated_and_real_devices_are_refused_together_before_the_plan(tmp_path, capsys, robot, tracker):
     code, path = _run(tmp_path, "--yes", robot=robot, tracker=tracker)
     out, err = capsys.readouterr()

@@ -40,7 +40,7 @@ def test_probe_reports_each_failed_reading_in_one_line_and_exits_1(capsys):
 
 def test_trace_io_is_refused_for_trackers_without_a_byte_stream(capsys):
     assert main(["--tracker", "mock", "--probe", "--trace-io", "x.log"]) == 2
-    assert "serial and I++" in capsys.readouterr().err
+    assert "serial, I++ and emScon" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(("spec", "words"), [

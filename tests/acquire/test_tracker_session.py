@@ -1,7 +1,7 @@
 """A full acquisition with real tracker drivers: the orchestrator moves the simulated robot while the serial
-driver (over a pseudo-terminal) or the I++ client (over loopback TCP) measures a simulated device that answers
-from the same rig's true TP; the session file is identified end to end. A device reset (serial) or a server
-restart (I++) is injected mid-session, with other faults; no step may be lost or duplicated.
+driver (over a pseudo-terminal), the I++ client or the emScon client (over loopback TCP) measures a simulated device
+that answers from the same rig's true TP; the session file is identified end to end. A device reset (serial) or a
+server restart (I++, emScon) is injected mid-session, with other faults; no step may be lost or duplicated.
 
 The CLI keeps refusing a simulated robot with a real tracker (``SimulatedRig.from_spec``): a real tracker
 cannot see a simulated arm. Here the devices are assembled by hand, so the simulated device and robot share
@@ -31,6 +31,7 @@ from identify.estimator.bounds import prediction_covariances, prediction_rms_bou
 from identify.results.pipeline import identify
 from identify.simulators.simulate import random_poses
 from kinematics.dh import points_from_joints
+from tests.emscon_device import EmsconServer
 from tests.tracker_devices import AsciiDevice, IppServer
 
 MODEL = "ur5e"
@@ -118,4 +119,22 @@ def test_ipp_tracker_session_with_a_server_restart(rig: SimulatedRig, tmp_path: 
     assert not any(e[2] == "retry" for e in events)  # the error was cleared and retried inside the driver
     warned = [r.status for s in steps for r in s.readings if r.status != "ok"]
     assert len(warned) == 1 and "warning 1009" in warned[0]  # the warning is kept in the session file
+    _check_identified(rig, meas, ident)
+
+
+def test_emscon_tracker_session_with_faults(rig: SimulatedRig, tmp_path: Path) -> None:
+    with EmsconServer(rig, noise=NOISE, seed=1) as server:
+        tracker = open_tracker(f"emscon:{server.host}:{server.port}?timeout=0.3&meas_time=0.001")
+        faults = {10: lambda: server.inject("beam_broken", 3), 20: lambda: server.inject("drop"),
+                  30: lambda: server.inject("garbage"), 40: lambda: server.inject("silence"),
+                  50: lambda: server.inject("warming_up")}
+        plan, result, steps, meas, events, ident = _run(rig, tracker, tmp_path / "emscon.session", faults)
+        reconnects, connections = tracker.reconnects, server.connections
+    _check_complete(plan, result, steps)
+    assert reconnects == 3 and connections == 4  # drop, garbage and silence: each read again on a new link
+    retries = [e[3] for e in events if e[2] == "retry"]
+    assert len(retries) == 4  # the beam broken for 3 attempts of one step (the 4th measures), one warm-up refusal
+    assert len({r.partition(",")[0] for r in retries[:3]}) == 1  # "step N, attempt k: ...": one step
+    assert all("BeamLost" in r and "10004" in r and "\n" not in r for r in retries[:3])
+    assert "TrackerNotReady" in retries[3] and "10012" in retries[3]
     _check_identified(rig, meas, ident)

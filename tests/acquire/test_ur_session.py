@@ -1,6 +1,7 @@
 """A whole acquisition against the UR controller emulator with the real command (``acquire``), the real
 ur_rtde client (in the driver's worker process) and the real serial tracker driver: the emulator process also
-serves a simulated polled-xyz tracker over loopback TCP that measures the emulated arm's true TP. The session
+serves a simulated polled-xyz tracker over loopback TCP that measures the emulated arm's true TP (or a simulated
+Leica emScon server, for the emScon client). The session
 is identified end to end and compared with the emulator's true robot, which is also the factory calibration
 its controller reports."""
 
@@ -106,6 +107,35 @@ def test_acquire_against_the_emulator_identifies_its_true_robot(tmp_path, capsys
             assert abs(delta) < 5 * std[i][name] + 1e-6, f"{name}{joint}: {delta:.3g} vs std {std[i][name]:.3g}"
             checked += 1
     assert checked >= 12
+
+
+def test_acquire_with_a_leica_tracker_against_both_emulators(tmp_path, capsys) -> None:
+    """``acquire --robot ur5e@HOST --tracker emscon:HOST:PORT``: the emScon client against the simulated emScon
+    server measuring the emulated arm, with a broken beam, a server restart, garbage and silence on the tracker and
+    a network drop on the robot; no step lost, and the identification is as good as the noise allows."""
+    with _emulator("disconnect@9") as emu:
+        port = emu.serve_emscon(NOISE, 1, "beam_broken@12x2,drop@30,garbage@50,silence@70")
+        args = _args(emu, "unused", tmp_path)
+        args[args.index("--tracker") + 1] = f"emscon:127.0.0.1:{port}?meas_time=0.001&timeout=0.5"
+        code = acquire(args)
+        _, err = capsys.readouterr()
+        assert code == 0, err
+        truth, connections = emu.truth(), emu.emscon_connections()
+    assert connections == 4  # the first link, then one after the restart, the garbage and the silence
+    with Session.open(tmp_path / "ur.session") as session:
+        steps, plan = session.steps(), session.plan
+        retries = [e[3] for e in session.events() if e[2] == "retry"]
+        meas = session.to_measurements()
+        assert session.outcome() == "complete"
+        assert [s.plan_index for s in steps] == list(range(len(plan.steps)))  # every step, once
+        assert all(s.status == "ok" and s.samples + s.rejected == SAMPLES for s in steps)
+        assert "emScon" in session.header["tracker"]["details"]["protocol"]
+    assert len(retries) == 2 and all("BeamLost" in r for r in retries)
+    model = model_from_dict(yaml.safe_load((tmp_path / "ur.result.yaml").read_text()))
+    q_check = random_poses(load_robot("ur5e").limits, 200, np.random.default_rng(0))
+    err = points_from_joints(model, q_check) - points_from_joints(truth, q_check)
+    rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
+    assert rms < 3.0 * prediction_rms_bound(truth, meas.q[~meas.check], q_check, NOISE / np.sqrt(SAMPLES))
 
 
 def test_ctrl_c_mid_run_stops_the_arm_resume_completes_and_the_report_says_no_factory_calibration(

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from bench.timing_terms import TRUE_TERMS, run_draw
-from identify.results.verdict import holdout, holdout_resolution
+from identify.results.verdict import holdout, holdout_resolution, recommended
 
 
 @pytest.mark.parametrize("seed", [2026, 2029])
@@ -36,14 +36,18 @@ def test_a_term_that_a_later_one_explains_is_dropped():
 
 def test_the_holdout_check_says_when_its_poses_cannot_show_the_joint_errors():
     """5 check poses at 0.02 mm expected resolve an extra error of about 1.2x that; joint errors that move the
-    predictions there by less are not validated (warn), by more they are (pass)."""
+    predictions there by less are not validated, and not recommended (the plain model is); by more they are."""
     from scipy.stats import chi2
 
     expected = 2e-5
     resolution = holdout_resolution(expected, 5)
     assert resolution == pytest.approx(expected * (chi2.isf(1e-3, 15) / 15 - 1) ** 0.5, rel=1e-12)
-    thin = holdout(5, expected, expected, "extended", {"plain": (expected, expected)}, differ=0.3 * resolution)
-    assert thin.status == "warn" and "not validated" in thin.message
-    shown = holdout(5, expected, expected, "extended", {"plain": (expected, expected)}, differ=2 * resolution)
+    # joint errors the check poses cannot show are not recommended: the plain model is, and the check says why
+    use, why = recommended((1.5 * expected, expected), (expected, expected), 5, 0.3 * resolution)
+    assert use == "plain" and "not validated" in why
+    thin = holdout(5, 1.5 * expected, expected, "plain", {"extended": (expected, expected)}, 0.3 * resolution, why)
+    assert "not recommended" in thin.message and "not validated" in thin.message
+    assert recommended((1.5 * expected, expected), (expected, expected), 5, 2 * resolution) == ("extended", "")
+    shown = holdout(5, expected, expected, "extended", {"plain": (1.5 * expected, expected)}, differ=2 * resolution)
     assert shown.status == "pass" and "beyond" in shown.message
     assert holdout(5, expected, expected, "plain", differ=None).status == "pass"

@@ -40,6 +40,9 @@ TRACKERS = [
     ("serial:socket://192.168.0.7:4001?protocol=faro", "serial", "socket://192.168.0.7:4001", {"protocol": "faro"}),
     ("ipp://host:1294", "ipp", "host:1294", {}),
     ("ipp://10.1.2.3", "ipp", "10.1.2.3", {}),
+    ("emscon:192.168.0.1", "emscon", "192.168.0.1", {}),
+    ("emscon:at960.local:7000?reflector=2&meas_time=0.5", "emscon", "at960.local:7000",
+     {"reflector": "2", "meas_time": "0.5"}),
     ("aruco:0?marker=7&size=0.05&camera=cam.yaml", "aruco", "0", {"marker": "7", "size": "0.05", "camera": "cam.yaml"}),
     ("aruco:/data/run1/*.png?marker=3", "aruco", "/data/run1/*.png", {"marker": "3"}),
     ("aruco:video.mp4", "aruco", "video.mp4", {}),
@@ -56,7 +59,8 @@ BAD_ROBOTS = ["", "   ", "sim:ur5e", "mock:", "mock:ur5e@10.0.0.1", "ur5e@", "ur
               "mock:ur5e?fault=protective_stop@3x2", "mock:ur5e?fault=slow@0", "mock:ur5e?fault=target_lost@3",
               "mock:ur5e?fault=slow@", "a:b:ur5e"]
 BAD_TRACKERS = ["", "seriall:/dev/ttyUSB0", "serial", "serial:", "ipp:host", "ipp://", "ipp://host:99999",
-                "ipp://bad host", "aruco:", "mock:x", "mock?", "mock?nois=1", "mock?dropout=1", "mock?dropout=-0.1",
+                "ipp://bad host", "emscon:", "emscon", "emscon:host:0", "emscon://host", "aruco:", "mock:x", "mock?",
+                "mock?nois=1", "mock?dropout=1", "mock?dropout=-0.1",
                 "mock?noise=abc", "mock?latency=inf", "mock?seed=x", "mock?fault=protective_stop",
                 "mock?fault=target_lost@2x0", "camera:0", "serial:/dev/ttyUSB0?baud", "serial:/dev/tty USB0"]
 
@@ -123,7 +127,8 @@ def test_unknown_backend_messages() -> None:
     with pytest.raises(SpecError) as info:
         TrackerSpec.parse("seriall:/dev/ttyUSB0")
     assert str(info.value) == ("unknown tracker backend 'seriall' (did you mean 'serial'?) in 'seriall:/dev/ttyUSB0'; "
-                               "expected serial:PORT[?opts], ipp://HOST[:PORT], aruco:SOURCE[?opts] or mock[?opts]")
+                               "expected serial:PORT[?opts], ipp://HOST[:PORT], emscon:HOST[:PORT][?opts], "
+                               "aruco:SOURCE[?opts] or mock[?opts]")
     with pytest.raises(SpecError, match=r"^unknown robot backend 'sim' in 'sim:ur5e'; expected MODEL"):
         RobotSpec.parse("sim:ur5e")
 
@@ -187,7 +192,8 @@ def test_registry_rejects_unknown_backends() -> None:
         registry.open_robot("sim:ur5e")
     with pytest.raises(SpecError, match="unknown tracker backend 'seriall'"):
         registry.open_tracker("seriall:/dev/ttyUSB0")
-    with pytest.raises(BackendUnavailable, match="unknown tracker backend 'laser'; known: serial, ipp, aruco, mock"):
+    with pytest.raises(BackendUnavailable,
+                       match="unknown tracker backend 'laser'; known: serial, ipp, emscon, aruco, mock"):
         registry.load_factory("tracker", "laser")
 
 

@@ -115,6 +115,7 @@ class UREmulator(ControllerServers):
         self._running = False
         self._frozen: dict[str, Any] | None = None  # the state the stream repeats while frozen
         self._trackers: list[Any] = []
+        self._emscon: list[Any] = []  # simulated emScon servers (serve_emscon)
 
     # --- lifecycle ------------------------------------------------------------------------------------------
 
@@ -140,7 +141,7 @@ class UREmulator(ControllerServers):
     def close(self) -> None:
         self._running = False
         self.rig._stop_requested = True
-        for tracker in self._trackers:
+        for tracker in [*self._trackers, *self._emscon]:
             tracker.stop()
         for s in [*self._servers, *list(self._connections)]:
             with contextlib.suppress(OSError):
@@ -229,6 +230,20 @@ class UREmulator(ControllerServers):
                              stamp_on_send=True)
         self._trackers.append(device)
         return str(device.port)
+
+    def serve_emscon(self, noise: float = 2e-5, seed: int = 0, faults: str = "") -> int:
+        """Start a simulated Leica emScon server (drivers/trackers/emscon_sim.py, loopback TCP) measuring this
+        emulator's true TP (noise m per axis; its measurement time passes on the emulator's clock); ``faults``:
+        ``NAME[@N][xK],...`` as ``emscon:sim?fault=``. Returns its port (``emscon:127.0.0.1:PORT``)."""
+        from drivers.trackers.emscon_sim import EmsconSimServer, parse_faults
+
+        server = EmsconSimServer(self.rig, noise=noise, seed=seed, faults=parse_faults(faults) if faults else ())
+        self._emscon.append(server)
+        return int(server.port)
+
+    def emscon_connections(self) -> int:
+        """Connections the simulated emScon servers accepted so far (one per link the client opened)."""
+        return sum(server.connections for server in self._emscon)
 
     def last_motion(self) -> tuple[float, float] | None:
         """(start, duration) of the latest move on the emulator's clock (s since the epoch, s), or None."""

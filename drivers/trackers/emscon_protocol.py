@@ -1,0 +1,388 @@
+"""The Leica emScon TPI packet format (binary, over TCP): encoders and decoders, pure and byte-level.
+
+Written from the public interface definitions of the emScon TPI (``ES_C_API_Def.h``, TPI 3.6); nothing here does
+any I/O (the client: drivers/trackers/emscon.py). Every packet is little-endian with 4-byte packing and starts
+with an 8-byte header, ``lPacketSize`` (int32, the whole packet's length in bytes) and ``type``
+(:data:`ES_DT`, uint32):
+
+- a command (``type`` 0) from the client: header, ``command`` (uint32), then the command's parameters;
+- its answer (``type`` 0): header, ``command``, ``status`` (uint32, :data:`STATUS`; 0 all OK), then the answer's
+  data (:data:`REPLY_BODY`: their sizes are fixed, which is how a damaged stream is recognised);
+- a stationary result (``type`` 2, :class:`SingleResult`): header, ``status``, ``measMode``, ``bIsTryMode``, then
+  17 doubles: the three values, their standard deviations and the total, pointing errors, a-priori standard
+  deviations and total, temperature, pressure, humidity (in the units set with ``SetUnits``);
+- an error (``type`` 1): header, ``command``, ``status``; a status change (``type`` 8): header, a code
+  (:data:`STATUS_CHANGE`), sent by the server unprompted.
+
+Text fields (reflector names, the software version) are 32 UTF-16LE code units, zero-padded.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+from drivers.errors import BadReading
+
+HEADER = struct.Struct("<iI")  # lPacketSize, type
+MAX_PACKET = 4096  # bytes: far above the longest packet this client reads (GetTrackerInfo's answer, 164)
+
+#: ES_DataType
+DT_COMMAND, DT_ERROR, DT_SINGLE, DT_NIVEL, DT_REFLECTOR_POS, DT_STATUS_CHANGE, DT_SINGLE2 = 0, 1, 2, 6, 7, 8, 9
+
+#: ES_Command values the client and the emulator use
+C_GET_SYSTEM_STATUS, C_GET_TRACKER_STATUS, C_SET_UNITS, C_GET_UNITS, C_INITIALIZE = 1, 2, 5, 6, 7
+C_SET_ENVIRONMENT, C_GET_ENVIRONMENT = 20, 21
+C_SET_MEAS_MODE, C_GET_MEAS_MODE, C_SET_COORD_SYS, C_GET_COORD_SYS = 24, 25, 26, 27
+C_SET_STATIONARY, C_GET_STATIONARY = 28, 29
+C_SET_REFLECTOR, C_GET_REFLECTOR, C_GET_REFLECTORS = 40, 41, 42
+C_SET_SYSTEM_SETTINGS, C_GET_SYSTEM_SETTINGS = 47, 48
+C_START_MEASUREMENT, C_STOP_MEASUREMENT = 49, 52
+C_GET_SOFTWARE_VERSION = 142
+COMMAND_NAMES = {
+    C_GET_SYSTEM_STATUS: "GetSystemStatus", C_GET_TRACKER_STATUS: "GetTrackerStatus", C_SET_UNITS: "SetUnits",
+    C_GET_UNITS: "GetUnits", C_INITIALIZE: "Initialize", C_SET_ENVIRONMENT: "SetEnvironmentParams",
+    C_GET_ENVIRONMENT: "GetEnvironmentParams", C_SET_MEAS_MODE: "SetMeasurementMode",
+    C_GET_MEAS_MODE: "GetMeasurementMode", C_SET_COORD_SYS: "SetCoordinateSystemType",
+    C_GET_COORD_SYS: "GetCoordinateSystemType", C_SET_STATIONARY: "SetStationaryModeParams",
+    C_GET_STATIONARY: "GetStationaryModeParams", C_SET_REFLECTOR: "SetReflector", C_GET_REFLECTOR: "GetReflector",
+    C_GET_REFLECTORS: "GetReflectors", C_SET_SYSTEM_SETTINGS: "SetSystemSettings",
+    C_GET_SYSTEM_SETTINGS: "GetSystemSettings", C_START_MEASUREMENT: "StartMeasurement",
+    C_STOP_MEASUREMENT: "StopMeasurement", C_GET_SOFTWARE_VERSION: "GetSystemSoftwareVersion",
+}
+
+#: ES_LengthUnit meter, ES_AngleUnit radian, ES_TemperatureUnit Celsius, ES_PressureUnit mbar, ES_HumidityUnit %RH
+UNITS_SI = (0, 0, 0, 0, 0)
+CS_RHR = 0  # ES_CoordinateSystemType: right-handed rectangular (X, Y, Z)
+MM_STATIONARY = 0  # ES_MeasMode
+TPS_INITIALIZED = 5  # ES_TrackerProcessorStatus
+TRACKER_READY = 2  # ES_TrackerStatus: 0 not ready, 1 busy, 2 ready
+TARGET_TYPES = {0: "unknown", 1: "corner cube", 2: "cat's eye", 3: "glass prism", 4: "RFI prism", 5: "RRR 1.5in",
+                6: "RRR 0.5in", 7: "BRR 1.5in", 8: "BRR 0.5in", 9: "TBR 0.5in"}
+
+#: ES_ResultStatus values this client names (others are shown by number)
+STATUS = {
+    0: "all OK", 1: "server busy", 2: "not implemented", 3: "wrong parameter", 23: "wrong current reflector",
+    26: "no tracker processor found", 36: "unknown error", 38: "no tracker connected", 39: "tracker not initialized",
+    41: "module timed out", 57: "meteo data out of range", 10004: "measurement status not ready",
+    10005: "ADM start-up busy", 10009: "no stationary result", 10010: "sensor not levelled",
+    10012: "sensor not warmed up", 10013: "sensor not stable", 10014: "system not ready for measurement",
+    10015: "communication with sensor failed",
+}
+#: statuses that mean the beam does not reach the reflector (broken beam, reflector lost): TargetLost
+BEAM_STATUSES = frozenset({10004, 10009})
+#: statuses that mean the tracker cannot measure yet (warming up, not initialised, unstable): retry later
+NOT_READY_STATUSES = frozenset({1, 39, 10005, 10010, 10012, 10013, 10014})
+
+#: ES_SystemStatusChange codes this client names
+STATUS_CHANGE = {
+    0: "distance set", 1: "laser warmed up", 2: "environment parameters changed", 6: "units changed",
+    7: "reflector changed", 8: "system settings changed", 12: "coordinate system type changed",
+    17: "measurement mode changed", 18: "stationary mode parameters changed", 25: "measurement status not ready",
+    26: "measurement status busy", 27: "measurement status ready", 146: "laser not stabilized",
+    851: "sensor disconnected", 997: "tracker processor connection closing", 998: "server closing",
+    999: "server started",
+}
+SSC_NOT_READY, SSC_BUSY, SSC_READY = 25, 26, 27
+
+_SINGLE = struct.Struct("<IIi17d")  # status, measMode, bIsTryMode, 17 doubles
+_SINGLE2 = struct.Struct("<IIi23d")
+_VERSION = struct.Struct("<iii")
+_UNITS = struct.Struct("<5I")
+_ENVIRONMENT = struct.Struct("<3d")
+_SETTINGS = struct.Struct("<I8i")
+_REFLECTOR = struct.Struct("<iiId64s")
+_SYSTEM_STATUS = struct.Struct("<4I3iIii")
+#: command -> size in bytes of its answer's data (after command and status)
+REPLY_BODY = {
+    C_GET_SYSTEM_STATUS: _SYSTEM_STATUS.size, C_GET_TRACKER_STATUS: 4, C_GET_UNITS: _UNITS.size,
+    C_GET_ENVIRONMENT: _ENVIRONMENT.size, C_GET_MEAS_MODE: 4, C_GET_COORD_SYS: 4, C_GET_STATIONARY: 8,
+    C_GET_REFLECTOR: 4, C_GET_REFLECTORS: _REFLECTOR.size, C_GET_SYSTEM_SETTINGS: _SETTINGS.size,
+    C_GET_SOFTWARE_VERSION: 64,
+}
+
+
+def status_text(status: int) -> str:
+    """``status 10004 (measurement status not ready)``: an ES_ResultStatus for messages."""
+    name = STATUS.get(status)
+    return f"status {status}" + (f" ({name})" if name else "")
+
+
+def command_name(command: int) -> str:
+    return COMMAND_NAMES.get(command, f"command {command}")
+
+
+# --- packets ------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Reply:
+    """The answer to a command: ``command``, ``status`` (0: all OK) and its data ``body`` (bytes)."""
+
+    command: int
+    status: int
+    body: bytes = b""
+
+
+@dataclass(frozen=True)
+class ErrorPacket:
+    """An ``ES_DT_Error`` packet: ``command`` failed with ``status``."""
+
+    command: int
+    status: int
+
+
+@dataclass(frozen=True)
+class StatusChange:
+    """An unsolicited ``ES_DT_SystemStatusChange``: ``code`` (:data:`STATUS_CHANGE`)."""
+
+    code: int
+
+    def __str__(self) -> str:
+        return STATUS_CHANGE.get(self.code, f"status change {self.code}")
+
+
+@dataclass(frozen=True)
+class SingleResult:
+    """A stationary measurement (``ES_DT_SingleMeasResult``, or ``...2`` without pointing errors): ``values``
+    (3,) in the units and coordinate system set, ``std`` (3,) their standard deviations, ``std_total``,
+    ``temperature``, ``pressure``, ``humidity`` the environment it was corrected with; ``status`` 0 all OK."""
+
+    status: int
+    mode: int
+    try_mode: bool
+    values: tuple[float, float, float]
+    std: tuple[float, float, float]
+    std_total: float
+    temperature: float
+    pressure: float
+    humidity: float
+
+
+@dataclass(frozen=True)
+class OtherPacket:
+    """A packet this client does not use (nivel or reflector position results): its ``type`` and bytes."""
+
+    type: int
+    data: bytes
+
+
+Packet = Reply | ErrorPacket | StatusChange | SingleResult | OtherPacket
+
+
+def frame(buffer: bytes) -> tuple[list[bytes], bytes]:
+    """Split a received byte stream into whole packets and the rest (an incomplete packet). BadReading when a
+    header's size cannot be a packet's (below 12 or above :data:`MAX_PACKET` bytes): the stream is out of step."""
+    packets = []
+    while len(buffer) >= HEADER.size:
+        size, kind = HEADER.unpack_from(buffer)
+        if not 12 <= size <= MAX_PACKET:
+            raise BadReading(f"a packet header gives {size} bytes (type {kind}): not an emScon packet, the stream "
+                             f"is out of step (first bytes {buffer[:16].hex(' ')})")
+        if len(buffer) < size:
+            break
+        packets.append(bytes(buffer[:size]))
+        buffer = buffer[size:]
+    return packets, bytes(buffer)
+
+
+def decode(packet: bytes) -> Packet:
+    """One whole packet (from :func:`frame`) -> its dataclass; BadReading when its size does not fit its type
+    (a command's answer of a known command must have exactly its data: :data:`REPLY_BODY`)."""
+    size, kind = HEADER.unpack_from(packet)
+    body = packet[HEADER.size:]
+    if size != len(packet):
+        raise BadReading(f"packet of {len(packet)} bytes says it has {size}")
+    if kind == DT_COMMAND:
+        if len(body) < 8:
+            raise BadReading(f"a command answer of {size} bytes is too short (at least 16)")
+        command, status = struct.unpack_from("<II", body)
+        data = body[8:]
+        expected = REPLY_BODY.get(command, 0) if status == 0 else None
+        if command in COMMAND_NAMES and expected is not None and len(data) != expected:
+            raise BadReading(f"the answer to {command_name(command)} has {len(data)} data bytes, not {expected}")
+        return Reply(command, status, data)
+    if kind == DT_ERROR:
+        if len(body) != 8:
+            raise BadReading(f"an error packet of {size} bytes (16 expected)")
+        return ErrorPacket(*struct.unpack("<II", body))
+    if kind == DT_STATUS_CHANGE:
+        if len(body) != 4:
+            raise BadReading(f"a status change packet of {size} bytes (12 expected)")
+        return StatusChange(struct.unpack("<I", body)[0])
+    if kind in (DT_SINGLE, DT_SINGLE2):
+        layout = _SINGLE if kind == DT_SINGLE else _SINGLE2
+        if len(body) != layout.size:
+            raise BadReading(f"a measurement result of {size} bytes ({HEADER.size + layout.size} expected)")
+        status, mode, try_mode, *d = layout.unpack(body)
+        std_total = d[6]
+        return SingleResult(status, mode, bool(try_mode), (d[0], d[1], d[2]), (d[3], d[4], d[5]), std_total,
+                            d[-3], d[-2], d[-1])
+    if kind in (DT_NIVEL, DT_REFLECTOR_POS):
+        return OtherPacket(kind, packet)
+    raise BadReading(f"a packet of unknown type {kind} ({size} bytes)")
+
+
+# --- what the client sends ----------------------------------------------------------------------------------
+
+
+def command(code: int, payload: bytes = b"") -> bytes:
+    """A command packet: header, ``code``, ``payload`` (the command's parameters, already packed)."""
+    return HEADER.pack(HEADER.size + 4 + len(payload), DT_COMMAND) + struct.pack("<I", code) + payload
+
+
+def set_units(length: int = 0, angle: int = 0, temperature: int = 0, pressure: int = 0, humidity: int = 0) -> bytes:
+    """SetUnits (default: metre, radian, degree Celsius, mbar, %RH: :data:`UNITS_SI`)."""
+    return command(C_SET_UNITS, _UNITS.pack(length, angle, temperature, pressure, humidity))
+
+
+def set_coordinate_system(kind: int = CS_RHR) -> bytes:
+    return command(C_SET_COORD_SYS, struct.pack("<I", kind))
+
+
+def set_measurement_mode(mode: int = MM_STATIONARY) -> bytes:
+    return command(C_SET_MEAS_MODE, struct.pack("<I", mode))
+
+
+def set_stationary_params(meas_time_ms: int, use_adm: bool = False) -> bytes:
+    """SetStationaryModeParams: the measurement's duration (ms) and whether the ADM alone measures."""
+    return command(C_SET_STATIONARY, struct.pack("<ii", int(meas_time_ms), int(use_adm)))
+
+
+def set_environment(temperature: float, pressure: float, humidity: float) -> bytes:
+    """SetEnvironmentParams in the units set (°C, mbar, %RH with :data:`UNITS_SI`)."""
+    return command(C_SET_ENVIRONMENT, _ENVIRONMENT.pack(temperature, pressure, humidity))
+
+
+def set_reflector(reflector_id: int) -> bytes:
+    return command(C_SET_REFLECTOR, struct.pack("<i", reflector_id))
+
+
+def set_system_settings(settings: tuple[int, ...]) -> bytes:
+    """SetSystemSettings from the nine fields of :func:`system_settings`."""
+    return command(C_SET_SYSTEM_SETTINGS, _SETTINGS.pack(*settings))
+
+
+# --- answers' data --------------------------------------------------------------------------------------------
+
+
+def _text(raw: bytes) -> str:
+    return raw.decode("utf-16-le", "replace").split("\x00", 1)[0].strip()
+
+
+def units(body: bytes) -> tuple[int, int, int, int, int]:
+    """GetUnits: (length, angle, temperature, pressure, humidity) unit codes."""
+    return _UNITS.unpack(body)  # type: ignore[return-value]
+
+
+def one_int(body: bytes) -> int:
+    """The single 32-bit value of GetCoordinateSystemType, GetMeasurementMode, GetReflector, GetTrackerStatus."""
+    return int(struct.unpack("<i", body)[0])
+
+
+def environment(body: bytes) -> tuple[float, float, float]:
+    """GetEnvironmentParams: (temperature, pressure, humidity) in the units set."""
+    return _ENVIRONMENT.unpack(body)  # type: ignore[return-value]
+
+
+def stationary_params(body: bytes) -> tuple[int, bool]:
+    """GetStationaryModeParams: (measurement time ms, ADM only)."""
+    time_ms, adm = struct.unpack("<ii", body)
+    return int(time_ms), bool(adm)
+
+
+def system_settings(body: bytes) -> tuple[int, ...]:
+    """GetSystemSettings: weather monitor status, apply transformation, apply station orientation, keep last
+    position, send unsolicited messages, send reflector position data, try mode, has nivel, has video camera."""
+    return _SETTINGS.unpack(body)
+
+
+@dataclass(frozen=True)
+class ReflectorEntry:
+    """One answer of GetReflectors (one per reflector the server knows)."""
+
+    total: int
+    id: int
+    target_type: int
+    surface_offset: float
+    name: str
+
+
+def reflector_entry(body: bytes) -> ReflectorEntry:
+    total, rid, kind, offset, name = _REFLECTOR.unpack(body)
+    return ReflectorEntry(total, rid, kind, offset, _text(name))
+
+
+@dataclass(frozen=True)
+class SystemStatus:
+    """GetSystemStatus: last result status, tracker processor, laser and ADM status, server version, weather
+    monitor status, flags, tracker serial number."""
+
+    last_status: int
+    processor: int
+    laser: int
+    adm: int
+    version: tuple[int, int, int]
+    weather_monitor: int
+    flags: int
+    serial: int
+
+
+def system_status(body: bytes) -> SystemStatus:
+    v = _SYSTEM_STATUS.unpack(body)
+    return SystemStatus(v[0], v[1], v[2], v[3], (v[4], v[5], v[6]), v[7], v[8], v[9])
+
+
+def software_version(body: bytes) -> str:
+    return _text(body)
+
+
+# --- what a server sends (the emulator in tests/, and this module's tests) ------------------------------------
+
+
+def reply(code: int, status: int = 0, body: bytes = b"") -> bytes:
+    """The answer packet to command ``code``."""
+    return HEADER.pack(HEADER.size + 8 + len(body), DT_COMMAND) + struct.pack("<II", code, status) + body
+
+
+def error_packet(code: int, status: int) -> bytes:
+    return HEADER.pack(16, DT_ERROR) + struct.pack("<II", code, status)
+
+
+def status_change(code: int) -> bytes:
+    return HEADER.pack(12, DT_STATUS_CHANGE) + struct.pack("<I", code)
+
+
+def single_result(values: tuple[float, float, float], std: tuple[float, float, float], environment_: tuple[float,
+                  float, float], status: int = 0, mode: int = MM_STATIONARY) -> bytes:
+    """An ``ES_DT_SingleMeasResult`` (pointing errors and a-priori deviations zero; totals from ``std``)."""
+    total = float(sum(s * s for s in std) ** 0.5)
+    doubles = (*values, *std, total, 0.0, 0.0, 0.0, *std, total, *environment_)
+    return HEADER.pack(HEADER.size + _SINGLE.size, DT_SINGLE) + _SINGLE.pack(status, mode, 0, *doubles)
+
+
+def text_field(text: str) -> bytes:
+    """32 UTF-16LE code units, zero-padded (names and versions)."""
+    raw = text.encode("utf-16-le")[:64]
+    return raw + b"\x00" * (64 - len(raw))
+
+
+def units_body(codes: tuple[int, ...]) -> bytes:
+    return _UNITS.pack(*codes)
+
+
+def environment_body(values: tuple[float, float, float]) -> bytes:
+    return _ENVIRONMENT.pack(*values)
+
+
+def settings_body(settings: tuple[int, ...]) -> bytes:
+    return _SETTINGS.pack(*settings)
+
+
+def reflector_body(total: int, rid: int, target_type: int, offset: float, name: str) -> bytes:
+    return _REFLECTOR.pack(total, rid, target_type, offset, text_field(name))
+
+
+def system_status_body(status: SystemStatus) -> bytes:
+    return _SYSTEM_STATUS.pack(status.last_status, status.processor, status.laser, status.adm, *status.version,
+                               status.weather_monitor, status.flags, status.serial)
