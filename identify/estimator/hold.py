@@ -142,11 +142,8 @@ def line_metric(problem: LineProblem, rng_seed: int = 0) -> Array:
     (home ± pi for revolute joints, ± 0.1 m for prismatic ones, seeded): what the data must determine for a model
     used anywhere, not only the measured point at the measured poses."""
     lines = problem.start
-    last = lines.directions[-1]
-    across = np.array(perpendicular_basis(last))
-    probes = (lines.tps[:, None, :] + PROBE * np.vstack([last, across])[None]).reshape(-1, 3)
-    probe = replace(lines, extra_tps=np.vstack([lines.extra_tps, probes]))
-    q = _spanning_poses(lines, rng_seed)
+    probe = replace(lines, extra_tps=np.vstack([lines.extra_tps, probe_points(lines)]))
+    q = spanning_poses(lines, rng_seed)
     count = len(probe.tps)
     q_all = np.repeat(q, count, axis=0)
     tp_index = np.tile(np.arange(count), len(q))
@@ -177,7 +174,15 @@ def table_metric(model: DHModel, free: NDArray[np.bool_], rng_seed: int = 0) -> 
     return flat.T @ flat / (len(flat) / 3)
 
 
-def _spanning_poses(lines: AxisLines, seed: int) -> Array:
+def probe_points(lines: AxisLines) -> Array:
+    """Points (3k, 3) :data:`PROBE` beside each tracked point at home, along the last axis and two directions
+    across it: where a tool or a second reflector would be, moving with the last link."""
+    last = lines.directions[-1]
+    across = np.array(perpendicular_basis(last))
+    return (lines.tps[:, None, :] + PROBE * np.vstack([last, across])[None]).reshape(-1, 3)
+
+
+def spanning_poses(lines: AxisLines, seed: int = 0) -> Array:
     """:data:`PROBE_POSES` joint values (k, n) about ``lines.home``: ± pi (revolute), ± 0.1 m (prismatic)."""
     half = np.array([np.pi if t == "R" else 0.1 for t in lines.joint_types])
     rng = np.random.default_rng(seed)

@@ -181,7 +181,7 @@ class Refinement:
         return out
 
 
-class TableProblem:
+class _Problem:
     """Residuals and Jacobian over the free parameters, weighted by 1/sigma when given. With several tracked
     points (``tp_index`` (m,), 0-based), the parameters end with the other points' tools (3 each, frame n):
     ``tools`` (k, 3) holds every point's, the first being the model's."""
@@ -239,7 +239,7 @@ class TableProblem:
         return out.reshape(-1, out.shape[2])
 
 
-def _solve(problem: TableProblem, x0: Array, loss: str, scale: float) -> Array:
+def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
     """Least-squares solve; the robust (outlier-finding) pass needs less precision than the final one."""
     linear = loss == "linear"
     method = "lm" if linear and len(problem.points) * 3 >= len(x0) else "trf"
@@ -295,7 +295,7 @@ def fit_table(
     notes: list[str] = []
     # values the data cannot determine take their conventional ones; the fit absorbs the change
     model, moved = _with_conventions(start, free, conventional)
-    problem = TableProblem(model, q, points, weights, free, tp_index, tools)
+    problem = _Problem(model, q, points, weights, free, tp_index, tools)
     x = _solve(problem, problem.x0, "linear", 1.0)
     inliers = np.ones(len(q), dtype=bool)
     if robust:
@@ -305,7 +305,7 @@ def fit_table(
         x = _solve(problem, x, "soft_l1", scale)
         inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
         model, tools = problem.model(x), problem.tools(x)
-        problem = TableProblem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
+        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
         x = _solve(problem, problem.x0, "linear", 1.0)
     model, tools = problem.model(x), problem.tools(x)
     if len(tools) > 1 and max_offset > 0:
@@ -349,7 +349,7 @@ def refine(
     weights = np.ones(len(q)) if sigma is None else 1.0 / np.asarray(sigma, dtype=float)
     table = fit_table(start, q, points, sigma, conventional, parallel, noise_guess, robust, max_offset, tp_index, tools)
     model, free, tools, inliers, notes = table.model, table.free, table.tools, table.inliers, table.notes
-    problem = TableProblem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
+    problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
     x = problem.x0
     jac = problem.jacobian(x)
     res_w = problem.residuals(x)
@@ -362,7 +362,7 @@ def refine(
     covariance = (cov * (scale2 if sigma is None else 1.0))[:n_free, :n_free]
     col_norm = np.linalg.norm(jac, axis=0)
     s_scaled = np.linalg.svd(jac / col_norm, compute_uv=False)
-    everyone = TableProblem(model, q, points, np.ones(len(q)), free, tp_index, tools)
+    everyone = _Problem(model, q, points, np.ones(len(q)), free, tp_index, tools)
     residuals = -everyone.residuals(x).reshape(-1, 3)
     noise = float(np.sqrt(np.sum((residuals[inliers]) ** 2) / dof))
     if sigma is not None:
@@ -429,7 +429,7 @@ def _release_parallel(
     exact DH is used, unless a ``d`` would move more than ``max_offset`` from its conventional value:
     then the convention is kept and the returned note says what it costs.
     """
-    exact = TableProblem(model, q, points, weights, free_exact)
+    exact = _Problem(model, q, points, weights, free_exact)
     x0 = exact.x0
     residuals = exact.residuals(x0)
     cost_c = float(residuals @ residuals)

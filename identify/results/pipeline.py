@@ -245,9 +245,11 @@ def identify(
     empty = TermSet((), np.zeros(meas.n_joints), torques)
     size = robot_size(best.lines, rows.meas.points)  # before joint errors
     cap = size if max_offset is None else max_offset
-    inl = best.inliers  # what the data do not determine is held at the nominal placed on them
-    reference = None if nominal is None else nominal_lines(nominal, best.q[inl], rows.data.points[inl],
-                                                           rows.data.tp_index[inl], best.lines.home)
+    # what the data do not determine is held at the nominal placed on them; not yet for arms whose first joint is
+    # prismatic, whose size (from its axis, which has no position) is not the arm's
+    inl = best.inliers
+    reference = None if nominal is None or meas.joint_types[0] != "R" else nominal_lines(
+        nominal, best.q[inl], rows.data.points[inl], rows.data.tp_index[inl], best.lines.home)
     write = partial(written_model, tp_ids=tuple(meas.tp_ids), conventional=conventional, nominal=nominal,
                     parallel_tol=parallel_tol, max_offset=cap, unit=rows.unit, declared=rows.declared,
                     sigma=rows.meas.sigma, reference=reference, size=size)

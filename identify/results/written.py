@@ -10,28 +10,34 @@ measured (the ``dh_table`` check). Frames: tracker; units: m, rad.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 
 from identify.estimator.adequacy import Adequacy
 from identify.estimator.estimate import FitData, LinesFit
 from identify.estimator.extensions import TermSet
-from identify.estimator.hold import Hold, held_fit, increments, line_metric, line_names, table_metric, undetermined
+from identify.estimator.hold import (
+    Hold,
+    held_fit,
+    increments,
+    line_metric,
+    line_names,
+    probe_points,
+    spanning_poses,
+    table_metric,
+    undetermined,
+)
 from identify.estimator.identifiability import LEVEL
 from identify.estimator.linalg import project_out, scaled_inverse
 from identify.estimator.poe import AxisLines, LineProblem, points_from_lines
 from identify.estimator.refine import (
     Refinement,
     TableFit,
-    TableProblem,
     fit_table,
     full_jacobian,
     parameter_names,
-    vector_from_model,
 )
 from identify.results import verdict as checks
 from identify.results.dh_output import DHOutput, dh_output, near_parallel
@@ -178,10 +184,11 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     q_fit, weights = fit.q[inl], data.weights[inl]
     rows = _FitRows(q_fit, data.points[inl], None if sigma is None else sigma[inl], weights, tp_index, res_w,
                     variance)
-    out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise)
+    to_model = held is not None and len(held) > 0
+    out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise, to_model)
     if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
         # the data resolve the misalignment: exact DH wherever it stays within max_offset
-        out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise)
+        out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise, to_model)
     first = tp_index == 0
     if dh_fit is None:  # exact DH: the lines' covariance carried over
         model = out.model
@@ -190,9 +197,8 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
         model, free = dh_fit.model, dh_fit.free
         cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first]) * variance
-        if held is not None and len(held):  # the refit keeps what the lines held: at their DH conversion
-            model, tools, cov_free = _held_table(model, free, tools, cov_free, out.model, rows, size, bias,
-                                                 data.unknown[inl][first])
+        if held is not None and len(held):
+            cov_free = _held_covariance(model, free, cov_free, size, bias)
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     n = model.n_joints
@@ -214,39 +220,12 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
                         held if held is not None and len(held) else None)
 
 
-def _held_table(model: DHModel, free: NDArray[np.bool_], tools: Array, covariance: Array, reference: DHModel,
-                rows: _FitRows, size: float, bias: float, unknown: NDArray[np.int64]) -> tuple[DHModel, Array, Array]:
-    """A DH table refitted to the data under the parallel-axis convention (its ``free`` parameters' ``covariance``,
-    every tracked point's ``tools``), refitted again with the directions the data do not determine brought to
-    ``reference`` (the held lines written as DH), as :mod:`identify.estimator.hold` does for the lines: the
-    maximum a posteriori table, its tools and its covariance. ``rows``: the fitted rows; ``bias``: the model
-    error's reach in sigma; ``unknown``: the first tracked point's rows' unread joints."""
+def _held_covariance(model: DHModel, free: NDArray[np.bool_], covariance: Array, size: float, bias: float) -> Array:
+    """The ``covariance`` of a DH table's ``free`` parameters, fitted to the data under the parallel-axis
+    convention, after the directions the data do not determine were held at the nominal (to its tolerance), as
+    :mod:`identify.estimator.hold` does for the lines; ``bias``: the model error's reach in sigma."""
     names = [n for n, f in zip(parameter_names(model.n_joints), free, strict=True) if f]
-    hold = undetermined(covariance, table_metric(model, free), size, names, bias)
-    if not len(hold):
-        return model, tools, covariance
-    offset = vector_from_model(reference) - vector_from_model(model)
-    offset[:3] = Rotation.from_matrix(reference.base[:3, :3] @ model.base[:3, :3].T).as_rotvec()
-    for angles in (slice(9, None, 4), slice(12, None, 4)):  # theta, alpha
-        offset[angles] = np.angle(np.exp(1j * offset[angles]))
-    problem = TableProblem(model, rows.q, rows.points, rows.weights, free, rows.tp_index, tools)
-    extra = len(problem.x0) - int(free.sum())
-    directions = np.hstack([hold.directions, np.zeros((len(hold), extra))])
-    target = directions @ (problem.x0 + np.concatenate([offset[free], np.zeros(extra)]))
-    scale = float(np.sqrt(rows.variance))
-
-    def residuals(x: Array) -> Array:
-        return np.concatenate([problem.residuals(x) / scale, (directions @ x - target) / hold.tolerance])
-
-    def jacobian(x: Array) -> Array:
-        return np.vstack([problem.jacobian(x) / scale, directions / hold.tolerance])
-
-    x = least_squares(residuals, problem.x0, jac=jacobian, method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10).x
-    model, tools = problem.model(x), problem.tools(x)
-    first = rows.tp_index == 0
-    covariance = dh_covariance(model, free, rows.q[first], rows.weights[first], unknown) * rows.variance
-    again = undetermined(covariance, table_metric(model, free), size, names, bias, len(hold))
-    return model, tools, again.update(covariance)
+    return undetermined(covariance, table_metric(model, free), size, names, bias).update(covariance)
 
 
 @dataclass(frozen=True)
@@ -265,17 +244,39 @@ class _FitRows:
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
-                rows: _FitRows, noise: float) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float]]:
+                rows: _FitRows, noise: float, to_model: bool = False
+                ) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float]]:
     """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH table
     refitted under that convention on every tracked point's rows (so the cost it adds is a likelihood ratio,
-    chi-square when the axes are parallel); the tools (k, 3) and that cost with the RMS gap to the lines."""
+    chi-square when the axes are parallel); the tools (k, 3) and that cost with the RMS gap to the lines. With
+    ``to_model`` (lines where undetermined directions were held at the nominal), the table is refitted to the
+    lines' own predictions over the joint space instead, points beside the tracked ones included, so it keeps
+    what the lines held where the data say nothing."""
     out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
     tools = _tools(out.model, lines)
     if not capped:
         return out, None, tools, _dh_gap(out.model, tools, lines, rows)
-    dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False, 0.0,
-                       rows.tp_index, tools)
+    if to_model:
+        q, points, tp_index, probe_tools = _model_rows(lines, out.model)
+        dh_fit = fit_table(out.model, q, points, None, conventional, sorted(capped), noise, False, 0.0, tp_index,
+                           probe_tools)
+        dh_fit = replace(dh_fit, tools=dh_fit.tools[: len(lines.tps)])
+    else:
+        dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False,
+                           0.0, rows.tp_index, tools)
     return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows)
+
+
+def _model_rows(lines: AxisLines, model: DHModel) -> tuple[Array, Array, NDArray[np.int64], Array]:
+    """Rows that describe ``lines`` over the joint space: joint values spanning it, the points the lines predict
+    there for every tracked point and for points beside the first (:func:`identify.estimator.hold.probe_points`),
+    their indices, and those points' tools in the last frame of ``model`` (whose axes are the lines' at home)."""
+    probes = probe_points(lines)
+    probe_lines = replace(lines, extra_tps=np.vstack([lines.extra_tps, probes]))
+    count = len(probe_lines.tps)
+    q = np.repeat(spanning_poses(lines), count, axis=0)
+    tp_index = np.tile(np.arange(count), len(q) // count)
+    return q, points_from_lines(probe_lines, q, tp_index), tp_index, _tools(model, probe_lines)
 
 
 def _dh_gap(model: DHModel, tools: Array, lines: AxisLines, rows: _FitRows) -> tuple[float, float]:
