@@ -62,8 +62,8 @@ class Hold:
         """The parameters (p,) of ``problem`` (increments on its start) that best fit its rows (noise ``variance``,
         weighted units) and the reference (``offset``: its parameters as increments) along the held directions, to
         ``tolerance``: the maximum a posteriori fit, solved as a nonlinear least-squares problem from the linear
-        update (:meth:`shift`, with the fit's ``covariance``), so a long way along a held direction that is not
-        linear does not spoil the fit to the data."""
+        update (:meth:`shift`, with the fit's ``covariance``) and from the reference itself, the lower cost kept: a
+        fit that wandered far along a direction the data do not see has a covariance that points elsewhere."""
         a, target, scale = self.directions, self.directions @ offset, float(np.sqrt(variance))
 
         def residuals(x: Array) -> Array:
@@ -72,8 +72,9 @@ class Hold:
         def jacobian(x: Array) -> Array:
             return np.vstack([problem.jacobian(x) / scale, a / self.tolerance])
 
-        return least_squares(residuals, self.shift(covariance, offset), jac=jacobian, method="trf", x_scale="jac",
-                             xtol=1e-10, ftol=1e-10).x
+        fits = [least_squares(residuals, start, jac=jacobian, method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10)
+                for start in (self.shift(covariance, offset), offset)]  # the nominal itself may lie nearer
+        return min(fits, key=lambda f: f.cost).x
 
     def update(self, covariance: Array) -> Array:
         """``covariance`` (p, p) after the held directions were measured at the reference to ``tolerance``."""
@@ -101,15 +102,16 @@ def undetermined(covariance: Array, metric: Array, size: float, names: list[str]
     root = (vectors * np.sqrt(np.clip(values, 0.0, None))) @ vectors.T  # metric^(1/2), symmetric
     scaled = root @ covariance[:k, :k] @ root
     values, vectors = np.linalg.eigh((scaled + scaled.T) / 2)
-    if count is None:
-        far = (3.0 + bias) * np.sqrt(np.clip(values, 0.0, None)) > LEVEL * size
+    std = np.sqrt(np.clip(values, 0.0, None))
+    if count is None:  # not determined, or known no better than the nominal is
+        far = ((3.0 + bias) * std > LEVEL * size) | ((1.0 + bias) * std > HELD_TOLERANCE * size)
     else:
         far = np.arange(len(values)) >= len(values) - count
     directions = np.zeros((int(far.sum()), len(covariance)))
     directions[:, :k] = vectors[:, far].T @ root
     lever = np.sqrt(np.clip(np.diag(metric)[:k], 0.0, None))
     moved = [(covariance[:k, :k] @ a[:k]) * lever for a in directions]  # what each parameter moves along it
-    return Hold(directions, np.sqrt(np.clip(values[far], 0.0, None)), HELD_TOLERANCE * size,
+    return Hold(directions, std[far], HELD_TOLERANCE * size,
                 tuple(_label(m / max(float(np.linalg.norm(m)), 1e-300), names) for m in moved))
 
 

@@ -167,8 +167,11 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     if reference is not None:
         scale = max(adequacy.residual, declared or 0.0) * np.sqrt(adequacy.inflation)
         bias = adequacy.model_error * np.sqrt(3 * int(inl.sum())) / scale if scale > 0 else 0.0
-        held = undetermined(covariance, line_metric(problem), size, line_names(problem), bias)
-        if len(held):  # moved there, then the covariance at the new lines with the nominal's own error
+        for _ in range(HOLD_ROUNDS):  # a fit that wandered far: its covariance is only right near the held point
+            found = undetermined(covariance, line_metric(problem), size, line_names(problem), bias)
+            if not len(found):
+                break
+            held = found if held is None or len(found) >= len(held) else held
             x = held.solve(problem, variance, covariance, increments(problem, reference))
             fit = held_fit(fit, data, problem, x)
             lines = fit.lines
@@ -176,8 +179,10 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
             jac_blocks = fit.jacobian_blocks(problem)
             res_w = problem.residuals(x0).reshape(-1, 3)
             inv, condition = scaled_inverse(jac_blocks.reshape(-1, problem.size))
-            held = undetermined(inv * variance, line_metric(problem), size, line_names(problem), bias, len(held))
-            covariance = held.update(inv * variance)
+            covariance = inv * variance
+        if held is not None:  # the covariance at the held lines, with the nominal's own error
+            held = undetermined(covariance, line_metric(problem), size, line_names(problem), bias, len(held))
+            covariance = held.update(covariance)
     lines_cov = covariance[: lines.n_parameters, : lines.n_parameters]
     near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
     tp_index = data.tp_index[inl]
@@ -218,6 +223,9 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     return WrittenModel(name, fit, adequacy, model, tools, std, fixed, ref, dict(out.capped), dh_check, terms,
                         predictor, lines_cov, covariance, condition, expected, problem, jac_blocks,
                         held if held is not None and len(held) else None)
+
+
+HOLD_ROUNDS = 3  # refits towards the nominal, each from the covariance at the last one's lines
 
 
 def _held_covariance(model: DHModel, free: NDArray[np.bool_], covariance: Array, size: float, bias: float) -> Array:
