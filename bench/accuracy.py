@@ -1,4 +1,4 @@
-"""Accuracy benchmark: held-out prediction error vs the Cramér-Rao bound (DESIGN.md, "Targets").
+"""Accuracy benchmark: held-out prediction error vs the Cramér-Rao bound (docs/benchmarks.md).
 
     .venv/bin/python -m bench.accuracy [--draws 50] [--quick] [--jobs 2] [--family ur5e ...]
 

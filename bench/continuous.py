@@ -12,7 +12,8 @@ session does not stream, only its readings' latency applies).
 
 Reported per mode: robot time (first step's start to last step's end on the rig's clock), tracker samples, the
 session's own held-out RMS (at its check poses and home checks, measured: it includes those poses' tracker noise)
-and the true error (DESIGN.md's accuracy: RMS over 200 random poses within the limits of the distance between
+and the true error (the accuracy of docs/benchmarks.md: RMS over 200 random poses within the limits of the distance
+between
 the identified model's TP and the simulated truth's, no noise), each as the median and the RMS over draws; and
 the ratio continuous / step of the RMS over draws with a paired bootstrap 95 % interval (the draws resampled
 together). The clock: the fitted offset at the fit's reference time against the rig's (its identity records

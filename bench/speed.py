@@ -1,4 +1,4 @@
-"""Speed benchmark: wall time of :func:`identify.results.pipeline.identify` in-process (DESIGN.md, "Targets").
+"""Speed benchmark: wall time of :func:`identify.results.pipeline.identify` in-process (docs/benchmarks.md).
 
     .venv/bin/python -m bench.speed [--repeats 10] [--datasets 5]
 

@@ -3,7 +3,10 @@ terminal or the SSH session closed). The commands treat the three alike: a run s
 ``aborted`` (resumable); at any other moment the command stops with one line and exit code 130.
 
 Python raises KeyboardInterrupt for SIGINT; :func:`raising` makes SIGTERM and SIGHUP raise :class:`Stopped`, a
-KeyboardInterrupt that remembers its signal, so every ``except KeyboardInterrupt`` handles them too.
+KeyboardInterrupt that remembers its signal, so every ``except KeyboardInterrupt`` handles them too. During the
+start-up imports :func:`deferred` only keeps a stop and raises it after them: raised inside a compiled module's
+initialisation it would become an ImportError, or be lost in a ``try: import``. (A signal in the interpreter's own
+start-up, the ~30 ms before the entry point's first line, still meets the system's default: exit 143.)
 """
 
 from __future__ import annotations
@@ -42,8 +45,25 @@ def reason_of(exc: BaseException) -> str:
     return reason(exc.signum if isinstance(exc, Stopped) else None)
 
 
+_pending: int | None = None  # the last stop signal received (see guarded), None when none
+
+
 def _raise(signum: int, _frame: object) -> None:
+    global _pending
+    _pending = signum
     raise Stopped(signum)
+
+
+def raise_pending() -> None:
+    """Raise :class:`Stopped` when a stop signal has been received under :func:`guarded` (it may have become
+    another error on its way, e.g. the ImportError of an interrupted import); else nothing."""
+    if _pending is not None:
+        raise Stopped(_pending)
+
+
+def _keep(signum: int) -> None:
+    global _pending
+    _pending = signum
 
 
 @contextmanager
@@ -68,10 +88,28 @@ def raising() -> Iterator[None]:
         yield
 
 
+@contextmanager
+def deferred() -> Iterator[None]:
+    """Inside the block a stop signal (Ctrl-C included) is only kept; it is raised (:class:`Stopped`) when the block
+    ends. For start-up imports: a KeyboardInterrupt raised inside a compiled module's initialisation becomes an
+    ImportError ("initialization failed"), and one raised inside a ``try: import ... except ImportError`` is lost."""
+    global _pending
+    _pending = None
+    with routed(_keep):
+        try:
+            yield
+        finally:
+            signum = _pending
+            if signum is not None:
+                raise Stopped(signum)
+
+
 def guarded(prog: str, body: Callable[[], int]) -> int:
     """A command's entry point: ``body()`` with SIGTERM and SIGHUP raising as Ctrl-C does; a stop at any moment
     (start-up imports included) is one line on stderr and exit code 130, a closed stdout (``| head``) a quiet
     exit 141 (128 + SIGPIPE, what a shell reports for a command its pipe stopped)."""
+    global _pending
+    _pending = None
     try:
         with raising():
             return body()
@@ -81,3 +119,8 @@ def guarded(prog: str, body: Callable[[], int]) -> int:
     except BrokenPipeError:  # the reader of stdout went away: stop quietly, as a pipeline expects
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error when Python flushes it
         return 141
+    except BaseException:  # a stop raised where it became another error (an import's ImportError): still a stop
+        if _pending is None:
+            raise
+        print(f"{prog}: {reason(_pending)}", file=sys.stderr)
+        return 130

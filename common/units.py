@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 import math
 import re
+from collections.abc import Callable
+from typing import Any
 
 #: metres per unit; ``um``, ``µm`` (micro sign) and ``μm`` (Greek mu) are the same micrometre
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3, "um": 1e-6, "µm": 1e-6, "μm": 1e-6, "in": 0.0254}
@@ -81,3 +83,53 @@ def positive_duration(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"{text!r}: must be a positive duration")
     return value
+
+
+class Typed(argparse.Action):
+    """argparse action of a length or duration option: ``convert`` (e.g. :func:`positive_length`) gives its value
+    (m or s), and the text as typed is kept (:func:`as_typed`) for messages that repeat it."""
+
+    def __init__(self, option_strings: list[str], dest: str, convert: Callable[[str], float], **kwargs: Any) -> None:
+        super().__init__(option_strings, dest, **kwargs)
+        self.convert = convert
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        try:
+            value = self.convert(values)
+        except argparse.ArgumentTypeError as exc:
+            raise argparse.ArgumentError(self, str(exc)) from None
+        setattr(namespace, self.dest, value)
+        setattr(namespace, TYPED, {**getattr(namespace, TYPED, {}), self.dest: values.strip()})
+
+
+TYPED = "typed_texts"  # the Namespace attribute of the texts as typed: {dest: text}
+
+
+def as_typed(args: argparse.Namespace, dest: str) -> str | None:
+    """The text option ``dest`` was given as on the command line (None: not given, or not a :class:`Typed`)."""
+    return getattr(args, TYPED, {}).get(dest)
+
+
+#: a length unit 1000x smaller or larger: the unit of a slip's correction (a bare number is metres)
+_FINER = {"": "mm", "m": "mm", "mm": "um", "µm": "nm", "μm": "nm", "um": "nm"}
+_COARSER = {"um": "mm", "µm": "mm", "μm": "mm", "mm": "m"}
+
+
+def mm(metres: float) -> str:
+    """A length for a message: ``0.05 mm``, ``50 mm`` (4 significant digits)."""
+    return f"{metres * 1e3:.4g} mm"
+
+
+def slip_hint(option: str, typed: str | None, metres: float, too_large: bool = True) -> str:
+    """What an operator is told of a length that looks 1000x off: ``--noise 0.05 is read as 50 mm; did you mean
+    0.05mm?``, repeating the text as typed (``typed``; None: ``metres`` shown instead) with the unit one step
+    smaller (``too_large``) or larger."""
+    shown = typed if typed is not None else f"{metres:g}"
+    said = f"{option} {shown} is read as {mm(metres)}"
+    match = _QUANTITY.fullmatch(typed or "")
+    unit = match["unit"] if match else None
+    fix = (_FINER if too_large else _COARSER).get(unit) if unit is not None else None
+    if fix is None or fix == "nm":
+        return f"{said}; give the unit, e.g. {option} {'0.05mm' if too_large else '50um'}"
+    return f"{said}; did you mean {match['number']}{fix}?"

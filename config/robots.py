@@ -1,7 +1,7 @@
 """Nominal robot models: the YAML files in ``config/robots/`` and their loader.
 
 A model file (schema 1) holds exactly the keys in :data:`KEYS`; ``dh`` is a standard DH table, base to tip,
-for the forward model of DESIGN.md (``theta``, ``alpha`` in radians; ``d``, ``a`` in metres). Per-joint values
+for the forward model of kinematics/dh.py (``theta``, ``alpha`` in radians; ``d``, ``a`` in metres). Per-joint values
 are radians for revolute joints and metres for prismatic ones: ``limits`` and ``home`` in rad / m,
 ``max_speed`` and ``default_speed`` in rad/s / m/s, ``default_acceleration`` in rad/s² / m/s².
 
@@ -43,7 +43,8 @@ class RobotModel:
     capsules (:mod:`config.geometry`), None when the file has none (then no plan can be checked for collisions).
     ``coupling``: how the controller's readings give the DH joint values (None: they are the DH values);
     ``links``: link masses and centres of mass (None when the file has no ``dynamics``), for compliance.
-    Limits, home and speeds are in DH joint values.
+    Limits, home and speeds are in DH joint values. ``document``: the plain data of a model that is not bundled
+    (None for a bundled one, known by its name), which sessions and results record (:func:`model_document`).
     """
 
     name: str
@@ -61,6 +62,7 @@ class RobotModel:
     geometry: RobotGeometry | None = None
     coupling: Coupling | None = None
     links: LinkMasses | None = None
+    document: dict[str, Any] | None = None
 
     @property
     def n_joints(self) -> int:
@@ -80,6 +82,18 @@ def load_robot(name_or_path: str | Path) -> RobotModel:
     """
     path = config_file(name_or_path, ROBOTS_DIR, "robot", robot_names)
     return _model_from_dict(path, read_yaml(path))
+
+
+def model_document(robot: RobotModel) -> dict[str, Any] | None:
+    """What a session or a result records of ``robot`` so that it reads where the model's file is not: the plain
+    data of a model file of the operator's (:func:`robot_from_document` reads it back); None for a bundled model,
+    which its name finds."""
+    return robot.document
+
+
+def robot_from_document(data: Any, source: str) -> RobotModel:
+    """The model a session or a result records (:func:`model_document`); ``source`` names it in a ConfigError."""
+    return _model_from_dict(Path(source), data, recorded=True)
 
 
 def _number(path: Path, key: str, value: Any, expected: str = "a finite number") -> float:
@@ -104,7 +118,7 @@ def _numbers(path: Path, key: str, value: Any, n: int, unit: str, positive: bool
     return np.array(out)
 
 
-def _model_from_dict(path: Path, data: Any) -> RobotModel:
+def _model_from_dict(path: Path, data: Any, recorded: bool = False) -> RobotModel:
     if not isinstance(data, dict):
         raise ConfigError(path, None, f"a mapping with keys {', '.join(KEYS)}", got(data))
     for key in data:
@@ -169,8 +183,9 @@ def _model_from_dict(path: Path, data: Any) -> RobotModel:
     name, vendor, description, source = (data[key].strip() for key in TEXT_KEYS)
     coupling = _coupling(path, data["coupling"], n) if "coupling" in data else None
     links = _dynamics(path, data["dynamics"], n) if "dynamics" in data else None
+    bundled = not recorded and path.resolve().parent == ROBOTS_DIR
     return RobotModel(name, vendor, description, source, types, nominal, limits, home, max_speed,
-                      default_speed, default_acc, path, geometry, coupling, links)
+                      default_speed, default_acc, path, geometry, coupling, links, None if bundled else data)
 
 
 def _matrix(path: Path, key: str, value: Any, n: int, unit: str) -> Array:

@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from common.arguments import SIZES
 from config.files import ConfigError, got, read_yaml
 
 Range = tuple[float, float]  # [min, max] of a joint, rad / m
@@ -46,9 +47,13 @@ class Validator:
             raise self.fail(key, expected, value)
         return float(value)
 
-    def integer(self, key: str, value: Any, low: int) -> int:
+    def integer(self, key: str, value: Any, low: int, size: str | None = None) -> int:
+        """``value``, an integer >= ``low`` and, for a size of :data:`common.arguments.SIZES`, at most its bound."""
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise self.fail(key, f"an integer >= {low}", value)
+        if size is not None and value > SIZES[size][1]:
+            _, high, why = SIZES[size]
+            raise self.fail(key, f"an integer from {low} to {high} ({why})", value)
         return value
 
     def numbers(self, key: str, value: Any, expected: str, count: int | None = None,
@@ -214,13 +219,13 @@ CHECKS: dict[str, Any] = {
     "tracker_settings": settings,
     "measure_time": lambda v, key, x: v.number(key, x, "a number >= 0 (s per reading)", 0.0, strict=False),
     "tp_guess": lambda v, key, x: v.numbers(key, x, "[x, y, z] in the flange frame (m)", 3),
-    "samples_per_step": lambda v, key, x: v.integer(key, x, 1),
+    "samples_per_step": lambda v, key, x: v.integer(key, x, 1, "samples"),
     "settle_time": lambda v, key, x: v.number(key, x, "a number >= 0 (s)", 0.0, strict=False),
-    "steps_per_sweep": lambda v, key, x: v.integer(key, x, 3),
+    "steps_per_sweep": lambda v, key, x: v.integer(key, x, 3, "steps"),
     "sweep_joints": joints,
     "sweep_ranges": ranges,
-    "free_poses": lambda v, key, x: v.integer(key, x, 0),
-    "check_poses": lambda v, key, x: v.integer(key, x, 0),
+    "free_poses": lambda v, key, x: v.integer(key, x, 0, "free_poses"),
+    "check_poses": lambda v, key, x: v.integer(key, x, 0, "check_poses"),
     "home_check_every": lambda v, key, x: v.integer(key, x, 0),
     "min_axis_distance": lambda v, key, x: v.number(key, x, "a number >= 0 (m)", 0.0, strict=False),
     "stream_speed": lambda v, key, x: None if x is None else v.number(key, x, "a speed > 0 (rad/s or m/s), or null",
@@ -248,5 +253,5 @@ CHECKS: dict[str, Any] = {
                                                                          "null for the TP at home", 3),
     "verify_edge": lambda v, key, x: None if x is None else v.number(key, x, "a number > 0 (m), or null for a size "
                                                                        "from the robot's reach", 0.0, strict=True),
-    "verify_cycles": lambda v, key, x: v.integer(key, x, 2),
+    "verify_cycles": lambda v, key, x: v.integer(key, x, 2, "cycles"),
 }

@@ -39,6 +39,7 @@ import importlib
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from common.errors import install_hint
 from drivers.errors import BackendUnavailable
 from drivers.spec import RobotSpec, TrackerSpec
 
@@ -103,7 +104,7 @@ def load_factory(kind: str, backend: str) -> Callable[..., Any]:
                                      f"{' '.join(str(exc).split())})") from exc
         top = missing.partition(".")[0]
         extra = EXTRAS.get(top)
-        hint = f"pip install 'dh-calib[{extra}]'" if extra else f"install the package that provides {top!r}"
+        hint = install_hint(extra) if extra else f"install the package that provides {top!r}"
         raise BackendUnavailable(f"the {backend!r} {kind} backend needs the Python module {top!r}, which is not "
                                  f"installed: {hint}") from exc
     factory = getattr(module, attribute, None)

@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from common.errors import InputError
 from common.outputs import write_output
-from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
+from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, recorded_model, robot_model
 from identify.applications.compare import CompareError, Comparison, check_same_robot
 from identify.applications.compare import compare as _compare
 from identify.applications.compensate import Compensation, controller_poses, ur_pose
@@ -69,7 +69,7 @@ class Result:
 
 
 def load_measurements(path: str | Path, joints: str | None = None, units: str | None = None) -> Measurements:
-    """The measurements of a CSV (the contract of DESIGN.md; ``joints``/``units`` as ``identify --joints/--units``)
+    """The measurements of a CSV (README.md, File contracts; ``joints``/``units`` as ``identify --joints/--units``)
     or of an acquisition session."""
     from identify.io.csvio import read_measurements
     from identify.io.session_measurements import read_session
@@ -87,7 +87,8 @@ def calibrate(meas: Measurements, robot: str | None = None, noise: float | None 
     model = robot_model(robot)
     meas = split_holdout(meas, holdout, seed)
     ident = identify(meas, None if model is None else model.nominal, noise=noise)
-    doc = result_to_dict(ident, None if model is None else model.nominal, None if model is None else model.name)
+    doc = result_to_dict(ident, None if model is None else model.nominal, None if model is None else model.name,
+                         nominal_model=None if model is None else model.document)
     return Result(doc, CalibratedModel.from_identification(ident), ident, model)
 
 
@@ -99,7 +100,7 @@ def load_result(path: str | Path) -> Result:
         model, doc = _load(str(path))
     except ResultError as exc:
         raise InputError(str(exc)) from None
-    return Result(doc, model, None, robot_model(nominal_name(doc)))
+    return Result(doc, model, None, robot_model(nominal_name(doc), recorded_model(doc), str(path)))
 
 
 def compensate(result: Result, targets: ArrayLike, seeds: ArrayLike | None = None, frame: str = "tracker",

@@ -1,4 +1,4 @@
-"""Forward model of DESIGN.md: standard DH chain, base transform and tracked point (TP).
+"""The forward model: standard DH chain, base transform and tracked point (TP).
 
 ``T(q) = base · A_1(q_1) · … · A_n(q_n)`` with
 ``A_i = Rz(theta_i + q_i if R) · Tz(d_i + q_i if P) · Tx(a_i) · Rx(alpha_i)``
@@ -162,7 +162,8 @@ def points_from_joints(model: DHModel, q: ArrayLike) -> Array:
 
 
 def model_to_dict(model: DHModel) -> dict[str, Any]:
-    """The result contract's three keys (DESIGN.md: ``joints``, ``base``, ``tool``) for ``model``, as plain data."""
+    """The result contract's three keys (README.md, File contracts: ``joints``, ``base``, ``tool``) for ``model``,
+    as plain data."""
     joints = [
         {"type": t, "a": float(a), "alpha": float(al), "d": float(d), "theta": float(th)}
         for t, th, d, a, al in zip(model.joint_types, model.theta, model.d, model.a, model.alpha, strict=True)

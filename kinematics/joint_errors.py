@@ -4,7 +4,7 @@
 FANUC arms J3 is measured against the horizontal, so the DH value is q3 = J3 + J2). Linear coupling:
 ``q_dh = C · readings + offset`` (C (n, n), offset (n,), rad or m).
 
-**Joint errors** (DESIGN.md note 8): the joint really stands at ``q + Δq(q)``, with, per joint i,
+**Joint errors**: the joint really stands at ``q + Δq(q)``, with, per joint i,
 
 - reading scale (gear-ratio error): ``Δq_i = s_i · q_i``
 - once-per-turn error (encoder or gear eccentricity): ``Δq_i = e_i · sin(q_i) + f_i · cos(q_i)``

@@ -32,6 +32,12 @@ print(json.dumps([code, sorted(sys.modules)]))
     ("acquire.commands.launch", ["export", "--help"], 0),  # before, these two imported everything (1 s of CPU)
     ("acquire.commands.launch", ["backup", "--help"], 0),
     ("acquire.commands.launch", ["verify", "--help"], 0),  # before: the estimator and the drivers (about 1 s of CPU)
+    ("acquire.commands.launch", ["calibrate-camera", "--help"], 0),  # before: OpenCV (1.8 s of CPU; issue 39)
+    ("acquire.commands.launch", ["print-board", "--views", "3"], 2),
+    ("identify.commands.launch", ["compare", "--help"], 0),  # before: scipy, the estimator (1 s of CPU)
+    ("identify.commands.launch", ["compensate", "--help"], 0),
+    ("identify.commands.launch", ["check", "--help"], 0),
+    ("identify.commands.launch", ["check", "r.yaml", "d.csv", "--noise", "0.05xx"], 2),
     ("acquire.commands.launch", ["export", "s.session"], 2),
     ("identify.commands.launch", ["--help"], 0),
     ("identify.commands.launch", ["--version"], 0),
@@ -61,6 +67,11 @@ def test_the_light_parsers_defaults_are_the_estimators():
     assert options.build_parser().parse_args(["x.csv"]).max_offset is None
     assert inspect.signature(identify).parameters["max_offset"].default is None
     assert sorted(options.UNITS) == sorted(UNITS)
+    from identify.applications import compare
+    from identify.commands import sub_options
+
+    assert (sub_options.ALPHA, sub_options.POSES) == (compare.ALPHA, compare.POSES)
+    assert sorted(sub_options.UNITS) == sorted(UNITS)
 
 
 def test_a_pipe_closed_by_its_reader_stops_the_command_quietly():

@@ -1,15 +1,6 @@
 """Camera tools of ``acquire``: calibrate a camera from ChArUco views, print a marker or board at true scale.
 
-    acquire calibrate-camera views/ --cols 7 --rows 5 --square 0.03 --size 0.022 --out cam.yaml
-    acquire calibrate-camera --live 0 --views 25 --cols 7 --rows 5 --square 0.03 --size 0.022 --out cam.yaml
-    acquire print-board --marker 7 --size 0.05 --out marker7.pdf
-    acquire print-board --board charuco --cols 7 --rows 5 --square 0.03 --size 0.022 --out board.png --dpi 600
-
-The calibration writes OpenCV FileStorage YAML (camera_matrix, distortion_coefficients, image_width,
-image_height, avg_reprojection_error), the file the ``aruco:`` tracker reads with ``camera=``. Views with
-fewer than ``--min-corners`` ChArUco corners or collinear ones are skipped; after a first fit, views whose
-RMS reprojection error exceeds 3x the median are dropped and the camera is fitted again.
-Exit codes: 0 done, 2 bad input (one line).
+Their options and help: acquire/commands/camera_options.py.
 """
 
 from __future__ import annotations
@@ -26,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from common.arguments import OneLineParser
+from acquire.commands.camera_options import calibrate_parser, print_parser
+from common.errors import install_hint
 from common.outputs import check_outputs, commit_file, write_output
-from common.units import positive_length
 from drivers.camera.intrinsics import CameraIntrinsics, write_intrinsics
 from drivers.camera.targets import Target, charuco_board, dictionary_id, grid_board, single_marker
 from drivers.errors import DriverError
@@ -40,28 +31,8 @@ class CameraToolError(Exception):
     """Bad input or data for a camera tool: one line, exit code 2."""
 
 
-def _parser(prog: str, description: str) -> argparse.ArgumentParser:
-    p = OneLineParser(prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter,
-                epilog=__doc__.split("\n\n", 1)[1].replace("``", ""))
-    p.add_argument("--dict", default="4X4_50", help="ArUco dictionary (4X4_50)")
-    p.add_argument("--cols", type=int, help="board columns (markers of a grid, squares of a ChArUco)")
-    p.add_argument("--rows", type=int, help="board rows")
-    p.add_argument("--square", type=positive_length, metavar="LENGTH",
-                   help="ChArUco square side, e.g. 30mm (a bare number is metres)")
-    p.add_argument("--size", type=positive_length, metavar="LENGTH",
-                   help="marker side, e.g. 22mm (a bare number is metres)")
-    p.add_argument("--first", type=int, default=0, help="id of the board's first marker (0)")
-    return p
-
-
 def calibrate_main(argv: list[str]) -> int:
-    p = _parser("acquire calibrate-camera", "Calibrate a camera from ChArUco board views; write its intrinsics.")
-    p.add_argument("images", nargs="?", help="folder or glob of board images")
-    p.add_argument("--live", metavar="CAMERA", help="grab the views from this camera (index or device) instead")
-    p.add_argument("--views", type=int, default=25, help="views to grab with --live (25), one a second")
-    p.add_argument("--min-corners", type=int, default=8, help="least ChArUco corners in a usable view (8)")
-    p.add_argument("--out", type=Path, required=True, help="intrinsics file to write (.yaml)")
-    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    p = calibrate_parser()
     args = p.parse_args(argv)
     inputs = sorted(glob.glob(args.images)) if args.images is not None else []
     check_outputs(inputs, [("--out", args.out)], args.force)
@@ -181,14 +152,7 @@ def _live_images(camera: str, views: int) -> list[np.ndarray]:
 
 
 def print_main(argv: list[str]) -> int:
-    p = _parser("acquire print-board", "Write a marker or board at true scale: PNG (with its DPI) or PDF.")
-    p.add_argument("--marker", type=int, help="a single marker of this id (with --size)")
-    p.add_argument("--board", choices=("grid", "charuco"), help="a board (with --cols, --rows, --size ...)")
-    p.add_argument("--gap", type=positive_length, metavar="LENGTH",
-                   help="grid board: gap between markers, e.g. 5mm (a bare number is metres; size/5)")
-    p.add_argument("--dpi", type=int, default=600, help="print resolution, dots per inch (600)")
-    p.add_argument("--out", type=Path, required=True, help="output file: .png or .pdf")
-    p.add_argument("--force", action="store_true", help="replace --out if it exists")
+    p = print_parser()
     args = p.parse_args(argv)
     target = _print_target(args)
     if not 72 <= args.dpi <= 4800:
@@ -251,7 +215,7 @@ def pdf(path: Path, image: np.ndarray, dpi: int) -> bytes:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        raise CameraToolError("PDF output needs matplotlib (pip install 'dh-calib[report]'); write .png") from None
+        raise CameraToolError(f"PDF output needs matplotlib ({install_hint('report')}); write .png") from None
     h, w = image.shape[:2]
     fig = plt.figure(figsize=(w / dpi, h / dpi))
     ax = fig.add_axes((0, 0, 1, 1))

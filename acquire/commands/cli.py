@@ -18,9 +18,11 @@ from acquire.commands.options import build_parser
 from acquire.commands.prepare import (
     UsageError,
     check_start,
+    check_units,
     confirm,
     open_devices,
     site_from_args,
+    tracker_site,
     without_faults,
 )
 from acquire.planning.plan import check_plan, estimate_duration, plan_clearance
@@ -103,6 +105,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         robot_spec = settings.robot if args.robot else without_faults(settings.robot)
         tracker_spec = settings.tracker if args.tracker else without_faults(settings.tracker)
         site, plan, path, changes = settings.site, session.plan, args.resume, settings.changes
+        base_site, no_stream = site, ""
         if not args.dry_run and _died_after_its_last_step(session, args.remeasure_missing):
             session.begin_run()  # closes the dead run; nothing connects or moves
             session.end_run("complete")
@@ -112,10 +115,12 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
             return 0
     else:
         # streams carry the fit: no free poses unless asked
-        site = mode_site(site_from_args(args), args.mode, args.free_poses)
         robot_spec = RobotSpec.parse(args.robot if args.robot is not None else "mock:ur5e").resolved()
         tracker_arg = args.tracker or "mock"
         tracker_spec = None if tracker_arg == "none" else TrackerSpec.parse(tracker_arg)
+        base_site, no_stream = tracker_site(site_from_args(args), args, tracker_spec)  # what the tracker states
+        site = mode_site(base_site, args.mode, args.free_poses)
+        check_units(args, site, tracker_spec)
         path, plan = None, None
     if args.json and not args.dry_run:
         raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")
@@ -133,7 +138,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     planned = args.target_accuracy is not None or args.max_robot_time is not None
     tradeoff = None
     if planned:
-        site, plan, tradeoff = _plan_for_target(args, robot_model, session, rehearsal)
+        site, plan, tradeoff = _plan_for_target(args, robot_model, session, rehearsal, base_site, no_stream)
     if plan is None:
         plan = build_mode_plan(args.mode, robot_model, site)
     elif args.mode is not None and args.mode != plan_mode(plan):
@@ -181,7 +186,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         say(tradeoff)
     elif args.dry_run and not rehearsal and session is None:
         say("modes: not compared for a camera (which streamed frames it would see is not modelled)" if camera
-            else format_modes(robot_model, site_from_args(args), plan, args.free_poses))
+            else format_modes(robot_model, base_site, plan, args.free_poses, no_stream))
     if args.dry_run:
         print("dry run: nothing was connected or moved")
         return 0
@@ -209,7 +214,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
                 print(f"plan: {line}")
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
-                      "command": " ".join(sys.argv)}
+                      "command": " ".join(sys.argv),
+                      **({"robot_model": robot_model.document} if robot_model.document is not None else {})}
             session = Session.create(path, plan, config, robot.identity(), tracker.identity(), robot_model.coupling)
         elif changes:
             session.set_connection(settings.connection(), "resumed with new connection details: " + "; ".join(changes))
@@ -231,8 +237,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
             session.close()
 
 
-def _plan_for_target(args: argparse.Namespace, robot: RobotModel, session: Session | None,
-                     rehearsal: bool) -> tuple[SiteConfig, Plan, str]:
+def _plan_for_target(args: argparse.Namespace, robot: RobotModel, session: Session | None, rehearsal: bool,
+                     site: SiteConfig, no_stream: str = "") -> tuple[SiteConfig, Plan, str]:
     """(site, plan, trade-off table) of ``--target-accuracy`` / ``--max-robot-time`` (acquire/planning/plan_target.py):
     the quickest candidate predicted to reach the target, or the most accurate within the time alone."""
     if session is not None:
@@ -242,7 +248,9 @@ def _plan_for_target(args: argparse.Namespace, robot: RobotModel, session: Sessi
     if args.mode == "both":
         raise UsageError("--target-accuracy and --max-robot-time plan step or continuous sessions, not both")
     modes = ("step", "continuous") if args.mode is None else (args.mode,)
-    found = candidates(modes, robot, site_from_args(args), args.steps, args.free_poses)
+    if no_stream:
+        modes = ("step",)  # a polled tracker: no continuous candidate
+    found = candidates(modes, robot, site, args.steps, args.free_poses)
     try:
         chosen = choose(found, args.target_accuracy, args.max_robot_time)
     except TargetError as exc:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from common.stop_signals import guarded
+from common.stop_signals import deferred, guarded
 
 
 def resume_target(argv: list[str]) -> Path | None:
@@ -40,19 +40,25 @@ SUBCOMMANDS = ("export", "backup", "verify", "calibrate-camera", "print-board") 
 
 
 def _main(argv: list[str]) -> int:
+    # a stop during the imports is raised after them, never inside one (common/stop_signals.py)
     if argv[:1] in (["export"], ["backup"]):  # they need neither the lock nor the acquisition code
-        from acquire.commands.session_commands import main as session_command
-
+        with deferred():
+            from acquire.commands.session_commands import main as session_command
         return session_command(argv)
-    if argv[:1] == ["verify"] and {"-h", "--help"} & set(argv[1:]):  # help without the estimator's imports
-        from acquire.commands.verify_options import build_parser
+    with deferred():
+        if argv[:1] == ["verify"] and {"-h", "--help"} & set(argv[1:]):  # help without the estimator's imports
+            from acquire.commands.verify_options import build_parser
 
-        build_parser().parse_args(argv[1:])  # prints the help and exits 0
-    if not argv[:1] or argv[0] not in SUBCOMMANDS:
-        refusal = _quick_refusal(argv)  # --help, --version, a bad option or device spec: before the heavy imports
-        if refusal is not None:
-            return refusal
-    from session.lock import Locked, busy_message, drop_held, hold
+            build_parser().parse_args(argv[1:])  # prints the help and exits 0
+        if argv[:1] in (["calibrate-camera"], ["print-board"]):  # help and usage errors before OpenCV's imports
+            from acquire.commands.camera_options import calibrate_parser, print_parser
+
+            (calibrate_parser if argv[0] == "calibrate-camera" else print_parser)().parse_args(argv[1:])
+        if not argv[:1] or argv[0] not in SUBCOMMANDS:
+            refusal = _quick_refusal(argv)  # --help, --version, a bad option or spec: before the heavy imports
+            if refusal is not None:
+                return refusal
+        from session.lock import Locked, busy_message, drop_held, hold
 
     target = resume_target(argv)
     if target is not None:
@@ -64,8 +70,13 @@ def _main(argv: list[str]) -> int:
         except OSError:
             pass  # a missing or unreadable file: the full command says so in its own words
     try:
-        from acquire.commands.cli import main as full_main
+        with deferred():
+            from importlib import import_module
 
+            from acquire.commands.cli import main as full_main
+
+            if argv[:1] in (["verify"], ["calibrate-camera"], ["print-board"]):  # the subcommand's imports too
+                import_module("acquire.commands." + ("verify_cli" if argv[0] == "verify" else "camera_cli"))
         return full_main(argv)
     finally:
         drop_held()  # a lock the command never claimed (it stopped before opening the session)

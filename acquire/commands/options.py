@@ -9,42 +9,51 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from common.arguments import OneLineParser, VersionAction
-from common.units import positive_duration, positive_length
+from common.arguments import OneLineParser, VersionAction, size
+from common.help_text import Formatter as HelpFormatter
+from common.units import Typed, positive_duration, positive_length
 
 DESCRIPTION = "Plan, move, measure and record a calibration session, then identify the robot from it."
 
 EPILOG = """\
 examples:
-  acquire --robot mock:ur5e --tracker mock            rehearsal with the simulated robot and tracker
-  acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 --config site.yaml
-  acquire --robot ur5e --tracker mock --dry-run       the plan, its duration and accuracy; nothing moves
-  acquire --robot ur5e@192.168.1.10 --tracker emscon:192.168.0.1 --config site.yaml
-                                                      a Leica laser tracker through its emScon server (port 700)
-  acquire --robot ur5e --dry-run --target-accuracy 0.02mm --max-robot-time 2min
-                                                      the quickest plan predicted to reach 0.02 mm
-  acquire --robot ur5e@192.168.1.10 --tracker none    the plan's motion at 25 % speed, measuring nothing
-  acquire --resume SESSION                            continue an interrupted session
-  acquire --tracker 'serial:/dev/ttyUSB0?protocol=polled-xyz' --probe    check the tracker on site
+  acquire --robot mock:ur5e --tracker mock     a rehearsal, all simulated
+  acquire --robot ur5e --tracker mock --dry-run
+      the plan, its duration and accuracy; nothing moves
+  acquire --dry-run --target-accuracy 0.02mm --max-robot-time 2min
+      the quickest plan predicted to reach 0.02 mm
+  acquire --robot ur5e@192.168.1.10 --tracker serial:/dev/ttyUSB0 \\
+      --config site.yaml                       a real arm and tracker
+  acquire --robot ur5e@192.168.1.10 --tracker emscon:192.168.0.1 \\
+      --config site.yaml                       a Leica tracker's emScon server
+  acquire --robot ur5e@192.168.1.10 --tracker none
+      the plan's motion at 25 % speed, measuring nothing
+  acquire --resume SESSION                     continue an interrupted session
+  acquire --tracker 'serial:/dev/ttyUSB0?protocol=polled-xyz' --probe
+      check the tracker on site
 
 subcommands (each has its own --help):
-  export SESSION --csv OUT.csv      the session's measurements as a CSV
-  backup SESSION COPY               a safe copy of a session, even while it is written
-  verify --result RESULT            ISO 9283-style accuracy before and after compensation
-  calibrate-camera IMAGES --out F   a camera's intrinsics from ChArUco board views
-  print-board --out F               a marker or board to print at true scale
+  export SESSION --csv OUT.csv     the session's measurements as a CSV
+  backup SESSION COPY              a safe copy, even of a session being written
+  verify --result RESULT           ISO 9283-style accuracy, before and after
+                                   compensation
+  calibrate-camera IMAGES --out F  a camera's intrinsics from ChArUco views
+  print-board --out F              a marker or board to print at true scale
 
 exit codes:
   0    complete (the identification passes, or passes with warnings)
   1    the run failed: robot fault, lost connection, timeout (resumable)
-  2    bad input, or a plan that breaks a limit or comes too close to the cell (one line)
-  3    complete, but the identification fails its verdict (do not use the model)
-  130  stopped by Ctrl-C, SIGTERM or SIGHUP: the motion stops, the run is recorded as aborted (resumable)
+  2    bad input, or a plan that breaks a limit or comes too close to the cell
+       (one line)
+  3    complete, but the identification fails its verdict (do not use the
+       model)
+  130  stopped by Ctrl-C, SIGTERM or SIGHUP: the motion stops, the run is
+       recorded as aborted (resumable)
 """
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(prog="acquire", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = OneLineParser(prog="acquire", description=DESCRIPTION, formatter_class=HelpFormatter,
                 epilog=EPILOG)
     p.add_argument("--robot", help="robot spec: ur5e, ur5e@HOST, mock:ur5e; the model may be a robot YAML file: "
                    "mock:my_arm.yaml, my_arm.yaml@HOST (mock:ur5e; on --resume: the session's, whose address may "
@@ -64,22 +73,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--realtime", action="store_true", help="mock mode at the speed of a real run")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--log", type=Path, metavar="FILE", help="log every step and event to FILE")
-    p.add_argument("--steps", type=int, help="steps per sweep (site default 36)")
-    p.add_argument("--samples", type=int, help="tracker samples per step (site default)")
-    p.add_argument("--free-poses", type=int, help="free poses added for the fit and validation")
-    p.add_argument("--noise", type=positive_length, metavar="LENGTH",
+    p.add_argument("--steps", type=size("steps"), help="steps per sweep (site default 36)")
+    p.add_argument("--samples", type=size("samples"), help="tracker samples per step (site default)")
+    p.add_argument("--free-poses", type=size("free_poses"), help="free poses added for the fit and validation")
+    p.add_argument("--noise", action=Typed, convert=positive_length, metavar="LENGTH",
                    help="tracker noise per axis (1 sigma) for the predicted accuracy, e.g. 0.05mm or 50um (a bare "
                         "number is metres)")
-    p.add_argument("--target-accuracy", type=positive_length, metavar="LENGTH",
+    p.add_argument("--target-accuracy", action=Typed, convert=positive_length, metavar="LENGTH",
                    help="plan for this predicted held-out accuracy (RMS TP error, e.g. 0.02mm) in the least robot "
                         "time: candidate sweep ranges, speeds, steps and free poses, and the dry run prints their "
                         "robot time against predicted accuracy (with --mode: that mode's only)")
-    p.add_argument("--max-robot-time", type=positive_duration, metavar="TIME",
+    p.add_argument("--max-robot-time", action=Typed, convert=positive_duration, metavar="TIME",
                    help="the longest robot time a planned session may take, e.g. 90s or 2min (a bare number is "
                         "seconds); alone: the most accurate candidate plan within it")
     p.add_argument("--probe", action="store_true",
                    help="open the tracker, take --count readings, print them with their spread, and exit")
-    p.add_argument("--count", type=int, default=10, help="readings taken by --probe (10)")
+    p.add_argument("--count", type=size("count"), default=10, help="readings taken by --probe (10)")
     p.add_argument("--json", action="store_true",
                    help="with --probe: one JSON object per reading; with --dry-run: the plan as one JSON object")
     p.add_argument("--speed-fraction", type=float, metavar="F",

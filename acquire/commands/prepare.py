@@ -45,6 +45,92 @@ def site_from_args(args: argparse.Namespace) -> SiteConfig:
                                acceleration_fraction=fraction)
 
 
+UNIT_SLIP = 10.0  # a noise this many times off the tracker's stated one: a unit slip, not the tracker
+NOISE_MAX = 0.01  # m: a noise (per axis) or a target accuracy above 1 cm calibrates nothing
+TARGET_SLIP = 100.0  # a target accuracy this many times the tracker's noise is met by any plan: a unit slip
+
+
+def stated_noise(tracker: TrackerSpec | None) -> float | None:
+    """The noise per axis (m) the named tracker states: a mock tracker's ``noise`` option (or its default), a
+    serial profile's data-sheet ``sigma``; None when it states none (or it cannot be read: said elsewhere)."""
+    return tracker_states(tracker)[0]
+
+
+def tracker_states(tracker: TrackerSpec | None) -> tuple[float | None, float | None, str]:
+    """What the named tracker states before it is opened: its noise per axis (m; None: unknown), its stream rate
+    (Hz; 0: it cannot stream, a polled device; None: unknown) and what says so (``profile polled-xyz``)."""
+    if tracker is None:
+        return None, None, ""
+    if tracker.backend == "mock":
+        from drivers.spec import MOCK_TRACKER_OPTIONS
+
+        try:
+            return (float(tracker.options.get("noise", MOCK_TRACKER_OPTIONS["noise"][1])),
+                    float(tracker.options.get("rate", MOCK_TRACKER_OPTIONS["rate"][1])), "the mock tracker's options")
+        except ValueError:
+            return None, None, ""
+    if tracker.backend == "serial":
+        from drivers.trackers.ascii_profile import load_profile
+
+        try:
+            profile = load_profile(tracker.options.get("protocol", "polled-xyz"))
+        except Exception:  # an unreadable profile is refused by the tracker's own checks, in its words
+            return None, None, ""
+        rate = 0.0 if profile.mode == "polled" else (1.0 / profile.period if profile.period else None)
+        return profile.sigma, rate, f"profile {profile.name}"
+    return None, None, ""
+
+
+def tracker_site(site: SiteConfig, args: argparse.Namespace, tracker: TrackerSpec | None) -> tuple[SiteConfig, str]:
+    """The site planned with what the named tracker states (:func:`tracker_states`): its noise unless ``--noise``
+    or the site file gives one, its stream rate unless the site file gives one. Returns the site and, for a tracker
+    that cannot stream, why (else ""); ``--mode continuous`` or ``both`` with it is a UsageError."""
+    noise, rate, said = tracker_states(tracker)
+    given = _site_keys(args.config)
+    if noise is not None and args.noise is None and ("tracker", "noise") not in given:
+        site = site.with_overrides(tracker_noise=noise)
+    if rate == 0.0:
+        why = f"{tracker} cannot stream ({said}: polled)"
+        if getattr(args, "mode", None) in ("continuous", "both"):
+            raise UsageError(f"--mode {args.mode}: {why}; use --mode step")
+        return site, why
+    if rate is not None and ("plan", "stream_rate") not in given:
+        site = site.with_overrides(stream_rate=min(rate, site.stream_rate))
+    return site, ""
+
+
+def _site_keys(path: Path | None) -> set[tuple[str, str]]:
+    """The (section, key) pairs the site file at ``path`` sets (none without a file)."""
+    if path is None:
+        return set()
+    from config.files import read_yaml
+
+    data = read_yaml(Path(path))
+    return {(section, key) for section, values in data.items() if isinstance(values, dict) for key in values}
+
+
+def check_units(args: argparse.Namespace, site: SiteConfig, tracker: TrackerSpec | None) -> None:
+    """UsageError (one line, repeating what was typed) for a ``--noise`` or ``--target-accuracy`` that looks
+    1000x off: a noise above :data:`NOISE_MAX` or :data:`UNIT_SLIP` times off the tracker's stated noise, a target
+    above :data:`NOISE_MAX` or :data:`TARGET_SLIP` times the noise planned with (``site.tracker_noise``, m)."""
+    from common.units import as_typed, mm, slip_hint
+
+    stated = stated_noise(tracker)
+    noise = args.noise
+    if noise is not None:
+        what = f"the tracker states {mm(stated)} per axis" if stated else f"no tracker is noisier than {mm(NOISE_MAX)}"
+        if noise > NOISE_MAX or (stated and noise > UNIT_SLIP * stated):
+            raise UsageError(f"{slip_hint('--noise', as_typed(args, 'noise'), noise)} ({what})")
+        if stated and noise * UNIT_SLIP < stated:
+            raise UsageError(f"{slip_hint('--noise', as_typed(args, 'noise'), noise, too_large=False)} ({what}; "
+                             "a tracker is not tenfold better than its data sheet)")
+    target = args.target_accuracy
+    if target is not None and (target > NOISE_MAX or target > TARGET_SLIP * site.tracker_noise):
+        raise UsageError(f"{slip_hint('--target-accuracy', as_typed(args, 'target_accuracy'), target)} "
+                         f"({target / site.tracker_noise:.0f}x the tracker noise {mm(site.tracker_noise)} per axis: "
+                         "any plan reaches it)")
+
+
 def without_faults(spec: Spec) -> Spec:
     """``spec`` without a mock backend's ``fault`` option."""
     if spec.backend != "mock" or "fault" not in spec.options:

@@ -23,7 +23,7 @@ from acquire.running.session import Session
 from acquire.verification.verify import MODES, VerifyError, build, design, header, problems
 from acquire.verification.verify_analysis import UNCERTAINTY, Outcome, analyse
 from common import fit_width
-from common.errors import InputError
+from common.errors import InputError, install_hint
 from common.fit_width import say
 from common.outputs import check_outputs, check_target, write_output
 from common.units import hms
@@ -32,6 +32,7 @@ from drivers.spec import RobotSpec, TrackerSpec
 from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name
 from identify.applications.controller import check_same_robot, controller_model
 from identify.applications.holds import ModelCheck
+from identify.applications.iso9283 import ISO_CYCLES
 from identify.io.result_io import load_result
 from identify.report.verify_rows import iso_rows, orientation_rows, pose_cells
 from session.schema import SessionError
@@ -58,7 +59,7 @@ def _robot_for(args: argparse.Namespace, doc: dict[str, Any], model: CalibratedM
     spec = RobotSpec.parse(args.robot if args.robot is not None else f"mock:{name or 'ur5e'}").resolved()
     robot = load_robot(spec.model)
     try:
-        check_same_robot(doc, model.model.joint_types, robot, result=str(args.result))
+        check_same_robot(doc, model.model.joint_types, robot, result=str(args.result), identified=model)
     except InputError as exc:
         raise UsageError(str(exc)) from None
     return spec, robot
@@ -73,6 +74,9 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
              f"test cube: centre {', '.join(f'{v * MM:.1f}' for v in info['centre'])} mm, edge {info['edge'] * MM:.0f} "
              "mm (base frame); per pose: its target, the joints commanded before compensation, and the AP "
              "predicted before / after [mm]"]
+    if info["cycles"] < ISO_CYCLES:
+        lines.insert(1, f"note: {info['cycles']} cycles per pose; ISO 9283 asks for {ISO_CYCLES} (fewer: a quicker "
+                        "test, its AP and RP less certain: see their uncertainties)")
     rows = [[f"P{k + 1}", *(f"{v:.1f}" for v in targets[k]),
              ", ".join(f"{np.degrees(v):.1f}" for v in info["q"]["before"][k]),
              f"{info['predicted']['before'][k] * MM:.3f} / 0 ± {info['expected'][k] * MM:.3f}"] for k in range(5)]
@@ -142,7 +146,7 @@ def _finish(session: Session, path: Path, robot: RobotModel) -> tuple[Outcome, d
     try:
         from identify.report.verify_html import verification_html
     except ImportError:
-        print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
+        print(f"note: no HTML report (it needs matplotlib: {install_hint('report')})")
         return outcome, summary
     write_output(report_path, verification_html(summary, session.header, str(path), session), force=True)
     print(f"report written to {report_path}")
@@ -198,7 +202,8 @@ def run(args: argparse.Namespace) -> int:
     path = args.session or _default_path(robot.name)
     confirm(robot_spec, args, plan, f"Move {robot_spec} through these {len(plan.steps)} steps? Type 'yes' to start: ")
     config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
-              "command": " ".join(sys.argv), "verification": info}
+              "command": " ".join(sys.argv), "verification": info,
+              **({"robot_model": robot.document} if robot.document is not None else {})}
     return _measure(args, None, path, plan, robot_spec, tracker_spec, site, robot, config)
 
 

@@ -22,7 +22,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from common.arguments import OneLineParser
+from common.arguments import OneLineParser, size
+from common.help_text import Formatter as HelpFormatter
 from common.help_text import description as _description
 
 
@@ -30,7 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
     assert __doc__ is not None
     first, rest = __doc__.split("\n\n", 1)
     p = OneLineParser(prog="acquire verify", description=_description(first),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
+                formatter_class=HelpFormatter, epilog=rest.replace("``", ""))
     p.add_argument("--result", type=Path, help="the calibration to verify (result YAML, with its covariance)")
     p.add_argument("--robot", help="robot spec (default: mock:<the result's robot>, the simulated rig)")
     p.add_argument("--tracker", help="tracker spec (default mock)")
@@ -38,9 +39,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--session", type=Path,
                    help="session file to create (default sessions/<robot>-verify-<time>.session)")
     p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this verification session")
-    p.add_argument("--cycles", type=int, help="visits of each pose per run (site verify.cycles; default 30, as ISO "
-                   "9283 asks; fewer for a quicker test: the dry run shows the duration)")
-    p.add_argument("--samples", type=int, help="tracker samples per visit (site default)")
+    p.add_argument("--cycles", type=size("cycles"),
+                   help="visits of each pose per run (site verify.cycles; default 30, as ISO 9283 asks; fewer for a "
+                   "quicker test: the dry run shows the duration)")
+    p.add_argument("--samples", type=size("samples"), help="tracker samples per visit (site default)")
     p.add_argument("--dry-run", action="store_true", help="print the test and its checks; move nothing")
     p.add_argument("--yes", action="store_true", help="do not ask before moving a real robot")
     p.add_argument("--realtime", action="store_true", help="mock mode at the speed of a real run")

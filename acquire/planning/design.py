@@ -1,5 +1,6 @@
 """The optimal design of free poses: the information a set of poses gives about the parameters the data determine,
-and the greedy choice of the poses that most reduce the predicted held-out error (DESIGN.md's Cramér-Rao bound).
+and the greedy choice of the poses that most reduce the predicted held-out error (the Cramér-Rao bound of
+identify/estimator/bounds.py).
 
 Pure numpy on the nominal model; joint values rad / m. Used by the planners (acquire/planning/plan.py,
 acquire/planning/plan_continuous.py) and the dry run's accuracy prediction (acquire/planning/plan_report.py).
@@ -55,7 +56,7 @@ def greedy_design(model: DHModel, q_fit: Array, candidates: Array, q_eval: Array
                   accept: Callable[[int], bool] | None = None) -> NDArray[np.int64]:
     """Indices of ``count`` rows of ``candidates`` chosen one at a time, each the pose that most reduces the
     predicted held-out error given ``q_fit`` and those chosen before: the trace of the Cramér-Rao prediction
-    covariance summed over ``q_eval`` (DESIGN.md), ``sum_k tr(Jc_k Σ Jc_kᵀ)`` with ``Σ = (JᵀJ)⁻¹``.
+    covariance summed over ``q_eval``, ``sum_k tr(Jc_k Σ Jc_kᵀ)`` with ``Σ = (JᵀJ)⁻¹``.
 
     Rank-one (rank-three: one TP) updates of Σ keep it O(count · candidates · r²) for r parameters.
     Directions the fit leaves undetermined get a tiny ridge, so poses that determine them win first. With

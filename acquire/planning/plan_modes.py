@@ -115,11 +115,14 @@ def build_both_plan(robot: RobotModel, site: SiteConfig, rng_seed: int = 0) -> P
     return replace(cont, steps=tuple(steps), notes=tuple(notes), speed=step.speed)  # stop-and-go sweeps' speed
 
 
-def format_modes(robot: RobotModel, site: SiteConfig, shown: Plan, free_poses: int | None = None) -> str:
+def format_modes(robot: RobotModel, site: SiteConfig, shown: Plan, free_poses: int | None = None,
+                 no_stream: str = "") -> str:
     """The dry run's comparison of the three modes for ``robot`` under ``site`` (before :func:`mode_site`;
     ``free_poses`` the ``--free-poses`` option): robot time (the duration estimate), tracker samples and predicted
     accuracy (Cramér-Rao bound of the held-out RMS TP error, timing error excluded) of each mode's plan
-    (``shown`` is one of them)."""
+    (``shown`` is one of them). ``no_stream``: why the tracker cannot stream (then only the step mode is shown)."""
+    if no_stream:
+        return f"\nmodes: step only: {no_stream}; continuous and both need a streaming tracker"
     rows = []
     for mode in MODES:
         plan = shown if plan_mode(shown) == mode else build_mode_plan(mode, robot, mode_site(site, mode, free_poses))

@@ -1,5 +1,5 @@
 """What the operator and other tools are told about a plan (pure): its predicted accuracy, the dry-run text,
-the clearance line and the Plan JSON of DESIGN.md.
+the clearance line and the plan as JSON (``acquire --dry-run --json``).
 
 :func:`predicted_accuracy` (Cramér-Rao bounds of the held-out TP error for the plan and for comparisons),
 :func:`format_plan` (the dry-run table), :func:`format_clearance` (the closest approach of the plan to its cell)
@@ -143,13 +143,13 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
     return "\n".join(lines)
 
 
-# the Plan JSON's kinds (DESIGN.md): a held-out free pose is "check"
+# the plan JSON's kinds: a held-out free pose is "check"
 JSON_KINDS = ("sweep", "free", "check", "home", "stream")
 
 
 def plan_json(plan: Plan, clearance: Clearance | None, duration_s: float | None = None,
               accuracy: dict[str, float] | None = None) -> dict[str, Any]:
-    """The plan as DESIGN.md's Plan JSON: ``robot``, ``joint_types``, ``home``, ``steps`` (execution order,
+    """The plan as JSON (``--dry-run --json``): ``robot``, ``joint_types``, ``home``, ``steps`` (execution order,
     ``{index, kind, joint, q}``, a held-out free pose's kind is "check") and ``clearance_m`` (m; None when the
     robot model has no collision geometry); then what the dry run prints besides: ``duration_s`` (s),
     ``predicted_accuracy`` (:func:`predicted_accuracy`'s figures, m; None for a continuous plan or a motion

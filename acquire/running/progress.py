@@ -27,6 +27,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from common.fit_width import wrap
 from common.units import hms
 from drivers.motion import motion_time
 from session.plan import Plan, Step
@@ -206,9 +207,11 @@ class ProgressDisplay:
                 self._bar.refresh()
 
     def _line(self, line: str) -> None:
+        """A progress line without a terminal: wrapped to ``COLUMNS`` when set (common/fit_width.py), else whole (a
+        log keeps one line per item)."""
         self.last_line = self.wall()
         with self._lock, contextlib.suppress(OSError, ValueError):
-            print(line, file=self.stream, flush=True)
+            print("\n".join(wrap(line)), file=self.stream, flush=True)
 
     def _tick(self) -> None:
         while not self._stop.wait(REFRESH_PERIOD):

@@ -16,6 +16,7 @@ import yaml
 from acquire.running.orchestrator import Orchestrator, RunResult, StopRequest, Timeouts
 from acquire.running.progress import ProgressDisplay
 from acquire.running.session import Session
+from common.errors import install_hint
 from common.fit_width import say
 from common.outputs import write_output
 from config.robots import ConfigError, RobotModel
@@ -113,7 +114,7 @@ def identify_session(session: Session, session_path: Path, robot: RobotModel) ->
     reference, note = factory_reference(calibration, why, robot.joint_types)
     if reference is not None or note:
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
-    doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path))
+    doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path), nominal_model=robot.document)
     if section := controller_section(calibration, robot.joint_types):  # what the arm runs today ("before")
         doc["controller"] = section
     out = session_path.with_suffix(".result.yaml")
@@ -124,7 +125,7 @@ def identify_session(session: Session, session_path: Path, robot: RobotModel) ->
     try:
         from identify.report.html import report_html
     except ImportError:
-        print("note: no HTML report (it needs matplotlib: pip install 'dh-calib[report]')")
+        print(f"note: no HTML report (it needs matplotlib: {install_hint('report')})")
         return doc
     report = session_path.with_suffix(".report.html")
     write_output(report, report_html(ident, meas, robot.nominal, robot.name, session=session, source=str(session_path),

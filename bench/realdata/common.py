@@ -1,7 +1,7 @@
 """What every converter and the real-data bench share: the measurement CSV they write, and an independent forward
 model to score written models with.
 
-The forward model here is written from DESIGN's equations and nothing else (it imports nothing from
+The forward model here is written from the README's equations (File contracts) and nothing else (it imports nothing from
 ``identify`` or ``kinematics``), so a model the product writes is scored by code that did not make it:
 ``T(q) = base · A_1(q_1) ··· A_n(q_n)``, ``A_i = Rz(theta_i + q_i) · Tz(d_i) · Tx(a_i) · Rx(alpha_i)`` (revolute;
 ``Tz(d_i + q_i)`` prismatic), point ``p = T(q) · [tool, 1]``; metres and radians; ``q`` are DH joint values
@@ -41,7 +41,7 @@ class Converted:
     metadata: dict[str, str] = field(default_factory=dict)
 
     def csv_text(self) -> str:
-        """The measurement CSV (DESIGN "Measurement CSV"): metres, radians, ``role`` and ``tp`` columns."""
+        """The measurement CSV (README.md, File contracts): metres, radians, ``role`` and ``tp`` columns."""
         out = io.StringIO()
         out.write(f"# joints: {self.joints}\n# units: m, rad\n")
         if self.coupling is not None:

@@ -1,6 +1,6 @@
 """Read the models a result YAML gives a user and predict with them, by this package's own forward model.
 
-Two models per file (DESIGN "Result YAML"): the plain one (top-level ``joints``, ``base``, ``tool``/``tools``,
+Two models per file (README.md, File contracts): the plain one (top-level ``joints``, ``base``, ``tool``/``tools``,
 ``coupling``: standard DH, no joint errors) and, when ``extensions`` is present, the extended one: the DH part
 ``extensions.model`` with the joint errors
 ``extensions.terms`` applied as ``extensions.equations`` state: the joint stands at ``q + dq(q)``, with

@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from common.errors import install_hint
 from config.robots import ConfigError, RobotModel, load_robot
 from drivers.base import Array, RobotState
 from drivers.clock import Clock, VirtualClock
@@ -198,7 +199,7 @@ class SimulatedRig:
             try:
                 from drivers.camera.tracker import rig_settings
             except ImportError as exc:
-                raise BackendUnavailable("the simulated camera needs OpenCV: pip install 'dh-calib[vision]'") from exc
+                raise BackendUnavailable(f"the simulated camera needs OpenCV: {install_hint('vision')}") from exc
             t["fault"], t["seed"], view = rig_settings(tracker)
         try:
             model = load_robot(robot.model)

@@ -62,6 +62,7 @@ from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 from drivers.trackers import emscon_protocol as es
 from drivers.trackers.emscon_options import DEFAULT_PORT, parse_settings
+from drivers.trackers.socket_reads import receive
 
 #: changes of the environment a result was corrected with (degC, mbar, %RH) that a reading's status reports
 ENVIRONMENT_STEP = (0.05, 0.1, 0.5)
@@ -375,17 +376,9 @@ class EmsconTracker:
             if remaining <= 0:
                 raise DeviceTimeout(f"{self.where}: no answer to {what} within the timeout ({self.reply_timeout:g} s "
                                     "per answer)")
-            try:
-                sock.settimeout(remaining)
-                chunk = sock.recv(65536)
-            except TimeoutError:
+            chunk = receive(sock, remaining, self.where, "the emScon server", self._drop)
+            if chunk is None:
                 continue
-            except OSError as exc:
-                self._drop()
-                raise ConnectionFailed(f"lost the connection to {self.where}: {one_line(exc)}") from exc
-            if not chunk:
-                self._drop()
-                raise ConnectionFailed(f"the emScon server {self.where} closed the connection")
             self._trace.data("<", chunk)
             self._buffer += chunk
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout
 from drivers.trace import ByteTrace, one_line
+from drivers.trackers.socket_reads import receive
 
 SEVERITY = {0: "info", 1: "warning", 2: "error", 3: "error (user action needed)", 9: "fatal server error"}
 _REPLY = re.compile(r"^(?P<tag>E?\d{4,5})\s+(?P<kind>[&#%!])\s*(?P<body>.*)$")
@@ -164,17 +165,9 @@ class IppProtocol:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 raise DeviceTimeout(f"{self.where}: no complete answer to {what} within the timeout")
-            try:
-                sock.settimeout(remaining)
-                chunk = sock.recv(65536)
-            except TimeoutError:
+            chunk = receive(sock, remaining, self.where, "the I++ server", self._drop)
+            if chunk is None:
                 continue
-            except OSError as exc:
-                self._drop()
-                raise ConnectionFailed(f"lost the connection to {self.where}: {one_line(exc)}") from exc
-            if not chunk:
-                self._drop()
-                raise ConnectionFailed(f"the I++ server {self.where} closed the connection")
             self._trace.data("<", chunk)
             self._buffer += chunk
 

@@ -40,6 +40,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from common.errors import install_hint
 from config.robots import ConfigError
 from drivers.base import DeviceIdentity, TrackerReading, check_measure_request
 from drivers.errors import (
@@ -140,7 +141,7 @@ class SerialTracker(LineStreaming):
         try:
             import serial
         except ImportError as exc:
-            raise BackendUnavailable("the serial tracker needs pyserial: pip install 'dh-calib[serial]'") from exc
+            raise BackendUnavailable(f"the serial tracker needs pyserial: {install_hint('serial')}") from exc
         self.close()
         self._trace.open()
         self._trace.event(f"open {self.url} profile={self.profile.name} baud={self.baud} parity={self.parity}")

@@ -55,6 +55,7 @@ from typing import Any
 
 import numpy as np
 
+from common.errors import install_hint
 from config.robots import ConfigError, RobotModel, load_robot
 from drivers.base import Array, DeviceIdentity, RobotState
 from drivers.errors import (
@@ -72,7 +73,7 @@ from drivers.ur.stream import JointStreaming
 from drivers.ur.worker import CALL_TIMEOUT, LinkLost, Snapshot, Worker, WorkerError
 
 CALIBRATION_TIMEOUT = 1.5  # s, at most, to read the kinematics info on the primary interface
-INSTALL_HINT = "pip install 'dh-calib[ur]'"
+INSTALL_HINT = install_hint("ur")
 PROBE_TIMEOUT = 3.0  # s, at most, for the first contact with the controller
 RECONNECT_TIMEOUT = 5.0  # s, at most, for a fresh worker to open the interfaces after a lost link
 POLL_PERIOD = 0.008  # s, about one RTDE package at 125 Hz

@@ -309,16 +309,34 @@ def nominal_name(doc: dict[str, Any]) -> str | None:
     return nominal.get("name") if isinstance(nominal, dict) else None
 
 
-def robot_model(name: str | None):
+def robot_model(name: str | None, recorded: Any = None, where: str | None = None):
     """The robot model named ``name`` (bundled name or YAML path), None for None; a bad name or file is an
-    :class:`~common.errors.InputError` (one line)."""
+    :class:`~common.errors.InputError` (one line). ``recorded``: the model document a session or a result
+    ``where`` records (:func:`recorded_model`): it is the model when ``name`` is its name (the file it was read
+    from may be gone)."""
     if name is None:
         return None
     if not name.strip():
         raise InputError("--robot is empty: name a bundled model (e.g. ur5e) or a robot YAML file")
-    from config.robots import ConfigError, load_robot
+    from config.robots import ConfigError, load_robot, robot_from_document
 
     try:
+        if isinstance(recorded, dict) and str(recorded.get("name", "")).strip().lower() == name.strip().lower():
+            return robot_from_document(recorded, f"{where or 'the input'}: its recorded robot model")
         return load_robot(name)
     except ConfigError as exc:
-        raise InputError(str(exc)) from None
+        hint = (f"; {where} names a robot model it does not record: give its YAML file with --robot FILE"
+                if where is not None else "")
+        raise InputError(f"{exc}{hint}") from None
+
+
+def recorded_model(doc: Any) -> dict[str, Any] | None:
+    """The robot model document (config/robots.py ``model_document``) a result (``nominal.model``) or a session
+    header (``config.robot_model``) records, None when it records none (a bundled model, or an older file)."""
+    if not isinstance(doc, dict):
+        return None
+    for section, key in (("nominal", "model"), ("config", "robot_model")):
+        value = (doc.get(section) or {}).get(key) if isinstance(doc.get(section), dict) else None
+        if isinstance(value, dict):
+            return value
+    return None

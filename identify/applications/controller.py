@@ -14,6 +14,7 @@ Frames: the model returned has the identity base (robot frame 0) and a zero tool
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 from common.errors import InputError
@@ -51,11 +52,13 @@ def controller_model(doc: dict[str, Any], robot: Any) -> tuple[DHModel, str]:
 
 
 def check_same_robot(doc: dict[str, Any], joint_types: str, robot: Any, option: str = "--robot",
-                     result: str = "the result") -> None:
+                     result: str = "the result", identified: Any = None) -> float | None:
     """Refuse (InputError, one line) a ``robot`` (a :class:`config.robots.RobotModel`) other than the model the
     result ``doc`` with ``joint_types`` was calibrated against (``nominal.name``), or with other joint types:
-    its joint values would mean another arm. The same check serves every command that takes a result and a
-    robot."""
+    its joint values would mean another arm. A result that records no model (identified without ``--robot``) is
+    compared with ``robot`` by what it is: ``identified`` (its CalibratedModel) must fit the robot's nominal within
+    :data:`MISFIT` (:func:`nominal_misfit`). Returns that misfit (m RMS), None when the result names its model.
+    The same check serves every command that takes a result and a robot."""
     from identify.applications.calibrated import nominal_name
 
     name = nominal_name(doc)
@@ -63,3 +66,45 @@ def check_same_robot(doc: dict[str, Any], joint_types: str, robot: Any, option: 
         raise InputError(f"{result} is a calibration of {name}; {option} {robot.name} is another robot model")
     if joint_types.upper() != robot.joint_types.upper():
         raise InputError(f"{result} has joints {joint_types}, {option} {robot.name} {robot.joint_types}")
+    if name is not None or identified is None:
+        return None
+    misfit = nominal_misfit(identified, robot)
+    if misfit > MISFIT:
+        raise InputError(f"{result} records no robot model, and {option} {robot.name} is not the arm it calibrated: "
+                         f"its nominal misses the identified arm by {misfit * 1e3:.3g} mm RMS (the same model: about "
+                         f"1 mm); give the model the arm is")
+    return misfit
+
+
+MISFIT = 5e-3  # m RMS: a robot model whose points miss the identified arm's by more is another model
+
+
+def nominal_misfit(identified: Any, robot: Any, poses: int = 40, seed: int = 0) -> float:
+    """RMS distance (m, 3D) between the tracked point of ``identified`` (a CalibratedModel) and ``robot``'s nominal
+    model at ``poses`` random readings within the robot's limits, after the best rigid placement of the nominal
+    and the best TP on its flange (9 parameters: the frames' and the tool's conventions cancel). A calibration of
+    the same model misses by its own errors (about a millimetre), another model (a UR10e for a UR5e) by
+    centimetres to decimetres."""
+    import numpy as np
+    from scipy.optimize import least_squares
+    from scipy.spatial.transform import Rotation
+
+    from kinematics.dh import flange_frames
+
+    limits = np.clip(np.asarray(robot.limits, dtype=float), -np.pi, np.pi)
+    q = np.random.default_rng(seed).uniform(limits[:, 0], limits[:, 1], (poses, robot.n_joints))
+    seen = np.asarray(identified.points(q), dtype=float)
+    q_dh = q if robot.coupling is None else robot.coupling.dh_from_readings(q)
+    turns, origins = flange_frames(replace(robot.nominal, base=np.eye(4)), q_dh)
+
+    def residuals(x: Any) -> Any:
+        points = np.einsum("mij,j->mi", turns, x[6:9]) + origins
+        return (points @ Rotation.from_rotvec(x[:3]).as_matrix().T + x[3:6] - seen).ravel()
+
+    # start: the rotation that best maps the flange origins onto the points (Kabsch), no tool
+    a, b = origins - origins.mean(axis=0), seen - seen.mean(axis=0)
+    u, _, vt = np.linalg.svd(b.T @ a)
+    rot = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    start = np.r_[Rotation.from_matrix(rot).as_rotvec(), seen.mean(axis=0) - origins.mean(axis=0) @ rot.T, 0, 0, 0]
+    fit = least_squares(residuals, start, method="lm")
+    return float(np.sqrt(np.mean(np.sum(fit.fun.reshape(-1, 3) ** 2, axis=1))))

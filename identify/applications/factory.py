@@ -4,7 +4,7 @@ Universal Robots controllers store calibrated standard-DH values per robot and s
 info of the primary client interface (read by drivers/ur/info.py, kept in the session header): ``theta``
 (rad, the joint zero offset added to the joint reading), ``a`` and ``d`` (m), ``alpha`` (rad), one per joint.
 UR's forward model is ``Rz(theta_i + q_i) Tz(d_i) Tx(a_i) Rx(alpha_i)`` with the same signs as the nominal
-values UR publishes (e.g. the UR5e's ``a_2 = -0.425 m``), which is the forward model of DESIGN.md and of
+values UR publishes (e.g. the UR5e's ``a_2 = -0.425 m``), which is our forward model (kinematics/dh.py) and that of
 ``config/robots/ur*.yaml``: the values map one to one, without sign changes or reordering. The calibration
 has no base or tool (the identified model's base and tool are in the tracker's frame), so the model returned
 has the identity base and a zero tool; compare DH tables, not predicted points.

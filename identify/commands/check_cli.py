@@ -1,21 +1,6 @@
 """``identify check RESULT DATA``: does a calibration still hold on new data?
 
-RESULT is a result YAML (identify --out); DATA a measurement CSV or an
-acquisition session of the same arm, taken with the tracker wherever it stands
-now. The tracker frame is registered anew (a rigid 6-DoF fit, robust to a few
-gross errors), then each model of the result predicts every row: the plain DH
-table and, when the result selected joint errors, the extended model. The
-figure that decides is cross-validated (each of 5 blocks of poses is predicted
-from a registration fitted on the others) and compared with the error the
-result expects there (tracker noise, model uncertainty, model error): up to
-1.5x it holds (pass), beyond 3x it does not (fail), in between: warn.
-
---refit-tool also refits each tracked point's position on the flange (3
-numbers per point): use it when the reflector was re-mounted. The check then
-cannot see a changed tool, nor a change of the arm that looks like one.
-
-Exit codes: 0 pass or warn, 3 fail (another arm, another tool, or the arm
-changed), 2 bad input (one line).
+Its options and help: identify/commands/sub_options.py (light, so that --help answers at once).
 """
 
 from __future__ import annotations
@@ -31,37 +16,21 @@ from typing import Any
 import numpy as np
 import yaml
 
-from common.arguments import OneLineParser
 from common.errors import InputError
 from common.outputs import check_outputs, write_output
+from common.units import as_typed, mm, slip_hint
 from identify.applications.calibrated import ResultError
 from identify.applications.domain import result_outside
 from identify.applications.holds import Check, check_models
 from identify.applications.result_models import ResultModels, result_models
+from identify.commands.sub_options import check_parser as build_parser
 from identify.estimator.measurements import Measurements
-from identify.io.csvio import UNITS, read_measurements
+from identify.io.csvio import read_measurements
 from identify.io.result_io import finite
 from identify.io.session_measurements import read_session
 from session.schema import is_session_file
 
 PROG = "identify check"
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(prog=PROG, description="Does a calibration still hold on new data of the arm?",
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog="\n".join(__doc__.splitlines()[2:]))
-    p.add_argument("result", metavar="RESULT", help="result YAML of the calibration (identify --out)")
-    p.add_argument("data", metavar="DATA", help="measurement CSV or acquisition session of the arm today")
-    p.add_argument("--refit-tool", action="store_true",
-                   help="also refit each tracked point on the flange (a re-mounted reflector)")
-    p.add_argument("--noise", type=float, metavar="M",
-                   help="today's tracker noise, m per axis (default: the calibration's)")
-    p.add_argument("--joints", metavar="TYPES", help="joint types of a CSV without '# joints:', e.g. RRRRRR")
-    p.add_argument("--units", choices=sorted(UNITS), help="unit of x, y, z in the CSV (default: file or m)")
-    p.add_argument("--json", action="store_true", help="print the check as one JSON object")
-    p.add_argument("--out", metavar="FILE", help="write the check as YAML")
-    p.add_argument("--force", action="store_true", help="replace --out if it exists")
-    return p
 
 
 def load(args: argparse.Namespace) -> tuple[dict[str, Any], Measurements, list[str]]:
@@ -93,11 +62,11 @@ def load(args: argparse.Namespace) -> tuple[dict[str, Any], Measurements, list[s
 
 def run(args: argparse.Namespace) -> tuple[Check, ResultModels, Measurements, list[str]]:
     """Check per ``args``; InputError (one line) for bad input."""
-    if args.noise is not None and not (args.noise > 0 and math.isfinite(args.noise)):
-        raise InputError(f"--noise must be a positive number of metres, got {args.noise}")
     check_outputs([args.result, args.data], [("--out", args.out)], args.force)
     doc, meas, notes = load(args)
     try:
+        if args.noise is not None:
+            check_noise(args.noise, as_typed(args, "noise"), _check(doc, meas, None, args.refit_tool))
         models = result_models(doc, meas.q, meas.tp, args.noise)
         check = check_models(meas.points, meas.q, meas.tp, models.models, models.use, args.refit_tool)
     except (ResultError, ValueError) as exc:
@@ -107,6 +76,26 @@ def run(args: argparse.Namespace) -> tuple[Check, ResultModels, Measurements, li
     if found is not None and found.count:
         notes.append("the check's figures pool the poses inside and outside the domain")
     return check, models, meas, notes
+
+
+def _check(doc: dict[str, Any], meas: Measurements, noise: float | None, refit_tool: bool) -> Check:
+    """The result's models checked on ``meas`` at tracker ``noise`` (m per axis; None: the result's)."""
+    models = result_models(doc, meas.q, meas.tp, noise)
+    return check_models(meas.points, meas.q, meas.tp, models.models, models.use, refit_tool)
+
+
+UNIT_SLIP = 10.0  # a stated noise this many times the data's own scatter cannot be the tracker's: a unit slip
+
+
+def check_noise(noise: float, typed: str | None, check: Check) -> None:
+    """InputError (one line) when ``noise`` (m per axis, typed as ``typed``) is more than :data:`UNIT_SLIP` times
+    the scatter the data show: the in-sample RMS per axis of ``check`` (made at the result's own noise), which
+    holds the tracker's noise and every model error, so no real noise exceeds it tenfold (1000x: a bare number
+    meant in mm)."""
+    scatter = min(m.fitted_dof_rms for m in check.models) / math.sqrt(3.0)
+    if noise > UNIT_SLIP * scatter:
+        raise InputError(f"{slip_hint('--noise', typed, noise)} ({noise / scatter:.0f}x the scatter these data "
+                         f"show, {mm(scatter)} per axis in-sample: no tracker is noisier than its own data)")
 
 
 def as_dict(check: Check, models: ResultModels, meas: Measurements, notes: list[str]) -> dict[str, Any]:

@@ -17,11 +17,12 @@ from typing import Any
 import numpy as np
 import yaml
 
-from common import __version__, fit_width
-from common.errors import InputError
+from common import __version__, fit_width, stop_signals
+from common.errors import InputError, install_hint
 from common.outputs import check_outputs, write_output
+from common.units import as_typed, slip_hint
 from config.robots import RobotModel
-from identify.applications.calibrated import robot_model
+from identify.applications.calibrated import recorded_model, robot_model
 from identify.commands.options import SUBCOMMANDS, build_parser
 from identify.estimator.measurements import Measurements
 from identify.io.csvio import format_measurements, read_measurements
@@ -46,7 +47,7 @@ def _check_exports(args: argparse.Namespace, joint_types: str) -> None:
         try:
             import identify.report.html  # noqa: F401
         except ImportError:
-            raise InputError("--report needs matplotlib: pip install 'dh-calib[report]'") from None
+            raise InputError(f"--report needs matplotlib: {install_hint('report')}") from None
 
 
 def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measurements, doc: dict[str, Any],
@@ -188,7 +189,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     meas = _rows(split_holdout(content.measurements, args.holdout, args.seed), args.rows)
     # a session knows its robot; --robot '' is refused, not taken for no --robot
     robot_name = args.robot if args.robot is not None else (header or {}).get("robot_model")
-    robot = robot_model(robot_name)
+    recorded = (recorded_model(header), str(args.input)) if args.robot is None and header is not None else (None, None)
+    robot = robot_model(robot_name, *recorded)
     nominal, nominal_name = (robot.nominal, robot.name) if robot else (None, None)
     if nominal is not None and nominal.joint_types != meas.joint_types:
         raise InputError(f"--robot {nominal_name} has joints {nominal.joint_types}, the data have "
@@ -203,13 +205,15 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         ident = replace(ident, verdict=checks.with_session_check(ident.verdict,
                                                                   checks.missing_steps(*header["missing_steps"])))
-    doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input))
+    doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input),
+                         nominal_model=robot.document if robot else None)
     if header is not None:  # the controller's own calibration: what the arm runs today ("before")
         from identify.applications.controller import controller_section
         from session.rows import factory_calibration
 
         if section := controller_section(factory_calibration(header)[0], meas.joint_types):
             doc["controller"] = section
+    _noise_hint(args, doc)
     if args.out:
         _write_atomic(Path(args.out), yaml.safe_dump(doc, sort_keys=False, width=120))
     reference, note = _factory_reference(header, meas.joint_types) if header is not None else (None, "")
@@ -264,6 +268,16 @@ def _rows(meas: Measurements, rows: str) -> Measurements:
     return meas.subset(fitted | meas.check)
 
 
+def _noise_hint(args: argparse.Namespace, doc: dict[str, Any]) -> None:
+    """A ``--noise`` ten times above the residuals (m per axis) is a unit slip: say so on stderr, repeating what was
+    typed and what to write (the verdict's model_fit check warns too)."""
+    residual = (doc.get("noise") or {}).get("residual_per_axis")
+    if args.noise is None or not residual or args.noise <= 10 * residual:
+        return
+    hint = slip_hint("--noise", as_typed(args, "noise"), args.noise)
+    print(f"identify: note: {hint} (the residuals are {residual * 1e3:.3g} mm per axis)", file=sys.stderr)
+
+
 def _with_coupling(meas: Measurements, path: str | None, robot: RobotModel | None, notes: list[str]) -> Measurements:
     """``meas`` with its readings' coupling: ``--coupling FILE``, else the file's, else the robot model's."""
     n = meas.n_joints
@@ -315,6 +329,7 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader of stdout went away (| head): the entry point stops quietly
         raise
     except Exception as exc:  # numerical failure: one line, not a traceback; --debug-free by design
+        stop_signals.raise_pending()  # unless a stop signal became this error (an interrupted import)
         print(f"identify: error: identification failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
     if doc["verdict"]["status"] == "fail":

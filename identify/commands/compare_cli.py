@@ -1,11 +1,6 @@
 """``identify compare A B [C ...]``: has the robot changed between calibrations? (the edge where files are read)
 
-Each input is a result YAML (``identify --out``, with its covariance) or an acquisition session (identified here
-against its robot's nominal model), oldest first. Results of different robots or joint types are refused. Prints
-one verdict line, then per consecutive pair the test of every DH parameter and the predicted TP displacement
-(see identify/applications/compare.py); ``--html FILE`` writes the trend of every significant parameter over the inputs.
-
-Exit codes: 0 no significant change, 3 a significant change, 2 bad input (one line).
+Its options and help: identify/commands/sub_options.py (light, so that --help answers at once).
 """
 
 from __future__ import annotations
@@ -21,36 +16,21 @@ from typing import Any
 import numpy as np
 
 from common import fit_width
-from common.arguments import OneLineParser
 from common.errors import InputError
-from common.help_text import description as _description
 from common.outputs import check_outputs, same_file, write_output
-from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
-from identify.applications.compare import ALPHA, POSES, CompareError, Comparison, check_same_robot, compare
+from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, recorded_model, robot_model
+from identify.applications.compare import CompareError, Comparison, check_same_robot, compare
 from identify.applications.domain import domain_from_document, outside
+from identify.commands.sub_options import compare_parser as build_parser
 from identify.io.result_io import load_result
 from session.schema import is_session_file
 
 
-def build_parser() -> argparse.ArgumentParser:
-    first, rest = __doc__.split("\n\n", 1)
-    p = OneLineParser(prog="identify compare", description=_description(first),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
-    p.add_argument("inputs", nargs="+", metavar="RESULT_OR_SESSION", help="two or more, oldest first")
-    p.add_argument("--robot", metavar="MODEL", help="nominal model (joint limits of the displacement poses; default: "
-                   "the inputs')")
-    p.add_argument("--alpha", type=float, default=ALPHA, help=f"family-wise false-alarm rate ({ALPHA})")
-    p.add_argument("--poses", type=int, default=POSES, help=f"random poses for the TP displacement ({POSES})")
-    p.add_argument("--seed", type=int, default=0, help="seed of those poses (0)")
-    p.add_argument("--html", metavar="FILE", help="write the trend page (needs matplotlib)")
-    p.add_argument("--json", action="store_true", help="print the comparison as one JSON object")
-    p.add_argument("--force", action="store_true", help="replace --html if it exists")
-    return p
-
-
-def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, float | None, np.ndarray | None]:
-    """The model of a result or session, its robot name, robot serial, time (s since the epoch, or None) and domain
-    (n, 2: the DH joint ranges it was fitted on, None when a result records none)."""
+def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, float | None, np.ndarray | None,
+                                   dict[str, Any] | None]:
+    """The model of a result or session, its robot name, robot serial, time (s since the epoch, or None), domain
+    (n, 2: the DH joint ranges it was fitted on, None when a result records none) and the robot model it records
+    (a model that is not bundled; else None)."""
     p = Path(path)
     if not p.exists():
         raise InputError(f"{path}: no such result or session")
@@ -61,8 +41,8 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
             raise InputError(str(exc)) from None
         if (doc.get("verdict") or {}).get("status") == "fail":
             raise InputError(f"{path} fails its verdict: its model cannot be compared")
-        return model, nominal_name(doc), None, p.stat().st_mtime, domain_from_document(doc)
-    from config.robots import ConfigError, load_robot
+        return model, nominal_name(doc), None, p.stat().st_mtime, domain_from_document(doc), recorded_model(doc)
+    from config.robots import ConfigError
     from identify.io.session_measurements import session_measurements
     from identify.results.pipeline import identify
     from session.schema import SessionError
@@ -74,7 +54,7 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
             if "verification" in (header.get("config") or {}):
                 raise InputError(f"{path} is a verification session (acquire verify): compare calibrations")
             meas, robot_name = session_measurements(session), session.plan.robot
-        robot = load_robot(robot_name)
+        robot = robot_model(robot_name, recorded_model(header), path)
     except (SessionError, ConfigError) as exc:
         raise InputError(str(exc)) from None
     ident = identify(meas, robot.nominal, links=robot.links)  # as acquire identifies its sessions
@@ -82,7 +62,7 @@ def load_input(path: str) -> tuple[CalibratedModel, str | None, str | None, floa
         raise InputError(f"{path}: its identification fails its verdict ({ident.verdict.summary()})")
     serial = (header.get("robot") or {}).get("serial") or None
     return (CalibratedModel.from_identification(ident, p.stem), robot.name, serial, header.get("created"),
-            ident.domain)
+            ident.domain, robot.document)
 
 
 def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
@@ -104,11 +84,13 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
         check_same_robot(models, [r for _, r, *_ in loaded], labels)
     except CompareError as exc:
         raise InputError(str(exc)) from None
-    serials = {(s, label) for (_, _, s, _, _), label in zip(loaded, labels, strict=True) if s}
+    serials = {(s, label) for (_, _, s, *_), label in zip(loaded, labels, strict=True) if s}
     if len({s for s, _ in serials}) > 1:
         a, b = sorted(serials)[:2]
         raise InputError(f"{a[1]} is robot serial {a[0]}, {b[1]} serial {b[0]}: different robots cannot be compared")
-    robot = robot_model(args.robot if args.robot is not None else next((r for _, r, *_ in loaded if r), None))
+    named = next(((r, doc, path) for (_, r, _, _, _, doc), path in zip(loaded, args.inputs, strict=True) if r),
+                 (None, None, None))
+    robot = robot_model(args.robot) if args.robot is not None else robot_model(*named)
     if robot is not None and robot.joint_types != models[0].model.joint_types:
         raise InputError(f"--robot {robot.name} has joints {robot.joint_types}, the inputs "
                          f"{models[0].model.joint_types}")
@@ -116,23 +98,23 @@ def run(args: argparse.Namespace) -> tuple[Comparison, dict[str, Any]]:
         result = compare(models, labels, None if robot is None else robot.limits, args.alpha, args.poses, args.seed)
     except CompareError as exc:
         raise InputError(str(exc)) from None
-    times = [t for _, _, _, t, _ in loaded]
+    times = [t for _, _, _, t, _, _ in loaded]
     if args.html:
         from identify.report.compare_html import compare_html
 
         write_output(args.html, compare_html(result, models, times), force=args.force)
-    notes = _domains(result, models, [d for *_, d in loaded])
+    notes = _domains(result, models, [d for _, _, _, _, d, _ in loaded])
     result = replace(result, notes=notes)
     return result, as_dict(result)
 
 
 def _domains(result: Comparison, models: list[CalibratedModel], domains: list[np.ndarray | None]) -> tuple[str, ...]:
     """For each input, how many of the poses the displacement was computed at lie outside its domain."""
-    out = []
     q = result.poses
+    if q is None:
+        return ()
+    out = []
     for label, model, domain in zip(result.labels, models, domains, strict=True):
-        if q is None:
-            break
         if domain is None:
             out.append(f"{label}: records no domain (written before results did): where it holds is not known")
             continue

@@ -1,35 +1,6 @@
 """``identify compensate RESULT --targets FILE --out FILE``: joint values (or controller poses) that bring the real
-arm to given targets with its identified model (the edge where files are read and written).
 
-Targets (CSV, one header row, ``#`` comment lines; metres and radians):
-
-- ``--frame tracker`` (default): ``x,y,z`` the TP in the tracker (cell) frame;
-- ``--frame base``: ``x,y,z`` and optionally ``rx,ry,rz`` (UR axis-angle) of the tool centre point (``--tool``,
-  default the identified TP) in the robot's base frame (DH frame 0); with ``rx,ry,rz`` the orientation counts;
-- ``--joints-from nominal``: ``q1..qN`` planned with the nominal model: the targets are where the nominal model
-  puts the tool there (position and, for six joints or more, orientation; base frame).
-
-Joint values (``q1..qN`` seeds, rows of ``--joints-from nominal``, and the output) are the controller's readings
-(for a coupled robot, as its controller reports them). Optional ``q1..qN`` columns seed the solution (default:
-the robot's home); an ``id`` column is copied through.
-Each target is solved with the controller's model first and the identified model from there (the branch of the
-seed). ``--as controller-pose`` also writes the pose the controller must be given so that the real arm reaches
-the target, as UR's ``p[x, y, z, rx, ry, rz]``. The controller's model ("before", what the arm runs today) is
-its factory calibration when the result records one (``controller:``), else the nominal model of ``--robot``.
-
-``--program FILE`` filters a robot program instead (URScript): every target of ``movej``, ``movel``, ``movep``
-and ``servoj`` (joint lists, rad; ``p[x, y, z, rx, ry, rz]`` poses, m and axis-angle rad, base frame; named
-poses assigned once) is rewritten so that the real arm goes where the program meant on the controller's model,
-each changed line commented with its change in mm and mrad; everything else is kept byte for byte, and what
-cannot be rewritten (targets computed at run time, pose_trans chains, values read from the controller) is listed
-line by line. The TCP: ``--tool``, else the program's one literal ``set_tcp(p[...])``, else the identified TP.
-Pose targets are solved from the previous target's joints (the first from home), as the controller runs them.
-The compensated joints are checked against the joint limits and the cell of ``--config SITE`` (default: the robot
-alone on its mounting surface); a target that fails is kept as written and listed.
-
-Another robot model than the result's is refused. Exit codes: 0 every target reached (with --program: every
-target rewritten and every motion line understood), 3 some not (each row or listed line says why), 2 bad input
-(one line).
+Its options and help: identify/commands/sub_options.py (light, so that --help answers at once).
 """
 
 from __future__ import annotations
@@ -46,11 +17,11 @@ from typing import Any
 import numpy as np
 
 from common import __version__
-from common.arguments import OneLineParser, comma_numbers
+from common.arguments import comma_numbers
 from common.errors import InputError
-from common.help_text import description as _description
+from common.fit_width import say
 from common.outputs import check_outputs, write_output
-from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, robot_model
+from identify.applications.calibrated import CalibratedModel, ResultError, nominal_name, recorded_model, robot_model
 from identify.applications.compensate import (
     Compensation,
     compensate,
@@ -62,38 +33,10 @@ from identify.applications.compensate import (
 )
 from identify.applications.controller import check_same_robot, controller_model
 from identify.applications.domain import result_outside
+from identify.commands.sub_options import compensate_parser as build_parser
 from identify.io.result_io import load_result
 
 MAX_COORDINATE = 10.0  # m: a target farther than this from the origin is almost surely in millimetres
-
-
-def build_parser() -> argparse.ArgumentParser:
-    first, rest = __doc__.split("\n\n", 1)  # the first paragraph is the description (one sentence over two lines)
-    p = OneLineParser(prog="identify compensate", description=_description(first),
-                formatter_class=argparse.RawDescriptionHelpFormatter, epilog=rest.replace("``", ""))
-    p.add_argument("result", help="result YAML of identify --out (with its covariance)")
-    given = p.add_mutually_exclusive_group(required=True)
-    given.add_argument("--targets", metavar="FILE", help="targets CSV (see above)")
-    given.add_argument("--program", metavar="FILE",
-                       help="robot program to filter (URScript: movej/movel/movep/servoj targets; see below)")
-    p.add_argument("--out", required=True, metavar="FILE", help="output CSV (with --program: the filtered program)")
-    p.add_argument("--frame", choices=("tracker", "base"), default="tracker",
-                   help="frame of x,y,z targets: tracker (the TP) or base (the tool, robot frame 0)")
-    p.add_argument("--joints-from", choices=("nominal",), dest="joints_from",
-                   help="targets are joint values planned with the nominal model")
-    p.add_argument("--as", choices=("joints", "controller-pose"), default="joints", dest="output",
-                   help="write joint values (default) or also the controller's pose (UR p[...])")
-    p.add_argument("--robot", metavar="MODEL",
-                   help="nominal model (limits, home, the controller's model); default: the result's")
-    p.add_argument("--tool", metavar="X,Y,Z[,RX,RY,RZ]",
-                   help="tool centre point in the flange frame, m and UR axis-angle rad (default: the identified TP)")
-    p.add_argument("--language", choices=("urscript",), default="urscript", help="language of --program")
-    p.add_argument("--config", metavar="SITE",
-                   help="site file whose cell the compensated program targets are checked against (default: the "
-                        "robot alone on its mounting surface)")
-    p.add_argument("--force", action="store_true", help="replace --out if it exists")
-    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
-    return p
 
 
 def read_targets(path: str | Path) -> tuple[dict[str, np.ndarray], list[str]]:
@@ -150,10 +93,13 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     status = (doc.get("verdict") or {}).get("status")
     if status == "fail":
         raise InputError(f"{args.result} fails its verdict: its model must not be used (see the result's checks)")
-    robot = robot_model(args.robot if args.robot is not None else nominal_name(doc))
+    robot = (robot_model(args.robot) if args.robot is not None
+             else robot_model(nominal_name(doc), recorded_model(doc), str(args.result)))
     n = identified.n_joints
+    misfit = None
     if robot is not None:  # another robot model's joint values mean another arm: refused before any work
-        check_same_robot(doc, identified.model.joint_types, robot, result=str(args.result))
+        misfit = check_same_robot(doc, identified.model.joint_types, robot, result=str(args.result),
+                                  identified=identified)
     if args.program:
         from identify.commands.program_cli import run_program
 
@@ -162,7 +108,7 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
         raise InputError("--as controller-pose needs the controller's model: give --robot (the result names none)")
     tcp, tcp_rot = identified.tool(), np.eye(3)
     if args.tool:
-        values = comma_numbers(args.tool, "--tool", (3, 6))
+        values = comma_numbers(args.tool, "--tool", (3, 6), lengths=3)
         tcp = np.array(values[:3])
         if len(values) == 6:
             tcp_rot = pose_matrices(np.zeros(3), np.array(values[3:]))[0, :3, :3]
@@ -211,6 +157,9 @@ def run(args: argparse.Namespace) -> tuple[dict[str, Any], int]:
     write_output(args.out, text, force=args.force)
     summary = _summary(result, args, status, robot)
     summary["before"] = before
+    if misfit is not None:
+        summary["note"] = (f"the result records no robot model: {robot.name} taken as its nominal (it fits the "
+                           f"identified arm within {misfit * 1e3:.2g} mm RMS)")
     summary["domain"] = result_outside(doc, result.solution.q[result.solution.reached])[1]
     return summary, 0 if bool(np.all(result.solution.reached)) else 3
 
@@ -310,7 +259,7 @@ def main(argv: list[str] | None = None) -> int:
     elif args.program:
         from identify.commands.program_cli import format_program_summary
 
-        print(format_program_summary(summary))
+        say(format_program_summary(summary))  # wrapped to the terminal (a kept line quotes the program)
     else:
-        print(format_summary(summary))
+        say(format_summary(summary))
     return code

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from common.stop_signals import guarded
+from common.stop_signals import deferred, guarded
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -20,15 +20,24 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str]) -> int:
-    from identify.commands.options import SUBCOMMANDS, build_parser
+    with deferred():  # a stop during the imports is raised after them, never inside one (common/stop_signals.py)
+        from identify.commands.options import SUBCOMMANDS, build_parser
 
-    if not argv[:1] or argv[0] not in SUBCOMMANDS:
-        args = build_parser().parse_args(argv)  # --help, --version and usage errors exit here
-        if not Path(args.input).exists():
-            print(f"identify: error: {args.input}: no such file", file=sys.stderr)
-            return 2
-    from identify.commands.cli import main as full_main
+        if not argv[:1] or argv[0] not in SUBCOMMANDS:
+            args = build_parser().parse_args(argv)  # --help, --version and usage errors exit here
+            if not Path(args.input).exists():
+                print(f"identify: error: {args.input}: no such file", file=sys.stderr)
+                return 2
+        else:  # a subcommand's --help and usage errors too, before its imports
+            from identify.commands import sub_options
 
+            getattr(sub_options, f"{argv[0]}_parser")().parse_args(argv[1:])
+        from importlib import import_module
+
+        from identify.commands.cli import main as full_main
+
+        if argv[:1] and argv[0] in SUBCOMMANDS:
+            import_module(f"identify.commands.{argv[0]}_cli")  # the subcommand's own imports, here too
     return full_main(argv)
 
 

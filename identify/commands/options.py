@@ -11,7 +11,8 @@ from __future__ import annotations
 import argparse
 
 from common.arguments import OneLineParser, VersionAction
-from common.units import length, positive_length
+from common.help_text import Formatter as HelpFormatter
+from common.units import Typed, length, positive_length
 
 DEFAULT_PARALLEL_TOL = 0.01  # rad: identify.estimator.cpa.DEFAULT_PARALLEL_TOL
 UNITS = ("m", "mm")  # identify.io.csvio.UNITS
@@ -27,9 +28,12 @@ examples:
   identify measurements.csv --json
 
 subcommands (each has its own --help):
-  compare A B [C ...]               has the robot changed between calibrations (results or sessions)?
+  compare A B [C ...]    has the robot changed between calibrations (results
+                         or sessions)?
   compensate RESULT --targets F --out F
-                                    joint values that bring the real arm to given targets
+                         joint values that bring the real arm to given targets
+                         (or --program F: a robot program filtered)
+  check RESULT DATA      does a calibration still hold on new data of the arm?
 
 exit codes:
   0    a result that passes its verdict, or passes with warnings
@@ -42,7 +46,7 @@ exit codes:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="identify", description=DESCRIPTION, epilog=EPILOG,
-                     formatter_class=argparse.RawDescriptionHelpFormatter)
+                     formatter_class=HelpFormatter)
     parser.add_argument("input", help="measurement CSV (sweep,joint,q1..qN,x,y,z) or an acquisition session file")
     parser.add_argument("--out", metavar="FILE", help="write the result YAML to FILE (README.md: File contracts)")
     parser.add_argument("--json", action="store_true", help="print the full result as JSON instead of a table")
@@ -64,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="seed of the hold-out draw (0)")
     parser.add_argument("--parallel-tol", type=float, default=DEFAULT_PARALLEL_TOL, metavar="RAD",
                         help=f"axes closer than this are treated as parallel ({DEFAULT_PARALLEL_TOL} rad)")
-    parser.add_argument("--max-offset", type=length, default=None, metavar="LENGTH",
+    parser.add_argument("--max-offset", action=Typed, convert=length, default=None, metavar="LENGTH",
                         help="where the data resolve a near-parallel pair's misalignment, keep the parallel-axis "
                         "convention instead of exact DH if exact DH would move d more than LENGTH (e.g. 500mm; a "
                         "bare number is metres; 'inf': exact DH always; default: the robot's size, the farthest "
@@ -72,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "convention costs; the URDF and UR calibration exports carry the exact axes whatever "
                         "the cap")
     parser.add_argument("--no-robust", action="store_true", help="plain least squares, no outlier rejection")
-    parser.add_argument("--noise", type=positive_length, metavar="LENGTH",
+    parser.add_argument("--noise", action=Typed, convert=positive_length, metavar="LENGTH",
                         help="the tracker's noise per axis (1 sigma) to judge the fit by, e.g. 0.05mm or 50um (a bare "
                         "number is metres; a sigma column wins)")
     parser.add_argument("--coupling", metavar="FILE",

@@ -41,7 +41,7 @@ def _tool(args: argparse.Namespace, program_tcp: tuple[float, ...] | None, ident
           ) -> tuple[np.ndarray, np.ndarray, bool, str]:
     """TCP position (3,) and rotation (3, 3) in the flange frame, whether it was given, and where it came from."""
     if args.tool:
-        values, source = comma_numbers(args.tool, "--tool", (3, 6)), "--tool"
+        values, source = comma_numbers(args.tool, "--tool", (3, 6), lengths=3), "--tool"
     elif program_tcp is not None:
         values, source = list(program_tcp), "the program's set_tcp"
     else:

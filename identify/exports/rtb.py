@@ -2,7 +2,7 @@
 
 Robotics Toolbox (``roboticstoolbox-python``): its standard-DH links are ``RevoluteDH`` with
 ``A = Rz(q + offset) Tz(d) Tx(a) Rx(alpha)`` and ``PrismaticDH`` with ``A = Rz(theta) Tz(q + offset) Tx(a)
-Rx(alpha)``, so the DESIGN.md model maps one to one: ``offset`` is our ``theta`` (revolute) or ``d``
+Rx(alpha)``, so our forward model (kinematics/dh.py) maps one to one: ``offset`` is our ``theta`` (revolute) or ``d``
 (prismatic); ``DHRobot(base=..., tool=...)`` carry the base transform and the TP, and
 ``robot.fkine(q).t`` is the predicted TP in the tracker frame. The generated text needs only
 ``numpy``, ``roboticstoolbox`` and ``spatialmath``; this module imports none of them.
@@ -94,5 +94,5 @@ def write_result_json(path: str | Path, doc: dict[str, Any]) -> None:
 
 
 def write_measurements_csv(path: str | Path, meas: Measurements, metadata: dict[str, str] | None = None) -> None:
-    """Write ``meas`` as the measurement CSV of DESIGN.md (``identify.io.csvio.format_measurements``)."""
+    """Write ``meas`` as the measurement CSV (README.md, File contracts; ``identify.io.csvio.format_measurements``)."""
     write_text(path, format_measurements(meas, metadata))

@@ -5,7 +5,7 @@ the joint's origin in its parent link, ``x, y, z`` (m) and ``roll, pitch, yaw`` 
 ``Rz(yaw) Ry(pitch) Rx(roll)``); the description chains them as ``origin_1 Rz(q_1) origin_2 Rz(q_2) …`` from
 the robot's base frame (``base_link_inertia``, the controller's base frame) to ``wrist_3_link``.
 
-With the forward model of DESIGN.md, ``A_i = Rz(q_i) D_i`` and ``D_i = Rz(theta_i) Tz(d_i) Tx(a_i)
+With the forward model (kinematics/dh.py), ``A_i = Rz(q_i) D_i`` and ``D_i = Rz(theta_i) Tz(d_i) Tx(a_i)
 Rx(alpha_i)``; this module splits each ``D_i`` at its ``Tz(d_i)``, so that joint ``i``'s origin is
 ``Tx(a_{i-1}) Rx(alpha_{i-1}) Rz(theta_i) Tz(d_i)`` (``a_0 = alpha_0 = 0``): the nominal UR values then give
 exactly the numbers of the stock files (e.g. ``forearm: x = a_2``), and ``wrist_3_link`` is DH frame 6, which

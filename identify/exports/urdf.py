@@ -1,4 +1,4 @@
-"""URDF of an identified robot: links and joints whose origins reproduce the DH model of DESIGN.md exactly
+"""URDF of an identified robot: links and joints whose origins reproduce the DH model (kinematics/dh.py) exactly
 (:func:`urdf_from_model`), or an axis-lines model with a full frame per joint (:func:`urdf_from_lines`).
 
 The forward model ``T(q) = base · A_1(q_1) · … · A_n(q_n)`` with ``A_i = M_i(q_i) · D_i``, where ``M_i`` is the

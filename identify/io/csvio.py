@@ -1,4 +1,4 @@
-"""Measurement CSV of DESIGN.md: read (with one-line errors for bad input) and write.
+"""Measurement CSV (README.md, File contracts): read (with one-line errors for bad input) and write.
 
 Format: UTF-8, comma separated, one header row; ``#`` lines are comments, ``# joints: RRRRRR`` and
 ``# units: m, rad`` (or ``mm``) and ``# coupling: [[...]]`` (row-major n x n, DH values = C · readings) carry
@@ -57,10 +57,36 @@ def read_measurements(path: str | Path, joints: str | None = None, units: str | 
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise InputError(f"{path}: not UTF-8 text (byte {exc.start}); not a measurement CSV") from None
+    what = _other_file(text)
+    if what is not None:
+        raise InputError(f"{path}: {what}")
     try:
         return parse_measurements(text.splitlines(), joints, units)
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
+
+
+def _other_file(text: str) -> str | None:
+    """What a YAML file of the product's given as measurements is, and where it goes (None: not one of them)."""
+    first = next((line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")), "")
+    if not re.match(r"[A-Za-z_][\w-]*:(\s|$)", first):  # a CSV header row, not a YAML mapping
+        return None
+    import yaml
+
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return None
+    if not isinstance(doc, dict):
+        return None
+    if "joints" in doc and ("verdict" in doc or "base" in doc):
+        return ("this is a result (a calibration, identify --out), not measurements: identify reads a measurement "
+                "CSV or a session; a result goes to identify compensate, check or compare, or acquire verify")
+    if "runs" in doc and "verdict" in doc:
+        return "this is a verification summary (acquire verify), not measurements: show it with identify --verification"
+    if "dh" in doc and "joints" in doc:
+        return "this is a robot model, not measurements: give it with --robot"
+    return "a YAML file, not a measurement CSV (sweep,joint,q1..qN,x,y,z; README.md, File contracts)"
 
 
 def parse_measurements(lines: Iterable[str], joints: str | None = None, units: str | None = None) -> CsvContent:

@@ -1,5 +1,5 @@
-"""The result document of DESIGN.md (``joints``, ``base``, ``tool``) plus its evidence, as plain data, and the result
-YAML read back (:func:`load_result`).
+"""The result document (README.md, File contracts: ``joints``, ``base``, ``tool``) plus its evidence, as plain
+data, and the result YAML read back (:func:`load_result`).
 
 Units follow the contract: metres and radians. The dict is ready for ``yaml.safe_dump`` or ``json``.
 """
@@ -23,7 +23,7 @@ from identify.results.written import WrittenModel
 from kinematics.dh import DH_NAMES, DHModel, model_to_dict
 
 CONVENTION = (
-    "standard DH (DESIGN.md forward model). Frame 0: z0 on joint 1's axis, theta1 and d1 conventional, the "
+    "standard DH (the forward model of README.md). Frame 0: z0 on joint 1's axis, theta1 and d1 conventional, the "
     "base absorbs the rest. Frame n: the last link's theta, d, a, alpha conventional, the tool carries the TP. "
     "Consecutive axes parallel within parallel_tol: the common normal passes where d takes its conventional "
     "value. Prismatic axes meet the next axis (a = 0). Conventional values: the nominal model's, or zero."
@@ -35,8 +35,10 @@ def _floats(values: Any) -> Any:
 
 
 def result_to_dict(ident: Identification, nominal: DHModel | None = None, nominal_name: str | None = None,
-                   source: str | None = None) -> dict[str, Any]:
-    """Everything the identification knows, contract keys first."""
+                   source: str | None = None, nominal_model: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Everything the identification knows, contract keys first. ``nominal_model``: the robot model's document
+    when it is not bundled (config/robots.py ``model_document``), recorded as ``nominal.model`` so that the result
+    reads where the model's file is not."""
     ref = ident.refinement
     n = ident.model.n_joints
     std = ident.std
@@ -121,10 +123,13 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         delta[:, 0] = np.angle(np.exp(1j * delta[:, 0]))
         doc["nominal"] = {"name": nominal_name, "delta": [dict(zip(DH_NAMES, map(float, row), strict=True))
                                                          for row in delta]}
+        if nominal_model is not None:
+            doc["nominal"]["model"] = nominal_model
     doc["warnings"] = list(ident.warnings) + list(ref.notes)
     doc["software"] = {"name": "dh-calib", "version": __version__}
     if source:
         doc["source"] = source
+        doc["source_path"] = str(Path(source).resolve())  # what the file is, wherever the result is read from
     return finite(doc)
 
 

@@ -44,10 +44,11 @@ def load_verification(path: str, data: str) -> dict[str, Any]:
         raise InputError(f"--verification {path} verified an earlier {result}: the file has changed since; verify "
                          f"the calibration of {data} again")
     try:
-        source = (yaml.safe_load(result.read_text(encoding="utf-8")) or {}).get("source")
+        written = yaml.safe_load(result.read_text(encoding="utf-8")) or {}
+        source, source_path = written.get("source"), written.get("source_path")
     except (OSError, UnicodeDecodeError, yaml.YAMLError, AttributeError):
-        source = None
-    if source is None or not _same(str(source), data, result.parent):
+        source = source_path = None
+    if source is None or not _same([str(p) for p in (source_path, source) if p], data, result.parent):
         raise InputError(f"--verification {path} verified {result} (a calibration of {source or 'unknown data'}), "
                          f"not a calibration of {data}: refused")
     return doc
@@ -62,7 +63,13 @@ def _find(named: str, beside: Path) -> Path | None:
     return None
 
 
-def _same(source: str, data: str, beside: Path) -> bool:
-    """Whether ``source`` (a result's, relative to where identify ran) names the file ``data``."""
-    target = Path(data).resolve()
-    return any(p.exists() and p.resolve() == target for p in (Path(source), beside / source))
+def _same(sources: list[str], data: str, beside: Path) -> bool:
+    """Whether a result's ``sources`` (its ``source_path``, absolute, and its ``source`` as typed, relative to
+    where identify ran: here, or the result's folder ``beside`` or one above it) are the file ``data``: the same
+    file (inode), however either path is spelled."""
+    from common.outputs import same_file
+
+    folders = [Path.cwd(), beside, *beside.resolve().parents]
+    candidates = [Path(s) if Path(s).is_absolute() else folder / s for s in sources for folder in folders]
+    candidates += [beside / Path(s).name for s in sources]  # the data moved with its result
+    return any(c.exists() and same_file(c, data) for c in candidates)

@@ -8,6 +8,7 @@ Units: as the language writes them (the URScript module: m and rad).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -91,8 +92,10 @@ def line_text(text: str, line: int) -> str:
 
 def rewrite(text: str, changes: Sequence[tuple[Target, str, str]], language: Language) -> str:
     """``text`` with each change's target span replaced by its literal and, at the end of the line where the
-    span ends (before the line ending), the changes' comments joined by ``; ``. Nothing else changes."""
-    edits = [(target.start, target.end, literal) for target, literal, _ in changes]
+    span ends (before the line ending), the changes' comments joined by ``; ``. Nothing else changes: a literal
+    written over several lines keeps its line breaks (:func:`same_layout`), so every line keeps its number."""
+    edits = [(target.start, target.end, same_layout(text[target.start:target.end], literal))
+             for target, literal, _ in changes]
     notes: dict[int, list[str]] = {}
     for target, _, note in changes:
         end = len(text)
@@ -105,3 +108,24 @@ def rewrite(text: str, changes: Sequence[tuple[Target, str, str]], language: Lan
     for start, end, new in sorted(edits, key=lambda e: (e[0], e[1]), reverse=True):
         out = out[:start] + new + out[end:]
     return out
+
+
+_LIST = re.compile(r"(?P<head>p?\s*\[)(?P<lead>\s*)(?P<body>.*?)(?P<trail>\s*)\]", re.S)
+_SEPARATOR = re.compile(r"\s*,\s*")
+
+
+def same_layout(old: str, new: str) -> str:
+    """The list literal ``new`` laid out as ``old`` is (``[...]`` or ``p[...]``, as many values): the separators
+    and the blanks inside the brackets of ``old`` around the values of ``new``. ``new`` as it is when ``old`` is on
+    one line or is not such a list."""
+    if "\n" not in old and "\r" not in old:
+        return new
+    a, b = _LIST.fullmatch(old), _LIST.fullmatch(new)
+    if a is None or b is None:
+        return new
+    separators = _SEPARATOR.findall(a["body"])
+    values = _SEPARATOR.split(b["body"].strip())
+    if len(values) != len(separators) + 1:
+        return new
+    body = values[0] + "".join(sep + value for sep, value in zip(separators, values[1:], strict=True))
+    return f"{a['head']}{a['lead']}{body}{a['trail']}]"

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from common import __version__
@@ -89,6 +90,9 @@ def figure_validation(errors: Array, expected: float | None) -> Figure:
         ax2.axhline(expected * MM, color="C1", ls="--", lw=1, label="expected RMS")
     ax2.set_xlabel("held-out pose")
     ax2.set_ylabel("3D error [mm]")
+    ax1.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts and pose numbers are whole: no 0.5 or 2.5 ticks
+    ax2.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax2.set_xlim(0.4, len(e) + 0.6)
     ax2.set_title("per pose")
     ax2.legend(fontsize=7)
     return fig

@@ -113,6 +113,23 @@ def test_without_a_terminal_one_line_every_few_seconds_of_wall_time(plans):
     assert re.search(r"step 3/23 \(joint \d continuous sweep\): running for 12 s \(planned \d+ s\)", out.getvalue())
 
 
+def test_without_a_terminal_lines_fit_columns_when_set(plans, monkeypatch):
+    """``COLUMNS=80 acquire ... | cat``: the progress lines (99 columns before, issue 39 item 10) fit; without
+    COLUMNS a log keeps one line per item."""
+    plan = plans[1]
+    for columns, most in (("80", 80), (None, 10**6)):
+        if columns is None:
+            monkeypatch.delenv("COLUMNS", raising=False)
+        else:
+            monkeypatch.setenv("COLUMNS", columns)
+        out, wall = io.StringIO(), Wall()
+        display = ProgressDisplay(plan, SITE.measure_time, stream=out, tty=False, simulated=True, wall=wall)
+        _run(display, wall, plan, 1.0)
+        lines = out.getvalue().splitlines()
+        assert lines and max(map(len, lines)) <= most
+        assert (columns is None) == all(line.startswith("step ") for line in lines)  # wrapped: continuations
+
+
 def _pty_run(argv: list[str], cols: int, cwd: Path | None = None) -> str:
     """The command's terminal output at ``cols`` columns (a real pseudo-terminal), escape sequences removed."""
     pid, fd = pty.fork()

@@ -27,7 +27,7 @@ def _plan(site_path, fraction: float):
 
 def test_rehearsal_against_the_emulator_moves_through_the_plan_at_a_quarter_speed(tmp_path, monkeypatch,
                                                                                    capsys) -> None:
-    pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
+    pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
     from tests.ur_emulator import CMD_MOVEJ, EmulatorProcess
 
     monkeypatch.chdir(tmp_path)

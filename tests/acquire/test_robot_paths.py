@@ -59,10 +59,14 @@ def test_a_mock_session_of_a_model_file_records_it_and_resumes_from_another_fold
     with Session.open(path) as session:
         spec = RobotSpec.parse(session.header["config"]["robot_spec"])
         assert session.outcome() == "complete"
+        assert session.header["config"]["robot_model"]["name"] == "cell7_arm"  # the model itself (issue 39)
     assert spec.model == str(cell / "cell7_arm.yaml")
     monkeypatch.chdir(tmp_path)
     assert main(["--resume", str(path), "--dry-run"]) == 0
     assert "Plan for cell7_arm" in capsys.readouterr().out
+    (cell / "cell7_arm.yaml").rename(tmp_path / "moved.yaml")  # the session still reads offline: its own model
+    assert identify_main([str(path)]) == 0
+    assert "cell7_arm" in capsys.readouterr().out
 
 
 def test_a_model_file_is_validated_as_the_bundled_ones_are(tmp_path, capsys):

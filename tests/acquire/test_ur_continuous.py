@@ -26,7 +26,7 @@ import pytest
 import yaml
 from scipy.stats import chi2
 
-pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
+pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
 
 from acquire.commands.cli import main as acquire
 from acquire.planning.plan_continuous import build_continuous_plan

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 import yaml
 
-pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
+pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
 
 from acquire.commands.cli import main as acquire
 from acquire.running.session import Session

@@ -162,7 +162,7 @@ def test_verification_refusals_and_dry_run(tmp_path, capsys) -> None:
 def test_verification_against_the_ur_controller_emulator(tmp_path, capsys) -> None:
     """The real command, the real ur_rtde client and the real serial tracker driver against the UR controller
     emulator and its simulated tracker: the same agreement with the emulated truth as on the mock rig."""
-    pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
+    pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
     from tests.ur_emulator import EmulatorProcess, ScaledClock
 
     noise, samples, cycles = 2e-5, 3, 3

@@ -107,6 +107,7 @@ def test_one_tracked_point_says_orientation_was_not_measured(tmp_path: Path, cap
     assert acquire(["verify", "--result", str(result), "--dry-run", "--cycles", "4"]) == 0
     dry = capsys.readouterr().out
     assert "each pose visited from 3 directions" in dry and "248 steps" in dry  # 8 + 2 x 5 x 4 x 3 x 2
+    assert "4 cycles per pose; ISO 9283 asks for 30" in dry  # issue 39, item 13
     verify = tmp_path / "v.session"
     monkeypatch.setenv("COLUMNS", "80")
     assert acquire(["verify", "--result", str(result), "--session", str(verify), "--cycles", "4", "--quiet"]) == 0

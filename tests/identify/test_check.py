@@ -216,7 +216,11 @@ def test_command_json_out_and_refusals(first, tmp_path, capsys):
         ([str(result), str(data), "--joints", "RRRR"], ""),
     ]
     for argv, words in cases:
-        assert main(["check", *argv]) == 2, argv
+        try:
+            code = main(["check", *argv])
+        except SystemExit as exc:  # a value its option refuses (--noise -1): argparse's one line
+            code = exc.code
+        assert code == 2, argv
         err = capsys.readouterr().err
         assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err, err
 
@@ -245,3 +249,18 @@ def test_check_reads_a_session_file(tmp_path):
     acquired, code, out = run_single_threaded(_session_then_check, str(tmp_path))
     assert acquired == 0 and code == 0, out
     assert out.startswith("PASS") and "moved 0.0 mm" in out  # the mock tracker stayed where it was
+
+
+def test_a_noise_1000x_off_against_what_the_data_show_is_refused(first, tmp_path, capsys):
+    """``--noise 0.05`` (50 mm read for 0.05 mm) makes any data pass against a huge "expected" error: refused,
+    repeating what was typed, since the data's own scatter (0.05 mm per axis) is 1000x below it; in its unit the
+    check runs and passes."""
+    doc, truth = first
+    result, data = tmp_path / "r.yaml", tmp_path / "today.csv"
+    result.write_text(yaml.safe_dump(doc))
+    data.write_text(format_measurements(_session(_moved(truth, 4)[0], 4)))
+    assert main(["check", str(result), str(data), "--noise", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "--noise 0.05 is read as 50 mm; did you mean 0.05mm?" in err, err
+    assert main(["check", str(result), str(data), "--noise", "0.05mm"]) == 0
+    assert main(["check", str(result), str(data), "--noise", "0.4mm"]) == 0  # 8x: a pessimistic noise, not a slip

@@ -283,3 +283,24 @@ def test_pose_targets_in_the_base_frame_with_a_tool(case, result_file, tmp_path,
     f_out = model.flanges(q_out[ok])
     np.testing.assert_allclose(f_out[:, :3, :3] @ tcp + f_out[:, :3, 3], pos[ok], atol=1e-9)
     np.testing.assert_allclose(f_out[:, :3, :3], pose_matrices(pos[ok], rv[ok])[:, :3, :3], atol=1e-9)
+
+
+def test_a_result_that_records_no_robot_is_refused_with_another_models_nominal(case, result_file, tmp_path,
+                                                                                capsys) -> None:
+    """Identified without --robot, the result names no model: --robot ur10e (another arm's nominal, joint changes
+    of radians) is refused in one line, --robot ur5e is taken and the summary says so."""
+    truth, _, _ = case
+    doc = yaml.safe_load(result_file.read_text())
+    doc.pop("nominal")
+    unnamed = _write(tmp_path / "unnamed.yaml", yaml.safe_dump(doc, sort_keys=False))
+    q = random_poses(ROBOT.limits, 3, np.random.default_rng(4))
+    pts = points_from_joints(truth, q)
+    targets = _write(tmp_path / "t.csv", "x,y,z\n" + "\n".join(",".join(map(str, p)) for p in pts) + "\n")
+    out = tmp_path / "o.csv"
+    argv = ["compensate", str(unnamed), "--targets", str(targets), "--out", str(out)]
+    assert main([*argv, "--robot", "ur10e"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "records no robot model" in err and "ur10e" in err, err
+    assert not out.exists()
+    assert main([*argv, "--robot", "ur5e"]) == 0
+    assert "taken as its nominal" in capsys.readouterr().out

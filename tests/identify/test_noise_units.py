@@ -57,3 +57,12 @@ def test_a_noise_without_a_known_unit_is_refused_in_one_line(capsys):
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "--noise" in err and "0.05mm" in err
+
+
+def test_identify_repeats_what_was_typed_when_the_noise_is_a_unit_slip(capsys):
+    """The verdict's hint is one text; the command's note repeats the typed value and its fix (issue 39, item 2)."""
+    assert main([str(SAMPLE), "--noise", "50mm", "--json"]) == 0
+    err = capsys.readouterr().err
+    assert "--noise 50mm is read as 50 mm; did you mean 50um?" in err
+    assert main([str(SAMPLE), "--noise", "50um", "--json"]) == 0
+    assert "did you mean" not in capsys.readouterr().err

@@ -257,3 +257,36 @@ def test_a_tcp_the_filter_cannot_know_is_refused_unless_tool_gives_it(result, tm
                      "0,0,0.1"]) == 0
         assert "TCP: --tool" in capsys.readouterr().out
         out.unlink()
+
+
+def test_the_program_report_fits_an_80_column_terminal(result, tmp_path, capsys, monkeypatch) -> None:
+    """Kept lines quote the program (up to 159 columns before, issue 39 item 10): wrapped to the terminal."""
+    program = tmp_path / "cycle.script"
+    program.write_bytes(PROGRAM.encode())
+    monkeypatch.setenv("COLUMNS", "80")
+    assert main(["compensate", str(result), "--program", str(program), "--out", str(tmp_path / "o.script"),
+                 "--tool", "0,0,0.1"]) == 3
+    printed = capsys.readouterr().out.splitlines()
+    assert max(map(len, printed)) <= 80 and any(line.startswith("  line 17: movec") for line in printed)
+
+
+def test_a_statement_continued_over_two_lines_keeps_its_lines(result, tmp_path, capsys) -> None:
+    """A target written over two lines was reflowed into one, shifting every later line number (issue 39, item 11):
+    its values change, its line breaks and indentation stay, and every other line is kept byte for byte."""
+    program = tmp_path / "two.script"
+    text = ("def cycle():\r\n"
+            "  movej([0.0, -1.2, 1.6,\r\n"
+            "         -1.97, -1.57, 0.0], a=1.2, v=0.5)\r\n"
+            "  movel(p[-0.4402, -0.3925, 0.3596,\r\n"
+            "          2.2207, 2.2207, 0.0008])\r\n"
+            "  textmsg(\"done\")\r\n"
+            "end\r\n")
+    program.write_bytes(text.encode())
+    out = tmp_path / "two.filtered.script"
+    assert main(["compensate", str(result), "--program", str(program), "--out", str(out)]) == 0
+    capsys.readouterr()
+    old, new = text.split("\r\n"), out.read_bytes().decode().split("\r\n")
+    assert len(new) == len(old) and [new[i] for i in (0, 5, 6)] == [old[i] for i in (0, 5, 6)]
+    assert new[1].startswith("  movej([") and new[1].endswith(",") and new[1] != old[1]
+    assert new[2].startswith("         ") and "], a=1.2, v=0.5)  # dh-calib: " in new[2]
+    assert new[3].startswith("  movel(p[") and new[4].startswith("          ") and "# dh-calib: " in new[4]

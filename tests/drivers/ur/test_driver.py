@@ -15,8 +15,8 @@ import time
 import numpy as np
 import pytest
 
-pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
-pytest.importorskip("rtde_receive", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
+pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
+pytest.importorskip("rtde_receive", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
 
 from config.robots import load_robot
 from drivers.base import Robot, RobotState
@@ -269,5 +269,5 @@ def test_spec_checks() -> None:
 
 def test_missing_ur_rtde_says_how_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "rtde_control", None)  # import fails
-    with pytest.raises(BackendUnavailable, match=r"pip install 'dh-calib\[ur\]'"):
+    with pytest.raises(BackendUnavailable, match=r"pip install 'ur-rtde==1.6.5' \(the ur extra\)"):
         open_robot("ur5e@127.0.0.1")

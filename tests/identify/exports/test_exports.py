@@ -1,6 +1,6 @@
 """Exports of an identified model: URDF, UR ROS driver calibration YAML, Robotics Toolbox snippet, JSON, CSV.
 
-Each export must reproduce the forward model of DESIGN.md (``points_from_joints``) to floating-point
+Each export must reproduce the forward model (``points_from_joints``) to floating-point
 precision at random configurations, checked with the consuming tool where it installs.
 """
 

@@ -129,7 +129,7 @@ def assert_one_line_error(code: int, out: str, err: str, *needles: str) -> None:
 
 
 def model_from_yaml(doc: dict) -> DHModel:
-    """The forward model of DESIGN.md from the contract keys only (independent of result_io)."""
+    """The forward model (README.md, File contracts) from the contract keys only (independent of result_io)."""
     joints = doc["joints"]
     return DHModel(
         "".join(j["type"] for j in joints),

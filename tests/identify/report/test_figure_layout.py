@@ -61,3 +61,23 @@ def test_the_trend_figures(identified):
     q = random_poses(robot.limits, 50, np.random.default_rng(0))
     assert figure_problems(figure_trend(["theta2", "a2", "d4", "alpha3"], models, ["jan", "feb"])) == []
     assert figure_problems(figure_displacement(models, ["jan", "feb"], q)) == []
+
+
+def test_the_3d_z_label_stands_clear_of_the_top_view_and_counts_are_whole(identified):
+    """Issue 39, item 12: the 3D view's z label ran into the top view's y label; the held-out histogram's count
+    axis had ticks at 0.5, 1.5, ... and the per-pose bars' axis at 2.5, 7.5, ... (drawn, then measured)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    _, fit, ident = identified
+    fig = figure_frames(ident, fit)
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    z_label = fig.axes[0].zaxis.label.get_window_extent(renderer)
+    y_label = fig.axes[1].yaxis.label.get_window_extent(renderer)
+    assert z_label.x1 + 20 < y_label.x0, (z_label, y_label)
+    for count in (8, 20, 40):
+        fig = figure_validation(np.abs(np.random.default_rng(count).normal(size=count)) * 1e-4, 1e-4)
+        FigureCanvasAgg(fig).draw()
+        for axis in (fig.axes[0].yaxis, fig.axes[1].xaxis):
+            assert all(float(t).is_integer() for t in axis.get_ticklocs()), axis.get_ticklocs()
