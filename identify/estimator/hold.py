@@ -8,12 +8,15 @@ than :data:`identify.estimator.identifiability.LEVEL` of the robot's size is *no
 fit cannot hold, or the noise, puts it anywhere along that direction (a UR with one reflector next to axis 6 wrote
 a5 = 186 mm, alpha5 = -152 deg where the arm has 0 and -90, and a tool on the flange inherited centimetres).
 
-With a nominal model, such a direction is held at the nominal placed on the data: the reference is a measurement
-with the nominal's own uncertainty, :data:`HELD_TOLERANCE` of the robot's size along each held direction (a real
-arm's geometry differs from its catalogue model by a millimetre or two per metre of reach), combined with the fit by
-the linear minimum-variance (Kalman) update. The determined directions keep what the data say, the correlated
-parameters follow the held ones, and the covariance afterwards carries the nominal's own error, so every accuracy
-stated from it accounts for the held values. Units: m, rad; frames: tracker.
+With a nominal model, the nominal placed on the data is a measurement too (:class:`NominalPrior`): of where the
+end effector's points go over the whole joint space, each direction of the model known to :data:`HELD_TOLERANCE` of
+the robot's size (a real arm's geometry differs from its catalogue model by a millimetre or two per metre of reach).
+The maximum a posteriori fit of the data and that prior keeps what the data determine (their sigma is far below the
+tolerance there, so the prior moves them by a negligible fraction of it), takes the nominal where the data say
+nothing, and weighs the two in between; the prior is nonlinear, so a fit that wandered far is brought back along
+the data's own valley. The covariance afterwards carries the nominal's own error, so every accuracy stated from it
+accounts for the held values; the directions the data alone leave undetermined are named (:func:`undetermined`).
+Units: m, rad; frames: tracker.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from scipy.optimize import least_squares
 from identify.estimator.estimate import FitData, LinesFit, place_nominal
 from identify.estimator.geometry import perpendicular_basis
 from identify.estimator.identifiability import LEVEL
-from identify.estimator.poe import AxisLines, JointTerms, LineProblem, lines_from_model
+from identify.estimator.poe import AxisLines, JointTerms, LineProblem, lines_from_model, points_from_lines
 from identify.estimator.refine import full_jacobian
 from kinematics.dh import DHModel, frames_from_joints
 
@@ -39,10 +42,10 @@ LOADING = 0.3  # loading of a held direction's (unit) vector on a parameter that
 
 @dataclass(frozen=True)
 class Hold:
-    """Directions held at the reference: ``directions`` (h, p) rows over the problem's parameters (scaled by the
-    lever arms, so ``directions @ x`` is metres of TP motion), their standard uncertainty before the hold ``std``
-    (h,) (m of TP motion), the ``tolerance`` (m) the reference is known to along each, and what each moves
-    (``names``, e.g. ``axis 6``, ``tracked point 1``)."""
+    """What was held at the reference: the directions the data do not determine, ``directions`` (h, p) rows over
+    the problem's parameters (scaled by the lever arms, so ``directions @ x`` is metres of end-effector motion),
+    their standard uncertainty from the data alone ``std`` (h,) (m of that motion), the ``tolerance`` (m) the
+    reference is known to along each, and what each moves (``names``, e.g. ``axis 6``, ``tracked point 1``)."""
 
     directions: Array
     std: Array
@@ -52,46 +55,64 @@ class Hold:
     def __len__(self) -> int:
         return len(self.std)
 
-    def shift(self, covariance: Array, offset: Array) -> Array:
-        """The parameter change (p,) that brings the held directions to the reference ``offset`` (p,: the
-        reference's parameters as increments on the fit's), the others following by their correlation."""
-        gain = self._gain(covariance)
-        return gain @ (self.directions @ offset)
 
-    def solve(self, problem: LineProblem, variance: float, covariance: Array, offset: Array) -> Array:
-        """The parameters (p,) of ``problem`` (increments on its start) that best fit its rows (noise ``variance``,
-        weighted units) and the reference (``offset``: its parameters as increments) along the held directions, to
-        ``tolerance``: the maximum a posteriori fit, solved as a nonlinear least-squares problem from the linear
-        update (:meth:`shift`, with the fit's ``covariance``) and from the reference itself, the lower cost kept: a
-        fit that wandered far along a direction the data do not see has a covariance that points elsewhere."""
-        a, target, scale = self.directions, self.directions @ offset, float(np.sqrt(variance))
+class NominalPrior:
+    """The reference (the nominal placed on the data) as a measurement of where the end effector's points go over
+    the joint space: the tracked points and :data:`PROBE` beside them (:func:`probe_points`), at
+    :data:`PROBE_POSES` spanning poses, each direction of the model known to ``tolerance`` (m, RMS over those points
+    and poses). Its residuals are in units of that tolerance, so stacked with the data's (in units of their noise)
+    they make the maximum a posteriori problem; it is nonlinear in the lines, so a fit that wandered far along a
+    direction the data do not see is brought back along the data's own valley, not along a straight line drawn
+    where the fit stopped. Parameters as ``problem``'s (:class:`identify.estimator.poe.LineProblem`)."""
+
+    def __init__(self, problem: LineProblem, reference: AxisLines, tolerance: float, probes: Array | None = None):
+        start = problem.start
+        self.probes = probe_points(start) if probes is None else probes
+        q = spanning_poses(start)
+        count = len(start.tps) + len(self.probes)
+        q_all, index = np.repeat(q, count, axis=0), np.tile(np.arange(count), len(q))
+        with_probes = replace(start, extra_tps=np.vstack([start.extra_tps, self.probes]))
+        self._problem = LineProblem(with_probes, q_all, np.zeros((len(q_all), 3)), np.ones(len(q_all)),
+                                    tp_index=index)
+        placed = replace(reference, extra_tps=np.vstack([reference.extra_tps, self.probes]))
+        self._target = points_from_lines(placed, q_all, index).ravel()
+        self._scale = tolerance * np.sqrt(len(q_all))
+        self._own, self._size = problem.n_lines, problem.size
+
+    def residuals(self, x: Array) -> Array:
+        """The points' offsets from the reference's at the problem's parameters ``x`` (p,), in tolerances."""
+        return (self._problem.residuals(self._embed(x)) - self._target) / self._scale
+
+    def jacobian(self, x: Array) -> Array:
+        """d residuals / dx, (3 k, p): the lines and tracked points move the points; joint errors, clock do not."""
+        out = np.zeros((len(self._target), self._size))
+        out[:, :self._own] = self._problem.jacobian(self._embed(x))[:, :self._own]
+        return out / self._scale
+
+    def solve(self, problem: LineProblem, variance: float, starts: list[Array]) -> Array:
+        """The parameters (p,) that best fit ``problem``'s rows (noise ``variance``, weighted units) and this
+        prior together, from each of ``starts`` (e.g. the fit itself, zero, and the reference as increments), the
+        lowest cost kept."""
+        scale = float(np.sqrt(variance))
 
         def residuals(x: Array) -> Array:
-            return np.concatenate([problem.residuals(x) / scale, (a @ x - target) / self.tolerance])
+            return np.concatenate([problem.residuals(x) / scale, self.residuals(x)])
 
         def jacobian(x: Array) -> Array:
-            return np.vstack([problem.jacobian(x) / scale, a / self.tolerance])
+            return np.vstack([problem.jacobian(x) / scale, self.jacobian(x)])
 
         fits = [least_squares(residuals, start, jac=jacobian, method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10)
-                for start in (self.shift(covariance, offset), offset)]  # the nominal itself may lie nearer
+                for start in starts]
         return min(fits, key=lambda f: f.cost).x
 
-    def update(self, covariance: Array) -> Array:
-        """``covariance`` (p, p) after the held directions were measured at the reference to ``tolerance``."""
-        gain = self._gain(covariance)
-        return covariance - gain @ self.directions @ covariance
-
-    def _gain(self, covariance: Array) -> Array:
-        a = self.directions
-        innovation = a @ covariance @ a.T + self.tolerance**2 * np.eye(len(a))
-        return covariance @ a.T @ np.linalg.inv(innovation)
+    def _embed(self, x: Array) -> Array:
+        return np.concatenate([x[:self._own], np.zeros(self._problem.size - self._own)])
 
 
-def undetermined(covariance: Array, metric: Array, size: float, names: list[str], bias: float = 0.0,
-                 count: int | None = None) -> Hold:
+def undetermined(covariance: Array, metric: Array, size: float, names: list[str], bias: float = 0.0) -> Hold:
     """The directions of ``covariance`` (p, p; m and rad) not determined for a robot of ``size`` (m): 3 sigma of
     motion of the end effector's points, plus ``bias`` sigma for a model error the fit cannot hold, beyond
-    :data:`LEVEL` of it (or the ``count`` least determined). ``metric`` (p, p): the mean square motion (m²) of those
+    :data:`LEVEL` of it, or known no better than the nominal is. ``metric`` (p, p): the mean square motion (m²) of those
     points per unit change of the parameters (:func:`line_metric`, :func:`table_metric`); ``names`` (k <= p): what
     each of the first k parameters is (e.g. ``axis 6``), the only ones held (the others, such as joint errors and
     clock, follow them through their correlation). ``bias``: the worst least-squares shift a model error ε per axis
@@ -103,10 +124,7 @@ def undetermined(covariance: Array, metric: Array, size: float, names: list[str]
     scaled = root @ covariance[:k, :k] @ root
     values, vectors = np.linalg.eigh((scaled + scaled.T) / 2)
     std = np.sqrt(np.clip(values, 0.0, None))
-    if count is None:  # not determined, or known no better than the nominal is
-        far = ((3.0 + bias) * std > LEVEL * size) | ((1.0 + bias) * std > HELD_TOLERANCE * size)
-    else:
-        far = np.arange(len(values)) >= len(values) - count
+    far = ((3.0 + bias) * std > LEVEL * size) | ((1.0 + bias) * std > HELD_TOLERANCE * size)
     directions = np.zeros((int(far.sum()), len(covariance)))
     directions[:, :k] = vectors[:, far].T @ root
     lever = np.sqrt(np.clip(np.diag(metric)[:k], 0.0, None))
@@ -160,10 +178,11 @@ def line_metric(problem: LineProblem, rng_seed: int = 0) -> Array:
     return flat.T @ flat / len(q_all)
 
 
-def table_metric(model: DHModel, free: NDArray[np.bool_], rng_seed: int = 0) -> Array:
-    """:func:`line_metric` for a DH ``model``'s ``free`` parameters (of the full vector of
-    :mod:`identify.estimator.refine`): its tool point and points :data:`PROBE` beside it along the last frame's
-    axes, over the same spanning poses (home: zero joint values)."""
+def table_rows(model: DHModel, free: NDArray[np.bool_], rng_seed: int = 0) -> Array:
+    """Rows (3 k, free count) whose Gram matrix is :func:`line_metric` for a DH ``model``'s ``free`` parameters (of
+    the full vector of :mod:`identify.estimator.refine`): the motion of its tool point and of points
+    :data:`PROBE` beside it along the last frame's axes, per unit change, over the same spanning poses (home: zero
+    joint values), divided by the root of their count (m per m, m per rad)."""
     half = np.array([np.pi if t == "R" else 0.1 for t in model.joint_types])
     q = np.random.default_rng(rng_seed).uniform(-1.0, 1.0, (PROBE_POSES, len(half))) * half
     blocks = []
@@ -173,7 +192,7 @@ def table_metric(model: DHModel, free: NDArray[np.bool_], rng_seed: int = 0) -> 
             jac[:, :, 6:9] = 0.0  # a probe beside the tool point is not moved by the tool point's own values
         blocks.append(np.compress(free, jac, axis=2).reshape(-1, int(free.sum())))
     flat = np.vstack(blocks)
-    return flat.T @ flat / (len(flat) / 3)
+    return flat / np.sqrt(len(flat) / 3)
 
 
 def probe_points(lines: AxisLines) -> Array:

@@ -145,15 +145,18 @@ def conditioning(condition: float, found: Identifiability | None = None, at_nomi
     if found.held:
         parts.append(f"{', '.join(found.held)} not separated by the data from other parameters: held at their "
                      "conventional values")
-    held = ("; held at the nominal (placed on the data) where the data do not determine the model: "
-            + ", ".join(dict.fromkeys(at_nominal)) + " (see fixed)") if at_nominal else ""
+    if at_nominal:  # the result is only the nominal there: right, but not a calibration of it
+        parts.append("the data do not determine the model along directions that move "
+                     + ", ".join(dict.fromkeys(at_nominal)) + ": held at the nominal placed on the data, its "
+                     "tolerance in every stated accuracy (see fixed); poses that move those joints further, or a "
+                     "second tracked point off the last axis, would determine them")
     if parts:
-        return Check("conditioning", "warn", condition, CONDITION_FAIL, "; ".join(parts) + held + number)
+        return Check("conditioning", "warn", condition, CONDITION_FAIL, "; ".join(parts) + number)
     w = found.worst
     text = "every parameter is determined" + ("" if w is None else
                                               f"; the least, {w.text()}, moves the tracked point "
                                               f"{100 * w.reach:.2g} % of the robot's size at 3 sigma")
-    return Check("conditioning", "pass", condition, CONDITION_FAIL, text + held + number)
+    return Check("conditioning", "pass", condition, CONDITION_FAIL, text + number)
 
 
 MODEL_NAMES = {"plain": "plain model (DH)", "extended": "extended model (DH + joint errors)"}

@@ -19,14 +19,16 @@ from identify.estimator.adequacy import Adequacy
 from identify.estimator.estimate import FitData, LinesFit
 from identify.estimator.extensions import TermSet
 from identify.estimator.hold import (
+    HELD_TOLERANCE,
     Hold,
+    NominalPrior,
     held_fit,
     increments,
     line_metric,
     line_names,
     probe_points,
     spanning_poses,
-    table_metric,
+    table_rows,
     undetermined,
 )
 from identify.estimator.identifiability import LEVEL
@@ -124,9 +126,10 @@ def robot_size(lines: AxisLines, points: Array) -> float:
 
 
 def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
-                  unknown: NDArray[np.int64]) -> Array:
+                  unknown: NDArray[np.int64], prior: Array | None = None) -> Array:
     """Unit-variance covariance of the ``free`` DH values (weighted units), rows of unread joints (``unknown``,
-    0-based, -1 for none) projected on the complement of their nuisance joint value."""
+    0-based, -1 for none) projected on the complement of their nuisance joint value; ``prior`` (k, free count):
+    rows of a further measurement of them, in the same units, stacked with the data's."""
     p, jac = full_jacobian(model, q)
     jac = np.compress(free, jac, axis=2)
     if np.any(weights != 1.0):
@@ -140,7 +143,8 @@ def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Ar
         revolute = model.revolute[j]
         g = np.where(revolute[:, None], np.cross(axis, p[rows] - origin), axis) * weights[rows, None]
         project_out(jac, rows, g)
-    return scaled_inverse(jac.reshape(-1, jac.shape[2]))[0]
+    flat = jac.reshape(-1, jac.shape[2])
+    return scaled_inverse(flat if prior is None else np.vstack([flat, prior]))[0]
 
 
 def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, terms: TermSet,
@@ -167,33 +171,35 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     if reference is not None:
         scale = max(adequacy.residual, declared or 0.0) * np.sqrt(adequacy.inflation)
         bias = adequacy.model_error * np.sqrt(3 * int(inl.sum())) / scale if scale > 0 else 0.0
-        for _ in range(HOLD_ROUNDS):  # a fit that wandered far: its covariance is only right near the held point
-            found = undetermined(covariance, line_metric(problem), size, line_names(problem), bias)
-            if not len(found):
-                break
-            held = found if held is None or len(found) >= len(held) else held
-            x = held.solve(problem, variance, covariance, increments(problem, reference))
-            fit = held_fit(fit, data, problem, x)
-            lines = fit.lines
-            problem = data.subset(inl).problem(lines, fit.terms.subset(inl))
-            jac_blocks = fit.jacobian_blocks(problem)
-            res_w = problem.residuals(x0).reshape(-1, 3)
-            inv, condition = scaled_inverse(jac_blocks.reshape(-1, problem.size))
-            covariance = inv * variance
-        if held is not None:  # the covariance at the held lines, with the nominal's own error
-            held = undetermined(covariance, line_metric(problem), size, line_names(problem), bias, len(held))
-            covariance = held.update(covariance)
+        names = line_names(problem)
+        # the nominal is a measurement of every direction, to its tolerance: it decides where the data do not; the
+        # fit from the nominal itself is tried too when the data leave directions undetermined (it may lie nearer)
+        wandered = len(undetermined(covariance, line_metric(problem), size, names, bias)) > 0
+        prior = NominalPrior(problem, reference, HELD_TOLERANCE * size)
+        starts = [x0, increments(problem, reference)] if wandered else [x0]
+        fit = held_fit(fit, data, problem, prior.solve(problem, variance, starts))
+        lines = fit.lines
+        problem = data.subset(inl).problem(lines, fit.terms.subset(inl))
+        jac_blocks = fit.jacobian_blocks(problem)
+        res_w = problem.residuals(x0).reshape(-1, 3)
+        inv, condition = scaled_inverse(jac_blocks.reshape(-1, problem.size))
+        # what the data alone leave undetermined at the held lines (said in fixed); the covariance with the prior
+        found = undetermined(inv * variance, line_metric(problem), size, names, bias)
+        held = found if len(found) else None
+        prior = NominalPrior(problem, reference, HELD_TOLERANCE * size, prior.probes)
+        both = np.vstack([jac_blocks.reshape(-1, problem.size), prior.jacobian(x0) * np.sqrt(variance)])
+        covariance = scaled_inverse(both)[0] * variance
     lines_cov = covariance[: lines.n_parameters, : lines.n_parameters]
     near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
     tp_index = data.tp_index[inl]
     q_fit, weights = fit.q[inl], data.weights[inl]
     rows = _FitRows(q_fit, data.points[inl], None if sigma is None else sigma[inl], weights, tp_index, res_w,
                     variance)
-    to_model = held is not None and len(held) > 0
-    out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise, to_model)
+    prior = None if reference is None else (reference, HELD_TOLERANCE * size)
+    out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise, prior)
     if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
         # the data resolve the misalignment: exact DH wherever it stays within max_offset
-        out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise, to_model)
+        out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise, prior)
     first = tp_index == 0
     if dh_fit is None:  # exact DH: the lines' covariance carried over
         model = out.model
@@ -201,9 +207,10 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
         cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
         model, free = dh_fit.model, dh_fit.free
-        cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first]) * variance
-        if held is not None and len(held):
-            cov_free = _held_covariance(model, free, cov_free, size, bias)
+        # with a nominal, the table's own directions are measured by it the same way as the lines' (its probes' rows)
+        prior = None if reference is None else table_rows(model, free) * np.sqrt(variance) / (HELD_TOLERANCE * size)
+        cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first],
+                                 prior) * variance
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     n = model.n_joints
@@ -222,18 +229,7 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
                      float(np.sum(res_w**2)), fit.q, data.points, [], tools)
     return WrittenModel(name, fit, adequacy, model, tools, std, fixed, ref, dict(out.capped), dh_check, terms,
                         predictor, lines_cov, covariance, condition, expected, problem, jac_blocks,
-                        held if held is not None and len(held) else None)
-
-
-HOLD_ROUNDS = 3  # refits towards the nominal, each from the covariance at the last one's lines
-
-
-def _held_covariance(model: DHModel, free: NDArray[np.bool_], covariance: Array, size: float, bias: float) -> Array:
-    """The ``covariance`` of a DH table's ``free`` parameters, fitted to the data under the parallel-axis
-    convention, after the directions the data do not determine were held at the nominal (to its tolerance), as
-    :mod:`identify.estimator.hold` does for the lines; ``bias``: the model error's reach in sigma."""
-    names = [n for n, f in zip(parameter_names(model.n_joints), free, strict=True) if f]
-    return undetermined(covariance, table_metric(model, free), size, names, bias).update(covariance)
+                        held)
 
 
 @dataclass(frozen=True)
@@ -252,39 +248,45 @@ class _FitRows:
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
-                rows: _FitRows, noise: float, to_model: bool = False
+                rows: _FitRows, noise: float, prior: tuple[AxisLines, float] | None = None
                 ) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float]]:
     """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH table
     refitted under that convention on every tracked point's rows (so the cost it adds is a likelihood ratio,
-    chi-square when the axes are parallel); the tools (k, 3) and that cost with the RMS gap to the lines. With
-    ``to_model`` (lines where undetermined directions were held at the nominal), the table is refitted to the
-    lines' own predictions over the joint space instead, points beside the tracked ones included, so it keeps
-    what the lines held where the data say nothing."""
+    chi-square when the axes are parallel); the tools (k, 3) and that cost with the RMS gap to the lines. With a
+    ``prior`` (the nominal's lines placed on the data, and its tolerance, m), the table is fitted to the data and to
+    that prior together, as the lines were (:class:`identify.estimator.hold.NominalPrior`), so it keeps what the
+    nominal held where the data say nothing."""
     out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
     tools = _tools(out.model, lines)
     if not capped:
         return out, None, tools, _dh_gap(out.model, tools, lines, rows)
-    if to_model:
-        q, points, tp_index, probe_tools = _model_rows(lines, out.model)
-        dh_fit = fit_table(out.model, q, points, None, conventional, sorted(capped), noise, False, 0.0, tp_index,
-                           probe_tools)
-        dh_fit = replace(dh_fit, tools=dh_fit.tools[: len(lines.tps)])
-    else:
+    if prior is None:
         dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False,
                            0.0, rows.tp_index, tools)
+    else:
+        q, points, tp_index, every_tool, sigma = _prior_rows(lines, out.model, *prior)
+        own = np.sqrt(rows.variance) / rows.weights  # each data row's noise, m
+        dh_fit = fit_table(out.model, np.vstack([rows.q, q]), np.vstack([rows.points, points]),
+                           np.concatenate([own, sigma]), conventional, sorted(capped), noise, False, 0.0,
+                           np.concatenate([rows.tp_index, tp_index]), every_tool)
+        dh_fit = replace(dh_fit, tools=dh_fit.tools[: len(lines.tps)])
     return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows)
 
 
-def _model_rows(lines: AxisLines, model: DHModel) -> tuple[Array, Array, NDArray[np.int64], Array]:
-    """Rows that describe ``lines`` over the joint space: joint values spanning it, the points the lines predict
-    there for every tracked point and for points beside the first (:func:`identify.estimator.hold.probe_points`),
-    their indices, and those points' tools in the last frame of ``model`` (whose axes are the lines' at home)."""
+def _prior_rows(lines: AxisLines, model: DHModel, reference: AxisLines, tolerance: float
+                ) -> tuple[Array, Array, NDArray[np.int64], Array, Array]:
+    """The nominal prior as rows of a DH table fit: joint values spanning the joint space, the points the
+    ``reference`` lines predict there for every tracked point and for points beside them
+    (:func:`identify.estimator.hold.probe_points` of ``lines``), their indices, every point's tool in the last frame
+    of ``model`` (whose axes are ``lines``' at home), and each row's sigma (m): ``tolerance`` RMS over them all."""
     probes = probe_points(lines)
     probe_lines = replace(lines, extra_tps=np.vstack([lines.extra_tps, probes]))
+    placed = replace(reference, extra_tps=np.vstack([reference.extra_tps, probes]))
     count = len(probe_lines.tps)
     q = np.repeat(spanning_poses(lines), count, axis=0)
     tp_index = np.tile(np.arange(count), len(q) // count)
-    return q, points_from_lines(probe_lines, q, tp_index), tp_index, _tools(model, probe_lines)
+    sigma = np.full(len(q), tolerance * np.sqrt(len(q)))
+    return q, points_from_lines(placed, q, tp_index), tp_index, _tools(model, probe_lines), sigma
 
 
 def _dh_gap(model: DHModel, tools: Array, lines: AxisLines, rows: _FitRows) -> tuple[float, float]:
@@ -316,10 +318,17 @@ UNDETERMINED = ("not determined by these data (redundant with other parameters, 
 
 
 def _held_reason(std: float, tolerance: float, size: float) -> str:
+    """Why a direction was held at the nominal: its sigma from the data alone, ``std`` (m of end-effector motion
+    over the joint space), against the nominal's ``tolerance`` and the level for a robot of ``size`` (m)."""
+    if 3.0 * std > 1e3 * size:
+        why = "these data do not constrain it at all"
+    elif 3.0 * std > LEVEL * size:
+        why = (f"3 sigma of these data move points on the end effector by {3e3 * std:.3g} mm over the joint space, "
+               f"beyond {100 * LEVEL:g} % of the robot's size ({size:.3g} m)")
+    else:
+        why = f"these data know it to {1e3 * std:.3g} mm (1 sigma of end-effector motion), no better than the nominal"
     return (f"held at the nominal placed on the data, known to {tolerance * 1e3:.3g} mm (the nominal's own tolerance, "
-            f"carried by the uncertainties): 3 sigma of these data moved points on the end effector by {3e3 * std:.3g} "
-            f"mm over the joint space, beyond {100 * LEVEL:g} % of the robot's size ({size:.3g} m); the value is that "
-            "sigma, m")
+            f"carried by the uncertainties): {why}; the value is the data's sigma, m of end-effector motion")
 
 
 def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:

@@ -1,13 +1,15 @@
-"""The hold's pieces (identify/estimator/hold.py): the reference as increments, and the update's covariance."""
+"""The hold's pieces (identify/estimator/hold.py): the reference as increments, and the nominal as a prior."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
 from config.robots import load_robot
-from identify.estimator.hold import Hold, increments
+from identify.estimator.hold import NominalPrior, increments
 from identify.estimator.poe import LineProblem, lines_from_model
-from kinematics.truth import random_truth
+from kinematics.truth import perturbed_model, random_truth
 
 
 def test_the_reference_as_increments_moves_the_lines_onto_it():
@@ -24,11 +26,23 @@ def test_the_reference_as_increments_moves_the_lines_onto_it():
     np.testing.assert_allclose(moved.tp_home, reference.tp_home, atol=1e-15)
 
 
-def test_a_held_direction_ends_at_the_tolerance_and_the_others_keep_their_variance():
-    covariance = np.diag([1e-2, 1e-8])  # the first direction undetermined, the second determined
-    hold = Hold(np.array([[1.0, 0.0]]), np.array([0.1]), 2e-3, ("axis 6",))
-    after = hold.update(covariance)
-    assert after[0, 0] < (2e-3) ** 2 and after[0, 0] > 0.99 * (2e-3) ** 2 * 1e-2 / (1e-2 + 4e-6)
-    assert after[1, 1] == covariance[1, 1]
-    shift = hold.shift(covariance, np.array([0.05, 1.0]))
-    assert abs(shift[0] - 0.05) < 1e-3 and shift[1] == 0.0
+def test_the_prior_vanishes_on_the_reference_and_its_jacobian_is_its_derivative():
+    """The nominal as a measurement of the end effector's points over the joint space: zero residual where the
+    lines are the reference's, one tolerance per RMS metre of their offset, and an exact Jacobian."""
+    robot = load_robot("ur5e")
+    rng = np.random.default_rng(2)
+    arm = random_truth(robot.nominal, robot.home, rng)
+    start = lines_from_model(arm, robot.home)
+    other = replace(perturbed_model(robot.nominal, rng), base=arm.base, tool=arm.tool)  # the same arm's nominal
+    reference = lines_from_model(other, robot.home)
+    problem = LineProblem(start, np.zeros((0, 6)), np.zeros((0, 3)), np.zeros(0))
+    prior = NominalPrior(problem, reference, 2e-3)
+    at_reference = increments(problem, reference)
+    assert np.linalg.norm(prior.residuals(at_reference)) < 1e-9
+    offset = np.linalg.norm(prior.residuals(np.zeros(problem.size)))  # RMS over points and poses, in tolerances
+    assert 0.1 < offset < 10.0  # two perturbed arms are a few mm apart, and a tolerance is 2 mm
+    step = 1e-7
+    x = 0.5 * at_reference
+    numeric = np.stack([(prior.residuals(x + step * e) - prior.residuals(x - step * e)) / (2 * step)
+                        for e in np.eye(problem.size)], axis=1)
+    np.testing.assert_allclose(prior.jacobian(x), numeric, atol=1e-6 * np.abs(numeric).max())
