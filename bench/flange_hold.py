@@ -7,10 +7,13 @@ reflector ``--offset`` from axis 6 (0.5 mm: a reflector on the flange's axis, as
 - the flange frame of each written model (its origin and points 100 mm along its axes), rigidly registered onto the
   true arm's (Kabsch), RMS: against the nominal's, which a real arm's is within 1-2 mm of;
 - a tool 100 mm off axis 6 on the written plain model: its error against the truth, and against what the result
-  states for it (the covariance propagated to that tool, model error included: ``CalibratedModel.expected_errors``).
+  states for it (the covariance propagated to that tool, model error included: ``CalibratedModel.expected_errors``),
+  at 200 poses inside the fit region (the result's domain, where its stated accuracy holds) and at the 200 over
+  the whole joint space (outside the domain the result says its figure is a lower bound: printed, no target).
 
-Targets: every plain model's flange no farther from the truth than max(2 x the nominal's, 5 mm); the tool within
-2x what the result states for it, pooled. Run: ``python -m bench.flange_hold [--arms 10]``. Exit 1 on a miss.
+Targets: every plain model's flange no farther from the truth than the nominal's (or 0.5 mm: the noise of the
+registration); the tool within 2x what the result states for it inside the domain, pooled.
+Run: ``python -m bench.flange_hold [--arms 10]``. Exit 1 on a miss.
 """
 
 from __future__ import annotations
@@ -55,6 +58,7 @@ def one_arm(robot, seed: int, offset: float, poses: int) -> dict[str, float]:
     limits = robot.limits.copy()
     limits[0], limits[4] = np.radians([-24.0, 57.0]), np.radians([-150.0, -30.0])
     q = random_poses(limits, poses, rng, margin=0.0)
+    q_inside = random_poses(limits, 200, np.random.default_rng(seed + 1000), margin=0.0)
     held = np.zeros(poses, dtype=bool)
     held[-10:] = True
     arm = RealArm(truth, errors=arm_errors(robot, rng), links=robot.links, tools=np.array([[offset, 0.0, 0.1]]))
@@ -69,10 +73,11 @@ def one_arm(robot, seed: int, offset: float, poses: int) -> dict[str, float]:
         out["extended"] = kabsch_rms(flange_points(ident.extended.model, q_all), true_flange)
     # the tool: the plain model as written, registered to the truth's frame (the tracker frame is the same)
     plain = CalibratedModel.from_identification(replace(ident, use="plain"))
-    predicted = plain.points(q_all, tool=TOOL)
-    true_tool = points_from_joints(replace(truth, tool=TOOL), arm.true_joints(q_all))
-    out["tool_error"] = float(np.sqrt(np.mean(np.sum((predicted - true_tool) ** 2, axis=1))))
-    out["tool_stated"] = float(np.sqrt(np.mean(plain.expected_errors(q_all, tool=TOOL) ** 2)))
+    for where, at in (("inside", q_inside), ("everywhere", q_all)):
+        predicted = plain.points(at, tool=TOOL)
+        true_tool = points_from_joints(replace(truth, tool=TOOL), arm.true_joints(at))
+        out[f"tool_{where}"] = float(np.sqrt(np.mean(np.sum((predicted - true_tool) ** 2, axis=1))))
+        out[f"stated_{where}"] = float(np.sqrt(np.mean(plain.expected_errors(at, tool=TOOL) ** 2)))
     return out
 
 
@@ -87,17 +92,19 @@ def main(argv: list[str] | None = None) -> int:
     rows = [one_arm(robot, args.seed + k, args.offset, args.poses) for k in range(args.arms)]
     print(f"ur5e, {args.arms} arms, one reflector {args.offset * 1e3:g} mm from axis 6, {args.poses} free poses in "
           "one region; at 200 poses over the joint space (mm):")
-    print("arm  held  flange: plain  extended  nominal   tool 100 mm off axis 6: error  stated  ratio")
+    print("                                       tool 100 mm off axis 6: inside the domain   everywhere (lower bound)")
+    print("arm  held  flange: plain  extended  nominal      error  stated  ratio      error  stated  ratio")
     for k, r in enumerate(rows):
         ext = f"{r['extended'] * 1e3:9.2f}" if "extended" in r else "        -"
-        print(f"{k:3d}  {'yes' if r['held'] else ' no'}  {r['plain'] * 1e3:14.2f}{ext}{r['nominal'] * 1e3:9.2f}   "
-              f"{r['tool_error'] * 1e3:30.2f}{r['tool_stated'] * 1e3:8.2f}{r['tool_error'] / r['tool_stated']:7.2f}")
-    far = [r for r in rows if r["plain"] > max(2 * r["nominal"], 5e-3)]
-    ratio = float(np.sqrt(np.mean([r["tool_error"] ** 2 for r in rows]) / np.mean([r["tool_stated"] ** 2
-                                                                                   for r in rows])))
-    print(f"plain flanges beyond max(2x the nominal's, 5 mm): {len(far)} of {len(rows)}; tool error / stated, "
-          f"pooled: {ratio:.2f}")
-    ok = not far and ratio <= 2.0
+        tool = "".join(f"{r[f'tool_{w}'] * 1e3:11.2f}{r[f'stated_{w}'] * 1e3:8.2f}"
+                       f"{r[f'tool_{w}'] / r[f'stated_{w}']:7.2f}" for w in ("inside", "everywhere"))
+        print(f"{k:3d}  {'yes' if r['held'] else ' no'}  {r['plain'] * 1e3:14.2f}{ext}{r['nominal'] * 1e3:9.2f}{tool}")
+    far = [r for r in rows if r["plain"] > max(r["nominal"], 5e-4)]
+    ratio = {w: float(np.sqrt(np.mean([r[f"tool_{w}"] ** 2 for r in rows])
+                              / np.mean([r[f"stated_{w}"] ** 2 for r in rows]))) for w in ("inside", "everywhere")}
+    print(f"plain flanges farther from the truth than the nominal's: {len(far)} of {len(rows)}; tool error / stated, "
+          f"pooled: {ratio['inside']:.2f} inside the domain, {ratio['everywhere']:.2f} everywhere")
+    ok = not far and ratio["inside"] <= 2.0
     print("targets: " + ("met" if ok else "MISSED"))
     return 0 if ok else 1
 

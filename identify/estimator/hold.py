@@ -30,13 +30,15 @@ from scipy.optimize import least_squares
 from identify.estimator.estimate import FitData, LinesFit, place_nominal
 from identify.estimator.geometry import perpendicular_basis
 from identify.estimator.identifiability import LEVEL
-from identify.estimator.poe import AxisLines, JointTerms, LineProblem, lines_from_model, points_from_lines
-from identify.estimator.refine import full_jacobian
+from identify.estimator.poe import AxisLines, JointTerms, LineProblem, lines_from_model
 from kinematics.dh import DHModel, frames_from_joints
 
 Array = NDArray[np.float64]
 
-HELD_TOLERANCE = 0.002  # of the robot's size, 1 sigma of TP motion: the nominal's own error along a held direction
+HELD_TOLERANCE = 0.002  # rad, and of the robot's size (m): 1 sigma of a real arm's axes about its catalogue model's
+# m, 1 sigma of one link's length or offset about the catalogue's: machined lengths up to 1 m hold +-0.3..0.8 mm
+# (ISO 2768-m), and calibrated arms differ from their catalogue tables by tenths of a millimetre to a millimetre
+LINK_TOLERANCE = 1e-3
 LOADING = 0.3  # loading of a held direction's (unit) vector on a parameter that names it
 
 
@@ -45,68 +47,89 @@ class Hold:
     """What was held at the reference: the directions the data do not determine, ``directions`` (h, p) rows over
     the problem's parameters (scaled by the lever arms, so ``directions @ x`` is metres of end-effector motion),
     their standard uncertainty from the data alone ``std`` (h,) (m of that motion), the ``tolerance`` (m) the
-    reference is known to along each, and what each moves (``names``, e.g. ``axis 6``, ``tracked point 1``)."""
+    reference is known to along each, what each moves (``names``, e.g. ``axis 6``, ``tracked point 1``), and
+    whether a model error the fit cannot hold counted (``model_error``)."""
 
     directions: Array
     std: Array
     tolerance: float
     names: tuple[str, ...]
+    model_error: bool = False
 
     def __len__(self) -> int:
         return len(self.std)
 
 
 class NominalPrior:
-    """The reference (the nominal placed on the data) as a measurement of where the end effector's points go over
-    the joint space: the tracked points and :data:`PROBE` beside them (:func:`probe_points`), at
-    :data:`PROBE_POSES` spanning poses, each direction of the model known to ``tolerance`` (m, RMS over those points
-    and poses). Its residuals are in units of that tolerance, so stacked with the data's (in units of their noise)
-    they make the maximum a posteriori problem; it is nonlinear in the lines, so a fit that wandered far along a
-    direction the data do not see is brought back along the data's own valley, not along a straight line drawn
-    where the fit stopped. Parameters as ``problem``'s (:class:`identify.estimator.poe.LineProblem`)."""
+    """The reference (the nominal placed on the data) as a measurement of the axis lines: each axis's tilt known
+    to :data:`HELD_TOLERANCE` rad and its position across itself to :data:`HELD_TOLERANCE` of the robot's ``size``
+    (m), about the reference's (:func:`increments`); tracked points, joint errors and clock are left to the data
+    (a nominal says nothing of them). Its residuals are in units of those tolerances, so stacked with the data's
+    (in units of their noise) they make the maximum a posteriori problem. Parameters as ``problem``'s
+    (:class:`identify.estimator.poe.LineProblem`)."""
 
-    def __init__(self, problem: LineProblem, reference: AxisLines, tolerance: float, probes: Array | None = None):
-        start = problem.start
-        self.probes = probe_points(start) if probes is None else probes
-        q = spanning_poses(start)
-        count = len(start.tps) + len(self.probes)
-        q_all, index = np.repeat(q, count, axis=0), np.tile(np.arange(count), len(q))
-        with_probes = replace(start, extra_tps=np.vstack([start.extra_tps, self.probes]))
-        self._problem = LineProblem(with_probes, q_all, np.zeros((len(q_all), 3)), np.ones(len(q_all)),
-                                    tp_index=index)
-        placed = replace(reference, extra_tps=np.vstack([reference.extra_tps, self.probes]))
-        self._target = points_from_lines(placed, q_all, index).ravel()
-        self._scale = tolerance * np.sqrt(len(q_all))
-        self._own, self._size = problem.n_lines, problem.size
+    def __init__(self, problem: LineProblem, reference: AxisLines, size: float):
+        self._reference = increments(problem, reference)
+        sigma = []
+        for kind in problem.types:
+            sigma += [HELD_TOLERANCE] * 2 + ([HELD_TOLERANCE * size] * 2 if kind == "R" else [])
+        self._sigma = np.array(sigma)
+        self._size = problem.size
+
+    @property
+    def reference(self) -> Array:
+        """The reference as the problem's parameters (p,)."""
+        return self._reference
 
     def residuals(self, x: Array) -> Array:
-        """The points' offsets from the reference's at the problem's parameters ``x`` (p,), in tolerances."""
-        return (self._problem.residuals(self._embed(x)) - self._target) / self._scale
+        """Each line parameter's offset from the reference's at ``x`` (p,), in tolerances."""
+        k = len(self._sigma)
+        return (x[:k] - self._reference[:k]) / self._sigma
 
-    def jacobian(self, x: Array) -> Array:
-        """d residuals / dx, (3 k, p): the lines and tracked points move the points; joint errors, clock do not."""
-        out = np.zeros((len(self._target), self._size))
-        out[:, :self._own] = self._problem.jacobian(self._embed(x))[:, :self._own]
-        return out / self._scale
+    def jacobian(self) -> Array:
+        """d residuals / dx (l, p): constant."""
+        out = np.zeros((len(self._sigma), self._size))
+        out[:, :len(self._sigma)] = np.diag(1.0 / self._sigma)
+        return out
 
     def solve(self, problem: LineProblem, variance: float, starts: list[Array]) -> Array:
         """The parameters (p,) that best fit ``problem``'s rows (noise ``variance``, weighted units) and this
-        prior together, from each of ``starts`` (e.g. the fit itself, zero, and the reference as increments), the
-        lowest cost kept."""
+        prior together, from each of ``starts`` (e.g. the fit itself and the reference), the lowest cost kept."""
         scale = float(np.sqrt(variance))
+        prior = self.jacobian()
 
         def residuals(x: Array) -> Array:
             return np.concatenate([problem.residuals(x) / scale, self.residuals(x)])
 
         def jacobian(x: Array) -> Array:
-            return np.vstack([problem.jacobian(x) / scale, self.jacobian(x)])
+            return np.vstack([problem.jacobian(x) / scale, prior])
 
         fits = [least_squares(residuals, start, jac=jacobian, method="trf", x_scale="jac", xtol=1e-10, ftol=1e-10)
                 for start in starts]
         return min(fits, key=lambda f: f.cost).x
 
-    def _embed(self, x: Array) -> Array:
-        return np.concatenate([x[:self._own], np.zeros(self._problem.size - self._own)])
+
+COMPARABLE = 10.0  # tolerances: a table value this far from the nominal's is another quantity (another convention)
+
+
+def table_prior(nominal: DHModel, table: DHModel) -> tuple[Array, Array]:
+    """The nominal as a measurement of a DH ``table``'s full parameter vector (:mod:`identify.estimator.refine`):
+    the nominal's values and their tolerances, :data:`HELD_TOLERANCE` rad for theta and alpha,
+    :data:`LINK_TOLERANCE` m for d and a (one link's values, where the axis lines' positions accumulate the errors
+    of every link before them); ``inf`` (no measurement) for the base and tool, which a nominal does not give, and
+    for every value of ``table`` (converted from lines that the nominal already held) more than
+    :data:`COMPARABLE` tolerances from the nominal's: a value the data determine far from it, or one written under
+    another convention (a prismatic joint's offset, an angle measured from the other side), not its quantity.
+    Angles are given on the table's own branch (the nominal's pi for the table's -pi + 0.004: -pi)."""
+    values = np.concatenate([np.zeros(9), nominal.dh_table().ravel()])
+    per_joint = np.array([HELD_TOLERANCE, LINK_TOLERANCE, LINK_TOLERANCE, HELD_TOLERANCE])
+    sigma = np.concatenate([np.full(9, np.inf), np.tile(per_joint, nominal.n_joints)])
+    own = np.concatenate([np.zeros(9), table.dh_table().ravel()])
+    offset = own - values
+    angles = np.concatenate([np.zeros(9, dtype=bool), np.tile([True, False, False, True], nominal.n_joints)])
+    offset[angles] = np.angle(np.exp(1j * offset[angles]))  # -pi and pi are one angle
+    sigma[np.abs(offset) > COMPARABLE * sigma] = np.inf
+    return own - offset, sigma  # the nominal's angles on the table's own branch
 
 
 def undetermined(covariance: Array, metric: Array, size: float, names: list[str], bias: float = 0.0) -> Hold:
@@ -130,7 +153,7 @@ def undetermined(covariance: Array, metric: Array, size: float, names: list[str]
     lever = np.sqrt(np.clip(np.diag(metric)[:k], 0.0, None))
     moved = [(covariance[:k, :k] @ a[:k]) * lever for a in directions]  # what each parameter moves along it
     return Hold(directions, std[far], HELD_TOLERANCE * size,
-                tuple(_label(m / max(float(np.linalg.norm(m)), 1e-300), names) for m in moved))
+                tuple(_label(m / max(float(np.linalg.norm(m)), 1e-300), names) for m in moved), bias > 0.0)
 
 
 def _label(vector: Array, names: list[str]) -> str:
@@ -176,23 +199,6 @@ def line_metric(problem: LineProblem, rng_seed: int = 0) -> Array:
     columns[:, :, :own] = jac[:, :, :own]
     flat = columns.reshape(-1, problem.size)
     return flat.T @ flat / len(q_all)
-
-
-def table_rows(model: DHModel, free: NDArray[np.bool_], rng_seed: int = 0) -> Array:
-    """Rows (3 k, free count) whose Gram matrix is :func:`line_metric` for a DH ``model``'s ``free`` parameters (of
-    the full vector of :mod:`identify.estimator.refine`): the motion of its tool point and of points
-    :data:`PROBE` beside it along the last frame's axes, per unit change, over the same spanning poses (home: zero
-    joint values), divided by the root of their count (m per m, m per rad)."""
-    half = np.array([np.pi if t == "R" else 0.1 for t in model.joint_types])
-    q = np.random.default_rng(rng_seed).uniform(-1.0, 1.0, (PROBE_POSES, len(half))) * half
-    blocks = []
-    for offset in (np.zeros(3), *(PROBE * np.eye(3))):
-        _, jac = full_jacobian(replace(model, tool=model.tool + offset), q)
-        if offset.any():
-            jac[:, :, 6:9] = 0.0  # a probe beside the tool point is not moved by the tool point's own values
-        blocks.append(np.compress(free, jac, axis=2).reshape(-1, int(free.sum())))
-    flat = np.vstack(blocks)
-    return flat / np.sqrt(len(flat) / 3)
 
 
 def probe_points(lines: AxisLines) -> Array:

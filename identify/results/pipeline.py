@@ -21,7 +21,7 @@ from identify.estimator.estimate import best_start
 from identify.estimator.extensions import Decision, TermSet
 from identify.estimator.hold import nominal_lines
 from identify.estimator.measurements import Measurements
-from identify.estimator.poe import AxisLines
+from identify.estimator.poe import AxisLines, points_from_lines
 from identify.estimator.refine import Refinement
 from identify.results import verdict as checks
 from identify.results.predict import Predictor
@@ -250,6 +250,10 @@ def identify(
     inl = best.inliers
     reference = None if nominal is None or meas.joint_types[0] != "R" else nominal_lines(
         nominal, best.q[inl], rows.data.points[inl], rows.data.tp_index[inl], best.lines.home)
+    if reference is not None:  # a nominal the data contradict is no measurement of the arm (the nominal check says so)
+        missed = points_from_lines(reference, best.q[inl], rows.data.tp_index[inl]) - rows.data.points[inl]
+        if np.sqrt(np.mean(np.sum(missed**2, axis=1))) > checks.NOMINAL_TOLERANCE * size:
+            reference = None
     write = partial(written_model, tp_ids=tuple(meas.tp_ids), conventional=conventional, nominal=nominal,
                     parallel_tol=parallel_tol, max_offset=cap, unit=rows.unit, declared=rows.declared,
                     sigma=rows.meas.sigma, reference=reference, size=size)

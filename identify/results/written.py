@@ -10,7 +10,7 @@ measured (the ``dh_table`` check). Frames: tracker; units: m, rad.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,16 +19,12 @@ from identify.estimator.adequacy import Adequacy
 from identify.estimator.estimate import FitData, LinesFit
 from identify.estimator.extensions import TermSet
 from identify.estimator.hold import (
-    HELD_TOLERANCE,
     Hold,
     NominalPrior,
     held_fit,
-    increments,
     line_metric,
     line_names,
-    probe_points,
-    spanning_poses,
-    table_rows,
+    table_prior,
     undetermined,
 )
 from identify.estimator.identifiability import LEVEL
@@ -40,6 +36,7 @@ from identify.estimator.refine import (
     fit_table,
     full_jacobian,
     parameter_names,
+    prior_rows,
 )
 from identify.results import verdict as checks
 from identify.results.dh_output import DHOutput, dh_output, near_parallel
@@ -51,11 +48,14 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class FixedParameter:
-    """A parameter held at ``value`` (rad or m) by a convention, for ``reason``."""
+    """A parameter held at ``value`` (rad or m) by a convention, for ``reason``; ``sigma`` (rad or m): the value's
+    own uncertainty where it is the nominal's (frame n placed as the catalogue places the flange: a tool given on
+    the flange carries it), 0 for a pure convention."""
 
     name: str
     value: float
     reason: str
+    sigma: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -172,12 +172,11 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
         scale = max(adequacy.residual, declared or 0.0) * np.sqrt(adequacy.inflation)
         bias = adequacy.model_error * np.sqrt(3 * int(inl.sum())) / scale if scale > 0 else 0.0
         names = line_names(problem)
-        # the nominal is a measurement of every direction, to its tolerance: it decides where the data do not; the
-        # fit from the nominal itself is tried too when the data leave directions undetermined (it may lie nearer)
+        # the nominal is a measurement of every axis, to its tolerance: it decides where the data do not; the fit
+        # from the nominal itself is tried too when the data leave directions undetermined (it may lie nearer)
+        prior = NominalPrior(problem, reference, size)
         wandered = len(undetermined(covariance, line_metric(problem), size, names, bias)) > 0
-        prior = NominalPrior(problem, reference, HELD_TOLERANCE * size)
-        starts = [x0, increments(problem, reference)] if wandered else [x0]
-        fit = held_fit(fit, data, problem, prior.solve(problem, variance, starts))
+        fit = held_fit(fit, data, problem, prior.solve(problem, variance, [x0, prior.reference] if wandered else [x0]))
         lines = fit.lines
         problem = data.subset(inl).problem(lines, fit.terms.subset(inl))
         jac_blocks = fit.jacobian_blocks(problem)
@@ -186,20 +185,22 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
         # what the data alone leave undetermined at the held lines (said in fixed); the covariance with the prior
         found = undetermined(inv * variance, line_metric(problem), size, names, bias)
         held = found if len(found) else None
-        prior = NominalPrior(problem, reference, HELD_TOLERANCE * size, prior.probes)
-        both = np.vstack([jac_blocks.reshape(-1, problem.size), prior.jacobian(x0) * np.sqrt(variance)])
-        covariance = scaled_inverse(both)[0] * variance
+        rows = NominalPrior(problem, reference, size).jacobian() * np.sqrt(variance)
+        covariance = scaled_inverse(np.vstack([jac_blocks.reshape(-1, problem.size), rows]))[0] * variance
     lines_cov = covariance[: lines.n_parameters, : lines.n_parameters]
     near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
     tp_index = data.tp_index[inl]
     q_fit, weights = fit.q[inl], data.weights[inl]
     rows = _FitRows(q_fit, data.points[inl], None if sigma is None else sigma[inl], weights, tp_index, res_w,
                     variance)
-    prior = None if reference is None else (reference, HELD_TOLERANCE * size)
-    out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise, prior)
+    # the nominal as a measurement of the table too (when it was one of the lines)
+    held_table = reference is not None and nominal is not None
+    out, dh_fit, tools, gap, tolerance = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise,
+                                                     held_table)
     if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
         # the data resolve the misalignment: exact DH wherever it stays within max_offset
-        out, dh_fit, tools, gap = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise, prior)
+        out, dh_fit, tools, gap, tolerance = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise,
+                                                         held_table)
     first = tp_index == 0
     if dh_fit is None:  # exact DH: the lines' covariance carried over
         model = out.model
@@ -207,16 +208,17 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
         cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
         model, free = dh_fit.model, dh_fit.free
-        # with a nominal, the table's own directions are measured by it the same way as the lines' (its probes' rows)
-        prior = None if reference is None else table_rows(model, free) * np.sqrt(variance) / (HELD_TOLERANCE * size)
         cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first],
-                                 prior) * variance
+                                 None if tolerance is None else prior_rows(free, tolerance / np.sqrt(variance))
+                                 ) * variance
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     n = model.n_joints
     names = parameter_names(n)
     vector = np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
-    fixed = [FixedParameter(names[k], float(vector[k]), _reason(names[k], n, model.joint_types, out.capped))
+    flange = _flange_sigma(n, tolerance)
+    fixed = [FixedParameter(names[k], float(vector[k]), _reason(names[k], n, model.joint_types, out.capped,
+                                                                 float(flange[k])), float(flange[k]))
              for k in np.flatnonzero(~free)]
     if held is not None:
         fixed += [FixedParameter(f"held: {label}", float(std), _held_reason(float(std), held.tolerance, size))
@@ -248,45 +250,22 @@ class _FitRows:
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
-                rows: _FitRows, noise: float, prior: tuple[AxisLines, float] | None = None
-                ) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float]]:
+                rows: _FitRows, noise: float, held: bool = False
+                ) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float], Array | None]:
     """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH table
     refitted under that convention on every tracked point's rows (so the cost it adds is a likelihood ratio,
-    chi-square when the axes are parallel); the tools (k, 3) and that cost with the RMS gap to the lines. With a
-    ``prior`` (the nominal's lines placed on the data, and its tolerance, m), the table is fitted to the data and to
-    that prior together, as the lines were (:class:`identify.estimator.hold.NominalPrior`), so it keeps what the
-    nominal held where the data say nothing."""
+    chi-square when the axes are parallel), and with ``held`` on the nominal's values too
+    (:func:`identify.estimator.hold.table_prior`); the tools (k, 3), that cost with the RMS gap to the lines, and
+    the nominal's tolerances of the full vector (rad, m; None unless ``held``)."""
     out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
     tools = _tools(out.model, lines)
+    values, tolerance = table_prior(nominal, out.model) if held and nominal is not None else (None, None)
     if not capped:
-        return out, None, tools, _dh_gap(out.model, tools, lines, rows)
-    if prior is None:
-        dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False,
-                           0.0, rows.tp_index, tools)
-    else:
-        q, points, tp_index, every_tool, sigma = _prior_rows(lines, out.model, *prior)
-        own = np.sqrt(rows.variance) / rows.weights  # each data row's noise, m
-        dh_fit = fit_table(out.model, np.vstack([rows.q, q]), np.vstack([rows.points, points]),
-                           np.concatenate([own, sigma]), conventional, sorted(capped), noise, False, 0.0,
-                           np.concatenate([rows.tp_index, tp_index]), every_tool)
-        dh_fit = replace(dh_fit, tools=dh_fit.tools[: len(lines.tps)])
-    return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows)
-
-
-def _prior_rows(lines: AxisLines, model: DHModel, reference: AxisLines, tolerance: float
-                ) -> tuple[Array, Array, NDArray[np.int64], Array, Array]:
-    """The nominal prior as rows of a DH table fit: joint values spanning the joint space, the points the
-    ``reference`` lines predict there for every tracked point and for points beside them
-    (:func:`identify.estimator.hold.probe_points` of ``lines``), their indices, every point's tool in the last frame
-    of ``model`` (whose axes are ``lines``' at home), and each row's sigma (m): ``tolerance`` RMS over them all."""
-    probes = probe_points(lines)
-    probe_lines = replace(lines, extra_tps=np.vstack([lines.extra_tps, probes]))
-    placed = replace(reference, extra_tps=np.vstack([reference.extra_tps, probes]))
-    count = len(probe_lines.tps)
-    q = np.repeat(spanning_poses(lines), count, axis=0)
-    tp_index = np.tile(np.arange(count), len(q) // count)
-    sigma = np.full(len(q), tolerance * np.sqrt(len(q)))
-    return q, points_from_lines(placed, q, tp_index), tp_index, _tools(model, probe_lines), sigma
+        return out, None, tools, _dh_gap(out.model, tools, lines, rows), tolerance
+    prior = None if tolerance is None else (values, tolerance / np.sqrt(rows.variance))  # in the rows' units
+    dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False, 0.0,
+                       rows.tp_index, tools, prior)
+    return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows), tolerance
 
 
 def _dh_gap(model: DHModel, tools: Array, lines: AxisLines, rows: _FitRows) -> tuple[float, float]:
@@ -331,7 +310,17 @@ def _held_reason(std: float, tolerance: float, size: float) -> str:
             f"carried by the uncertainties): {why}; the value is the data's sigma, m of end-effector motion")
 
 
-def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
+def _flange_sigma(n: int, tolerance: Array | None) -> Array:
+    """The full vector's sigmas (rad or m) of frame n's DH values where they are the nominal's (``tolerance``: the
+    nominal's, :func:`identify.estimator.hold.table_prior`; None without a nominal), zeros elsewhere."""
+    out = np.zeros(9 + 4 * n)
+    if tolerance is not None:
+        last = slice(9 + 4 * (n - 1), 9 + 4 * n)
+        out[last] = np.where(np.isfinite(tolerance[last]), tolerance[last], 0.0)
+    return out
+
+
+def _reason(name: str, n: int, types: str, capped: dict[int, float], sigma: float = 0.0) -> str:
     joint = int("".join(ch for ch in name if ch.isdigit()) or 0)
     if joint in capped and name.startswith("d"):
         return (f"axes {joint} and {joint + 1} are parallel within tolerance or their uncertainty, or exact DH would "
@@ -342,6 +331,11 @@ def _reason(name: str, n: int, types: str, capped: dict[int, float]) -> str:
     if name.startswith("d") and joint > 1 and set(types[: joint - 1]) == {"P"}:
         return (f"redundant with the base position: joints 1-{joint - 1} only translate, so a shift along axis "
                 f"{joint} is a shift of the base (a convention of the robot's structure, not a gap in the data)")
+    if joint == n and sigma > 0:
+        unit = f"{sigma * 1e3:.3g} mm" if name[:-1] in ("d", "a") else f"{np.degrees(sigma):.3g} deg"
+        return ("redundant with the tool: frame n (the flange) is placed where the nominal places it, known to "
+                f"{unit} (its tolerance, in the accuracy stated for a tool given on the flange); the tool carries "
+                "the TP")
     if joint == n:
         return "redundant with the tool: frame n is placed by convention and the tool carries the TP"
     if types[joint - 1] == "P" and name[:-1] in ("a", "d"):
