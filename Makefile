@@ -35,6 +35,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	status=0; \
 	$(BIN)/python -m bench.accuracy || status=1; \
+	$(BIN)/python -m bench.full_pose || status=1; \
 	$(BIN)/python -m bench.speed || status=1; \
 	$(BIN)/python -m bench.trust || status=1; \
 	$(BIN)/python -m bench.acquisition || status=1; \

@@ -16,7 +16,10 @@ What the file holds, and what this converter assumes:
 - rows: one per reflector and pose (``tp`` 1, 2, 3 = the file's column triples); the converter finds the sweeps
   from the readings (consecutive poses that differ in one DH joint);
 - split (fixed): the middle pose of every sweep (index ``len // 2``) is held out (``role`` check, all three
-  reflectors); the rest fit. The set is one session: no second one.
+  reflectors); the rest fit. The set is one session: no second one. No region split: every sweep starts from
+  one home pose, so each joint other than the swept one has one value, and holding out one side of a joint
+  removes most of its sweep (the product then has no circle to start from). The paper's figures are for its
+  own split and model: none is printed.
 - nominal model: none is needed (the sweeps identify the arm from scratch); the set's repository does not
   name the robot model, so no data sheet is cited.
 - noise: not given by the set; the product estimates it from the residuals.
@@ -28,14 +31,13 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.realdata.common import Converted, DataError, require
+from bench.realdata.common import Converted, DataError, Source, require
 
 NAME = "boby2021"
 FILE = "N1N2N3Jval.csv"
 JOINTS = "RRRRRR"
 COUPLING = np.eye(6)
 COUPLING[2, 1] = 1.0  # DH joint 3 = J2 + J3
-PUBLISHED = None  # the paper's figures are for its own split and model; none for this one
 
 
 def load(folder: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -97,3 +99,6 @@ def convert(folder: Path) -> Converted:
         metadata={"source": "Boby & Klimchik laser-tracker sweeps (RABKKK/LaserTrackerPoseData4KinIdent), "
                             "converted by bench.realdata.boby2021"},
     )
+
+
+SOURCE = Source(NAME, NAME, convert)

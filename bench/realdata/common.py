@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import io
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -70,6 +71,41 @@ class Converted:
     def dh_values(self) -> Array:
         """DH joint values of every row (coupling applied), rad or m."""
         return self.q if self.coupling is None else self.q @ self.coupling.T
+
+
+def free_poses(joints: str, q: Array, points: Array, source: str, hold_every: int = 4,
+               sigma: Array | None = None) -> Converted:
+    """Free poses (``joint`` 0, one sweep id each) of one tracked point, every ``hold_every``-th (0-based index
+    hold_every - 1, 2 hold_every - 1, ...) held out; ``source`` goes into the CSV's metadata."""
+    m = len(q)
+    check = np.arange(m) % hold_every == hold_every - 1
+    return Converted(joints, q, points, np.arange(1, m + 1), np.zeros(m, dtype=np.int64), check,
+                     np.ones(m, dtype=np.int64), sigma=sigma, metadata={"source": source})
+
+
+def no_sessions(folder: Path) -> dict[str, Converted]:
+    return {}
+
+
+@dataclass(frozen=True)
+class Source:
+    """One public set as the bench runs it: ``DATA/<folder>/`` holds its files.
+
+    ``convert`` gives the fit session with the set's fixed held-out rows (``role`` check); ``sessions`` the later
+    sessions of the same arm (all rows check; scored after a rigid re-registration of the tracker); ``nominal``
+    the robot YAML the product starts from (None: the set's sweeps identify the arm from scratch); ``regions`` the
+    DH joints (1-based) whose upper half of the fit session is held out in a region split; ``published`` the
+    figures the source states, by split slug (the bench prints them beside its own rows); ``retool``: the tracked
+    point was re-mounted between sessions, so a later session re-fits the tools with the tracker's pose."""
+
+    name: str
+    folder: str
+    convert: Callable[[Path], Converted]
+    sessions: Callable[[Path], dict[str, Converted]] = no_sessions
+    nominal: Path | None = None
+    regions: tuple[int, ...] = ()
+    published: dict[str, str] = field(default_factory=dict)
+    retool: bool = False
 
 
 def require(path: Path) -> Path:

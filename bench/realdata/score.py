@@ -99,6 +99,18 @@ def models(doc: dict[str, Any]) -> dict[str, Model]:
     return out
 
 
+def from_robot(doc: dict[str, Any], tracked: list[int]) -> Model:
+    """The nominal of a robot YAML (``config/robots/*.yaml`` format: ``joints``, ``dh``, optional ``coupling``)
+    as a model with an identity base and zero tools for the tracked points ``tracked``."""
+    types = doc["joints"]
+    n = len(types)
+    table = np.array([[row["theta"], row["d"], row["a"], row["alpha"]] for row in doc["dh"]], dtype=float)
+    coupling = doc.get("coupling") or {}
+    return Model(types, table, np.eye(4), {tp: np.zeros(3) for tp in tracked},
+                 np.array(coupling.get("matrix", np.eye(n)), dtype=float),
+                 np.array(coupling.get("offset", np.zeros(n)), dtype=float))
+
+
 def stated(doc: dict[str, Any]) -> dict[str, float]:
     """What the file says its models predict on the check rows (m): ``{model: expected RMS}``. Files with
     ``validation.plain``/``extended`` state one per model; older files one for the full predictor (extended

@@ -20,6 +20,7 @@ What the files hold, and what this converter assumes:
   for joint 1, is as valid a reading of the CSV contract, but the product's start cannot use sweeps of one
   joint taken at different values of the others: see bench/realdata/README.md, "Findings".)
 - split (fixed): every fourth free pose (0-based index 3, 7, ... among them) is held out (``role`` check);
+  region splits: the rows with A1 (then A2) above its median are held out, the rest fit;
 - second session: the 5 kg run (same day, same grid, payload added), scored after a rigid re-registration; it
   measures what a payload does to a model fitted without one, not a tracker move;
 - nominal model: ``bench/realdata/robots/iiwa7_a1a2.yaml`` (A2 0.340 m above the base, perpendicular to A1,
@@ -33,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.realdata.common import Converted, DataError, require
+from bench.realdata.common import Converted, DataError, Source, require
 
 NAME = "zhang2016"
 FIT_FILE, SECOND_FILE = "20161216_run1_0kg.csv", "20161216_run4_5kg.csv"
@@ -42,13 +43,13 @@ FROZEN_LIMIT = 1e-3  # rad: A3..A7 must stay this close to 0
 LEVEL_TOL = np.radians(0.5)  # rad: readings closer than this are one grid level
 HOLD_EVERY = 4
 NOMINAL = Path(__file__).with_name("robots") / "iiwa7_a1a2.yaml"
-PUBLISHED = None
 
 
 def load(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Readings of A1, A2 (rad) and tracked points (m) of one run, the home row dropped."""
+    require(path)
     try:
-        data = np.loadtxt(require(path), delimiter=",", skiprows=1, ndmin=2)
+        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
     except ValueError as exc:
         raise DataError(f"{path}: not the comma-separated run this converter reads ({exc})") from None
     if data.shape[1] != 31:
@@ -98,12 +99,15 @@ def convert(folder: Path) -> Converted:
     return _converted(q, points, sweep, joint, check, FIT_FILE)
 
 
-def convert_second(folder: Path) -> Converted | None:
-    """The 5 kg run (all rows check, free poses), or None when the folder does not hold it."""
+def sessions(folder: Path) -> dict[str, Converted]:
+    """The 5 kg run (all rows check, free poses), when the folder holds it."""
     path = Path(folder) / SECOND_FILE
     if not path.is_file():
-        return None
+        return {}
     q, points = load(path)
     m = len(q)
-    return _converted(q, points, np.arange(1, m + 1), np.zeros(m, dtype=np.int64), np.ones(m, dtype=bool),
-                      SECOND_FILE)
+    return {"5 kg": _converted(q, points, np.arange(1, m + 1), np.zeros(m, dtype=np.int64), np.ones(m, dtype=bool),
+                               SECOND_FILE)}
+
+
+SOURCE = Source(NAME, NAME, convert, sessions, nominal=NOMINAL, regions=(1, 2))

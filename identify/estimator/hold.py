@@ -234,7 +234,7 @@ def increments(problem: LineProblem, reference: AxisLines) -> Array:
             k += 4
         else:
             k += 2
-    x[k:problem.n_lines] = (reference.tps - start.tps).ravel()
+    x[k:k + start.tps.size] = (reference.tps - start.tps).ravel()
     return x
 
 

@@ -37,6 +37,7 @@ from identify.results.stages import (
     fits_from_starts,
     held_out,
     joint_errors,
+    orientation_fit,
     recommended,
     sweep_fits,
     verdict_of,
@@ -77,6 +78,7 @@ class Identification:
     warnings: list[str] = field(default_factory=list)
     clock: ClockFit | None = None
     domain: Array | None = None
+    orientation: tuple[int, int, float] | None = None  # orientation rows: count, rejected, RMS residual (rad)
 
     @property
     def plain(self) -> WrittenModel:
@@ -158,7 +160,7 @@ class Identification:
     def rms(self) -> float:
         """RMS 3D residual of the fitted inliers under the recommended model, m."""
         fit = self.used.fit
-        return float(np.sqrt(np.mean(np.sum(fit.residuals[fit.inliers] ** 2, axis=1))))
+        return float(np.sqrt(np.mean(np.sum(fit.residuals[fit.inliers & fit.positions] ** 2, axis=1))))
 
     @property
     def geometric_rms(self) -> float:
@@ -236,7 +238,7 @@ def identify(
     coupling = meas.coupling
     meas, warnings = checked_measurements(meas, nominal)
     conventional = np.zeros((meas.n_joints, 4)) if nominal is None else nominal.dh_table()
-    rows = fit_rows(meas, noise)
+    rows = fit_rows(meas, noise, warnings)
     geo, fits = fits_from_starts(rows, nominal, conventional, parallel_tol, robust, warnings)
     best, adequacy, clock_test = clock_tested(best_start(fits, rows.data), rows, robust)
     torques = None if links is None or nominal is None else (lambda x: gravity_torques(nominal, links, x))
@@ -274,7 +276,8 @@ def identify(
         validations=validations,
         geometric=geo,
         sweeps=sweeps,
-        rejected_rows=[int(r) for r in rows.meas.row[~models[use].fit.inliers]],
+        rejected_rows=[int(r) for r in rows.meas.row[~models[use].fit.inliers & ~rows.meas.oriented]],
+        orientation=orientation_fit(rows, models[use].refinement),
         convention="nominal" if nominal is not None else "zero",
         verdict=verdict,
         start=models["plain"].fit.start,

@@ -35,6 +35,7 @@ from identify.estimator.refine import (
     TableFit,
     fit_table,
     full_jacobian,
+    orientation_blocks,
     parameter_names,
     prior_rows,
 )
@@ -86,7 +87,8 @@ class WrittenModel:
     expected: float
     problem: LineProblem
     jacobian_blocks: Array
-    held: Hold | None = None
+    frames: Array | None = None  # each tracked point's target frame in frame n (k, 3, 3), NaN where not measured
+    held: Hold | None = None  # what the data alone left undetermined, held at the nominal
 
     @property
     def lines(self) -> AxisLines:
@@ -94,8 +96,8 @@ class WrittenModel:
 
     @property
     def fit_rms(self) -> float:
-        """RMS 3D residual of the fitted inliers (m)."""
-        res = self.fit.residuals[self.fit.inliers]
+        """RMS 3D residual of the fitted inliers' positions (m)."""
+        res = self.fit.residuals[self.fit.inliers & self.fit.positions]
         return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
 
     @property
@@ -126,10 +128,30 @@ def robot_size(lines: AxisLines, points: Array) -> float:
 
 
 def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
-                  unknown: NDArray[np.int64], prior: Array | None = None) -> Array:
+                  unknown: NDArray[np.int64], rotations: Array | None = None, frames: Array | None = None,
+                  prior: Array | None = None) -> Array:
     """Unit-variance covariance of the ``free`` DH values (weighted units), rows of unread joints (``unknown``,
-    0-based, -1 for none) projected on the complement of their nuisance joint value; ``prior`` (k, free count):
-    rows of a further measurement of them, in the same units, stacked with the data's."""
+    0-based, -1 for none) projected on the complement of their nuisance joint value; orientation rows
+    (``rotations`` finite, of the first tracked point, whose target frame in frame n is ``frames[0]``) with the
+    frame's turn as a parameter fitted with them; ``prior`` (k, free count): rows of a further measurement of the
+    DH values, in the same units, stacked with the data's."""
+    count = int(free.sum())
+    if rotations is not None and np.any(_finite(rotations)):
+        t = _finite(rotations)
+        turns = orientation_blocks(model, free, q[t], rotations[t], frames[0], weights[t])
+        positions = np.zeros((int(np.sum(~t)), 3, turns.shape[2]))
+        positions[:, :, :count] = _position_blocks(model, free, q[~t], weights[~t], unknown[~t])
+        flat = np.vstack([positions, turns]).reshape(-1, turns.shape[2])
+    else:
+        flat = _position_blocks(model, free, q, weights, unknown).reshape(-1, count)
+    if prior is not None:
+        flat = np.vstack([flat, np.hstack([prior, np.zeros((len(prior), flat.shape[1] - count))])])
+    return scaled_inverse(flat)[0][:count, :count]
+
+
+def _position_blocks(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
+                     unknown: NDArray[np.int64]) -> Array:
+    """The weighted position Jacobian (m, 3, free) of :func:`dh_covariance`, nuisance joint values projected out."""
     p, jac = full_jacobian(model, q)
     jac = np.compress(free, jac, axis=2)
     if np.any(weights != 1.0):
@@ -143,8 +165,7 @@ def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Ar
         revolute = model.revolute[j]
         g = np.where(revolute[:, None], np.cross(axis, p[rows] - origin), axis) * weights[rows, None]
         project_out(jac, rows, g)
-    flat = jac.reshape(-1, jac.shape[2])
-    return scaled_inverse(flat if prior is None else np.vstack([flat, prior]))[0]
+    return jac
 
 
 def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, terms: TermSet,
@@ -192,7 +213,7 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     tp_index = data.tp_index[inl]
     q_fit, weights = fit.q[inl], data.weights[inl]
     rows = _FitRows(q_fit, data.points[inl], None if sigma is None else sigma[inl], weights, tp_index, res_w,
-                    variance)
+                    variance, None if data.rotations is None else data.rotations[inl])
     # the nominal as a measurement of the table too (when it was one of the lines)
     held_table = reference is not None and nominal is not None
     out, dh_fit, tools, gap, tolerance = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise,
@@ -203,14 +224,14 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
                                                          held_table)
     first = tp_index == 0
     if dh_fit is None:  # exact DH: the lines' covariance carried over
-        model = out.model
+        model, frames = out.model, target_frames_of(out.model, lines)
         free = np.any(out.jacobian != 0.0, axis=1)
         cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
-        model, free = dh_fit.model, dh_fit.free
+        model, free, frames = dh_fit.model, dh_fit.free, dh_fit.frames
+        prior = None if tolerance is None else prior_rows(free, tolerance / np.sqrt(variance))
         cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first],
-                                 None if tolerance is None else prior_rows(free, tolerance / np.sqrt(variance))
-                                 ) * variance
+                                 rows.rotations_of(first), frames, prior) * variance
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     n = model.n_joints
@@ -223,22 +244,21 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     if held is not None:
         fixed += [FixedParameter(f"held: {label}", float(std), _held_reason(float(std), held.tolerance, size))
                   for label, std in zip(held.names, held.std, strict=True)]
-    kinematic = slice(0, problem.n_terms)  # the clock correction's parameters come last
-    predictor = Predictor(lines, covariance[kinematic, kinematic], terms, fit.terms.coefs, None, tp_ids)
+    kinematic = predictor_parameters(problem)
+    predictor = Predictor(lines, covariance[np.ix_(kinematic, kinematic)], terms, fit.terms.coefs, None, tp_ids)
     expected = _expected_accuracy(predictor, q_fit, np.asarray(tp_ids)[tp_index], adequacy)
     dh_check = checks.dh_table(gap[0], gap[1], expected, [f"d{i}" for i in out.capped])
     ref = Refinement(model, free, cov_free, adequacy.noise, inl, fit.residuals, condition,
                      float(np.sum(res_w**2)), fit.q, data.points, [], tools)
     return WrittenModel(name, fit, adequacy, model, tools, std, fixed, ref, dict(out.capped), dh_check, terms,
-                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks,
-                        held)
+                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks, frames, held)
 
 
 @dataclass(frozen=True)
 class _FitRows:
     """The inlier rows a DH table is written from: joint values ``q`` (with joint errors), ``points``, ``sigma``
     (or None), ``weights``, ``tp_index``, the lines' weighted residuals ``res_w`` and the noise ``variance``
-    (weighted units)."""
+    (weighted units); ``rotations`` the measured frames of orientation rows (NaN on position rows; None: none)."""
 
     q: Array
     points: Array
@@ -247,6 +267,18 @@ class _FitRows:
     tp_index: NDArray[np.int64]
     res_w: Array
     variance: float
+    rotations: Array | None = None
+
+    @property
+    def positions(self) -> NDArray[np.bool_]:
+        return np.ones(len(self.q), dtype=bool) if self.rotations is None else ~_finite(self.rotations)
+
+    def rotations_of(self, rows: NDArray[np.bool_]) -> Array | None:
+        return None if self.rotations is None else self.rotations[rows]
+
+
+def _finite(rotations: Array) -> NDArray[np.bool_]:
+    return np.all(np.isfinite(rotations), axis=(1, 2))
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
@@ -264,24 +296,41 @@ def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, 
         return out, None, tools, _dh_gap(out.model, tools, lines, rows), tolerance
     prior = None if tolerance is None else (values, tolerance / np.sqrt(rows.variance))  # in the rows' units
     dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False, 0.0,
-                       rows.tp_index, tools, prior)
+                       rows.tp_index, tools, rows.rotations, prior)
     return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows), tolerance
 
 
 def _dh_gap(model: DHModel, tools: Array, lines: AxisLines, rows: _FitRows) -> tuple[float, float]:
     """RMS difference (m) of the DH model's and the lines' predictions at the fitted rows, and the cost the DH
     model adds over the lines', in noise variances."""
-    dh = points_with_tools(model, tools, rows.q, rows.tp_index)
-    gap = dh - points_from_lines(lines, rows.q, rows.tp_index)
-    res_dh = (rows.points - dh) * rows.weights[:, None]
-    added = float(np.sum(res_dh**2) - np.sum(rows.res_w**2)) / max(rows.variance, 1e-300)
+    pos = rows.positions  # (orientation rows: their frame is fitted apart, and the gap is in positions)
+    q, tp = rows.q[pos], rows.tp_index[pos]
+    dh = points_with_tools(model, tools, q, tp)
+    gap = dh - points_from_lines(lines, q, tp)
+    res_dh = (rows.points[pos] - dh) * rows.weights[pos, None]
+    added = float(np.sum(res_dh**2) - np.sum(rows.res_w[pos] ** 2)) / max(rows.variance, 1e-300)
     return float(np.sqrt(np.mean(np.sum(gap**2, axis=1)))), added
+
+
+def target_frames_of(model: DHModel, lines: AxisLines) -> Array | None:
+    """Every tracked point's target frame (k, 3, 3) in the last DH frame of ``model`` (whose axes are ``lines``' at
+    home), NaN for a point whose orientation was not measured; None when none was."""
+    if lines.orientations is None:
+        return None
+    flange = frames_from_joints(model, lines.home[None, :])[0, -1]
+    return flange[:3, :3].T @ lines.orientations
 
 
 def _tools(model: DHModel, lines: AxisLines) -> Array:
     """Every tracked point (k, 3) in the last DH frame of ``model`` (whose axes are ``lines``' at home)."""
     flange = frames_from_joints(model, lines.home[None, :])[0, -1]
     return (lines.tps - flange[:3, 3]) @ flange[:3, :3]
+
+
+def predictor_parameters(problem: LineProblem) -> NDArray[np.int64]:
+    """Indices of the parameters a position predictor carries: lines, tracked points and joint-error coefficients
+    (the home orientations of full-pose targets and the clock correction left out; their covariance is marginal)."""
+    return np.r_[0:problem.start.n_parameters, problem.n_lines:problem.n_terms].astype(np.int64)
 
 
 def _expected_accuracy(predictor: Predictor, q: Array, tp: NDArray[np.int64], adequacy: Adequacy) -> float:
