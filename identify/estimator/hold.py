@@ -64,16 +64,21 @@ class NominalPrior:
     """The reference (the nominal placed on the data) as a measurement of the axis lines: each axis's tilt known
     to :data:`HELD_TOLERANCE` rad and its position across itself to :data:`HELD_TOLERANCE` of the robot's ``size``
     (m), about the reference's (:func:`increments`); tracked points, joint errors and clock are left to the data
-    (a nominal says nothing of them). Its residuals are in units of those tolerances, so stacked with the data's
-    (in units of their noise) they make the maximum a posteriori problem. Parameters as ``problem``'s
+    (a nominal says nothing of them). The tolerances are widened by :func:`nominal_scale` where the data show this
+    arm farther from its nominal than they say (``covariance``: the fit's, without the prior), or by a given
+    ``scale``. Its residuals are in units of those tolerances, so stacked with the data's (in units of their noise)
+    they make the maximum a posteriori problem. Parameters as ``problem``'s
     (:class:`identify.estimator.poe.LineProblem`)."""
 
-    def __init__(self, problem: LineProblem, reference: AxisLines, size: float):
+    def __init__(self, problem: LineProblem, reference: AxisLines, size: float, covariance: Array | None = None,
+                 scale: float | None = None):
         self._reference = increments(problem, reference)
         sigma = []
         for kind in problem.types:
             sigma += [HELD_TOLERANCE] * 2 + ([HELD_TOLERANCE * size] * 2 if kind == "R" else [])
         self._sigma = np.array(sigma)
+        self.scale = nominal_scale(self._reference[:len(sigma)], self._sigma, covariance) if scale is None else scale
+        self._sigma *= self.scale
         self._size = problem.size
 
     @property
@@ -112,17 +117,33 @@ class NominalPrior:
 COMPARABLE = 10.0  # tolerances: a table value this far from the nominal's is another quantity (another convention)
 
 
-def table_prior(nominal: DHModel, table: DHModel) -> tuple[Array, Array]:
+def nominal_scale(offset: Array, sigma: Array, covariance: Array | None) -> float:
+    """How many times its stated tolerances this arm lies from its nominal, judged where the data see it: the RMS
+    of ``offset / sigma`` (the reference's line parameters as increments on the fit, and their tolerances, (l,))
+    over the parameters the data know to a third of their tolerance or better (``covariance``, (p, p), the fit's
+    without the prior); at least 1, and 1 when fewer than three are known that well. The nominal's tolerance where
+    the data are silent is then the one the data show where they speak (empirical Bayes): a robot farther from its
+    catalogue model than usual (a real Franka Panda misses its catalogue table by 3-6 mm) is not held to 1 mm."""
+    if covariance is None:
+        return 1.0
+    known = np.sqrt(np.clip(np.diag(covariance)[:len(sigma)], 0.0, None)) < sigma / 3.0
+    if np.sum(known) < 3:
+        return 1.0
+    return max(1.0, float(np.sqrt(np.mean((offset[known] / sigma[known]) ** 2))))
+
+
+def table_prior(nominal: DHModel, table: DHModel, scale: float = 1.0) -> tuple[Array, Array]:
     """The nominal as a measurement of a DH ``table``'s full parameter vector (:mod:`identify.estimator.refine`):
     the nominal's values and their tolerances, :data:`HELD_TOLERANCE` rad for theta and alpha,
-    :data:`LINK_TOLERANCE` m for d and a (one link's values, where the axis lines' positions accumulate the errors
+    :data:`LINK_TOLERANCE` m for d and a, both times ``scale`` (:func:`nominal_scale`) (one link's values, where
+    the axis lines' positions accumulate the errors
     of every link before them); ``inf`` (no measurement) for the base and tool, which a nominal does not give, and
     for every value of ``table`` (converted from lines that the nominal already held) more than
     :data:`COMPARABLE` tolerances from the nominal's: a value the data determine far from it, or one written under
     another convention (a prismatic joint's offset, an angle measured from the other side), not its quantity.
     Angles are given on the table's own branch (the nominal's pi for the table's -pi + 0.004: -pi)."""
     values = np.concatenate([np.zeros(9), nominal.dh_table().ravel()])
-    per_joint = np.array([HELD_TOLERANCE, LINK_TOLERANCE, LINK_TOLERANCE, HELD_TOLERANCE])
+    per_joint = np.array([HELD_TOLERANCE, LINK_TOLERANCE, LINK_TOLERANCE, HELD_TOLERANCE]) * scale
     sigma = np.concatenate([np.full(9, np.inf), np.tile(per_joint, nominal.n_joints)])
     own = np.concatenate([np.zeros(9), table.dh_table().ravel()])
     offset = own - values

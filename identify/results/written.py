@@ -188,14 +188,14 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     # noise variance in weighted units (1 for a right sigma column), never below the declared noise
     variance = max(adequacy.residual, declared or 0.0) ** 2 / unit**2 * adequacy.inflation
     covariance = inv * variance
-    held = None
+    held, scale = None, 1.0
     if reference is not None:
         scale = max(adequacy.residual, declared or 0.0) * np.sqrt(adequacy.inflation)
         bias = adequacy.model_error * np.sqrt(3 * int(inl.sum())) / scale if scale > 0 else 0.0
         names = line_names(problem)
         # the nominal is a measurement of every axis, to its tolerance: it decides where the data do not; the fit
         # from the nominal itself is tried too when the data leave directions undetermined (it may lie nearer)
-        prior = NominalPrior(problem, reference, size)
+        prior = NominalPrior(problem, reference, size, covariance)
         wandered = len(undetermined(covariance, line_metric(problem), size, names, bias)) > 0
         fit = held_fit(fit, data, problem, prior.solve(problem, variance, [x0, prior.reference] if wandered else [x0]))
         lines = fit.lines
@@ -206,7 +206,8 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
         # what the data alone leave undetermined at the held lines (said in fixed); the covariance with the prior
         found = undetermined(inv * variance, line_metric(problem), size, names, bias)
         held = found if len(found) else None
-        rows = NominalPrior(problem, reference, size).jacobian() * np.sqrt(variance)
+        scale = prior.scale
+        rows = NominalPrior(problem, reference, size, scale=scale).jacobian() * np.sqrt(variance)
         covariance = scaled_inverse(np.vstack([jac_blocks.reshape(-1, problem.size), rows]))[0] * variance
     lines_cov = covariance[: lines.n_parameters, : lines.n_parameters]
     near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
@@ -217,11 +218,11 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     # the nominal as a measurement of the table too (when it was one of the lines)
     held_table = reference is not None and nominal is not None
     out, dh_fit, tools, gap, tolerance = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise,
-                                                     held_table)
+                                                     held_table, scale)
     if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
         # the data resolve the misalignment: exact DH wherever it stays within max_offset
         out, dh_fit, tools, gap, tolerance = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise,
-                                                         held_table)
+                                                         held_table, scale)
     first = tp_index == 0
     if dh_fit is None:  # exact DH: the lines' covariance carried over
         model, frames = out.model, target_frames_of(out.model, lines)
@@ -282,16 +283,17 @@ def _finite(rotations: Array) -> NDArray[np.bool_]:
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
-                rows: _FitRows, noise: float, held: bool = False
+                rows: _FitRows, noise: float, held: bool = False, scale: float = 1.0
                 ) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float], Array | None]:
     """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH table
     refitted under that convention on every tracked point's rows (so the cost it adds is a likelihood ratio,
     chi-square when the axes are parallel), and with ``held`` on the nominal's values too
-    (:func:`identify.estimator.hold.table_prior`); the tools (k, 3), that cost with the RMS gap to the lines, and
+    (:func:`identify.estimator.hold.table_prior`, tolerances times ``scale``); the tools (k, 3), that cost with
+    the RMS gap to the lines, and
     the nominal's tolerances of the full vector (rad, m; None unless ``held``)."""
     out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
     tools = _tools(out.model, lines)
-    values, tolerance = table_prior(nominal, out.model) if held and nominal is not None else (None, None)
+    values, tolerance = table_prior(nominal, out.model, scale) if held and nominal is not None else (None, None)
     if not capped:
         return out, None, tools, _dh_gap(out.model, tools, lines, rows), tolerance
     prior = None if tolerance is None else (values, tolerance / np.sqrt(rows.variance))  # in the rows' units
