@@ -52,6 +52,7 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.camera_stream || status=1; \
 	$(BIN)/python -m bench.timing_terms || status=1; \
 	$(BIN)/python -m bench.region_split || status=1; \
+	$(BIN)/python -m bench.flange_hold || status=1; \
 	$(BIN)/python -m bench.startup || status=1; \
 	exit $$status
 

@@ -218,8 +218,10 @@ class _Problem:
 
     def __init__(self, start: DHModel, q: Array, points: Array, weights: Array, free: NDArray[np.bool_],
                  tp_index: NDArray[np.int64] | None = None, tools: Array | None = None,
-                 rotations: Array | None = None, frames: Array | None = None):
+                 rotations: Array | None = None, frames: Array | None = None,
+                 prior: tuple[Array, Array] | None = None):
         self.start, self.q, self.points, self.weights, self.free = start, q, points, weights, free
+        self.prior = prior
         self.tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index
         self.extra = np.zeros((0, 3)) if tools is None else np.asarray(tools, dtype=float)[1:]
         self.template = np.concatenate([vector_from_model(start), self.extra.ravel()])
@@ -293,6 +295,25 @@ class _Problem:
             predicted[rows] = points_from_joints(replace(model, tool=tool), self.q[rows])
         return (self._turned(x, predicted - self.points) * self.weights[:, None]).ravel()
 
+    def objective(self, x: Array) -> Array:
+        """What the fit minimises: the residuals, then the prior's rows (when one is given)."""
+        out = self.residuals(x)
+        return out if self.prior is None else np.concatenate([out, self._prior_rows(x)])
+
+    def objective_jacobian(self, x: Array) -> Array:
+        data = self.jacobian(x)
+        return data if self.prior is None else np.vstack([data, self._prior_jacobian(data.shape[1])])
+
+    def _prior_rows(self, x: Array) -> Array:
+        """The free values' offsets from ``prior``'s, in its sigmas (only where they are finite)."""
+        values, sigma = self.prior
+        keep = np.isfinite(sigma[self.free])
+        return ((self.full(x) - values) / sigma)[self.free][keep]
+
+    def _prior_jacobian(self, columns: int) -> Array:
+        rows = prior_rows(self.free, self.prior[1])
+        return np.hstack([rows, np.zeros((len(rows), columns - rows.shape[1]))])
+
     def jacobian(self, x: Array) -> Array:
         v = self.full(x)
         model, tools = model_from_vector(self.start, v), self.tools(x)
@@ -351,17 +372,27 @@ def target_frames(model: DHModel, q: Array, rotations: Array, tp_index: NDArray[
     return out
 
 
+def prior_rows(free: NDArray[np.bool_], sigma: Array) -> Array:
+    """Rows (k, free count) that measure each ``free`` value of the full vector with a finite ``sigma`` to that
+    sigma: a prior's Jacobian (and its information, stacked with the data's)."""
+    own = sigma[free]
+    keep = np.flatnonzero(np.isfinite(own))
+    out = np.zeros((len(keep), int(free.sum())))
+    out[np.arange(len(keep)), keep] = 1.0 / own[keep]
+    return out
+
+
 def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
     """Least-squares solve; the robust (outlier-finding) pass needs less precision than the final one."""
     linear = loss == "linear"
     method = "lm" if linear and len(problem.points) * 3 >= len(x0) else "trf"
     if method == "lm" and is_tall(len(problem.points) * 3, len(x0)):
-        return solve_tall(problem.residuals, problem.jacobian, x0, STOP_SIGMAS)
+        return solve_tall(problem.objective, problem.objective_jacobian, x0, STOP_SIGMAS)
     tol = converged_tolerance(len(problem.points) * 3) if linear else 1e-8
     fit = least_squares(
-        problem.residuals,
+        problem.objective,
         x0,
-        jac=problem.jacobian,
+        jac=problem.objective_jacobian,
         method=method,
         loss=loss,
         f_scale=scale,
@@ -401,10 +432,13 @@ def fit_table(
     tp_index: NDArray[np.int64] | None = None,
     tools: Array | None = None,
     rotations: Array | None = None,
+    prior: tuple[Array, Array] | None = None,
 ) -> TableFit:
     """The maximum-likelihood DH table of :func:`refine`, without its covariance (arguments as there); ``rotations``
     (m, 3, 3): the measured target frame of orientation rows (NaN on position rows; their ``sigma`` is sigma_r,
-    rad), fitted with a target frame in frame n per tracked point (``TableFit.frames``)."""
+    rad), fitted with a target frame in frame n per tracked point (``TableFit.frames``); with a ``prior`` (values
+    and sigmas of the full vector, in the weighted rows' units; ``inf`` where none), the maximum a posteriori
+    table."""
     tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else np.asarray(tp_index)
     tools = start.tool[None, :] if tools is None else np.asarray(tools, dtype=float)
     weights = np.ones(len(q)) if sigma is None else 1.0 / np.asarray(sigma, dtype=float)
@@ -412,7 +446,7 @@ def fit_table(
     notes: list[str] = []
     # values the data cannot determine take their conventional ones; the fit absorbs the change
     model, moved = _with_conventions(start, free, conventional)
-    problem = _Problem(model, q, points, weights, free, tp_index, tools, rotations)
+    problem = _Problem(model, q, points, weights, free, tp_index, tools, rotations, prior=prior)
     x = _solve(problem, problem.x0, "linear", 1.0)
     inliers = np.ones(len(q), dtype=bool)
     if robust and rotations is not None:
@@ -424,7 +458,8 @@ def fit_table(
         x = _solve(problem, x, "soft_l1", scale)
         inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
         model, tools = problem.model(x), problem.tools(x)
-        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
+        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools,
+                           prior=prior)
         x = _solve(problem, problem.x0, "linear", 1.0)
     model, tools, frames = problem.model(x), problem.tools(x), problem.target_frames(x)
     if (len(tools) > 1 or rotations is not None) and max_offset > 0:

@@ -80,7 +80,8 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "base_translation": _floats(std[3:6]),
         "tool": _floats(std[6:9]),
     }
-    doc["fixed"] = [{"parameter": f.name, "value": f.value, "reason": f.reason} for f in ident.fixed]
+    doc["fixed"] = [{"parameter": f.name, "value": f.value, "reason": f.reason}
+                    | ({"sigma": f.sigma} if f.sigma else {}) for f in ident.fixed]
     doc["convention"] = {
         "values_from": f"nominal model {nominal_name}" if nominal_name else ident.convention,
         "parallel_links": ident.parallel,

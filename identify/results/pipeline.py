@@ -19,8 +19,9 @@ from identify.estimator.adequacy import Adequacy
 from identify.estimator.cpa import DEFAULT_PARALLEL_TOL, GeometricResult
 from identify.estimator.estimate import best_start
 from identify.estimator.extensions import Decision, TermSet
+from identify.estimator.hold import nominal_lines
 from identify.estimator.measurements import Measurements
-from identify.estimator.poe import AxisLines
+from identify.estimator.poe import AxisLines, points_from_lines
 from identify.estimator.refine import Refinement
 from identify.results import verdict as checks
 from identify.results.predict import Predictor
@@ -244,10 +245,20 @@ def identify(
     # joint errors referenced to the readings' zero, not to this data set's home: the extended model's DH offsets
     # then mean the same on every data set of the arm (a home that moved with the split moved them by c·τ(home))
     empty = TermSet((), np.zeros(meas.n_joints), torques)
-    cap = robot_size(best.lines, rows.meas.points) if max_offset is None else max_offset  # size before joint errors
+    size = robot_size(best.lines, rows.meas.points)  # before joint errors
+    cap = size if max_offset is None else max_offset
+    # what the data do not determine is held at the nominal placed on them; not yet for arms whose first joint is
+    # prismatic, whose size (from its axis, which has no position) is not the arm's
+    inl = best.inliers
+    reference = None if nominal is None or meas.joint_types[0] != "R" else nominal_lines(
+        nominal, best.q[inl], rows.data.points[inl], rows.data.tp_index[inl], best.lines.home)
+    if reference is not None:  # a nominal the data contradict is no measurement of the arm (the nominal check says so)
+        missed = points_from_lines(reference, best.q[inl], rows.data.tp_index[inl]) - rows.data.points[inl]
+        if np.sqrt(np.mean(np.sum(missed**2, axis=1))) > checks.NOMINAL_TOLERANCE * size:
+            reference = None
     write = partial(written_model, tp_ids=tuple(meas.tp_ids), conventional=conventional, nominal=nominal,
                     parallel_tol=parallel_tol, max_offset=cap, unit=rows.unit, declared=rows.declared,
-                    sigma=rows.meas.sigma)
+                    sigma=rows.meas.sigma, reference=reference, size=size)
     best, adequacy, extended, decisions = (joint_errors(best, adequacy, rows, empty) if extensions
                                            else (best, adequacy, None, []))
     models = written_models(write, rows, best, adequacy, empty, extended)

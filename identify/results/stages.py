@@ -270,7 +270,8 @@ def verdict_of(models: dict[str, WrittenModel], use: str, decisions: list[Decisi
     size = robot_size(plain.lines, rows.meas.points)
     found = [
         checks.model_fit(used.fit_rms, used.adequacy, _cause(models, decisions)),
-        checks.conditioning(used.condition, _identifiability(used, size)),
+        checks.conditioning(used.condition, _identifiability(used, size), () if used.held is None else used.held.names,
+                            used.held is not None and used.held.model_error),
         checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
         plain.dh_check,
     ]
