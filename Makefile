@@ -40,6 +40,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	status=0; \
 	$(BIN)/python -m bench.accuracy || status=1; \
+	$(BIN)/python -m bench.full_pose || status=1; \
 	$(BIN)/python -m bench.speed || status=1; \
 	$(BIN)/python -m bench.trust || status=1; \
 	$(BIN)/python -m bench.acquisition || status=1; \
@@ -52,9 +53,11 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.continuous || status=1; \
 	$(BIN)/python -m bench.second_session || status=1; \
 	$(BIN)/python -m bench.ur_continuous || status=1; \
+	$(BIN)/python -m bench.emscon_vs_ipp || status=1; \
 	$(BIN)/python -m bench.camera_stream || status=1; \
 	$(BIN)/python -m bench.timing_terms || status=1; \
 	$(BIN)/python -m bench.region_split || status=1; \
+	$(BIN)/python -m bench.flange_hold || status=1; \
 	$(BIN)/python -m bench.startup || status=1; \
 	exit $$status
 

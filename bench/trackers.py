@@ -16,6 +16,12 @@
    virtual clock: no device latency): the set-up at connect, then per stationary reading (``StartMeasurement``,
    its answer and its result) the median and 95th percentile latency and the readings per second, one reading per
    ``measure`` call and ``--readings`` in one call. Target: < 1 ms per reading (the protocol's own cost).
+   Continuous measurement by time at its fastest (a point every 1 ms) for ``--stream-seconds`` s on the wall
+   clock, read every 20 ms as a sweep reads it: points per second delivered, their delay (the host's time when
+   ``read_stream`` handed a point over minus the point's time; the server sends 10 packets a second, so up to about
+   120 ms), the process's CPU time per point (the client and the emulator, which computes each point's kinematics,
+   share the process), and the times to start and stop the measurement. Target: every point
+   the server sent, none in a gap, 1,000 per second.
 """
 
 from __future__ import annotations
@@ -28,7 +34,9 @@ import time
 import warnings
 from typing import Any
 
+from drivers.clock import WallClock
 from drivers.registry import open_tracker
+from drivers.sim.rig import SimulatedRig
 from drivers.trackers.ascii_profile import LineSplitter, checksum_of, load_profile, parse_line
 from drivers.trackers.ipp import IppTracker
 from tests.emscon_device import EmsconServer
@@ -122,6 +130,37 @@ def emscon_loopback(readings: int) -> tuple[float, float, float, float, float]:
             len(walls) / sum(walls), batch)
 
 
+def emscon_stream(seconds: float) -> dict[str, float]:
+    """Continuous measurement by time at 1 ms against the simulated emScon server on the wall clock (module doc)."""
+    rig = SimulatedRig("ur5e", seed=0, clock=WallClock())
+    with EmsconServer(rig, noise=2e-5) as server:
+        tracker = open_tracker(f"emscon:{server.host}:{server.port}?meas_time=0.001")
+        tracker.connect(3.0)
+        started = time.perf_counter()
+        rate = tracker.start_stream(1000.0, 3.0)
+        start_ms = (time.perf_counter() - started) * 1e3
+        cpu, wall, delays, kept, gaps = time.process_time(), time.perf_counter(), [], 0, 0
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            time.sleep(0.02)
+            batch = tracker.read_stream()
+            now = time.time()
+            delays += (now - (batch.t + server.boot)).tolist()  # tracker time + its boot = the point's host time
+            kept, gaps = kept + len(batch.t), gaps + len(batch.gaps)
+        started = time.perf_counter()
+        last = tracker.stop_stream(3.0)
+        stop_ms = (time.perf_counter() - started) * 1e3
+        span = time.perf_counter() - wall
+        cpu = time.process_time() - cpu
+        kept, gaps = kept + len(last.t), gaps + len(last.gaps)
+        sent = len(server.streamed)
+        tracker.close()
+    delays.sort()
+    return {"rate": rate, "per_second": kept / span, "kept": kept, "sent": sent, "gaps": gaps,
+            "delay_median": statistics.median(delays) * 1e3, "delay_max": delays[-1] * 1e3,
+            "cpu_us": cpu / max(kept, 1) * 1e6, "start_ms": start_ms, "stop_ms": stop_ms}
+
+
 def _timed_measurements(tracker: Any, count: int) -> list[float]:
     """Wall time (s) of each of ``count`` single measurements."""
     walls = []
@@ -139,6 +178,7 @@ def main() -> int:
     parser.add_argument("--readings", type=int, default=300)
     parser.add_argument("--latency", type=float, default=0.005, help="device response time, s")
     parser.add_argument("--average", type=int, default=10, help="I++ points per averaged reading")
+    parser.add_argument("--stream-seconds", type=float, default=3.0, help="emScon continuous measurement, s")
     args = parser.parse_args()
     warnings.filterwarnings("ignore", r"set(Daemon|Name)\(\) is deprecated", DeprecationWarning)  # pyserial 3.5
     missed = False
@@ -172,6 +212,14 @@ def main() -> int:
           f"{'ok' if median < 1.0 else 'MISSED'}")
     print(f"  readings per second                {single:6.0f} one per call, {batch:6.0f} with "
           f"{args.readings * 3} in one call")
+    r = emscon_stream(args.stream_seconds)
+    ok = r["kept"] == r["sent"] and not r["gaps"] and r["rate"] == 1000.0
+    missed |= not ok
+    print(f"  continuous by time, every 1 ms     {r['per_second']:6.0f} points/s over {args.stream_seconds:g} s: "
+          f"{r['kept']} of the {r['sent']} sent, {r['gaps']} gaps  {'ok' if ok else 'MISSED'}")
+    print(f"  delay from a point to its read     {r['delay_median']:6.1f} ms median, {r['delay_max']:6.1f} ms max; "
+          f"CPU {r['cpu_us']:.0f} us per point (client and emulator together); start {r['start_ms']:.2f} ms, "
+          f"stop {r['stop_ms']:.2f} ms")
     return 1 if missed else 0
 
 

@@ -8,12 +8,26 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 Array = NDArray[np.float64]
 
 REJECT_SIGMAS = 5.0  # a sample farther than this many robust sigmas from the median is an outlier
 CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise (chi, 3 degrees of freedom)
 SPREAD_FLOOR = 1e-7  # m: below this a spread is the reply's resolution (0.1 µm), not noise
+
+
+def mean_orientation(rotvecs: Array) -> tuple[Array, float | None]:
+    """The chordal mean (a rotation vector (3,), rad) of orientations ``rotvecs`` (n, 3) of a still target, and its
+    per-axis standard uncertainty from their spread (rad: the RMS per-axis turn from the mean over sqrt(n), None for
+    fewer than 3)."""
+    rotations = Rotation.from_rotvec(np.asarray(rotvecs, dtype=float).reshape(-1, 3))
+    mean = rotations.mean()
+    if len(rotations) < 3:
+        return mean.as_rotvec(), None
+    turns = (rotations * mean.inv()).as_rotvec()
+    per_axis = float(np.sqrt(np.sum(turns**2) / (3 * (len(turns) - 1))))
+    return mean.as_rotvec(), max(per_axis, SPREAD_FLOOR) / np.sqrt(len(turns))
 
 
 def robust_mean(points: Array, reject_sigmas: float = REJECT_SIGMAS) -> tuple[Array, float | None, NDArray[np.bool_]]:

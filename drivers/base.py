@@ -45,13 +45,18 @@ class DeviceIdentity:
 class TrackerReading:
     """One TP measurement: ``position`` (3,) m in the tracker frame, ``timestamp`` s, the device's
     per-axis standard uncertainty ``sigma`` (m) when it reports one, its ``status`` word, and ``tp``: the id
-    (1..N) of the tracked point it sees (several reflectors or markers on the flange; 1 when there is one)."""
+    (1..N) of the tracked point it sees (several reflectors or markers on the flange; 1 when there is one).
+    Full-pose devices (6-DoF probes, camera targets) also give the target frame's orientation in the tracker frame,
+    ``rotvec`` (3,) a rotation vector (rad; ``position`` is then the frame's origin), with its per-axis standard
+    uncertainty ``sigma_r`` (rad) when they report one."""
 
     position: Array
     timestamp: float
     sigma: float | None = None
     status: str = "ok"
     tp: int = 1
+    rotvec: Array | None = None
+    sigma_r: float | None = None
 
 
 @runtime_checkable

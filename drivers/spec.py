@@ -95,6 +95,8 @@ MOCK_TRACKER_OPTIONS: dict[str, tuple[str, object, str]] = {
     "turned": ("vector", (0.0, 0.0, 0.0), "the tracker stands turned: what it sees is rotated by the rotation "
                "vector X,Y,Z, degrees (its length is the angle)"),
     "occlusion": ("probability", None, _OCCLUSION + " (default: the robot spec's, 0)"),
+    "orientation": ("float", 0.0, "6-DoF mode (a 6-DoF probe on each tracked point): every reading also gives the "
+                    "target frame's orientation, with isotropic noise of this many rad per axis (0: positions only)"),
     "rate": ("rate", 250.0, "stream rate, Hz (continuous motion; drivers/sim/stream.py)"),
     "clock_offset": ("signed", 0.0, "the tracker clock's offset from the robot's, s"),
     "drift": ("drift", 0.0, "the tracker clock's rate error, a fraction in [-0.01, 0.01] (1e-3: 0.1 %)"),

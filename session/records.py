@@ -37,6 +37,25 @@ class PointRecord:
             raise ValueError(f"tracked point {self.tp}: needs an id >= 1 and a finite position (x, y, z)")
 
 
+@dataclass(frozen=True)
+class FrameRecord:
+    """The averaged orientation of one tracked point's target frame at a step (full-pose devices): ``tp`` its id,
+    ``rotvec`` (rx, ry, rz) the frame's rotation in the tracker frame as a rotation vector, rad, ``sigma_r`` its
+    per-axis standard uncertainty (rad) or None."""
+
+    tp: int
+    rotvec: tuple[float, float, float]
+    sigma_r: float | None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "tp", int(self.tp))
+        object.__setattr__(self, "rotvec", tuple(float(v) for v in self.rotvec))
+        if self.sigma_r is not None:
+            object.__setattr__(self, "sigma_r", float(self.sigma_r))
+        if self.tp < 1 or len(self.rotvec) != 3 or not all(map(math.isfinite, self.rotvec)):
+            raise ValueError(f"tracked point {self.tp}: an orientation needs an id >= 1 and a finite rx, ry, rz")
+
+
 @dataclass(frozen=True, eq=False)
 class StepRecord:
     """What happened at one plan step.
@@ -49,7 +68,8 @@ class StepRecord:
     ``t_start``/``t_end``: s since the epoch; ``readings``: every raw reading, ``used`` parallel flags.
     ``points``: with a tracker that sees several points, the average of each point seen (ascending ids; the
     readings carry their ``tp``); ``position`` and ``sigma`` are then the first one's, ``samples`` and
-    ``rejected`` the totals. Empty when every reading sees point 1: ``position`` is then point 1's.
+    ``rejected`` the totals. Empty when every reading sees point 1: ``position`` is then point 1's. ``frames``:
+    with a full-pose device, each tracked point's averaged orientation (:class:`FrameRecord`, ascending ids).
     Equality compares values (NaN equals NaN), so a record read back equals the one written.
     """
 
@@ -71,6 +91,7 @@ class StepRecord:
     readings: tuple[TrackerReading, ...] = ()
     used: tuple[bool, ...] = ()
     points: tuple[PointRecord, ...] = ()
+    frames: tuple[FrameRecord, ...] = ()
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -84,6 +105,7 @@ class StepRecord:
         put(self, "readings", tuple(self.readings))
         put(self, "used", tuple(bool(u) for u in self.used))
         put(self, "points", tuple(self.points))
+        put(self, "frames", tuple(self.frames))
         if self.status not in STATUSES:
             raise ValueError(f"step {self.plan_index}: status must be 'ok' or 'missing', got {self.status!r}")
         if self.status == "ok":
@@ -137,12 +159,12 @@ class StepRecord:
                    **fields)
 
     def _key(self) -> tuple[Any, ...]:
-        readings = tuple((_floats(r.position), nan_none(r.timestamp), nan_none(r.sigma), r.status, r.tp)
-                         for r in self.readings)
+        readings = tuple((_floats(r.position), nan_none(r.timestamp), nan_none(r.sigma), r.status, r.tp,
+                          _floats(r.rotvec), nan_none(r.sigma_r)) for r in self.readings)
         points = tuple((p.tp, _floats(p.position), nan_none(p.sigma), p.samples, p.rejected) for p in self.points)
         return (self.plan_index, self.kind, self.sweep, self.joint, self.role, _floats(self.q_cmd),
                 _floats(self.q_act), _floats(self.position), nan_none(self.sigma), self.samples, self.rejected,
-                self.status, self.reason, self.t_start, self.t_end, readings, self.used, points)
+                self.status, self.reason, self.t_start, self.t_end, readings, self.used, points, self.frames)
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, StepRecord):

@@ -17,8 +17,8 @@ import numpy as np
 
 from drivers.base import TrackerReading
 from kinematics.joint_errors import Coupling
-from session.records import PointRecord, StepRecord
-from session.schema import STEP_COLUMNS, columns, dump_q, load_q, nan_of
+from session.records import FrameRecord, PointRecord, StepRecord
+from session.schema import ORIENTATION_COLUMNS, STEP_COLUMNS, columns, dump_q, load_q, nan_of
 
 
 def insert_step(db: sqlite3.Connection, record: StepRecord, readings: list[tuple[Any, ...]], run_id: int) -> None:
@@ -33,11 +33,13 @@ def insert_step(db: sqlite3.Connection, record: StepRecord, readings: list[tuple
         (i, record.kind, record.sweep, record.joint, record.role, dump_q(record.q_cmd),
          dump_q(record.q_act), x, y, z, record.sigma, record.samples, record.rejected, record.status,
          record.reason, record.t_start, record.t_end, run_id))
-    db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used, tp)"
-                   " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)", readings)
+    db.executemany("INSERT INTO readings (plan_index, x, y, z, sigma, t, status, used, tp, rx, ry, rz, sigma_r)"
+                   " VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", readings)
     db.executemany("INSERT INTO step_points (plan_index, tp, x, y, z, sigma, samples, rejected)"
                    " VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                    [(i, p.tp, *p.position, p.sigma, p.samples, p.rejected) for p in record.points])
+    db.executemany("INSERT INTO step_orientations (plan_index, tp, rx, ry, rz, sigma_r) VALUES (?, ?, ?, ?, ?, ?)",
+                   [(i, f.tp, *f.rotvec, f.sigma_r) for f in record.frames])
 
 
 def retire_step(db: sqlite3.Connection, plan_index: int) -> None:
@@ -48,9 +50,10 @@ def retire_step(db: sqlite3.Connection, plan_index: int) -> None:
     attempt = 1 + db.execute("SELECT count(*) FROM retired_steps WHERE plan_index = ?", (i,)).fetchone()[0]
     db.execute(f"INSERT INTO retired_steps (attempt, run_id, {names}) SELECT ?, run_id, {names}"
                " FROM steps WHERE plan_index = ?", (attempt, i))
-    db.execute("INSERT INTO retired_readings (plan_index, attempt, x, y, z, sigma, t, status, used, tp)"
-               " SELECT plan_index, ?, x, y, z, sigma, t, status, used, tp FROM readings"
+    db.execute("INSERT INTO retired_readings (plan_index, attempt, x, y, z, sigma, t, status, used, tp, rx, ry, rz,"
+               " sigma_r) SELECT plan_index, ?, x, y, z, sigma, t, status, used, tp, rx, ry, rz, sigma_r FROM readings"
                " WHERE plan_index = ? ORDER BY id", (attempt, i))
+    db.execute("DELETE FROM step_orientations WHERE plan_index = ?", (i,))
     db.execute("DELETE FROM readings WHERE plan_index = ?", (i,))
     db.execute("DELETE FROM steps WHERE plan_index = ?", (i,))
 
@@ -79,12 +82,28 @@ def step_rows(db: sqlite3.Connection, where: str = "") -> list[dict[str, Any]]:
 
 def reading_rows(db: sqlite3.Connection) -> dict[int, list[tuple[TrackerReading, bool]]]:
     """Plan index -> every raw reading of the step with its ``used`` flag, in the order recorded."""
-    tp = "tp" if "tp" in columns(db, "readings") else "1"
+    have = columns(db, "readings")
+    tp = "tp" if "tp" in have else "1"
+    turn = ", ".join(name if name in have else "NULL" for name in ORIENTATION_COLUMNS)
     out: dict[int, list[tuple[TrackerReading, bool]]] = {}
-    for i, x, y, z, sigma, t, status, used, point in db.execute(
-            f"SELECT plan_index, x, y, z, sigma, t, status, used, {tp} FROM readings ORDER BY id"):
-        reading = TrackerReading(np.array([nan_of(x), nan_of(y), nan_of(z)]), nan_of(t), sigma, status, int(point))
+    for i, x, y, z, sigma, t, status, used, point, rx, ry, rz, sigma_r in db.execute(
+            f"SELECT plan_index, x, y, z, sigma, t, status, used, {tp}, {turn} FROM readings ORDER BY id"):
+        rotvec = None if rx is None else np.array([rx, ry, rz], dtype=float)
+        reading = TrackerReading(np.array([nan_of(x), nan_of(y), nan_of(z)]), nan_of(t), sigma, status, int(point),
+                                 rotvec, sigma_r)
         out.setdefault(i, []).append((reading, bool(used)))
+    return out
+
+
+def frame_rows(db: sqlite3.Connection) -> dict[int, list[FrameRecord]]:
+    """Plan index -> the averaged target-frame orientations of a step measured by a full-pose device, ascending ids
+    (empty for files without them)."""
+    if not columns(db, "step_orientations"):
+        return {}
+    out: dict[int, list[FrameRecord]] = {}
+    for i, tp, rx, ry, rz, sigma_r in db.execute(
+            "SELECT plan_index, tp, rx, ry, rz, sigma_r FROM step_orientations ORDER BY plan_index, tp"):
+        out.setdefault(i, []).append(FrameRecord(tp, (rx, ry, rz), sigma_r))
     return out
 
 

@@ -18,6 +18,11 @@ The file (stdlib ``sqlite3``, rollback journal ``DELETE``, ``synchronous=EXTRA``
   sees one). SQLite stores NaN as NULL; NULL coordinates read back NaN.
 - ``step_points(plan_index, tp, x, y, z, sigma, samples, rejected)``: with a tracker that sees several points,
   the average of every point seen at an ok step (``steps`` then holds the smallest id's); no rows otherwise.
+- ``step_orientations(plan_index, tp, rx, ry, rz, sigma_r)``: with a full-pose device (6-DoF probe, camera target),
+  the averaged orientation of every point seen at an ok step (a rotation vector in the tracker frame, rad, and its
+  per-axis sigma, rad); the raw readings' own are the ``rx, ry, rz, sigma_r`` columns of ``readings`` (NULL: a
+  position only). Added by :func:`migrate` like ``tp``: a reader of an older version ignores them and reads the
+  positions, which stay right, so the schema number does not change.
 - ``events(id, t, run_id, kind, message)``: pauses, faults, retries, resumes, changed connection details.
 - ``retired_steps`` / ``retired_readings``: earlier attempts of steps measured again (``attempt`` 1, 2...),
   with the columns of ``steps`` / ``readings``; ``steps`` always holds the latest attempt.
@@ -57,6 +62,7 @@ POINTS_SCHEMA = 2  # several tracked points or coupled readings
 STREAMS_SCHEMA = 3  # continuous motion: stream steps in the plan, samples in the stream tables
 NEWEST_SCHEMA = STREAMS_SCHEMA  # the newest this version reads
 MAGIC = b"SQLite format 3\x00"
+ORIENTATION_COLUMNS = ("rx", "ry", "rz", "sigma_r")  # a reading's target-frame rotation vector (rad), its sigma
 STEP_COLUMNS = ("plan_index", "kind", "sweep", "joint", "role", "q_cmd", "q_act", "x", "y", "z", "sigma", "samples",
                  "rejected", "status", "reason", "t_start", "t_end")
 
@@ -113,6 +119,9 @@ CREATE TABLE IF NOT EXISTS stream_gaps (
 CREATE TABLE IF NOT EXISTS stream_batches (
     stream INTEGER NOT NULL REFERENCES streams (id), t REAL NOT NULL, joint_samples INTEGER NOT NULL,
     tracker_samples INTEGER NOT NULL);
+CREATE TABLE IF NOT EXISTS step_orientations (
+    plan_index INTEGER NOT NULL REFERENCES steps (plan_index), tp INTEGER NOT NULL, rx REAL NOT NULL,
+    ry REAL NOT NULL, rz REAL NOT NULL, sigma_r REAL, PRIMARY KEY (plan_index, tp));
 CREATE TABLE IF NOT EXISTS writer (
     id INTEGER PRIMARY KEY CHECK (id = 1), pid INTEGER NOT NULL, host TEXT NOT NULL, since REAL NOT NULL,
     command TEXT NOT NULL);
@@ -152,6 +161,9 @@ def migrate(conn: sqlite3.Connection) -> None:
     for table in ("readings", "retired_readings"):
         if "tp" not in columns(conn, table):
             conn.execute(f"ALTER TABLE {table} ADD COLUMN tp INTEGER NOT NULL DEFAULT 1")
+        for name in ORIENTATION_COLUMNS:  # full-pose readings (NULL: a position only)
+            if name not in columns(conn, table):
+                conn.execute(f"ALTER TABLE {table} ADD COLUMN {name} REAL")
 
 
 def initialise(conn: sqlite3.Connection, meta: list[tuple[str, str]], version: int) -> None:

@@ -47,8 +47,17 @@ from kinematics.joint_errors import Coupling
 from session.lock import Locked, busy_message, write_lock
 from session.lock import unlock as _unlock
 from session.plan import Plan
-from session.records import PointRecord, StepRecord
-from session.rows import coupling_of, drift_from, insert_step, point_rows, reading_rows, retire_step, step_rows
+from session.records import FrameRecord, PointRecord, StepRecord
+from session.rows import (
+    coupling_of,
+    drift_from,
+    frame_rows,
+    insert_step,
+    point_rows,
+    reading_rows,
+    retire_step,
+    step_rows,
+)
 from session.schema import (
     NEWEST_SCHEMA,
     POINTS_SCHEMA,
@@ -362,8 +371,10 @@ class SessionFile:
             if p.shape != (3,):
                 raise SessionError(f"{self.path}: step {i}: a reading's position has {p.size} values, not 3")
             sigma = None if reading.sigma is None else float(reading.sigma)
+            turn = (None,) * 3 if reading.rotvec is None else tuple(map(float, np.reshape(reading.rotvec, 3)))
+            sigma_r = None if reading.sigma_r is None else float(reading.sigma_r)
             readings.append((i, *map(float, p), sigma, float(reading.timestamp), reading.status, int(used),
-                             int(reading.tp)))
+                             int(reading.tp), *turn, sigma_r))
         if record.points and self._db.execute("PRAGMA user_version").fetchone()[0] < POINTS_SCHEMA:
             self._mark_newest()
         insert_step(self._db, record, readings, self._run_id)
@@ -414,13 +425,14 @@ class SessionFile:
     def steps(self) -> list[StepRecord]:
         """Every recorded step in plan order, with its raw readings and, when it saw several tracked points,
         their averages."""
-        by_step, points = reading_rows(self._db), point_rows(self._db)
+        by_step, points, frames = reading_rows(self._db), point_rows(self._db), frame_rows(self._db)
         out = []
         for row in step_rows(self._db):
             raw = by_step.get(row["plan_index"], [])
             try:
                 out.append(StepRecord(**row, readings=tuple(r for r, _ in raw), used=tuple(u for _, u in raw),
-                                      points=tuple(points.get(row["plan_index"], ()))))
+                                      points=tuple(points.get(row["plan_index"], ())),
+                                      frames=tuple(frames.get(row["plan_index"], ()))))
             except ValueError as exc:
                 raise SessionError(f"{self.path}: inconsistent record ({exc})") from None
         return out
@@ -431,6 +443,11 @@ class SessionFile:
         """What the stop-and-go measurements are made of: the ok steps other than streams as step rows (plan order,
         :func:`session.rows.step_rows`) and the per-point averages of the steps that saw several tracked points."""
         return step_rows(self._db, "WHERE status = 'ok' AND kind != 'stream'"), point_rows(self._db)
+
+    def measured_frames(self) -> dict[int, list[FrameRecord]]:
+        """The averaged target-frame orientations of the steps a full-pose device measured (plan index -> ascending
+        tracked-point ids; empty without any)."""
+        return frame_rows(self._db)
 
     def streams(self) -> list[StreamData]:
         """The complete, current attempt of every stream step recorded ok, in plan order (continuous motion)."""

@@ -6,6 +6,8 @@ import socket
 import threading
 from typing import Any
 
+from drivers.trackers.socket_reads import accept_each
+
 
 class _Served:
     """A thread serving a byte stream on file descriptor ``fd`` until ``stop()``."""
@@ -37,12 +39,4 @@ class _Served:
 
     def _accept_each(self, server: socket.socket, serve: Any) -> None:
         """Accept loopback connections on ``server`` until stopped, ``serve(conn)`` each, then close it."""
-        server.settimeout(0.05)
-        while not self._stop.is_set():
-            try:
-                conn, _ = server.accept()
-            except TimeoutError:
-                continue
-            with conn:
-                serve(conn)
-        server.close()
+        accept_each(server, serve, self._stop)

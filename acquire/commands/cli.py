@@ -186,8 +186,9 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if tracker_spec is not None and tracker_spec.backend == "emscon":  # what the tracker will be asked to do
         from drivers.trackers.emscon_options import describe
 
-        stops = sum(step.kind != "stream" for step in plan.steps)
-        say("\n".join(["", *describe(tracker_spec, site, plan.samples_per_step, stops)]))
+        sweeps = sum(step.kind == "stream" for step in plan.steps)
+        say("\n".join(["", *describe(tracker_spec, site, plan.samples_per_step, len(plan.steps) - sweeps, sweeps,
+                                      site.stream_rate)]))
     say(format_clearance(clearance, plan, site))
     if tradeoff is not None:
         say(tradeoff)

@@ -26,6 +26,8 @@ examples:
       --config site.yaml                       a real arm and tracker
   acquire --robot ur5e@192.168.1.10 --tracker emscon:192.168.0.1 \\
       --config site.yaml                       a Leica tracker's emScon server
+  acquire --robot ur5e@192.168.1.10 --tracker emscon:192.168.0.1 \\
+      --mode continuous                        its continuous measurement
   acquire --robot ur5e@192.168.1.10 --tracker none
       the plan's motion at 25 % speed, measuring nothing
   acquire --resume SESSION                     continue an interrupted session
@@ -59,8 +61,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "mock:my_arm.yaml, my_arm.yaml@HOST (mock:ur5e; on --resume: the session's, whose address may "
                    "change)")
     p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, emscon:HOST[:PORT]?... (a Leica "
-                   "laser tracker's emScon server, port 700; emscon:sim with a mock robot), aruco:..., mock, or none "
-                   "(motion rehearsal) (mock; on --resume: the session's, whose port or host may change)")
+                   "laser tracker's emScon server, port 700: stationary points, and for continuous sweeps its "
+                   "continuous measurement by time stamped with the tracker's clock; emscon:sim with a mock robot), "
+                   "aruco:..., mock, or none (motion rehearsal) (mock; on --resume: the session's, whose port or "
+                   "host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
     p.add_argument("--session", type=Path, help="session file to create (default sessions/<robot>-<time>.session)")
     p.add_argument("--resume", type=Path, metavar="SESSION", help="continue this session where it stopped")

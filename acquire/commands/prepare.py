@@ -5,6 +5,7 @@ where the arm stands to the plan's first step. ``UsageError``: bad input, one li
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -78,6 +79,15 @@ def tracker_states(tracker: TrackerSpec | None) -> tuple[float | None, float | N
             return None, None, ""
         rate = 0.0 if profile.mode == "polled" else (1.0 / profile.period if profile.period else None)
         return profile.sigma, rate, f"profile {profile.name}"
+    if tracker.backend == "emscon":  # continuous by time: one point per millisecond at most (the TPI's least step)
+        noise = None
+        if tracker.target == "sim":
+            try:
+                noise = float(tracker.options.get("noise", 5e-5))
+            except ValueError:
+                noise = None
+            noise = noise if noise is not None and 0 < noise < math.inf else None  # else refused by the tracker
+        return noise, 1000.0, "the emScon TPI"
     return None, None, ""
 
 

@@ -26,13 +26,13 @@ from numpy.typing import NDArray
 
 from acquire.running.session import Session
 from common import stop_signals
-from drivers.averaging import robust_mean
+from drivers.averaging import mean_orientation, robust_mean
 from drivers.base import Robot, RobotState, Tracker, TrackerReading
 from drivers.clock import Clock
 from drivers.errors import ConnectionFailed, DeviceTimeout, MeasurementError, RobotFault
 from identify.estimator.geometry import circle_2d_algebraic, perpendicular_basis, plane_from_points
 from session.plan import Plan, Step
-from session.records import PointRecord, StepRecord
+from session.records import FrameRecord, PointRecord, StepRecord
 
 Array = NDArray[np.float64]
 
@@ -99,6 +99,22 @@ def average_points(readings: list[TrackerReading]) -> tuple[list[PointRecord], l
             used[k] = bool(keep)
         points.append(PointRecord(tp, tuple(float(v) for v in mean), sigma, int(kept.sum()), int((~kept).sum())))
     return points, used
+
+
+def average_frames(readings: list[TrackerReading], used: list[bool]) -> tuple[FrameRecord, ...]:
+    """Each tracked point's averaged target-frame orientation over its kept readings that carry one (full-pose
+    devices; empty otherwise): the chordal mean, with the device's sigma_r over sqrt(kept) when it states one, else
+    the readings' spread (None for fewer than 3)."""
+    out = []
+    for tp in sorted({r.tp for r in readings if r.rotvec is not None}):
+        mine = [r for r, keep in zip(readings, used, strict=True) if keep and r.tp == tp and r.rotvec is not None]
+        if not mine:
+            continue
+        mean, spread = mean_orientation(np.array([r.rotvec for r in mine], dtype=float))
+        device = [r.sigma_r for r in mine if r.sigma_r is not None]
+        sigma_r = float(np.median(device)) / np.sqrt(len(mine)) if device else spread
+        out.append(FrameRecord(tp, tuple(float(v) for v in mean), sigma_r))
+    return tuple(out)
 
 
 class StopRequest:
@@ -240,6 +256,7 @@ class Orchestrator:
             step, q_cmd=q_cmd, q_act=q_act, position=points[0].position, sigma=points[0].sigma, samples=sum(used),
             rejected=len(used) - sum(used), status="ok", reason="", t_start=t_start, t_end=self.clock.now(),
             readings=readings, used=used, points=tuple(points) if several else (),
+            frames=average_frames(readings, used),
         )
 
     def _command(self, step: Step) -> tuple[float, ...]:

@@ -6,9 +6,9 @@ Sequencing only: the devices stream (drivers/base.py: StreamingRobot, StreamingT
 virtual clock in mock mode), so a crash loses at most that much. Every wait has a timeout: the move's own
 duration plus the site's move timeout (also the bound given to the robot's ``start_move``). Faults: the tracker's
 gaps (target lost) and the robot's (lost packets) are recorded with the samples and the sweep goes on; a robot
-fault, a lost connection or a timeout stops the motion and the streams, marks the attempt interrupted and
-re-raises (the run ends resumable; a resume redoes the sweep from its start); Ctrl-C (``stop.requested``) stops
-the motion and returns a missing record.
+fault, a lost connection, a timeout or any other driver error stops the motion and the streams, marks the attempt
+interrupted and re-raises (the run ends resumable; a resume redoes the sweep from its start); Ctrl-C
+(``stop.requested``) stops the motion and returns a missing record.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from collections.abc import Callable
 from acquire.running.session import Session
 from drivers.base import JointStreamBatch, RobotState, TrackerStreamBatch
 from drivers.clock import Clock
-from drivers.errors import ConnectionFailed, DeviceTimeout, DriverError, RobotFault
+from drivers.errors import DeviceTimeout, DriverError, RobotFault
 from drivers.motion import motion_time
 from session.plan import Plan, Step
 from session.records import StepRecord
@@ -121,7 +121,7 @@ def run_stream(robot, tracker, session: Session, clock: Clock, step: Step, plan:
             _pump_for(clock, STREAM_SLACK, pump)
         pump(final=True)
         streaming = False
-    except (RobotFault, ConnectionFailed, DeviceTimeout, KeyboardInterrupt) as exc:
+    except (DriverError, KeyboardInterrupt) as exc:  # a fault, a lost link, a timeout, a stream that cannot be read
         robot.stop()
         if streaming:
             with contextlib.suppress(DriverError, ValueError):

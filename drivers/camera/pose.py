@@ -66,16 +66,32 @@ class Pose:
         """``tp`` (3,) m in the target frame -> camera frame."""
         return self.rotation @ np.asarray(tp, dtype=float) + self.translation
 
+    def pose_covariance(self, sigma_px: float) -> Array:
+        """Covariance (6, 6) of (rotation vector, translation), rad² and m², of the least-squares pose: the sandwich
+        ``N⁻¹ Jᵀ Σ J N⁻¹`` (N = JᵀJ) with :attr:`image_covariance`, else ``sigma_px² N⁻¹`` (independent corners)."""
+        inverse = np.linalg.pinv(self.jacobian.T @ self.jacobian)
+        if self.image_covariance is not None:
+            gain = inverse @ self.jacobian.T
+            return gain @ self.image_covariance @ gain.T
+        return sigma_px**2 * inverse
+
+    def orientation_covariance(self, sigma_px: float) -> Array:
+        """Covariance (3, 3) rad² of the target frame's orientation as a small turn in the camera frame
+        (``R -> exp(δφ) R``): the rotation vector's block of :meth:`pose_covariance` through the left Jacobian."""
+        rvec = cv2.Rodrigues(self.rotation)[0].ravel()
+        angle = float(np.linalg.norm(rvec))
+        k = np.array([[0.0, -rvec[2], rvec[1]], [rvec[2], 0.0, -rvec[0]], [-rvec[1], rvec[0], 0.0]])
+        if angle < 1e-8:
+            left = np.eye(3) + 0.5 * k
+        else:
+            left = np.eye(3) + (1 - np.cos(angle)) / angle**2 * k + (angle - np.sin(angle)) / angle**3 * (k @ k)
+        return left @ self.pose_covariance(sigma_px)[:3, :3] @ left.T
+
     def point_covariance(self, tp: Array, sigma_px: float) -> Array:
         """Covariance (3, 3) m² of :meth:`point`: from :attr:`image_covariance` when there is one (the
         least-squares pose's sandwich ``N⁻¹ Jᵀ Σ J N⁻¹``, N = JᵀJ), else for independent corner noise
         ``sigma_px`` pixels per coordinate (``sigma_px² N⁻¹``)."""
-        inverse = np.linalg.pinv(self.jacobian.T @ self.jacobian)
-        if self.image_covariance is not None:
-            gain = inverse @ self.jacobian.T
-            pose_cov = gain @ self.image_covariance @ gain.T
-        else:
-            pose_cov = sigma_px**2 * inverse
+        pose_cov = self.pose_covariance(sigma_px)
         rvec = cv2.Rodrigues(self.rotation)[0]
         _, d_r = cv2.Rodrigues(rvec)  # (3, 9): d vec(R) (row-major) / d rvec
         tp = np.asarray(tp, dtype=float)
@@ -111,6 +127,14 @@ class CornerNoise:
             return pose.point_covariance(tp, 0.0) * scale
         sigma_px = max(math.sqrt(self.rss / self.dof) if self.dof else 0.0, SIGMA_PX_FLOOR)
         return pose.point_covariance(tp, sigma_px)
+
+    def orientation_covariance(self, pose: Pose) -> Array:
+        """Covariance (3, 3) rad² of ``pose``'s orientation (:meth:`Pose.orientation_covariance`), with the corner
+        noise of :meth:`covariance`."""
+        if self.expected is not None and pose.image_covariance is not None:
+            return pose.orientation_covariance(0.0) * max(self.rss / max(self.expected, 1e-30), 1.0)
+        sigma_px = max(math.sqrt(self.rss / self.dof) if self.dof else 0.0, SIGMA_PX_FLOOR)
+        return pose.orientation_covariance(sigma_px)
 
 
 def estimate_pose(obs: Observation, matrix: Array, distortion: Array, square: bool = False,

@@ -77,8 +77,10 @@ from typing import Any
 
 import cv2
 import numpy as np
+from scipy.spatial.transform import Rotation
 from scipy.stats import f as f_dist
 
+from drivers.averaging import mean_orientation
 from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
 from drivers.camera.pose import CornerNoise, Pose, estimate_pose
@@ -354,7 +356,15 @@ class ArucoTracker(FrameStreaming):
         sigma = _frame_sigma(model, pts[kept], dof) / math.sqrt(n)
         stamp = float(np.mean([t for (_, t), k in zip(poses, kept, strict=True) if k]))
         status = "ok" if n == len(pts) else f"ok ({len(pts) - n} of {len(pts)} frames rejected)"
-        return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=sigma, status=status)
+        # the target frame (the board's axes at the TP): the kept frames' mean orientation, its sigma as the TP's
+        rotvecs = np.array([cv2.Rodrigues(p.rotation)[0].ravel() for (p, _), k in zip(poses, kept, strict=True) if k])
+        rotvec, _ = mean_orientation(rotvecs)
+        turns = (Rotation.from_rotvec(rotvecs) * Rotation.from_rotvec(rotvec).inv()).as_rotvec()
+        model_r = math.sqrt(float(np.mean([np.trace(noise.orientation_covariance(p)) for (p, _), k
+                                           in zip(poses, kept, strict=True) if k])) / 3)
+        sigma_r = _frame_sigma(model_r, turns, dof) / math.sqrt(n)
+        return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=sigma, status=status, rotvec=rotvec,
+                              sigma_r=sigma_r)
 
 
 def _frame_sigma(model: float, pts: Array, dof: int) -> float:

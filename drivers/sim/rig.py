@@ -74,7 +74,7 @@ from drivers.sim.pairing import check_pairing, is_simulated_camera, is_simulated
 from drivers.sim.stream_model import StreamedMove, StreamSettings
 from drivers.sim.world import backlash_play, joint_errors_for, reflector_tools, true_joints
 from drivers.spec import PERSISTENT_FAULTS, ROBOT_FAULTS, TRACKER_FAULTS, FaultSpec, RobotSpec, TrackerSpec
-from kinematics.dh import frames_from_joints, points_from_joints
+from kinematics.dh import flange_frames, frames_from_joints, points_from_joints
 from kinematics.truth import random_truth
 
 RING_FREQUENCY = 8.0  # Hz, of the oscillation after a move
@@ -122,7 +122,8 @@ class SimulatedRig:
                  points: int = 1, occlusion: float = 0.0, scale: float = 0.0, eccentricity: float = 0.0,
                  compliance: float = 0.0, backlash: float = 0.0, stream: StreamSettings | None = None,
                  arm: int | None = None,
-                 moved: Iterable[float] = (0.0, 0.0, 0.0), turned: Iterable[float] = (0.0, 0.0, 0.0)) -> None:
+                 moved: Iterable[float] = (0.0, 0.0, 0.0), turned: Iterable[float] = (0.0, 0.0, 0.0),
+                 orientation: float = 0.0) -> None:
         self.model = model if isinstance(model, RobotModel) else load_robot(model)
         self.clock: Clock = VirtualClock() if clock is None else clock
         self.seed = int(seed)
@@ -140,6 +141,7 @@ class SimulatedRig:
         if int(points) != points or points < 1:
             raise ValueError(f"simulated rig: points must be an integer >= 1, got {points!r}")
         self.points = int(points)
+        self.orientation = _setting("orientation", orientation)  # rad per axis; 0: the tracker sees positions only
         home = np.array(self.model.home, dtype=float)
         self.truth = random_truth(self.model.nominal, home, np.random.default_rng(self.seed))
         self.arm = self.seed if arm is None else int(arm)
@@ -156,9 +158,13 @@ class SimulatedRig:
         self.joint_errors = joint_errors_for(self.model, self.scale, math.radians(self.eccentricity),
                                              self.compliance, np.random.default_rng([self.seed, 5]))
         self.tools = reflector_tools(self.truth, home, self.points, np.random.default_rng([self.seed, 4]))
+        # each tracked point's target frame in the flange frame (a 6-DoF probe's axes: seeded, any orientation)
+        frames = Rotation.random(self.points, random_state=np.random.default_rng([self.seed, 6]))
+        self.target_frames = frames.as_matrix()
         self._robot_rng = np.random.default_rng([self.seed, 1])
         self._tracker_rng = np.random.default_rng([self.tracker_seed, 2])
         self._occlusion_rng = np.random.default_rng([self.tracker_seed, 3])
+        self._orientation_rng = np.random.default_rng([self.tracker_seed, 8])
         self._rest = self.readings_of(home)  # where the arm came to rest (actual readings)
         self._lash = np.zeros(self.model.n_joints)  # each joint's offset from its readings in the gap (backlash)
         self._ring_amp, self._ring_start, self._ring_decays = np.zeros(self.model.n_joints), self.clock.now(), True
@@ -215,7 +221,7 @@ class SimulatedRig:
                       tracker_seed=t["seed"], robot_faults=r["fault"], tracker_faults=t["fault"], scale=r["scale"],
                       eccentricity=r["eccentricity"], compliance=r["compliance"], backlash=r["backlash"],
                       stream=StreamSettings.from_settings(r, t), arm=r["arm"], moved=t["moved"],
-                      turned=t["turned"], **world)
+                      turned=t["turned"], orientation=t["orientation"], **world)
         except ValueError as exc:
             raise SpecError(f"robot spec {str(robot)!r}: {exc}") from None
         rig.robot_spec, rig.tracker_spec = robot, tracker
@@ -260,6 +266,13 @@ class SimulatedRig:
         (points, 3), or (m, points, 3) for m times; reflector k is ``tools[k]`` on the flange."""
         q = np.atleast_2d(self.true_joints(t))
         out = np.stack([points_from_joints(replace(self.truth, tool=tool), q) for tool in self.tools], axis=1)
+        return out if np.ndim(t) else out[0]
+
+    def true_frames(self, t: float | Array | None = None) -> Array:
+        """The true orientation of every tracked point's target frame, tracker frame <- target frame, at clock time
+        ``t`` (default now): (points, 3, 3), or (m, points, 3, 3) for m times (``target_frames[k]`` on the flange)."""
+        rotation, _ = flange_frames(self.truth, np.atleast_2d(self.true_joints(t)))
+        out = np.einsum("mij,kjl->mkil", rotation, self.target_frames)
         return out if np.ndim(t) else out[0]
 
     def true_point(self, t: float | None = None) -> Array:

@@ -6,6 +6,9 @@ later, every reflector in sight at once, each with its own isotropic Gaussian no
 reported as ``sigma``) and its id ``tp`` (1..points). A measurement is lost as a whole with probability
 ``dropout`` (TargetLost); with ``occlusion`` each reflector is out of sight for the whole measurement with that
 probability (no readings of it; all out of sight: TargetLost). Scheduled faults as in drivers/sim/rig.py.
+6-DoF mode (``orientation=SIGMA_R``): each reading also gives its tracked point's target frame (the rig's
+``target_frames`` on the flange) as a rotation vector, turned by isotropic Gaussian noise of ``SIGMA_R`` rad per axis
+(reported as ``sigma_r``), from a generator of its own (the positions' draws are those of the mock without it).
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from drivers.base import DeviceIdentity, TrackerReading, check_measure_request
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, SpecError, TargetLost
@@ -48,6 +52,8 @@ class SimulatedTracker(TrackerStreaming):
         details = {"noise": f"{rig.noise:g}", "latency": f"{rig.latency:g}", "dropout": f"{rig.dropout:g}"}
         if rig.points > 1 or rig.occlusion > 0:
             details.update(points=str(rig.points), occlusion=f"{rig.occlusion:g}")
+        if rig.orientation > 0:
+            details.update(orientation=f"{rig.orientation:g}")
         if any(rig.moved) or any(rig.turned):
             details.update(moved=",".join(f"{v:g}" for v in rig.moved), turned=",".join(f"{v:g}" for v in rig.turned))
         s = rig.stream  # its streams' clock (drivers/sim/stream.py): what a session's clock fit should find
@@ -98,6 +104,14 @@ class SimulatedTracker(TrackerStreaming):
                 raise TargetLost(f"simulated tracker: every one of the {rig.points} point(s) is out of sight "
                                  f"(line of sight blocked) at measurement {number}")
         clock.sleep(latency * count)
+        if rig.orientation > 0:
+            frames = rig.true_frames(times)  # (count, points, 3, 3)
+            turns = Rotation.from_rotvec(rig._orientation_rng.normal(0.0, rig.orientation, (count, rig.points, 3))
+                                         .reshape(-1, 3)).as_matrix().reshape(frames.shape)
+            rotvecs = Rotation.from_matrix((turns @ frames).reshape(-1, 3, 3)).as_rotvec().reshape(count, rig.points, 3)
+            return [TrackerReading(points[i, k], float(times[i]), sigma=rig.noise, tp=int(k) + 1,
+                                   rotvec=rotvecs[i, k], sigma_r=rig.orientation)
+                    for i in range(count) for k in seen]
         return [TrackerReading(points[i, k], float(times[i]), sigma=rig.noise, tp=int(k) + 1)
                 for i in range(count) for k in seen]
 
@@ -113,7 +127,7 @@ def open_tracker(spec: TrackerSpec | str, *, rig: SimulatedRig | None = None, si
     given = spec.mock_settings()
     given["seed"] = rig.seed if given["seed"] is None else given["seed"]
     ours = {"noise": rig.noise, "latency": rig.latency, "dropout": rig.dropout, "seed": rig.tracker_seed,
-            "moved": rig.moved, "turned": rig.turned}
+            "moved": rig.moved, "turned": rig.turned, "orientation": rig.orientation}
     ours.update({key: getattr(rig, key) for key in ("points", "occlusion") if given[key] is not None})
     ours.update(rig.stream.tracker_options())
     rig._check_settings(spec, ours, given, rig.tracker_spec)

@@ -39,8 +39,11 @@ errors the orchestrator retries. A dropped connection, a damaged byte stream (Ba
 silent (DeviceTimeout) closes the link; the reading is then retried on a new connection (set up again as at
 connect) up to ``retries`` times, so the step is not lost. Unsolicited status changes are kept in ``events``.
 
-Not implemented: continuous measurement (``ES_MM_ContinuousTime``; the tracker is not a ``StreamingTracker``, so
-``--mode continuous`` is refused before anything moves) and 6-DoF probe results.
+Continuous sweeps (``--mode continuous``): the tracker streams by continuous measurement by time, each point stamped
+with the tracker's own time (drivers/trackers/emscon_stream.py: the exchange, the stamps, its faults as gaps).
+
+6-DoF probes (T-Mac class): :meth:`~drivers.trackers.emscon_probe.ProbeMeasurement.measure_pose` takes one stationary
+6-DoF measurement as a pose (drivers/trackers/emscon_probe.py); sessions do not use it yet.
 """
 
 from __future__ import annotations
@@ -62,6 +65,8 @@ from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 from drivers.trackers import emscon_protocol as es
 from drivers.trackers.emscon_options import DEFAULT_PORT, parse_settings
+from drivers.trackers.emscon_probe import ProbeMeasurement
+from drivers.trackers.emscon_stream import ContinuousMeasurement
 from drivers.trackers.socket_reads import receive
 
 #: changes of the environment a result was corrected with (degC, mbar, %RH) that a reading's status reports
@@ -88,11 +93,12 @@ class BeamLost(EmsconStatus, TargetLost):
     """The beam does not reach the reflector (broken beam, reflector lost); re-lock it on the reflector."""
 
 
-class EmsconTracker:
-    """An emScon server as a tracker (implements :class:`drivers.base.Tracker`). After :meth:`connect`:
-    ``version`` (server), ``serial`` (tracker), ``environment`` (°C, mbar, %RH in force), ``reflector`` (id, name,
-    target type, surface offset m), ``meas_time_ms`` (the stationary measurement time in force); ``events`` holds
-    every unsolicited status change (time, text); ``reconnects`` counts links re-opened by :meth:`measure`."""
+class EmsconTracker(ContinuousMeasurement, ProbeMeasurement):
+    """An emScon server as a tracker (implements :class:`drivers.base.Tracker` and ``StreamingTracker``). After
+    :meth:`connect`: ``version`` (server), ``serial`` (tracker), ``environment`` (°C, mbar, %RH in force),
+    ``reflector`` (id, name, target type, surface offset m), ``meas_time_ms`` (the stationary measurement time in
+    force); ``events`` holds every unsolicited status change (time, text); ``reconnects`` counts links re-opened by
+    :meth:`measure` (a stream's: ``stream_counts``). ``measure_pose``: a 6-DoF probe's pose (not used by sessions)."""
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, *, timeout: float = 3.0, init_timeout: float = 120.0,
                  retries: int = 2, meas_time: float = 1.0, reflector: str | None = None, initialize: str = "auto",
@@ -118,6 +124,8 @@ class EmsconTracker:
         self.meas_status = ""  # the last measurement status change: ready, busy, not ready
         self.reconnects = 0
         self._simulator, self.server = simulator, None  # emscon:sim: starts the simulated server at connect
+        self.measurement_mode = es.MM_STATIONARY  # the mode set on the server (stationary, continuous, 6-DoF)
+        self._init_stream()
 
     @property
     def where(self) -> str:
@@ -137,6 +145,7 @@ class EmsconTracker:
         self._connected_once = True
 
     def close(self) -> None:
+        self.stop_stream(self.reply_timeout)
         self._drop()
         self._connected_once = False  # a closed tracker measures again only after connect()
         self._trace.close()
@@ -168,6 +177,7 @@ class EmsconTracker:
         check_measure_request(count, timeout)
         if not self._connected_once:
             raise ConnectionFailed(f"emScon tracker {self.where} is not connected (call connect())")
+        self._refuse_while_streaming(f"emScon tracker {self.where}")
         deadline = time.monotonic() + timeout
         return [self._one_reading(deadline) for _ in range(int(count))]
 
@@ -183,6 +193,9 @@ class EmsconTracker:
                     self.reconnects += 1
                     self._trace.event("reconnecting")
                     self._open(deadline)
+                if self.measurement_mode != es.MM_STATIONARY:  # after a continuous or 6-DoF one on this link
+                    self._call(es.set_measurement_mode(es.MM_STATIONARY), es.C_SET_MEAS_MODE, deadline)
+                    self.measurement_mode = es.MM_STATIONARY
                 return self._stationary(deadline)
             except EmsconStatus:
                 raise  # the tracker's own state: nothing a new link repairs
@@ -269,6 +282,7 @@ class EmsconTracker:
             self.recorded_environment = self.environment
         self._choose_reflector(deadline)
         self._call(es.set_measurement_mode(es.MM_STATIONARY), es.C_SET_MEAS_MODE, deadline)
+        self.measurement_mode = es.MM_STATIONARY
         self._call(es.set_stationary_params(self.meas_time_ms), es.C_SET_STATIONARY, deadline)
         time_ms, _ = es.stationary_params(self._ask(es.C_GET_STATIONARY, deadline))
         if time_ms != self.meas_time_ms:

@@ -125,8 +125,11 @@ def _number(value: Any) -> float:
         return math.nan
 
 
-def describe(spec: TrackerSpec, site: Any, samples_per_step: int, steps: int) -> list[str]:
-    """What the tracker will be asked to do, for the dry run: one line each, no connection made."""
+def describe(spec: TrackerSpec, site: Any, samples_per_step: int, steps: int, sweeps: int = 0,
+             stream_rate: float = 0.0) -> list[str]:
+    """What the tracker will be asked to do, for the dry run: one line each, no connection made. ``steps``: the
+    plan's stationary steps (``samples_per_step`` measurements each); ``sweeps``: its continuous sweeps, streamed
+    at ``stream_rate`` Hz asked."""
     s = parse_settings(spec, site)
     where = "a simulated emScon server on the mock robot (loopback)" if s.simulated else f"{s.host}:{s.port}"
     env = ("set to {:g} degC, {:g} mbar, {:g} %RH".format(*s.environment) if s.environment
@@ -138,16 +141,29 @@ def describe(spec: TrackerSpec, site: Any, samples_per_step: int, steps: int) ->
     limit = float(getattr(site, "measure_timeout", math.inf))
     late = ([f"  warning: {samples_per_step} measurements of {s.meas_time:g} s take about {step_time:.1f} s, more "
              f"than the site's measure timeout ({limit:g} s): raise timeouts.measure or lower meas_time"]
-            if step_time > limit else [])
-    return [f"tracker: Leica emScon TPI at {where}; at connect and at every reconnect it is asked to:",
-            "  initialise " + ("at every connect" if s.initialize == "always" else "only if it says it is not")
-            + f" (within {s.init_timeout:g} s)",
-            "  use metres, radians, degC, mbar, %RH and right-handed rectangular coordinates in its own frame "
-            "(no transformation, no station orientation)",
-            f"  environment: {env}",
-            f"  reflector: {reflector}",
-            f"  measure stationary points of {s.meas_time:g} s: {samples_per_step} per step, {readings} in all "
-            f"({readings * s.meas_time / 60:.1f} min of measuring)",
-            f"  faults: a broken beam or lost reflector, warming up or not ready: retried by the run; a dropped, "
-            f"garbled or silent link: read again on a new link ({s.retries} retries, {s.timeout:g} s per answer)",
-            *late]
+            if steps and step_time > limit else [])
+    lines = [f"tracker: Leica emScon TPI at {where}; at connect and at every reconnect it is asked to:",
+             "  initialise " + ("at every connect" if s.initialize == "always" else "only if it says it is not")
+             + f" (within {s.init_timeout:g} s)",
+             "  use metres, radians, degC, mbar, %RH and right-handed rectangular coordinates in its own frame "
+             "(no transformation, no station orientation)",
+             f"  environment: {env}",
+             f"  reflector: {reflector}"]
+    if steps:
+        lines.append(f"  measure stationary points of {s.meas_time:g} s: {samples_per_step} per step, {readings} in "
+                     f"all ({readings * s.meas_time / 60:.1f} min of measuring)")
+    if sweeps:
+        separation = continuous_separation(stream_rate)
+        lines += [f"  measure continuously by time during each of the {sweeps} sweeps: a point every {separation} ms "
+                  f"({1000 / separation:g} per second), each stamped with the tracker's own clock (the session fits "
+                  "its offset and drift to the robot's)",
+                  "  in a sweep, a broken beam or lost reflector, flagged points, a dropped, garbled or silent link: "
+                  "a gap, and the measurement started again (every 0.2 s until the beam is back; on a new link)"]
+    lines.append(f"  faults: a broken beam or lost reflector, warming up or not ready: retried by the run; a dropped, "
+                 f"garbled or silent link: read again on a new link ({s.retries} retries, {s.timeout:g} s per answer)")
+    return lines + late
+
+
+def continuous_separation(rate: float) -> int:
+    """The time separation (ms, whole, at least 1) of a continuous measurement asked ``rate`` points per second."""
+    return max(1, round(1000.0 / rate))

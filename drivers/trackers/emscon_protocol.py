@@ -11,8 +11,20 @@ with an 8-byte header, ``lPacketSize`` (int32, the whole packet's length in byte
 - a stationary result (``type`` 2, :class:`SingleResult`): header, ``status``, ``measMode``, ``bIsTryMode``, then
   17 doubles: the three values, their standard deviations and the total, pointing errors, a-priori standard
   deviations and total, temperature, pressure, humidity (in the units set with ``SetUnits``);
+- a continuous result (``type`` 3, :class:`MultiResult`; ``type`` 10 with each point's a-priori deviations):
+  header, ``status``, ``lNumberOfResults``, ``measMode``, ``bIsTryMode``, temperature, pressure, humidity (doubles),
+  then that many points, each ``status`` (:data:`POINT_STATUS`), ``lTime1``, ``lTime2`` (int32: the tracker's time
+  of the point, read as whole seconds and microseconds; below) and its three values (doubles; ``type`` 10 adds 7);
 - an error (``type`` 1): header, ``command``, ``status``; a status change (``type`` 8): header, a code
   (:data:`STATUS_CHANGE`), sent by the server unprompted.
+
+Continuous measurement by time (``ES_MM_ContinuousTime``): ``SetContinuousTimeModeParams`` (``lTimeSeparation``
+ms between points, ``lNumberOfPoints`` 0 for no end, ``bUseRegion``, ``regionType``), then ``StartMeasurement``:
+its answer, then continuous result packets (the server gathers the points of a few hundred milliseconds into each)
+until ``StopMeasurement``. The header does not say what ``lTime1`` and ``lTime2`` hold; this client reads them as
+seconds and microseconds of the tracker's clock, as the public ROS driver ``beckjac/emscon_ros`` does, and checks the
+reading on every packet (drivers/trackers/emscon_stream.py): microseconds within [0, 10^6) and points one time
+separation apart, else the stream is refused in one line rather than mis-timed.
 
 Text fields (reflector names, the software version) are 32 UTF-16LE code units, zero-padded.
 """
@@ -20,21 +32,25 @@ Text fields (reflector names, the software version) are 32 UTF-16LE code units, 
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
+from typing import Any
+
+import numpy as np
 
 from drivers.errors import BadReading
 
 HEADER = struct.Struct("<iI")  # lPacketSize, type
-MAX_PACKET = 4096  # bytes: far above the longest packet this client reads (GetTrackerInfo's answer, 164)
+MAX_PACKET = 1 << 18  # bytes: above the longest packet this client reads (a continuous result of 2,800 points)
 
 #: ES_DataType
-DT_COMMAND, DT_ERROR, DT_SINGLE, DT_NIVEL, DT_REFLECTOR_POS, DT_STATUS_CHANGE, DT_SINGLE2 = 0, 1, 2, 6, 7, 8, 9
+DT_COMMAND, DT_ERROR, DT_SINGLE, DT_MULTI, DT_NIVEL, DT_REFLECTOR_POS, DT_STATUS_CHANGE = 0, 1, 2, 3, 6, 7, 8
+DT_PROBE_STATIONARY, DT_SINGLE2, DT_MULTI2 = 4, 9, 10
 
 #: ES_Command values the client and the emulator use
 C_GET_SYSTEM_STATUS, C_GET_TRACKER_STATUS, C_SET_UNITS, C_GET_UNITS, C_INITIALIZE = 1, 2, 5, 6, 7
 C_SET_ENVIRONMENT, C_GET_ENVIRONMENT = 20, 21
 C_SET_MEAS_MODE, C_GET_MEAS_MODE, C_SET_COORD_SYS, C_GET_COORD_SYS = 24, 25, 26, 27
-C_SET_STATIONARY, C_GET_STATIONARY = 28, 29
+C_SET_STATIONARY, C_GET_STATIONARY, C_SET_CONTINUOUS_TIME, C_GET_CONTINUOUS_TIME = 28, 29, 30, 31
 C_SET_REFLECTOR, C_GET_REFLECTOR, C_GET_REFLECTORS = 40, 41, 42
 C_SET_SYSTEM_SETTINGS, C_GET_SYSTEM_SETTINGS = 47, 48
 C_START_MEASUREMENT, C_STOP_MEASUREMENT = 49, 52
@@ -45,7 +61,9 @@ COMMAND_NAMES = {
     C_GET_ENVIRONMENT: "GetEnvironmentParams", C_SET_MEAS_MODE: "SetMeasurementMode",
     C_GET_MEAS_MODE: "GetMeasurementMode", C_SET_COORD_SYS: "SetCoordinateSystemType",
     C_GET_COORD_SYS: "GetCoordinateSystemType", C_SET_STATIONARY: "SetStationaryModeParams",
-    C_GET_STATIONARY: "GetStationaryModeParams", C_SET_REFLECTOR: "SetReflector", C_GET_REFLECTOR: "GetReflector",
+    C_GET_STATIONARY: "GetStationaryModeParams", C_SET_CONTINUOUS_TIME: "SetContinuousTimeModeParams",
+    C_GET_CONTINUOUS_TIME: "GetContinuousTimeModeParams", C_SET_REFLECTOR: "SetReflector",
+    C_GET_REFLECTOR: "GetReflector",
     C_GET_REFLECTORS: "GetReflectors", C_SET_SYSTEM_SETTINGS: "SetSystemSettings",
     C_GET_SYSTEM_SETTINGS: "GetSystemSettings", C_START_MEASUREMENT: "StartMeasurement",
     C_STOP_MEASUREMENT: "StopMeasurement", C_GET_SOFTWARE_VERSION: "GetSystemSoftwareVersion",
@@ -54,7 +72,9 @@ COMMAND_NAMES = {
 #: ES_LengthUnit meter, ES_AngleUnit radian, ES_TemperatureUnit Celsius, ES_PressureUnit mbar, ES_HumidityUnit %RH
 UNITS_SI = (0, 0, 0, 0, 0)
 CS_RHR = 0  # ES_CoordinateSystemType: right-handed rectangular (X, Y, Z)
-MM_STATIONARY = 0  # ES_MeasMode
+MM_STATIONARY, MM_CONTINUOUS_TIME, MM_6D_STATIONARY = 0, 1, 6  # ES_MeasMode
+#: ES_MeasurementStatus of each point of a continuous result (0 all OK; others "should be treated with care")
+POINT_STATUS = {0: "all OK", 1: "speed warning", 2: "speed exceeded", 3: "prism error", 4: "trigger time violation"}
 TPS_INITIALIZED = 5  # ES_TrackerProcessorStatus
 TRACKER_READY = 2  # ES_TrackerStatus: 0 not ready, 1 busy, 2 ready
 TARGET_TYPES = {0: "unknown", 1: "corner cube", 2: "cat's eye", 3: "glass prism", 4: "RFI prism", 5: "RRR 1.5in",
@@ -78,7 +98,8 @@ NOT_READY_STATUSES = frozenset({1, 39, 10005, 10010, 10012, 10013, 10014})
 STATUS_CHANGE = {
     0: "distance set", 1: "laser warmed up", 2: "environment parameters changed", 6: "units changed",
     7: "reflector changed", 8: "system settings changed", 12: "coordinate system type changed",
-    17: "measurement mode changed", 18: "stationary mode parameters changed", 25: "measurement status not ready",
+    17: "measurement mode changed", 18: "stationary mode parameters changed",
+    19: "continuous time mode parameters changed", 25: "measurement status not ready",
     26: "measurement status busy", 27: "measurement status ready", 146: "laser not stabilized",
     851: "sensor disconnected", 997: "tracker processor connection closing", 998: "server closing",
     999: "server started",
@@ -87,6 +108,13 @@ SSC_NOT_READY, SSC_BUSY, SSC_READY = 25, 26, 27
 
 _SINGLE = struct.Struct("<IIi17d")  # status, measMode, bIsTryMode, 17 doubles
 _SINGLE2 = struct.Struct("<IIi23d")
+_MULTI = struct.Struct("<IiIi3d")  # status, lNumberOfResults, measMode, bIsTryMode, environment
+#: ProbeStationaryResultT after the header: status, measMode, bIsTryMode, triggerStatus, lRotationStatus, probe id,
+#: field number, tipStatus, tip adapter id and interface, then 41 doubles (positions 0-16: the tip's position, its
+#: deviations, total, covariances and a-priori ones; 17-20: the quaternion; 21-23: rotation angles; 24-37 their
+#: deviations and covariances; 38-40: the environment): 376 bytes in all
+_PROBE_STATIONARY = struct.Struct("<IIiIiiiIii41d")
+_CONTINUOUS_TIME = struct.Struct("<iiiI")  # lTimeSeparation (ms), lNumberOfPoints, bUseRegion, regionType
 _VERSION = struct.Struct("<iii")
 _UNITS = struct.Struct("<5I")
 _ENVIRONMENT = struct.Struct("<3d")
@@ -97,6 +125,7 @@ _SYSTEM_STATUS = struct.Struct("<4I3iIii")
 REPLY_BODY = {
     C_GET_SYSTEM_STATUS: _SYSTEM_STATUS.size, C_GET_TRACKER_STATUS: 4, C_GET_UNITS: _UNITS.size,
     C_GET_ENVIRONMENT: _ENVIRONMENT.size, C_GET_MEAS_MODE: 4, C_GET_COORD_SYS: 4, C_GET_STATIONARY: 8,
+    C_GET_CONTINUOUS_TIME: _CONTINUOUS_TIME.size,
     C_GET_REFLECTOR: 4, C_GET_REFLECTORS: _REFLECTOR.size, C_GET_SYSTEM_SETTINGS: _SETTINGS.size,
     C_GET_SOFTWARE_VERSION: 64,
 }
@@ -160,6 +189,35 @@ class SingleResult:
 
 
 @dataclass(frozen=True)
+class MultiResult:
+    """A continuous result (``ES_DT_MultiMeasResult``, or ``...2`` with each point's a-priori deviations): the
+    packet's ``status`` (0 all OK), ``mode``, ``try_mode``, the environment it was corrected with, and per point
+    ``point_status`` (k,) (:data:`POINT_STATUS`), ``time1``, ``time2`` (k,) the raw ``lTime1``, ``lTime2``,
+    ``values`` (k, 3) in the units set and, for ``...2``, ``std`` (k, 3) the a-priori standard deviations (else
+    None)."""
+
+    status: int
+    mode: int
+    try_mode: bool
+    temperature: float
+    pressure: float
+    humidity: float
+    point_status: np.ndarray
+    time1: np.ndarray
+    time2: np.ndarray
+    values: np.ndarray
+    std: np.ndarray | None = None
+
+    def __eq__(self, other: object) -> bool:  # arrays compare element by element
+        if not isinstance(other, MultiResult):
+            return NotImplemented
+        return all(np.array_equal(a, b) if isinstance(a, np.ndarray) or isinstance(b, np.ndarray) else a == b
+                   for a, b in zip(astuple(self), astuple(other), strict=True))
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True)
 class OtherPacket:
     """A packet this client does not use (nivel or reflector position results): its ``type`` and bytes."""
 
@@ -167,7 +225,32 @@ class OtherPacket:
     data: bytes
 
 
-Packet = Reply | ErrorPacket | StatusChange | SingleResult | OtherPacket
+@dataclass(frozen=True)
+class ProbeResult:
+    """A 6-DoF stationary probe result (``ES_DT_StationaryProbeMeasResult``, T-Mac class probes): the measuring
+    tip's ``position`` (3,) and its standard deviations ``position_std`` (3,) in the units and coordinate system set,
+    the probe's orientation as ``quaternion`` (q0, q1, q2, q3) and as ``angles`` (rotation angles X, Y, Z) with
+    their standard deviations ``angles_std``, the ``rotation_status`` bits, probe and tip ids, the environment."""
+
+    status: int
+    mode: int
+    try_mode: bool
+    trigger: int
+    rotation_status: int
+    probe_id: int
+    tip_status: int
+    tip_adapter_id: int
+    position: tuple[float, float, float]
+    position_std: tuple[float, float, float]
+    quaternion: tuple[float, float, float, float]
+    angles: tuple[float, float, float]
+    angles_std: tuple[float, float, float]
+    temperature: float
+    pressure: float
+    humidity: float
+
+
+Packet = Reply | ErrorPacket | StatusChange | SingleResult | MultiResult | ProbeResult | OtherPacket
 
 
 def frame(buffer: bytes) -> tuple[list[bytes], bytes]:
@@ -218,9 +301,41 @@ def decode(packet: bytes) -> Packet:
         std_total = d[6]
         return SingleResult(status, mode, bool(try_mode), (d[0], d[1], d[2]), (d[3], d[4], d[5]), std_total,
                             d[-3], d[-2], d[-1])
+    if kind in (DT_MULTI, DT_MULTI2):
+        return _multi_result(kind, body)
+    if kind == DT_PROBE_STATIONARY:
+        if len(body) != _PROBE_STATIONARY.size:
+            raise BadReading(f"a 6-DoF probe result of {size} bytes ({HEADER.size + _PROBE_STATIONARY.size} expected)")
+        v = _PROBE_STATIONARY.unpack(body)
+        d = v[10:]
+        return ProbeResult(v[0], v[1], bool(v[2]), v[3], v[4], v[5], v[7], v[8], (d[0], d[1], d[2]),
+                           (d[3], d[4], d[5]), (d[17], d[18], d[19], d[20]), (d[21], d[22], d[23]),
+                           (d[24], d[25], d[26]), d[38], d[39], d[40])
     if kind in (DT_NIVEL, DT_REFLECTOR_POS):
         return OtherPacket(kind, packet)
     raise BadReading(f"a packet of unknown type {kind} ({size} bytes)")
+
+
+def _point_dtype(kind: int) -> np.dtype:
+    """One point of a continuous result (``MeasValueT``, or ``MeasValue2T`` for ``ES_DT_MultiMeasResult2``)."""
+    names = ["status", "time1", "time2", "values"] + (["std", "total", "covariance"] if kind == DT_MULTI2 else [])
+    formats = ["<u4", "<i4", "<i4", ("<f8", 3)] + ([("<f8", 3), "<f8", ("<f8", 3)] if kind == DT_MULTI2 else [])
+    return np.dtype({"names": names, "formats": formats})
+
+
+def _multi_result(kind: int, body: bytes) -> MultiResult:
+    point = _point_dtype(kind).itemsize  # 36 or 92 bytes
+    if len(body) < _MULTI.size:
+        raise BadReading(f"a continuous result of {HEADER.size + len(body)} bytes is too short")
+    status, count, mode, try_mode, temperature, pressure, humidity = _MULTI.unpack_from(body)
+    if count < 0 or len(body) != _MULTI.size + count * point:
+        raise BadReading(f"a continuous result of {HEADER.size + len(body)} bytes says it holds {count} points "
+                         f"({HEADER.size + _MULTI.size + max(count, 0) * point} bytes expected)")
+    rows = np.frombuffer(body, _point_dtype(kind), count, _MULTI.size)
+    std = rows["std"].astype(float) if kind == DT_MULTI2 else None
+    return MultiResult(status, mode, bool(try_mode), temperature, pressure, humidity, rows["status"].astype(np.int64),
+                       rows["time1"].astype(np.int64), rows["time2"].astype(np.int64), rows["values"].astype(float),
+                       std)
 
 
 # --- what the client sends ----------------------------------------------------------------------------------
@@ -247,6 +362,14 @@ def set_measurement_mode(mode: int = MM_STATIONARY) -> bytes:
 def set_stationary_params(meas_time_ms: int, use_adm: bool = False) -> bytes:
     """SetStationaryModeParams: the measurement's duration (ms) and whether the ADM alone measures."""
     return command(C_SET_STATIONARY, struct.pack("<ii", int(meas_time_ms), int(use_adm)))
+
+
+def set_continuous_time_params(separation_ms: int, points: int = 0, use_region: bool = False,
+                               region: int = 0) -> bytes:
+    """SetContinuousTimeModeParams: ``separation_ms`` between points, ``points`` to take (0: until stopped),
+    whether a region (``region``: 0 sphere, 1 box) limits where points are taken."""
+    return command(C_SET_CONTINUOUS_TIME, _CONTINUOUS_TIME.pack(int(separation_ms), int(points), int(use_region),
+                                                               int(region)))
 
 
 def set_environment(temperature: float, pressure: float, humidity: float) -> bytes:
@@ -278,6 +401,12 @@ def units(body: bytes) -> tuple[int, int, int, int, int]:
 def one_int(body: bytes) -> int:
     """The single 32-bit value of GetCoordinateSystemType, GetMeasurementMode, GetReflector, GetTrackerStatus."""
     return int(struct.unpack("<i", body)[0])
+
+
+def continuous_time_params(body: bytes) -> tuple[int, int, bool, int]:
+    """GetContinuousTimeModeParams: (time separation ms, number of points, use region, region type)."""
+    separation, points, use_region, region = _CONTINUOUS_TIME.unpack(body)
+    return int(separation), int(points), bool(use_region), int(region)
 
 
 def environment(body: bytes) -> tuple[float, float, float]:
@@ -359,6 +488,36 @@ def single_result(values: tuple[float, float, float], std: tuple[float, float, f
     total = float(sum(s * s for s in std) ** 0.5)
     doubles = (*values, *std, total, 0.0, 0.0, 0.0, *std, total, *environment_)
     return HEADER.pack(HEADER.size + _SINGLE.size, DT_SINGLE) + _SINGLE.pack(status, mode, 0, *doubles)
+
+
+def multi_result(point_status: Any, time1: Any, time2: Any, values: Any, environment_: tuple[float, float, float],
+                 std: Any = None, status: int = 0, mode: int = MM_CONTINUOUS_TIME) -> bytes:
+    """A continuous result of k points (``ES_DT_MultiMeasResult``; with ``std`` (k, 3), ``...2``, whose totals
+    are computed and covariances zero): per point its status, ``lTime1``, ``lTime2`` and values (k, 3)."""
+    kind = DT_MULTI if std is None else DT_MULTI2
+    values = np.asarray(values, dtype=float).reshape(-1, 3)
+    rows = np.zeros(len(values), _point_dtype(kind))
+    rows["status"], rows["time1"], rows["time2"], rows["values"] = point_status, time1, time2, values
+    if std is not None:
+        rows["std"] = std
+        rows["total"] = np.sqrt(np.sum(np.square(std), axis=1))
+    head = _MULTI.pack(status, len(rows), mode, 0, *environment_)
+    return HEADER.pack(HEADER.size + len(head) + rows.nbytes, kind) + head + rows.tobytes()
+
+
+def probe_stationary_result(position: tuple[float, float, float], position_std: tuple[float, float, float],
+                            quaternion: tuple[float, float, float, float], angles: tuple[float, float, float],
+                            angles_std: tuple[float, float, float], environment_: tuple[float, float, float],
+                            probe_id: int = 1, status: int = 0) -> bytes:
+    """An ``ES_DT_StationaryProbeMeasResult`` (totals from the deviations, covariances and a-priori values zero,
+    trigger not pressed, rotation status 1: valid, tip OK, tip adapter 1)."""
+    total = float(sum(x * x for x in position_std) ** 0.5)
+    angle_total = float(sum(x * x for x in angles_std) ** 0.5)
+    doubles = (*position, *position_std, total, 0.0, 0.0, 0.0, *position_std, total, 0.0, 0.0, 0.0, *quaternion,
+               *angles, *angles_std, angle_total, 0.0, 0.0, 0.0, *angles_std, angle_total, 0.0, 0.0, 0.0,
+               *environment_)
+    body = _PROBE_STATIONARY.pack(status, MM_6D_STATIONARY, 0, 0, 1, probe_id, 0, 0, 1, 0, *doubles)
+    return HEADER.pack(HEADER.size + len(body), DT_PROBE_STATIONARY) + body
 
 
 def text_field(text: str) -> bytes:

@@ -5,9 +5,20 @@ robot's rig) and the tests (tests/emscon_device.py; tests/drivers/trackers/test_
 independent CESAPI client). It speaks the subset a calibration needs: GetSystemStatus, Initialize, Set/GetUnits,
 Set/GetCoordinateSystemType (right-handed rectangular only; others: status 2, not implemented),
 Set/GetSystemSettings, Set/GetEnvironmentParams, GetReflectors / Set/GetReflector, Set/GetMeasurementMode
-(stationary only), Set/GetStationaryModeParams, StartMeasurement (answer, then one ``ES_DT_SingleMeasResult`` after
-the measurement time on the rig's clock), GetTrackerStatus, GetSystemSoftwareVersion; any other command is answered
-with status 2 (not implemented).
+(stationary, continuous by time, 6-DoF stationary), Set/GetStationaryModeParams, Set/GetContinuousTimeModeParams,
+StartMeasurement (stationary: the answer, then one ``ES_DT_SingleMeasResult`` after the measurement time on the
+rig's clock; continuous: the answer, then ``ES_DT_MultiMeasResult`` packets; 6-DoF: one
+``ES_DT_StationaryProbeMeasResult`` of a probe whose frame is the flange's moved to the TP, its quaternion (q0
+scalar) taking probe-frame vectors to the tracker frame), StopMeasurement, GetTrackerStatus,
+GetSystemSoftwareVersion; any other command is answered with status 2 (not implemented).
+
+Continuous by time: the points are the rig's true TP at times ``lTimeSeparation`` ms apart on the rig's clock (the
+first at the StartMeasurement), each with the noise; every :data:`PACKET_PERIOD` s of that clock the points due so
+far leave in one packet (about 10 packets per second, as the TPI's TCP data packet rate allows: 3 to 10), and
+StopMeasurement sends the last ones before its answer. A point's ``lTime1``, ``lTime2`` are whole seconds and
+microseconds of the tracker's own clock: ``(1 + drift)·(τ − boot)`` at the point's rig time τ, where the tracker
+booted :data:`UPTIME` s before the server started (``drift`` of the constructor, default 0); the stamp is when the
+point was taken.
 
 What it starts with, so that a client that assumes anything gets wrong numbers: millimetres, the system settings
 applying a transformation (every point shifted by :data:`SHIFT`), no unsolicited messages, reflector id 1 of
@@ -21,10 +32,20 @@ change "not ready", then the answer with status 10004; the next measurement that
 (status 10012), ``not_ready`` (status 10014), ``garbage`` (answer OK, then 40 bytes that are no packet),
 ``silence`` (no answer), ``drop`` (the server closes the connection), ``split`` (the result arrives in three
 pieces 10 ms apart: must still parse).
+
+Faults during a continuous measurement (``inject`` or ``fault=NAME[@N][xK]``, ``@N`` counting the continuous result
+packets over the server's life): ``stream_lost`` (the beam breaks: status change "not ready", an ``ES_DT_Error``
+packet for StartMeasurement with status 10004, the measurement ends; the next K StartMeasurement commands are
+answered 10004 as a ``beam_broken``), ``stream_prism`` (the next K packets' points have status 3, prism error),
+``stream_garbage`` (40 bytes that are no packet instead of the packet's), ``stream_drop`` (the server closes the
+connection), ``stream_silence`` (the link goes silent: no packet and no answer until the client closes it). On the
+mock's virtual clock the client's waits (a relock every 0.2 s, the silence timeout, a reconnect) are wall time, during
+which the virtual clock runs on: such a fault costs a larger part of a sweep there than on a real tracker.
 """
 
 from __future__ import annotations
 
+import contextlib
 import re
 import socket
 import struct
@@ -33,10 +54,16 @@ import time
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from drivers.trackers import emscon_protocol as es
+from drivers.trackers.socket_reads import accept_each
 
-EMSCON_FAULTS = ("beam_broken", "lost_during", "warming_up", "not_ready", "garbage", "silence", "drop", "split")
+STREAM_FAULTS = ("stream_lost", "stream_prism", "stream_garbage", "stream_drop", "stream_silence")
+EMSCON_FAULTS = ("beam_broken", "lost_during", "warming_up", "not_ready", "garbage", "silence", "drop", "split",
+                 *STREAM_FAULTS)
+PACKET_PERIOD = 0.1  # s of the rig's clock between continuous result packets
+UPTIME = 5000.25  # s the tracker's clock had run when the server started (its stamps' origin is its boot)
 SHIFT = (0.5, -0.2, 0.1)  # m: the transformation the server applies until the client switches it off
 #: (id, target type, surface offset m, name) of the reflectors the server knows
 REFLECTORS = ((1, 5, 0.01905, "RRR 1.5in"), (2, 6, 0.00635, "RRR 0.5in"), (3, 9, 0.00635, "TBR 0.5in"))
@@ -66,12 +93,15 @@ class EmsconSimServer:
     """The emulator (module doc) on ``host``, ``port``; readings are the rig's true TP (``rig.true_point()``, m in
     the tracker frame; ``rig`` is a :class:`drivers.sim.rig.SimulatedRig`) plus Gaussian noise ``noise`` (m per axis),
     reported with ``noise`` as each axis's standard deviation; the measurement time passes on ``rig.clock``.
-    ``initialized=False``: the tracker needs an Initialize (which takes ``init_time`` s). ``stop()`` ends it."""
+    ``initialized=False``: the tracker needs an Initialize (which takes ``init_time`` s); ``drift``: the tracker
+    clock's relative drift (continuous stamps, module doc); ``angle_noise``: rad per axis of a 6-DoF probe's
+    orientation. ``stop()`` ends it."""
 
     def __init__(self, rig: Any, *, noise: float = 2e-5, seed: int = 0, initialized: bool = True,
-                 init_time: float = 0.05, faults: tuple[tuple[str, int, int], ...] = ()) -> None:
+                 init_time: float = 0.05, faults: tuple[tuple[str, int, int], ...] = (), drift: float = 0.0,
+                 angle_noise: float = 2e-5) -> None:
         self.rig = rig
-        self.noise, self.init_time = noise, init_time
+        self.noise, self.init_time, self.drift, self.angle_noise = noise, init_time, drift, angle_noise
         self.rng = np.random.default_rng(seed)
         self._server = socket.create_server(("127.0.0.1", 0))
         self.host, self.port = "127.0.0.1", self._server.getsockname()[1]
@@ -83,18 +113,26 @@ class EmsconSimServer:
         self.reflector = 1
         self.mode = es.MM_STATIONARY
         self.stationary = (1000, 0)
+        self.continuous = (100, 0, 0, 0)  # lTimeSeparation ms, lNumberOfPoints, bUseRegion, regionType
+        self.boot = rig.clock.now() - UPTIME  # rig time at which the tracker's clock read 0
         self.faults: list[str] = []
+        self.stream_faults: list[str] = []
         self.broken = False  # the beam is broken (a beam_broken fault was answered, no measurement since)
         self.commands: list[int] = []
         self.connections = 0
         self.measurements = 0  # results sent
         self.truths: list[np.ndarray] = []  # the true point (m, tracker frame) of every result sent
         self.started = 0  # StartMeasurement commands so far
+        self.packets = 0  # continuous result packets so far (sent or replaced by a fault)
+        self.probe_truths: list[np.ndarray] = []  # the true pose (4x4, tracker <- probe) of every 6-DoF result sent
+        self.streamed: list[tuple[float, np.ndarray]] = []  # (rig time, true point m) of every streamed point sent
         self._schedule = list(faults)
         self._lock = threading.Lock()
         self._stop = threading.Event()
+        self._link: _Link | None = None
         self.received = bytearray()
-        self._thread = threading.Thread(target=self._serve, daemon=True, name="emscon-sim")
+        self._thread = threading.Thread(target=accept_each, args=(self._server, self._serve_connection, self._stop),
+                                        daemon=True, name="emscon-sim")
         self._thread.start()
 
     def stop(self) -> None:
@@ -112,57 +150,54 @@ class EmsconSimServer:
         self.environment = tuple(float(v) for v in values)  # type: ignore[assignment]
 
     def inject(self, fault: str, count: int = 1) -> None:
+        """``fault`` on the next ``count`` StartMeasurement commands, or for a ``stream_`` fault the next
+        continuous result packets (module doc)."""
         if fault not in EMSCON_FAULTS:
             raise ValueError(f"unknown fault {fault!r} (known: {', '.join(EMSCON_FAULTS)})")
         with self._lock:
-            self.faults.extend([fault] * count)
+            (self.stream_faults if fault in STREAM_FAULTS else self.faults).extend([fault] * count)
+
+    def tracker_time(self, tau: float | np.ndarray) -> float | np.ndarray:
+        """The tracker clock's reading (s) at rig time ``tau`` (s)."""
+        return (1.0 + self.drift) * (np.asarray(tau) - self.boot)
 
     # --- serving --------------------------------------------------------------------------------------------
-
-    def _serve(self) -> None:
-        self._server.settimeout(0.05)
-        while not self._stop.is_set():
-            try:
-                conn, _ = self._server.accept()
-            except TimeoutError:
-                continue
-            with conn:
-                self._serve_connection(conn)
-        self._server.close()
 
     def _serve_connection(self, conn: socket.socket) -> None:
         self.connections += 1
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         conn.settimeout(0.05)
+        link = self._link = _Link(conn)
         buffer = b""
-        while not self._stop.is_set():
-            try:
-                data = conn.recv(4096)
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            if not data:
-                return
-            self.received += data
-            buffer += data
-            while len(buffer) >= 12:
-                size, kind = struct.unpack_from("<iI", buffer)
-                if size < 12 or size > 4096 or kind != es.DT_COMMAND:
-                    return  # not a command stream: hang up, as a server would on a protocol violation
-                if len(buffer) < size:
-                    break
-                packet, buffer = buffer[:size], buffer[size:]
-                code = struct.unpack_from("<I", packet, 8)[0]
-                if not self._answer(conn, code, packet[12:]):
+        try:
+            while not self._stop.is_set() and not link.closed:
+                try:
+                    data = conn.recv(4096)
+                except TimeoutError:
+                    continue
+                except OSError:
                     return
+                if not data:
+                    return
+                self.received += data
+                buffer += data
+                while len(buffer) >= 12:
+                    size, kind = struct.unpack_from("<iI", buffer)
+                    if size < 12 or size > 4096 or kind != es.DT_COMMAND:
+                        return  # not a command stream: hang up, as a server would on a protocol violation
+                    if len(buffer) < size:
+                        break
+                    packet, buffer = buffer[:size], buffer[size:]
+                    code = struct.unpack_from("<I", packet, 8)[0]
+                    if not self._answer(link, code, packet[12:]):
+                        return
+        finally:
+            self._end_stream(link, flush=False)
 
-    def _answer(self, conn: socket.socket, code: int, payload: bytes) -> bool:
+    def _answer(self, link: _Link, code: int, payload: bytes) -> bool:
         """Answer one command; False to close the connection."""
         self.commands.append(code)
-
-        def send(data: bytes) -> None:
-            conn.sendall(data)
+        send = link.send
 
         def ok(body: bytes = b"", change: int | None = None) -> bool:
             send(es.reply(code, 0, body))
@@ -175,7 +210,12 @@ class EmsconSimServer:
             return True
 
         if code == es.C_START_MEASUREMENT:
-            return self._measure(conn)
+            return self._measure(link)
+        if code == es.C_STOP_MEASUREMENT:
+            self._end_stream(link, flush=True)
+            return ok()
+        if link.measuring:
+            return refuse(1)  # server busy: the continuous measurement runs
         if code == es.C_GET_SYSTEM_STATUS:
             status = es.SystemStatus(0, es.TPS_INITIALIZED if self.initialized else 3, 3, 2, VERSION,
                                      self.settings[0], 0, SERIAL)
@@ -224,8 +264,9 @@ class EmsconSimServer:
             return ok(struct.pack("<i", self.reflector))
         if code == es.C_SET_MEAS_MODE:
             mode = struct.unpack("<I", payload)[0]
-            if mode != es.MM_STATIONARY:
+            if mode not in (es.MM_STATIONARY, es.MM_CONTINUOUS_TIME, es.MM_6D_STATIONARY):
                 return refuse(2)
+            self.mode = mode
             return ok(change=17)
         if code == es.C_GET_MEAS_MODE:
             return ok(struct.pack("<I", self.mode))
@@ -234,63 +275,228 @@ class EmsconSimServer:
             return ok(change=18)
         if code == es.C_GET_STATIONARY:
             return ok(struct.pack("<ii", *self.stationary))
+        if code == es.C_SET_CONTINUOUS_TIME:
+            separation, points, use_region, region = struct.unpack("<iiiI", payload)
+            if separation < 1 or points < 0 or use_region:  # regions are not emulated
+                return refuse(4 if separation < 1 else 5 if points < 0 else 6)
+            self.continuous = (separation, points, use_region, region)
+            return ok(change=19)
+        if code == es.C_GET_CONTINUOUS_TIME:
+            return ok(struct.pack("<iiiI", *self.continuous))
         if code == es.C_GET_TRACKER_STATUS:
             return ok(struct.pack("<I", es.TRACKER_READY if self.initialized and not self.broken else 0))
         if code == es.C_GET_SOFTWARE_VERSION:
             return ok(es.text_field("emScon emulator {}.{}.{}".format(*VERSION)))
         return refuse(2)
 
-    def _measure(self, conn: socket.socket) -> bool:
+    def _measure(self, link: _Link) -> bool:
         with self._lock:
             self.started += 1
             for name, at, count in self._schedule:
-                if at == self.started:
+                if at == self.started and name not in STREAM_FAULTS:
                     self.faults.extend([name] * count)
             fault = self.faults.pop(0) if self.faults else None
         unsolicited = bool(self.settings[4])
         code = es.C_START_MEASUREMENT
+        send = link.send
+        if link.measuring:
+            send(es.reply(code, 1))  # server busy: one measurement at a time
+            return True
+        self._end_stream(link, flush=False)  # one that ended by itself (beam lost, count reached)
         if fault == "drop":
             return False
         if fault == "silence":
             return True
         if fault == "beam_broken":
             if unsolicited and not self.broken:
-                conn.sendall(es.status_change(es.SSC_NOT_READY))
+                send(es.status_change(es.SSC_NOT_READY))
             self.broken = True
-            conn.sendall(es.reply(code, 10004))
+            send(es.reply(code, 10004))
             return True
         if fault in ("warming_up", "not_ready"):
-            conn.sendall(es.reply(code, 10012 if fault == "warming_up" else 10014))
+            send(es.reply(code, 10012 if fault == "warming_up" else 10014))
             return True
         if not self.initialized:
-            conn.sendall(es.reply(code, 39))
+            send(es.reply(code, 39))
             return True
         if self.broken:
             self.broken = False
             if unsolicited:
-                conn.sendall(es.status_change(es.SSC_READY))
-        conn.sendall(es.reply(code, 0))
-        if fault == "lost_during":
-            conn.sendall(es.error_packet(code, 10009))
+                send(es.status_change(es.SSC_READY))
+        send(es.reply(code, 0))
+        if self.mode == es.MM_CONTINUOUS_TIME:
+            link.stream = _Stream(self.rig.clock.now(), self.continuous[0] / 1000, self.continuous[1])
+            link.thread = threading.Thread(target=self._stream_loop, args=(link,), daemon=True,
+                                           name="emscon-sim-stream")
+            link.thread.start()
             return True
+        if fault == "lost_during":
+            send(es.error_packet(code, 10009))
+            return True
+        if self.mode == es.MM_6D_STATIONARY:
+            return self._probe(link)
         if fault == "garbage":
-            conn.sendall(b"\xff\xff\xff\x7f" + bytes(self.rng.integers(0, 256, 36, dtype=np.uint8)))
+            send(b"\xff\xff\xff\x7f" + bytes(self.rng.integers(0, 256, 36, dtype=np.uint8)))
             return True
         self.rig.clock.sleep(self.stationary[0] / 1000)  # the stationary measurement's duration
         true = np.asarray(self.rig.true_point(), dtype=float)
-        point = true + self.rng.normal(0.0, self.noise, 3)
-        if self.settings[1]:
-            point = point + np.array(SHIFT)
-        scale = LENGTH_SCALE[self.units[0]]
-        values = tuple(float(v) for v in point * scale)
-        std = (self.noise * scale,) * 3
-        packet = es.single_result(values, std, self.environment)  # type: ignore[arg-type]
+        values, std = self._reported(true[None, :])
+        packet = es.single_result(tuple(values[0]), tuple(std), self.environment)  # type: ignore[arg-type]
         self.measurements += 1  # counted before it leaves: a client may read the truth as soon as it has the result
         self.truths.append(true)
         if fault == "split":
             for piece in (packet[:5], packet[5:60], packet[60:]):
-                conn.sendall(piece)
+                send(piece)
                 time.sleep(0.01)
         else:
-            conn.sendall(packet)
+            send(packet)
         return True
+
+    def _probe(self, link: _Link) -> bool:
+        """A 6-DoF stationary result: the probe is the flange's frame moved to the TP (its measuring tip); the tip
+        with the noise, the orientation turned by a random rotation of ``angle_noise`` rad per axis."""
+        self.rig.clock.sleep(self.stationary[0] / 1000)
+        pose = np.asarray(self.rig.flange_pose(), dtype=float).copy()
+        pose[:3, 3] = self.rig.true_point()
+        values, std = self._reported(pose[None, :3, 3])
+        turn = Rotation.from_rotvec(self.rng.normal(0.0, self.angle_noise, 3))
+        rotation = turn * Rotation.from_matrix(pose[:3, :3])
+        x, y, z, w = rotation.as_quat()
+        angles = tuple(float(a) for a in rotation.as_euler("xyz"))
+        self.measurements += 1  # counted before it leaves, as a stationary result
+        self.probe_truths.append(pose)
+        link.send(es.probe_stationary_result(tuple(values[0]), std, (w, x, y, z), angles,  # type: ignore[arg-type]
+                                             (self.angle_noise,) * 3, self.environment))
+        return True
+
+    def _reported(self, true: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float]]:
+        """True points (k, 3) m -> what the server reports (k, 3) in its units and settings, and each axis's
+        standard deviation in those units."""
+        point = true + self.rng.normal(0.0, self.noise, true.shape)
+        if self.settings[1]:
+            point = point + np.array(SHIFT)
+        scale = LENGTH_SCALE[self.units[0]]
+        return point * scale, (self.noise * scale,) * 3
+
+    # --- continuous measurement ---------------------------------------------------------------------------
+
+    def _stream_loop(self, link: _Link) -> None:
+        """One packet per PACKET_PERIOD s of the rig's clock (several at once when the clock jumped, as a
+        virtual clock does), until the measurement ends."""
+        stream = link.stream
+        assert stream is not None
+        while not (self._stop.is_set() or link.closed or stream.ended.is_set()):
+            while self.rig.clock.now() >= stream.last_packet + PACKET_PERIOD and not stream.ended.is_set():
+                self._send_points(link, stream, stream.last_packet + PACKET_PERIOD)
+                stream.ended_itself = stream.ended.is_set()
+            stream.ended.wait(0.002)
+
+    def _send_points(self, link: _Link, stream: _Stream, until: float) -> None:
+        """One packet of the points due by rig time ``until``, or the packet's fault."""
+        stream.last_packet = until
+        due = int(np.floor((until - stream.start) / stream.separation + 1e-9)) + 1
+        if stream.limit:
+            due = min(due, stream.limit)
+        k = np.arange(stream.sent, due)
+        if not len(k):
+            return
+        with self._lock:
+            self.packets += 1
+            for name, at, count in self._schedule:
+                if at == self.packets and name in STREAM_FAULTS:
+                    self.stream_faults.extend([name] * count)
+            fault = self.stream_faults.pop(0) if self.stream_faults else None
+            if fault == "stream_lost":  # it and the same ones queued after it: the restarts refused
+                refused = 1
+                while self.stream_faults and self.stream_faults[0] == "stream_lost":
+                    refused += self.stream_faults.pop(0) == "stream_lost"
+                self.faults[:0] = ["beam_broken"] * refused
+        stream.sent = due
+        if stream.limit and due >= stream.limit:
+            stream.ended.set()  # lNumberOfPoints taken: the measurement ends after this packet
+        if fault == "stream_lost":
+            if self.settings[4]:
+                link.send(es.status_change(es.SSC_NOT_READY))
+            self.broken = True
+            link.send(es.error_packet(es.C_START_MEASUREMENT, 10004))
+            stream.ended.set()
+            return
+        if fault == "stream_drop":
+            link.close()
+            return
+        if fault == "stream_silence":
+            link.muted = True
+            return
+        if fault == "stream_garbage":
+            link.send(b"\xff\xff\xff\x7f" + bytes(self.rng.integers(0, 256, 36, dtype=np.uint8)))
+            return
+        tau = stream.start + k * stream.separation
+        true = np.array([self.rig.true_point(float(t)) for t in tau], dtype=float)
+        values, _ = self._reported(true)  # the standard statistic mode: no deviations per point
+        stamp = np.asarray(self.tracker_time(tau))
+        seconds = np.floor(stamp)
+        micro = np.minimum(np.round((stamp - seconds) * 1e6), 999_999)
+        status = np.full(len(k), 3 if fault == "stream_prism" else 0)
+        if link.send(es.multi_result(status, seconds, micro, values, self.environment)):
+            self.streamed.extend(zip(tau.tolist(), true, strict=True))
+
+    def _end_stream(self, link: _Link, flush: bool) -> None:
+        """Stop the continuous measurement of ``link`` (``flush``: its due points sent first, as StopMeasurement
+        does)."""
+        stream, thread = link.stream, link.thread
+        if stream is None:
+            return
+        stream.ended.set()
+        if thread is not None:
+            thread.join(2.0)
+        if flush and not link.closed and not link.muted and not stream.ended_itself:
+            self._send_points(link, stream, self.rig.clock.now())
+        link.stream, link.thread = None, None
+
+
+class _Stream:
+    """A continuous measurement: points every ``separation`` s of the rig's clock from ``start``, ``limit`` of
+    them (0: no end); ``sent`` so far, the last packet's rig time."""
+
+    def __init__(self, start: float, separation: float, limit: int) -> None:
+        self.start, self.separation, self.limit = start, separation, limit
+        self.sent = 0
+        self.last_packet = start
+        self.ended = threading.Event()
+        self.ended_itself = False  # the beam was lost or the count reached: nothing left to send
+
+
+class _Link:
+    """One client connection: its socket, what is sent on it (the command handler and the stream share it), the
+    continuous measurement running on it; ``muted``: a silent link sends nothing."""
+
+    def __init__(self, conn: socket.socket) -> None:
+        self.conn = conn
+        self.closed = self.muted = False
+        self.stream: _Stream | None = None
+        self.thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def measuring(self) -> bool:
+        """A continuous measurement runs on this link."""
+        return self.stream is not None and not self.stream.ended.is_set()
+
+    def send(self, data: bytes) -> bool:
+        """Send ``data``; False when it did not leave (a closed or silent link)."""
+        with self._lock:
+            if self.closed or self.muted:
+                return False
+            try:
+                self.conn.sendall(data)
+            except OSError:
+                self.closed = True
+                return False
+            return True
+
+    def close(self) -> None:
+        """The server hangs up (the serving loop sees it and ends)."""
+        with self._lock:
+            self.closed = True
+            with contextlib.suppress(OSError):
+                self.conn.shutdown(socket.SHUT_RDWR)

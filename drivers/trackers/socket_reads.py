@@ -1,9 +1,11 @@
 """One read from a tracker's TCP link, shared by the clients that frame its bytes themselves (I++ DME lines,
-emScon packets): what came, nothing yet, or a dead link said in one line."""
+emScon packets): what came, nothing yet, or a dead link said in one line; and the accept loop the simulated servers
+share (``emscon:sim``, the tests' I++ server)."""
 
 from __future__ import annotations
 
 import socket
+import threading
 from collections.abc import Callable
 
 from drivers.errors import ConnectionFailed
@@ -26,3 +28,17 @@ def receive(sock: socket.socket, timeout: float, where: str, server: str, drop: 
         drop()
         raise ConnectionFailed(f"{server} {where} closed the connection")
     return chunk
+
+
+def accept_each(server: socket.socket, serve: Callable[[socket.socket], None], stop: threading.Event) -> None:
+    """The accept loop of a simulated server (tests' devices, ``emscon:sim``): accept connections on ``server``
+    until ``stop`` is set, ``serve(conn)`` each in turn, close it; then close ``server``."""
+    server.settimeout(0.05)
+    while not stop.is_set():
+        try:
+            conn, _ = server.accept()
+        except TimeoutError:
+            continue
+        with conn:
+            serve(conn)
+    server.close()

@@ -41,7 +41,9 @@ class CalibratedModel:
     marks the parameters of :func:`identify.estimator.refine.parameter_names` that ``covariance`` (m, rad squared) is
     over (None: a model known exactly, e.g. a nominal one). ``predictor``: what predicts where the result has it (None:
     the DH table alone). ``model_error``: m per axis, what the model cannot hold; ``noise``: the tracker's, m per
-    axis. ``tools``: TP id -> tool (m, frame n). ``name``: what it is.
+    axis. ``tools``: TP id -> tool (m, frame n). ``name``: what it is. ``held`` (9 + 4n,): sigmas (m, rad) of fixed
+    values that are the nominal's (frame n placed as the catalogue places the flange), which a tool given on the
+    flange carries; None for none.
     """
 
     model: DHModel
@@ -52,6 +54,7 @@ class CalibratedModel:
     noise: float = 0.0
     tools: dict[int, Array] | None = None
     name: str = "model"
+    held: Array | None = None
 
     # --- construction ---------------------------------------------------------------------------------------
 
@@ -82,16 +85,19 @@ class CalibratedModel:
         if len(cov["parameters"]) != free.sum() or not np.all(np.isfinite(matrix)):
             raise ResultError("the result's covariance names unknown parameters or holds non-numbers")
         return cls(model, free, matrix, predictor, float(noise.get("model_error_per_axis") or 0.0),
-                   float(noise.get("tracker_per_axis") or 0.0), tools or None, name)
+                   float(noise.get("tracker_per_axis") or 0.0), tools or None, name,
+                   _held_sigmas(names, doc.get("fixed") or []))
 
     @classmethod
     def from_identification(cls, ident: Any, name: str = "identified") -> CalibratedModel:
         """The model of an :class:`~identify.results.pipeline.Identification` (what its result document would give)."""
         used = ident.used
         tools = {int(i): np.asarray(t, dtype=float) for i, t in zip(ident.tp_ids, used.tools, strict=True)}
+        names = parameter_names(used.model.n_joints)
+        fixed = [{"parameter": f.name, "sigma": f.sigma} for f in used.fixed]
         return cls(used.model, used.refinement.free.copy(), used.refinement.covariance, ident.predictor,
                    float(ident.adequacy.model_error), float(ident.adequacy.noise),
-                   tools if len(tools) > 1 else None, name)
+                   tools if len(tools) > 1 else None, name, _held_sigmas(names, fixed))
 
     @classmethod
     def exact(cls, model: DHModel, name: str = "nominal") -> CalibratedModel:
@@ -232,7 +238,11 @@ class CalibratedModel:
             keep[:6] = False
         sel = keep[self.free]
         g = jac[:, :, self.free & keep]
-        return g @ self.covariance[np.ix_(sel, sel)] @ np.swapaxes(g, 1, 2)
+        out = g @ self.covariance[np.ix_(sel, sel)] @ np.swapaxes(g, 1, 2)
+        if tool is not None and self.held is not None:  # a tool on the flange: where the nominal put the flange
+            h = jac * self.held
+            out += h @ np.swapaxes(h, 1, 2)
+        return out
 
     def expected_errors(self, q: Array, tool: Array | None = None, frame: str = "tracker") -> Array:
         """Expected 3D error (k,) of the prediction at each of ``q``, m: the RMS the parameters' uncertainty and
@@ -243,6 +253,15 @@ class CalibratedModel:
     def expected_rms(self, q: Array) -> float:
         """RMS over ``q`` of :meth:`expected_errors`, m."""
         return float(np.sqrt(np.mean(self.expected_errors(q) ** 2)))
+
+
+def _held_sigmas(names: list[str], fixed: list[Any]) -> Array | None:
+    """The full vector's sigmas (m, rad) of the ``fixed`` entries (result document) that carry one; None for none."""
+    out = np.zeros(len(names))
+    for entry in fixed:
+        if isinstance(entry, dict) and entry.get("sigma") and entry.get("parameter") in names:
+            out[names.index(entry["parameter"])] = float(entry["sigma"])
+    return out if np.any(out) else None
 
 
 def predictor_from_document(doc: dict[str, Any], model: DHModel, tp_ids: list[int]) -> Predictor:

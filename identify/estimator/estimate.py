@@ -45,7 +45,8 @@ class LinesFit:
     soft-L1 cost on its own noise scale (starts are compared on a common one: :func:`best_start`); ``terms``
     the joint errors fitted with the lines; ``timing`` the streamed rows' clock correction (None without
     streamed rows); ``jacobian`` (m, 3, p): the weighted, projected Jacobian blocks of every row at the fit
-    (:meth:`identify.estimator.poe.LineProblem.jacobian_blocks` at zero), when the fit computed them (else None)."""
+    (:meth:`identify.estimator.poe.LineProblem.jacobian_blocks` at zero), when the fit computed them (else None);
+    ``oriented`` (m,) the orientation rows, whose ``residuals`` are rad (None: no orientation row)."""
 
     lines: AxisLines
     q: Array
@@ -56,6 +57,12 @@ class LinesFit:
     terms: JointTerms
     timing: Retiming | None = None
     jacobian: Array | None = field(default=None, repr=False)
+    oriented: NDArray[np.bool_] | None = None
+
+    @property
+    def positions(self) -> NDArray[np.bool_]:
+        """The position rows (m,): residuals in metres."""
+        return np.ones(len(self.q), dtype=bool) if self.oriented is None else ~self.oriented
 
     def jacobian_blocks(self, problem: LineProblem) -> Array:
         """The Jacobian blocks of ``problem`` at zero, where ``problem`` is this fit's on its inliers."""
@@ -183,7 +190,9 @@ class FitData:
     (m,) = 1/sigma, ``unknown`` (m,) 0-based unread joint or -1, ``tp_index`` (m,) 0-based tracked point,
     ``group`` (m,) the row's sweep and tracked point (>= 1; 0 for free poses) and ``joint`` (m,) the joint
     its sweep moves, for the neighbour test; ``timing`` the clock correction of streamed rows (fitted from
-    its current ``tau``; None without streamed rows)."""
+    its current ``tau``; None without streamed rows); ``rotations`` (m, 3, 3) the measured target-frame rotation of
+    orientation rows, NaN on position rows (None: no orientation row; see :class:`identify.estimator.poe.LineProblem`:
+    an orientation row's weight is 1/sigma_r and its residual is in rad)."""
 
     q: Array
     points: Array
@@ -193,22 +202,32 @@ class FitData:
     group: NDArray[np.int64]
     joint: NDArray[np.int64]
     timing: Retiming | None = None
+    rotations: Array | None = None
+
+    @property
+    def oriented(self) -> NDArray[np.bool_]:
+        """The orientation rows (m,)."""
+        if self.rotations is None:
+            return np.zeros(len(self.q), dtype=bool)
+        return np.all(np.isfinite(self.rotations), axis=(1, 2))
 
     def subset(self, rows: NDArray[np.bool_]) -> FitData:
         return FitData(self.q[rows], self.points[rows], self.weights[rows], self.unknown[rows], self.tp_index[rows],
-                       self.group[rows], self.joint[rows], None if self.timing is None else self.timing.subset(rows))
+                       self.group[rows], self.joint[rows], None if self.timing is None else self.timing.subset(rows),
+                       None if self.rotations is None else self.rotations[rows])
 
     def timed(self, timing: Retiming | None) -> FitData:
         """The same rows with the clock correction ``timing`` (its rows must be these)."""
         return replace(self, timing=timing)
 
     def problem(self, lines: AxisLines, terms: JointTerms | None = None) -> LineProblem:
-        return LineProblem(lines, self.q, self.points, self.weights, self.unknown, self.tp_index, terms, self.timing)
+        return LineProblem(lines, self.q, self.points, self.weights, self.unknown, self.tp_index, terms, self.timing,
+                           self.rotations)
 
     def fit(self, start: AxisLines, terms: JointTerms | None = None, loss: str = "linear",
             scale: float = 1.0) -> LeastSquares:
         return fit_lines(start, self.q, self.points, self.weights, self.unknown, loss, scale, self.tp_index, terms,
-                         self.timing)
+                         self.timing, self.rotations)
 
 
 def pose_ids(data: FitData) -> NDArray[np.int64]:
@@ -269,7 +288,8 @@ def fit(start: AxisLines, data: FitData, robust: bool, label: str, terms: JointT
                 if np.array_equal(inliers, kept):
                     break
     cost = _soft_l1(res, _inlier_scale(res, inliers))
-    return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms, data.timing, jac)
+    return LinesFit(lines, q_s, inliers, -res / data.weights[:, None], cost, label, terms, data.timing, jac,
+                    _oriented(data))
 
 
 def fit_kept(start: AxisLines, data: FitData, inliers: NDArray[np.bool_], label: str, terms: JointTerms) -> LinesFit:
@@ -283,7 +303,12 @@ def fit_kept(start: AxisLines, data: FitData, inliers: NDArray[np.bool_], label:
     res = problem.residuals(np.zeros(problem.size)).reshape(-1, 3)
     cost = _soft_l1(res, _inlier_scale(res, inliers))
     return LinesFit(kept.lines, problem.joints(kept.lines), inliers.copy(), -res / data.weights[:, None], cost, label,
-                    terms, data.timing)
+                    terms, data.timing, oriented=_oriented(data))
+
+
+def _oriented(data: FitData) -> NDArray[np.bool_] | None:
+    """``data``'s orientation rows, None without any."""
+    return None if data.rotations is None else data.oriented
 
 
 def best_start(fits: list[LinesFit], data: FitData) -> LinesFit:

@@ -4,7 +4,8 @@ Rows follow the measurement CSV (README, "File contracts"): ``sweep`` id, the 1-
 that sweep (0 for free poses), joint readings ``q`` (rad for R, m for P; NaN where a moved joint's
 reading was not logged), the TP ``points`` in the tracker frame (metres) and the id ``tp`` of the tracked
 point each row sees (several reflectors at one pose: one row each). With a ``coupling`` the readings are
-the controller's; :func:`in_dh_joints` turns them into DH joint values.
+the controller's; :func:`in_dh_joints` turns them into DH joint values. Full-pose devices (6-DoF probes, camera
+targets) also give the measured target frame's orientation (``rotvec``, rad) with its own uncertainty (``sigma_r``).
 """
 
 from __future__ import annotations
@@ -36,6 +37,10 @@ class Measurements:
     Continuous motion: ``t`` (m,) the sample's time, s on the tracker's clock (NaN or None when unknown);
     ``streamed`` (m,) marks rows recorded while the robot moved, whose ``q`` were interpolated from the
     robot's joint stream at robot time ``t + clock_offset`` (s); the fit refines that timing.
+
+    Full pose: ``rotvec`` (m, 3) the measured target frame's orientation in the tracker frame as a rotation vector
+    (axis times angle, rad; NaN rows: that row measured a position only) and ``sigma_r`` (m,) its standard
+    uncertainty per axis (rad, NaN where no orientation); ``points`` is then the frame's origin. None: no row has one.
     """
 
     joint_types: str
@@ -52,6 +57,8 @@ class Measurements:
     t: Array | None = None
     streamed: NDArray[np.bool_] | None = None
     clock_offset: float = 0.0
+    rotvec: Array | None = None
+    sigma_r: Array | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_types", check_joint_types(self.joint_types))
@@ -66,6 +73,13 @@ class Measurements:
             object.__setattr__(self, "streamed", np.zeros(m, dtype=bool))
         if np.any(self.streamed) and (self.t is None or np.any(np.isnan(self.t[self.streamed]))):
             raise InputError("streamed rows need their time t (s): the fit interpolates the joints in time")
+
+    @property
+    def oriented(self) -> NDArray[np.bool_]:
+        """Rows (m,) that measured an orientation as well as a position."""
+        if self.rotvec is None:
+            return np.zeros(len(self), dtype=bool)
+        return np.all(np.isfinite(self.rotvec), axis=1)
 
     @property
     def has_streams(self) -> bool:
@@ -99,6 +113,8 @@ class Measurements:
             tp=self.tp[mask],
             t=None if self.t is None else self.t[mask],
             streamed=self.streamed[mask],
+            rotvec=None if self.rotvec is None else self.rotvec[mask],
+            sigma_r=None if self.sigma_r is None else self.sigma_r[mask],
         )
 
     def sweeps_of(self, joint: int) -> list[int]:
@@ -128,6 +144,7 @@ def validate(meas: Measurements, with_nominal: bool = False) -> list[str]:
     if meas.sigma is not None and not np.all(np.isfinite(meas.sigma) & (meas.sigma > 0)):
         bad = int(meas.row[~(np.isfinite(meas.sigma) & (meas.sigma > 0))][0])
         raise InputError(f"line {bad}: sigma must be a positive number (metres)")
+    _validate_orientation(meas)
     if np.any((meas.joint < 0) | (meas.joint > n)):
         bad = int(meas.row[(meas.joint < 0) | (meas.joint > n)][0])
         raise InputError(f"line {bad}: joint must be 0 (free pose) or 1..{n}")
@@ -160,6 +177,50 @@ def validate(meas: Measurements, with_nominal: bool = False) -> list[str]:
             if count < FEW_SWEEP_SAMPLES:
                 warnings.append(f"sweep {s} (joint {j}) has only {count} samples; {FEW_SWEEP_SAMPLES}+ recommended")
     return warnings
+
+
+def _validate_orientation(meas: Measurements) -> None:
+    """InputError (one line) unless every row's orientation is whole (rx, ry, rz all given or all empty), has a
+    positive ``sigma_r`` (rad), and the positions have their ``sigma`` (m): the two are weighed by their own."""
+    if meas.rotvec is None:
+        return
+    given = np.isfinite(meas.rotvec)
+    partial = np.any(given, axis=1) & ~np.all(given, axis=1)
+    if np.any(partial) or np.any(np.isinf(meas.rotvec)):
+        bad = int(meas.row[partial | np.any(np.isinf(meas.rotvec), axis=1)][0])
+        raise InputError(f"line {bad}: give rx, ry, rz all three (finite, rad) or leave all three empty")
+    oriented = meas.oriented
+    if not np.any(oriented):
+        return
+    sigma_r = np.full(len(meas), np.nan) if meas.sigma_r is None else meas.sigma_r
+    bad_sigma = oriented & ~(np.isfinite(sigma_r) & (sigma_r > 0))
+    if np.any(bad_sigma):
+        raise InputError(f"line {int(meas.row[bad_sigma][0])}: an orientation (rx, ry, rz) needs sigma_r, its "
+                         "standard uncertainty per axis (a positive number of radians)")
+    if meas.sigma is None:
+        raise InputError("orientations (rx, ry, rz) need a sigma column too: positions (m) and orientations (rad) "
+                         "are weighed by their own uncertainties, sigma and sigma_r")
+
+
+def orientation_rows(meas: Measurements) -> tuple[Measurements, list[str]]:
+    """The fit's rows: every row as a position row (``rotvec`` NaN), then each orientation as a row of its own
+    (the same readings, ``rotvec`` set, ``sigma`` = its ``sigma_r``, rad), so that an orientation and its position
+    are tested for outliers and weighed each on its own; and notes. Orientations of rows with an unread joint or
+    recorded in continuous motion are not used (their joint values are estimated from the position alone)."""
+    oriented = meas.oriented
+    if not np.any(oriented):
+        return replace(meas, rotvec=None, sigma_r=None), []
+    notes = []
+    unusable = oriented & (np.any(np.isnan(meas.q), axis=1) | meas.streamed)
+    if np.any(unusable):
+        notes.append(f"{int(unusable.sum())} orientation(s) of rows with an unread joint or streamed not used")
+    extra = meas.subset(oriented & ~unusable)
+    positions = replace(meas, rotvec=np.full((len(meas), 3), np.nan), sigma_r=None)
+    extra = replace(extra, sigma=extra.sigma_r, sigma_r=None)
+    joined = {name: np.concatenate([getattr(positions, name), getattr(extra, name)])
+              for name in ("q", "points", "sweep", "joint", "sigma", "check", "row", "tp", "streamed", "rotvec")}
+    t = None if meas.t is None else np.concatenate([meas.t, extra.t])
+    return replace(meas, t=t, sigma_r=None, **joined), notes
 
 
 def prepared_joints(meas: Measurements, home: Array) -> tuple[Array, NDArray[np.int64]]:

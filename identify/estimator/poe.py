@@ -7,7 +7,12 @@ this fit is well conditioned where DH is not; its lines are then turned into DH 
 Parameters: per revolute joint, 2 tilts of the direction and 2 shifts of the point; per prismatic, 2
 tilts; then the TP at home (3). That is exactly what position-only data determine (4R + 2P + 3).
 
-Several tracked points (reflectors) share the lines; each has its own position at home (``tps``). Joint
+Several tracked points (reflectors) share the lines; each has its own position at home (``tps``). A tracked point
+whose rows measured the target frame's orientation too (6-DoF probes, camera targets) also has that frame's rotation
+at home (``orientations``): it turns with the chain's rotation, ``R(q) = L(q) · R_home`` with ``L(q)`` the product
+of the joints' rotations about their lines; an orientation row's residual is ``log(R(q) · R_measuredᵀ)`` (rad,
+:mod:`identify.estimator.orientation`), weighted by 1/sigma_r as a position row's is by 1/sigma, so both are in
+units of their own standard uncertainty. Joint
 errors beyond the lines (:mod:`kinematics.joint_errors`) enter as ``q + R · c``: per-row regressors ``R``
 (m, T), each acting on one joint, with coefficients ``c`` fitted with the lines.
 
@@ -29,6 +34,13 @@ from scipy.optimize import least_squares
 
 from identify.estimator.geometry import cross, perpendicular_basis, rotation_about_axis, turned, unit
 from identify.estimator.linalg import project_out
+from identify.estimator.orientation import (
+    inverse_left_jacobians,
+    left_jacobians,
+    matrices_from_rotvecs,
+    mean_rotation,
+    rotation_residuals,
+)
 from identify.estimator.sync import Retiming
 from identify.estimator.tall_lsq import is_tall, solve_tall
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
@@ -40,7 +52,9 @@ Array = NDArray[np.float64]
 class AxisLines:
     """Joint axes at the home pose: ``points`` (n, 3) on each line, unit ``directions`` (n, 3), the
     ``home`` readings (n,) and the TP there, ``tp_home`` (3,); with several tracked points the others'
-    positions at home, ``extra_tps`` (k - 1, 3). Prismatic points are meaningless."""
+    positions at home, ``extra_tps`` (k - 1, 3); ``orientations`` (k, 3, 3): each tracked point's target frame at
+    home in the tracker frame, NaN for points whose orientation was not measured (None: none was). Prismatic points
+    are meaningless."""
 
     joint_types: str
     points: Array
@@ -48,6 +62,7 @@ class AxisLines:
     home: Array
     tp_home: Array
     extra_tps: Array = field(default_factory=lambda: np.zeros((0, 3)))
+    orientations: Array | None = None
 
     @property
     def tps(self) -> Array:
@@ -77,6 +92,39 @@ def points_from_lines(lines: AxisLines, q: Array, tp_index: NDArray[np.int64] | 
     """Predicted TP (m, 3) at joint readings ``q`` (m, n); ``tp_index`` (m,): which tracked point (0-based
     row of ``lines.tps``; default the first)."""
     return _apply(lines, q, range(len(lines.joint_types)), _home_points(lines, len(q), tp_index))
+
+
+def chain_rotations(lines: AxisLines, q: Array) -> Array:
+    """The chain's rotation ``L(q)`` (m, 3, 3): the product of the revolute joints' turns from home to readings ``q``
+    (m, n); a frame at home with rotation R is at ``L(q) R`` (prismatic joints only translate)."""
+    out = np.tile(np.eye(3), (len(q), 1, 1))
+    for i, t in enumerate(lines.joint_types):
+        if t == "R":
+            out = out @ rotation_about_axis(lines.directions[i], q[:, i] - lines.home[i])
+    return out
+
+
+def target_rotations(lines: AxisLines, q: Array, tp_index: NDArray[np.int64] | None = None) -> Array:
+    """Predicted target-frame rotations (m, 3, 3), tracker frame, at readings ``q`` (m, n); NaN for a tracked point
+    without an orientation. ``tp_index`` as in :func:`points_from_lines`."""
+    if lines.orientations is None:
+        return np.full((len(q), 3, 3), np.nan)
+    home = lines.orientations[np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index]
+    return chain_rotations(lines, q) @ home
+
+
+def home_orientations(lines: AxisLines, q: Array, rotations: Array, tp_index: NDArray[np.int64]) -> Array:
+    """Each tracked point's target frame at home (k, 3, 3) that best fits the measured ``rotations`` (m, 3, 3; NaN
+    rows: positions only) at readings ``q`` (m, n): the chordal mean of ``L(q)ᵀ R`` over its rows; ``lines``'
+    own orientation (or NaN) for a point without measured rotations."""
+    count = len(lines.tps)
+    out = np.full((count, 3, 3), np.nan) if lines.orientations is None else lines.orientations.copy()
+    given = np.all(np.isfinite(rotations), axis=(1, 2))
+    for p in range(count):
+        rows = given & (tp_index == p)
+        if np.any(rows):
+            out[p] = mean_rotation(np.swapaxes(chain_rotations(lines, q[rows]), 1, 2) @ rotations[rows])
+    return out
 
 
 def _home_points(lines: AxisLines, m: int, tp_index: NDArray[np.int64] | None) -> Array:
@@ -160,21 +208,36 @@ class LineProblem:
     ``unknown`` (m,): 0-based index of each row's unread joint, -1 where every reading is known;
     ``tp_index`` (m,): each row's tracked point (0-based row of ``start.tps``); ``terms``: joint errors
     fitted with the lines; ``timing``: the clock correction of streamed rows (:mod:`identify.estimator.sync`).
-    Parameters are increments on ``start`` (and on ``terms.coefs``, ``timing.tau``), zero at the start:
-    lines, then 3 per tracked point, then one per joint-error coefficient, then the timing's (when free).
+    ``rotations`` (m, 3, 3): the measured target-frame rotation of orientation rows (NaN rows: position rows); an
+    orientation row's residual is its rotation's (rad, weighted by its ``weights`` entry, 1/sigma_r), and it has no
+    unread joint. Parameters are increments on ``start`` (and on ``terms.coefs``, ``timing.tau``), zero at the start:
+    lines, then 3 per tracked point, then 3 per tracked point with orientation rows (a turn of its frame at home, a
+    rotation vector in the tracker frame applied on the left), then one per joint-error coefficient, then the
+    timing's (when free).
     """
 
     def __init__(self, start: AxisLines, q: Array, points: Array, weights: Array,
                  unknown: NDArray[np.int64] | None = None, tp_index: NDArray[np.int64] | None = None,
-                 terms: JointTerms | None = None, timing: Retiming | None = None):
-        self.start, self.q, self.points, self.weights = start, q, points, weights
+                 terms: JointTerms | None = None, timing: Retiming | None = None, rotations: Array | None = None):
+        self.q, self.points, self.weights = q, points, weights
         self.unknown = np.full(len(q), -1) if unknown is None else np.asarray(unknown)
         self.has_unknown = bool(np.any(self.unknown >= 0))
         self.tp_index = None if tp_index is None or not np.any(tp_index) else np.asarray(tp_index)
         self.terms = JointTerms.none(len(q)) if terms is None else terms
         self.types = start.joint_types
         self.bases = [np.array(perpendicular_basis(d)) for d in start.directions]
-        self.n_lines = start.n_parameters
+        self.rotations = rotations
+        self.oriented = (np.zeros(len(q), dtype=bool) if rotations is None
+                         else np.all(np.isfinite(rotations), axis=(1, 2)))
+        if np.any(self.oriented & (self.unknown >= 0)):
+            raise ValueError("an orientation row cannot have an unread joint")
+        tps = np.zeros(len(q), dtype=np.int64) if tp_index is None else np.asarray(tp_index)
+        self.oriented_tps = [int(p) for p in np.unique(tps[self.oriented])]  # 0-based, with orientation parameters
+        if self.oriented_tps and (start.orientations is None
+                                  or not np.all(np.isfinite(start.orientations[self.oriented_tps]))):
+            start = replace(start, orientations=home_orientations(start, q, rotations, tps))
+        self.start = start
+        self.n_lines = start.n_parameters + 3 * len(self.oriented_tps)
         self.timing = timing
         self.n_terms = self.n_lines + len(self.terms)  # index of the first timing parameter
         self.size = self.n_terms + (0 if timing is None else timing.size)
@@ -194,8 +257,13 @@ class LineProblem:
             else:
                 pts.append(self.start.points[i])
                 k += 2
-        tps = x[k:self.n_lines].reshape(-1, 3) + self.start.tps
-        lines = AxisLines(self.types, np.array(pts), np.array(dirs), self.start.home, tps[0], tps[1:])
+        tps = x[k:self.start.n_parameters].reshape(-1, 3) + self.start.tps
+        orientations = self.start.orientations
+        if self.oriented_tps:
+            orientations = orientations.copy()
+            turns = matrices_from_rotvecs(x[self.start.n_parameters:self.n_lines].reshape(-1, 3))
+            orientations[self.oriented_tps] = turns @ orientations[self.oriented_tps]
+        lines = AxisLines(self.types, np.array(pts), np.array(dirs), self.start.home, tps[0], tps[1:], orientations)
         return lines, tangents
 
     def coefs(self, x: Array) -> Array:
@@ -217,8 +285,16 @@ class LineProblem:
 
     def residuals(self, x: Array) -> Array:
         lines, _ = self.lines(x)
-        predicted = points_from_lines(lines, self.joints(lines, self.coefs(x), self.tau(x)), self.tp_index)
-        return ((predicted - self.points) * self.weights[:, None]).ravel()
+        return self.residuals_at(lines, self.joints(lines, self.coefs(x), self.tau(x))).ravel()
+
+    def residuals_at(self, lines: AxisLines, q: Array) -> Array:
+        """Weighted residuals (m, 3) of every row, predicted minus measured, for ``lines`` at joint values ``q``."""
+        res = points_from_lines(lines, q, self.tp_index) - self.points
+        o = self.oriented
+        if np.any(o):
+            tps = None if self.tp_index is None else self.tp_index[o]
+            res[o] = rotation_residuals(target_rotations(lines, q[o], tps), self.rotations[o])
+        return res * self.weights[:, None]
 
     def jacobian_blocks(self, x: Array, q: Array | None = None, tp_index: NDArray[np.int64] | None = None,
                         regressors: Array | None = None) -> Array:
@@ -241,9 +317,11 @@ class LineProblem:
         jac = np.zeros((m, 3, self.size))
         nuisance = np.zeros((m, 3))
         k = self.start.n_line_parameters
+        oriented = self.oriented if data else np.zeros(m, dtype=bool)
         for chunk in _chunks(m):
             tps = None if tp_index is None else tp_index[chunk]
             lefts, outputs = self._line_columns(lines, tangents, q[chunk], tps, jac[chunk])
+            turning = oriented[chunk]
             here = streamed[chunk]
             if timed:
                 timing_columns = np.zeros((int(np.sum(here)), 3, self.size - self.n_terms))
@@ -257,6 +335,8 @@ class LineProblem:
                                            cross(lines.directions[i], outputs[i] - lines.points[i]))
                     else:
                         column = lefts[i] @ lines.directions[i]
+                    if np.any(turning):  # an orientation row turns with a revolute joint, not with a prismatic one
+                        column[turning] = lefts[i][turning] @ lines.directions[i] if t == "R" else 0.0
                     if data:
                         rows = self.unknown[chunk] == i
                         nuisance[chunk][rows] = column[rows]
@@ -272,6 +352,8 @@ class LineProblem:
                 for p in range(len(lines.tps)):
                     rows = np.flatnonzero(tps == p) + chunk.start
                     jac[rows, :, k + 3 * p:k + 3 * p + 3] = lefts[-1][rows - chunk.start]
+            if np.any(turning):
+                self._orientation_columns(lines, tangents, q[chunk], tps, lefts, turning, jac[chunk], chunk.start, x)
         if data:
             if np.any(self.weights != 1.0):
                 jac *= self.weights[:, None, None]
@@ -282,6 +364,37 @@ class LineProblem:
 
     def jacobian(self, x: Array) -> Array:
         return self.jacobian_blocks(x).reshape(-1, self.size)
+
+    def _orientation_columns(self, lines: AxisLines, tangents: list[Array], q: Array,
+                             tp_index: NDArray[np.int64] | None, lefts: Array, turning: NDArray[np.bool_], jac: Array,
+                             offset: int, x: Array) -> None:
+        """In place, for the orientation rows ``turning`` of a chunk of rows at joint values ``q`` (its first row
+        ``offset``; parameters ``x``): the columns of the lines, tracked points and home orientations in ``jac``
+        (chunk, 3, size), unweighted, with ``lefts`` from :meth:`_line_columns`. A tilt du of revolute joint i's
+        direction turns the frame by ``L_i J_l(δ u) δ du`` (``L_i`` the joints before i, δ its angle from home);
+        shifts of a line, the tracked points' positions and prismatic joints do not turn it; the turn ω of the
+        frame at home turns it by ``L(q) J_l(ω) dω``. Every column is then mapped through ``J_l⁻¹(r)`` of the row's
+        residual r (exact for any r)."""
+        rows = np.flatnonzero(turning)
+        block = np.zeros((len(rows), 3, self.size))
+        first = np.cumsum([0] + [4 if t == "R" else 2 for t in self.types])
+        for i, t in enumerate(self.types):
+            if t != "R":
+                continue
+            delta = q[rows, i] - lines.home[i]
+            spin = left_jacobians(delta[:, None] * lines.directions[i]) * delta[:, None, None]
+            block[:, :, first[i]:first[i] + 2] = lefts[i][rows] @ spin @ tangents[i].T
+        tps = np.zeros(len(rows), dtype=np.int64) if tp_index is None else tp_index[rows]
+        start = self.start.n_parameters
+        turns = left_jacobians(x[start:self.n_lines].reshape(-1, 3))
+        for slot, p in enumerate(self.oriented_tps):
+            mine = tps == p
+            block[mine, :, start + 3 * slot:start + 3 * slot + 3] = lefts[-1][rows[mine]] @ turns[slot]
+        # the joint-value columns (terms, timing) of these rows were set in the loop: keep them
+        block[:, :, self.n_lines:] = jac[rows, :, self.n_lines:]
+        predicted = lefts[-1][rows] @ lines.orientations[tps]
+        measured = self.rotations[rows + offset]
+        jac[rows] = inverse_left_jacobians(rotation_residuals(predicted, measured)) @ block
 
     def _line_columns(self, lines: AxisLines, tangents: list[Array], q: Array, tp_index: NDArray[np.int64] | None,
                       jac: Array) -> tuple[Array, Array]:
@@ -370,8 +483,10 @@ class LeastSquares(NamedTuple):
 def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None = None,
               unknown: NDArray[np.int64] | None = None, loss: str = "linear",
               scale: float = 1.0, tp_index: NDArray[np.int64] | None = None,
-              terms: JointTerms | None = None, timing: Retiming | None = None) -> LeastSquares:
-    """Least-squares axis lines and TP for readings ``q`` (m, n) and TP ``points`` (m, 3).
+              terms: JointTerms | None = None, timing: Retiming | None = None,
+              rotations: Array | None = None) -> LeastSquares:
+    """Least-squares axis lines and TP for readings ``q`` (m, n) and TP ``points`` (m, 3) (and the target frame's
+    ``rotations`` (m, 3, 3) of orientation rows, NaN elsewhere: see :class:`LineProblem`).
 
     ``weights`` (m,) = 1/sigma per sample; ``unknown`` marks rows whose one joint was not read, ``tp_index``
     each row's tracked point, ``terms`` the joint errors and ``timing`` the clock correction to fit (see
@@ -379,7 +494,7 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
     ``loss``/``scale`` select a robust loss of scipy's ``least_squares`` (scale in weighted units).
     """
     weights = np.ones(len(q)) if weights is None else weights
-    problem = LineProblem(start, q, points, weights, unknown, tp_index, terms, timing)
+    problem = LineProblem(start, q, points, weights, unknown, tp_index, terms, timing, rotations)
     n_nuisance = int(np.sum(problem.unknown >= 0))
     linear = loss == "linear"
     method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
@@ -398,7 +513,7 @@ def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None =
     lines = _canonical(lines)
     coefs, tau = problem.coefs(x), problem.tau(x)
     q_solved = problem.joints(lines, coefs, tau)
-    residuals = (points_from_lines(lines, q_solved, problem.tp_index) - points) * weights[:, None]
+    residuals = problem.residuals_at(lines, q_solved)
     return LeastSquares(lines, q_solved, residuals, JointTerms(problem.terms.regressors, problem.terms.joints, coefs),
                         None if timing is None else replace(timing, tau=tau))
 
@@ -409,9 +524,11 @@ WARM_STRIDE = 10  # a tall fit starts from a fit of every 10th row (√10 σ off
 def _every(problem: LineProblem, stride: int) -> LineProblem:
     """The same problem (same parameters) on every ``stride``-th row of ``problem``."""
     rows = np.arange(0, len(problem.q), stride)
-    return LineProblem(problem.start, problem.q[rows], problem.points[rows], problem.weights[rows],
-                       problem.unknown[rows], None if problem.tp_index is None else problem.tp_index[rows],
-                       problem.terms.subset(rows), None if problem.timing is None else problem.timing.subset(rows))
+    sub = LineProblem(problem.start, problem.q[rows], problem.points[rows], problem.weights[rows],
+                      problem.unknown[rows], None if problem.tp_index is None else problem.tp_index[rows],
+                      problem.terms.subset(rows), None if problem.timing is None else problem.timing.subset(rows),
+                      None if problem.rotations is None else problem.rotations[rows])
+    return sub if sub.oriented_tps == problem.oriented_tps else problem  # (the same parameters, or every row)
 
 
 def _warm_start(problem: LineProblem) -> Array:
@@ -430,4 +547,4 @@ def _canonical(lines: AxisLines) -> AxisLines:
             d = lines.directions[i]
             pts[i] = pts[i] + ((lines.tp_home - pts[i]) @ d) * d
     return AxisLines(lines.joint_types, pts, np.array([unit(d) for d in lines.directions]), lines.home,
-                     lines.tp_home, lines.extra_tps)
+                     lines.tp_home, lines.extra_tps, lines.orientations)

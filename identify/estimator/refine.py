@@ -22,9 +22,16 @@ from scipy.stats import f as f_dist
 
 from identify.estimator.geometry import cross, left_jacobian, skew
 from identify.estimator.linalg import triangle
+from identify.estimator.orientation import (
+    inverse_left_jacobians,
+    left_jacobians,
+    matrices_from_rotvecs,
+    mean_rotation,
+    rotation_residuals,
+)
 from identify.estimator.poe import STOP_SIGMAS, converged_tolerance
 from identify.estimator.tall_lsq import is_tall, solve_tall
-from kinematics.dh import DH_NAMES, DHModel, points_from_joints, running_frames
+from kinematics.dh import DH_NAMES, DHModel, flange_frames, points_from_joints, running_frames
 
 Array = NDArray[np.float64]
 
@@ -99,6 +106,26 @@ def _full_jacobian_rows(model: DHModel, q: Array, omega: Array | None) -> tuple[
         z_prev, o_prev = z_cur, o_cur
     jac[:, :, 6:9] = np.stack(frame[:3], axis=2)  # the last frame's rotation
     return p, jac
+
+
+def orientation_jacobian(model: DHModel, q: Array, omega: Array | None = None) -> tuple[Array, Array]:
+    """Rotation of DH frame n (m, 3, 3) and the turn of it (m, 3, 9 + 4n; rad per unit of each full-vector parameter,
+    tracker frame) at joint values ``q`` (m, n): a joint's theta turns it about z_{i-1}, its alpha about x_i, the base
+    rotation (its increment ``omega``) as itself; lengths and the tool do not turn it."""
+    q = np.asarray(q, dtype=float)
+    n = model.n_joints
+    jac = np.zeros((len(q), 3, 9 + 4 * n))
+    jac[:, :, 0:3] = np.eye(3) if omega is None else left_jacobian(omega)
+    frames = running_frames(model, q)
+    _, _, z_prev, _ = next(frames)
+    frame = None
+    for i, frame in enumerate(frames):
+        x_cur, _, z_cur, _ = frame
+        jac[:, :, 9 + 4 * i] = z_prev
+        jac[:, :, 9 + 4 * i + 3] = x_cur
+        z_prev = z_cur
+    rotation = np.stack(frame[:3], axis=2) if frame is not None else np.broadcast_to(model.base[:3, :3], (len(q), 3, 3))
+    return rotation, jac
 
 
 def parallel_links(model: DHModel, parallel_tol: float) -> list[int]:
@@ -184,19 +211,34 @@ class Refinement:
 class _Problem:
     """Residuals and Jacobian over the free parameters, weighted by 1/sigma when given. With several tracked
     points (``tp_index`` (m,), 0-based), the parameters end with the other points' tools (3 each, frame n):
-    ``tools`` (k, 3) holds every point's, the first being the model's."""
+    ``tools`` (k, 3) holds every point's, the first being the model's. Orientation rows (``rotations`` (m, 3, 3)
+    finite: a full-pose target's measured frame, weight 1/sigma_r) have the rotation residual
+    ``log(R_n(q) T_p R_measuredᵀ)`` (rad) with ``T_p`` their tracked point's target frame in frame n
+    (``frames`` (k, 3, 3) start; a turn ω of it, ``exp(ω) T_p``, 3 parameters per oriented point, last)."""
 
     def __init__(self, start: DHModel, q: Array, points: Array, weights: Array, free: NDArray[np.bool_],
-                 tp_index: NDArray[np.int64] | None = None, tools: Array | None = None):
+                 tp_index: NDArray[np.int64] | None = None, tools: Array | None = None,
+                 rotations: Array | None = None, frames: Array | None = None,
+                 prior: tuple[Array, Array] | None = None):
         self.start, self.q, self.points, self.weights, self.free = start, q, points, weights, free
+        self.prior = prior
         self.tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else tp_index
         self.extra = np.zeros((0, 3)) if tools is None else np.asarray(tools, dtype=float)[1:]
         self.template = np.concatenate([vector_from_model(start), self.extra.ravel()])
         self.size = len(self.free)
+        self.rotations = rotations
+        self.turning = (np.zeros(len(q), dtype=bool) if rotations is None
+                        else np.all(np.isfinite(rotations), axis=(1, 2)))
+        self.oriented_tps = [int(p) for p in np.unique(self.tp_index[self.turning])]
+        self.frames = frames
+        if self.oriented_tps and (frames is None or not np.all(np.isfinite(frames[self.oriented_tps]))):
+            self.frames = target_frames(start, q, rotations, self.tp_index, len(self.extra) + 1, frames)
+        self.n_position = int(self.free.sum()) + self.extra.size  # parameters before the frames' turns
 
     @property
     def x0(self) -> Array:
-        return np.concatenate([self.template[: self.size][self.free], self.extra.ravel()])
+        return np.concatenate([self.template[: self.size][self.free], self.extra.ravel(),
+                               np.zeros(3 * len(self.oriented_tps))])
 
     def full(self, x: Array) -> Array:
         v = self.template[: self.size].copy()
@@ -205,7 +247,42 @@ class _Problem:
 
     def tools(self, x: Array) -> Array:
         """Every tracked point's tool (k, 3) at ``x``."""
-        return np.vstack([self.full(x)[6:9], x[int(self.free.sum()):].reshape(-1, 3)])
+        return np.vstack([self.full(x)[6:9], x[int(self.free.sum()):self.n_position].reshape(-1, 3)])
+
+    def target_frames(self, x: Array) -> Array | None:
+        """Every tracked point's target frame in frame n (k, 3, 3) at ``x`` (NaN where not measured; None: none)."""
+        if not self.oriented_tps:
+            return self.frames
+        out = self.frames.copy()
+        out[self.oriented_tps] = matrices_from_rotvecs(x[self.n_position:].reshape(-1, 3)) @ out[self.oriented_tps]
+        return out
+
+    def _turned(self, x: Array, res: Array) -> Array:
+        """``res`` (m, 3) with the orientation rows' rotation residuals (rad, unweighted) at ``x``."""
+        o = self.turning
+        if np.any(o):
+            rotation, _ = flange_frames(self.model(x), self.q[o])
+            res[o] = rotation_residuals(rotation @ self.target_frames(x)[self.tp_index[o]], self.rotations[o])
+        return res
+
+    def _orientation_blocks(self, x: Array, out: Array) -> None:
+        """In place: the orientation rows' blocks of the (unweighted) Jacobian ``out`` (m, 3, size)."""
+        o = self.turning
+        if not np.any(o):
+            return
+        v = self.full(x)
+        model = model_from_vector(self.start, v)
+        rotation, jac = orientation_jacobian(model, self.q[o], omega=v[:3])
+        block = np.zeros((int(o.sum()), 3, out.shape[2]))
+        block[:, :, : int(self.free.sum())] = jac[:, :, self.free]
+        turns = left_jacobians(x[self.n_position:].reshape(-1, 3))
+        frames = self.target_frames(x)
+        tps = self.tp_index[o]
+        for slot, p in enumerate(self.oriented_tps):
+            mine = tps == p
+            block[mine, :, self.n_position + 3 * slot:self.n_position + 3 * slot + 3] = rotation[mine] @ turns[slot]
+        residual = rotation_residuals(rotation @ frames[tps], self.rotations[o])
+        out[o] = inverse_left_jacobians(residual) @ block
 
     def model(self, x: Array) -> DHModel:
         return model_from_vector(self.start, self.full(x))
@@ -216,17 +293,50 @@ class _Problem:
         for k, tool in enumerate(tools):
             rows = self.tp_index == k
             predicted[rows] = points_from_joints(replace(model, tool=tool), self.q[rows])
-        return ((predicted - self.points) * self.weights[:, None]).ravel()
+        return (self._turned(x, predicted - self.points) * self.weights[:, None]).ravel()
+
+    def objective(self, x: Array) -> Array:
+        """What the fit minimises: the residuals, then the prior's rows (when one is given)."""
+        out = self.residuals(x)
+        return out if self.prior is None else np.concatenate([out, self._prior_rows(x)])
+
+    def objective_jacobian(self, x: Array) -> Array:
+        data = self.jacobian(x)
+        return data if self.prior is None else np.vstack([data, self._prior_jacobian(data.shape[1])])
+
+    def _prior_rows(self, x: Array) -> Array:
+        """The free values' offsets from ``prior``'s, in its sigmas (only where they are finite)."""
+        values, sigma = self.prior
+        keep = np.isfinite(sigma[self.free])
+        return ((self.full(x) - values) / sigma)[self.free][keep]
+
+    def _prior_jacobian(self, columns: int) -> Array:
+        rows = prior_rows(self.free, self.prior[1])
+        return np.hstack([rows, np.zeros((len(rows), columns - rows.shape[1]))])
 
     def jacobian(self, x: Array) -> Array:
         v = self.full(x)
         model, tools = model_from_vector(self.start, v), self.tools(x)
         n_free, n_extra = int(self.free.sum()), 3 * (len(tools) - 1)
+        if np.any(self.turning):
+            n_turns = 3 * len(self.oriented_tps)
+            out = np.zeros((len(self.q), 3, n_free + n_extra + n_turns))
+            out[:, :, :n_free + n_extra] = self._position_blocks(x, model, tools, n_free, n_extra)
+            self._orientation_blocks(x, out)
+            out *= self.weights[:, None, None]
+            return out.reshape(-1, out.shape[2])
         if not n_extra:  # one tracked point: its columns as they come (no second (m, 3, p) copy)
             out = np.compress(self.free, full_jacobian(replace(model, tool=tools[0]), self.q, omega=v[:3])[1], axis=2)
             if np.any(self.weights != 1.0):
                 out *= self.weights[:, None, None]
             return out.reshape(-1, out.shape[2])
+        out = self._position_blocks(x, model, tools, n_free, n_extra)
+        out *= self.weights[:, None, None]
+        return out.reshape(-1, out.shape[2])
+
+    def _position_blocks(self, x: Array, model: DHModel, tools: Array, n_free: int, n_extra: int) -> Array:
+        """The unweighted position Jacobian (m, 3, n_free + n_extra) of every row, each at its tracked point."""
+        v = self.full(x)
         out = np.zeros((len(self.q), 3, n_free + n_extra))
         for k, tool in enumerate(tools):
             rows = self.tp_index == k
@@ -235,8 +345,41 @@ class _Problem:
                 out[rows, :, n_free + 3 * (k - 1): n_free + 3 * k] = jac[:, :, 6:9]
                 jac[:, :, 6:9] = 0.0
             out[rows, :, :n_free] = jac[:, :, self.free]
-        out *= self.weights[:, None, None]
-        return out.reshape(-1, out.shape[2])
+        return out
+
+
+def orientation_blocks(model: DHModel, free: NDArray[np.bool_], q: Array, rotations: Array, frame: Array,
+                       weights: Array) -> Array:
+    """Weighted Jacobian (m, 3, free + 3) of orientation rows (measured frames ``rotations`` (m, 3, 3) at joint values
+    ``q``, weights 1/sigma_r) over the ``free`` full-vector values and the turn of the target ``frame`` (3, 3, in
+    frame n), at ``model``."""
+    problem = _Problem(model, q, np.zeros((len(q), 3)), weights, free, None, None, rotations, frame[None])
+    return problem.jacobian(problem.x0).reshape(len(q), 3, -1)
+
+
+def target_frames(model: DHModel, q: Array, rotations: Array, tp_index: NDArray[np.int64], count: int,
+                  frames: Array | None = None) -> Array:
+    """Each of ``count`` tracked points' target frame in DH frame n (count, 3, 3) that best fits the measured
+    ``rotations`` (m, 3, 3; NaN rows: positions only) at joint values ``q``: the chordal mean of ``R_n(q)ᵀ R`` over
+    its rows; ``frames``' value (or NaN) for a point without any."""
+    out = np.full((count, 3, 3), np.nan) if frames is None else np.array(frames, dtype=float)
+    given = np.all(np.isfinite(rotations), axis=(1, 2))
+    for p in range(count):
+        rows = given & (tp_index == p)
+        if np.any(rows):
+            rotation, _ = flange_frames(model, q[rows])
+            out[p] = mean_rotation(np.swapaxes(rotation, 1, 2) @ rotations[rows])
+    return out
+
+
+def prior_rows(free: NDArray[np.bool_], sigma: Array) -> Array:
+    """Rows (k, free count) that measure each ``free`` value of the full vector with a finite ``sigma`` to that
+    sigma: a prior's Jacobian (and its information, stacked with the data's)."""
+    own = sigma[free]
+    keep = np.flatnonzero(np.isfinite(own))
+    out = np.zeros((len(keep), int(free.sum())))
+    out[np.arange(len(keep)), keep] = 1.0 / own[keep]
+    return out
 
 
 def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
@@ -244,12 +387,12 @@ def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
     linear = loss == "linear"
     method = "lm" if linear and len(problem.points) * 3 >= len(x0) else "trf"
     if method == "lm" and is_tall(len(problem.points) * 3, len(x0)):
-        return solve_tall(problem.residuals, problem.jacobian, x0, STOP_SIGMAS)
+        return solve_tall(problem.objective, problem.objective_jacobian, x0, STOP_SIGMAS)
     tol = converged_tolerance(len(problem.points) * 3) if linear else 1e-8
     fit = least_squares(
-        problem.residuals,
+        problem.objective,
         x0,
-        jac=problem.jacobian,
+        jac=problem.objective_jacobian,
         method=method,
         loss=loss,
         f_scale=scale,
@@ -265,13 +408,15 @@ def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
 @dataclass(frozen=True)
 class TableFit:
     """A DH table fitted by :func:`fit_table`: the ``model``, the ``free`` mask of the full vector, every tracked
-    point's ``tools`` (k, 3, frame n), the ``inliers`` mask and ``notes`` on the conventions applied."""
+    point's ``tools`` (k, 3, frame n), the ``inliers`` mask and ``notes`` on the conventions applied; ``frames``
+    (k, 3, 3) each point's target frame in frame n where orientations were measured (NaN elsewhere; None: none)."""
 
     model: DHModel
     free: NDArray[np.bool_]
     tools: Array
     inliers: NDArray[np.bool_]
     notes: list[str]
+    frames: Array | None = None
 
 
 def fit_table(
@@ -286,8 +431,14 @@ def fit_table(
     max_offset: float = DEFAULT_MAX_OFFSET,
     tp_index: NDArray[np.int64] | None = None,
     tools: Array | None = None,
+    rotations: Array | None = None,
+    prior: tuple[Array, Array] | None = None,
 ) -> TableFit:
-    """The maximum-likelihood DH table of :func:`refine`, without its covariance (arguments as there)."""
+    """The maximum-likelihood DH table of :func:`refine`, without its covariance (arguments as there); ``rotations``
+    (m, 3, 3): the measured target frame of orientation rows (NaN on position rows; their ``sigma`` is sigma_r,
+    rad), fitted with a target frame in frame n per tracked point (``TableFit.frames``); with a ``prior`` (values
+    and sigmas of the full vector, in the weighted rows' units; ``inf`` where none), the maximum a posteriori
+    table."""
     tp_index = np.zeros(len(q), dtype=np.int64) if tp_index is None else np.asarray(tp_index)
     tools = start.tool[None, :] if tools is None else np.asarray(tools, dtype=float)
     weights = np.ones(len(q)) if sigma is None else 1.0 / np.asarray(sigma, dtype=float)
@@ -295,9 +446,11 @@ def fit_table(
     notes: list[str] = []
     # values the data cannot determine take their conventional ones; the fit absorbs the change
     model, moved = _with_conventions(start, free, conventional)
-    problem = _Problem(model, q, points, weights, free, tp_index, tools)
+    problem = _Problem(model, q, points, weights, free, tp_index, tools, rotations, prior=prior)
     x = _solve(problem, problem.x0, "linear", 1.0)
     inliers = np.ones(len(q), dtype=bool)
+    if robust and rotations is not None:
+        raise ValueError("the robust DH fit is for positions; orientation rows come from the lines' fit")
     if robust:
         inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
     if not np.all(inliers):
@@ -305,10 +458,11 @@ def fit_table(
         x = _solve(problem, x, "soft_l1", scale)
         inliers = inlier_mask(problem.residuals(x).reshape(-1, 3), int(free.sum()))
         model, tools = problem.model(x), problem.tools(x)
-        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools)
+        problem = _Problem(model, q[inliers], points[inliers], weights[inliers], free, tp_index[inliers], tools,
+                           prior=prior)
         x = _solve(problem, problem.x0, "linear", 1.0)
-    model, tools = problem.model(x), problem.tools(x)
-    if len(tools) > 1 and max_offset > 0:
+    model, tools, frames = problem.model(x), problem.tools(x), problem.target_frames(x)
+    if (len(tools) > 1 or rotations is not None) and max_offset > 0:
         raise ValueError("releasing the parallel-axis convention is for one tracked point")
     free_exact = select_free(start, q, ()) if parallel and max_offset > 0 else free
     if np.any(free_exact & ~free):  # with no offset allowed, the convention stays
@@ -318,7 +472,7 @@ def fit_table(
         notes += [note] if note else []
     if moved:
         notes.append(f"{moved} undetermined parameter(s) set to their conventional values")
-    return TableFit(model, free, tools, inliers, notes)
+    return TableFit(model, free, tools, inliers, notes, frames)
 
 
 def refine(

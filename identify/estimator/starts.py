@@ -1,4 +1,5 @@
-"""Starting values for the maximum-likelihood fit: the paper's circles and the nominal model on the data.
+"""Starting values for the maximum-likelihood fit: the paper's circles, the axes from full-pose readings' relative
+rotations (:mod:`identify.estimator.rotation_axes`, no circle needed: any arc) and the nominal model on the data.
 
 Frames: tracker; units: metres and radians. With several tracked points the geometric step runs on the
 first one's rows and every other point's position at home follows by linear least squares (the chain is a
@@ -15,6 +16,7 @@ from identify.estimator.cpa import GeometricResult, ReadingScaleError, geometric
 from identify.estimator.estimate import nominal_start
 from identify.estimator.measurements import Measurements
 from identify.estimator.poe import AxisLines, points_from_lines
+from identify.estimator.rotation_axes import lines_from_rotations
 from kinematics.dh import DHModel
 
 Array = NDArray[np.float64]
@@ -28,7 +30,13 @@ def starts(meas: Measurements, q: Array, unknown: NDArray[np.int64], tp_index: N
     the fit rows' prepared readings, unread joints and tracked points (see :mod:`identify.estimator.poe`)."""
     found: list[tuple[str, AxisLines]] = []
     geo = None
-    first = meas.subset(tp_index == 0)
+    positions = ~meas.oriented  # (orientation rows repeat their position rows' readings)
+    first = meas.subset((tp_index == 0) & positions)
+    rotated = lines_from_rotations(meas, home) if np.any(meas.oriented) else None
+    if rotated is not None:
+        found.append(("axes from the relative rotations", other_points(rotated, q[positions], meas.points[positions],
+                                                                       unknown[positions], tp_index[positions],
+                                                                       warnings)))
     if all(first.sweeps_of(j) for j in range(1, meas.n_joints + 1)):
         try:
             geo = geometric_step(first, conventional, parallel_tol, nominal)
@@ -36,11 +44,13 @@ def starts(meas: Measurements, q: Array, unknown: NDArray[np.int64], tp_index: N
                               np.array([ax.direction for ax in geo.axes]), home, geo.tp_home)
             found.append(("geometric step", other_points(lines, q, meas.points, unknown, tp_index, warnings)))
         except InputError as exc:
-            if nominal is None or isinstance(exc, ReadingScaleError):  # readings in degrees: no start helps
+            if (nominal is None and rotated is None) or isinstance(exc, ReadingScaleError):  # degrees: no start helps
                 raise
-            warnings.append(f"geometric step skipped ({exc}); started from the nominal model")
+            other = "the nominal model" if rotated is None else "the axes of the relative rotations"
+            warnings.append(f"geometric step skipped ({exc}); started from {other}")
     if nominal is not None and np.sum(unknown < 0) >= 3:
-        found.append(("nominal", nominal_start(nominal, q, meas.points, unknown, home, tp_index)))
+        found.append(("nominal", nominal_start(nominal, q[positions], meas.points[positions], unknown[positions], home,
+                                               tp_index[positions])))
     if not found:
         raise InputError("no start for the fit: sweep every joint, or give a nominal model and free poses")
     return geo, found

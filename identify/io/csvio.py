@@ -4,6 +4,9 @@ Format: UTF-8, comma separated, one header row; ``#`` lines are comments, ``# jo
 ``# units: m, rad`` (or ``mm``) and ``# coupling: [[...]]`` (row-major n x n, DH values = C · readings) carry
 metadata. Columns ``sweep,joint,q1..qN,x,y,z`` plus optional ``sigma``, ``role`` (fit/check) and ``tp``
 (tracked point id); ``t`` (the sample's time, s) is kept; any other column (``step``...) is ignored.
+Full pose (optional): ``rx,ry,rz`` the measured target frame's orientation in the device frame (rotation vector,
+rad; x, y, z is then the frame's origin) and ``sigma_r`` its standard uncertainty per axis (rad); rows without an
+orientation leave the four empty.
 Continuous motion: ``# streamed: 3, 4`` lists the sweeps recorded while the robot moved (their joint values
 interpolated from the joint stream at robot time ``t + clock_offset``), ``# clock_offset: 0.0123`` (s).
 """
@@ -27,6 +30,7 @@ from kinematics.dh import check_joint_types
 from kinematics.joint_errors import Coupling
 
 UNITS = {"m": 1.0, "mm": 1e-3}
+ROTATION_COLUMNS = ("rx", "ry", "rz")
 _Q_COLUMN = re.compile(r"^q(\d+)$")
 
 
@@ -123,10 +127,12 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
     check = np.zeros(m, dtype=bool)
     tp = np.ones(m, dtype=np.int64)
     t = np.full(m, np.nan) if "t" in columns else None
+    rotvec = np.full((m, 3), np.nan) if "rx" in columns else None
+    sigma_r = np.full(m, np.nan) if "sigma_r" in columns else None
     line_numbers = np.array([number for number, _ in numbered[1:]], dtype=np.int64)
     fast = _parse_fast(rows, header, columns, n)
     if fast is not None:  # every field well formed: vectorised (the loop below names the first bad field)
-        sweep, joint, q, points, fast_sigma, fast_tp, t, fast_check = fast
+        sweep, joint, q, points, fast_sigma, fast_tp, t, fast_check, rotvec, sigma_r = fast
         points = points * scale
         sigma = None if fast_sigma is None else fast_sigma * scale
         tp = np.ones(m, dtype=np.int64) if fast_tp is None else fast_tp
@@ -155,6 +161,11 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
             tp[k] = _integer(fields, columns["tp"], "tp", line)
             if tp[k] < 1:
                 raise InputError(f"line {line}: tp must be a positive integer (the tracked point's id), got {tp[k]}")
+        if rotvec is not None:
+            for axis, name in enumerate(ROTATION_COLUMNS):
+                rotvec[k, axis] = _number(fields, columns[name], name, line, allow_empty=True)
+        if sigma_r is not None:
+            sigma_r[k] = _number(fields, columns["sigma_r"], "sigma_r", line, allow_empty=True)
     if scale == 1.0 and looks_like_millimetres(points):
         peak = float(np.max(np.abs(points)))
         raise InputError(f"x, y, z reach {peak:g}: these look like millimetres; pass --units mm "
@@ -162,7 +173,8 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
     coupling = parse_coupling(metadata["coupling"], n) if "coupling" in metadata else None
     streamed, offset = _streams(metadata, sweep, t)
     meas = Measurements(types, q, points, sweep, joint, sigma, check, line_numbers, has_role="role" in columns,
-                        tp=tp, coupling=coupling, t=t, streamed=streamed, clock_offset=offset)
+                        tp=tp, coupling=coupling, t=t, streamed=streamed, clock_offset=offset, rotvec=rotvec,
+                        sigma_r=sigma_r)
     return CsvContent(meas, metadata, notes)
 
 
@@ -176,6 +188,14 @@ def _parse_fast(rows: list[list[str]], header: list[str], columns: dict[str, int
         index = columns[name]
         values = np.array([fields[index] for fields in rows], dtype=float)
         if not np.all(np.isfinite(values)):
+            raise ValueError(name)
+        return values
+
+    def optional(name: str) -> np.ndarray:  # empty fields are NaN; a written "nan" or "inf" is refused
+        texts = [fields[columns[name]].strip() for fields in rows]
+        values = np.array([text or "nan" for text in texts], dtype=float)
+        given = np.array([bool(text) for text in texts])
+        if not np.all(np.isfinite(values[given])):
             raise ValueError(name)
         return values
 
@@ -200,13 +220,15 @@ def _parse_fast(rows: list[list[str]], header: list[str], columns: dict[str, int
         return None
     if tp is not None and np.any(tp < 1):
         return None
+    rotvec = np.column_stack([optional(name) for name in ROTATION_COLUMNS]) if "rx" in columns else None
+    sigma_r = optional("sigma_r") if "sigma_r" in columns else None
     check = None
     if "role" in columns:
         roles = np.array([fields[columns["role"]].strip().lower() for fields in rows])
         if not set(roles.tolist()) <= {"fit", "check"}:
             return None
         check = roles == "check"
-    return sweep, joint, q, points, sigma, tp, t, check
+    return sweep, joint, q, points, sigma, tp, t, check, rotvec, sigma_r
 
 
 def _streams(metadata: dict[str, str], sweep: np.ndarray, t: np.ndarray | None) -> tuple[np.ndarray, float]:
@@ -296,7 +318,11 @@ def _columns(header: list[str], types: str, line: int, notes: list[str]) -> dict
                 "comma-separated, with a decimal point)" if separator else "")
         raise InputError(f"line {line}: missing column(s) {', '.join(missing)}; expected "
                          f"sweep,joint,q1..q{n},x,y,z{hint}")
-    ignored = [name for name in header if name not in (*required, "sigma", "role", "tp", "t")]
+    rotation = [name for name in (*ROTATION_COLUMNS, "sigma_r") if name in seen]
+    if rotation and not set(ROTATION_COLUMNS) <= set(rotation):
+        raise InputError(f"line {line}: an orientation needs the columns rx, ry, rz together (and sigma_r), got "
+                         f"{', '.join(rotation)}")
+    ignored = [name for name in header if name not in (*required, "sigma", "role", "tp", "t", *rotation)]
     if ignored:
         notes.append(f"ignored column(s): {', '.join(ignored)}")
     return seen
@@ -350,6 +376,9 @@ def format_measurements(meas: Measurements, metadata: dict[str, str] | None = No
         header.append("tp")
     if meas.t is not None:
         header.append("t")
+    oriented = meas.rotvec is not None and bool(np.any(meas.oriented))
+    if oriented:
+        header += [*ROTATION_COLUMNS, "sigma_r"]
     writer = csv.writer(out, lineterminator="\n")
     writer.writerow(header)
     for k in range(len(meas)):
@@ -364,5 +393,9 @@ def format_measurements(meas: Measurements, metadata: dict[str, str] | None = No
             row.append(str(int(meas.tp[k])))
         if meas.t is not None:
             row.append("" if math.isnan(meas.t[k]) else repr(float(meas.t[k])))
+        if oriented:
+            given = bool(meas.oriented[k])
+            row += [repr(float(v)) if given else "" for v in meas.rotvec[k]]
+            row.append(repr(float(meas.sigma_r[k])) if given else "")
         writer.writerow(row)
     return out.getvalue()

@@ -80,7 +80,8 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "base_translation": _floats(std[3:6]),
         "tool": _floats(std[6:9]),
     }
-    doc["fixed"] = [{"parameter": f.name, "value": f.value, "reason": f.reason} for f in ident.fixed]
+    doc["fixed"] = [{"parameter": f.name, "value": f.value, "reason": f.reason}
+                    | ({"sigma": f.sigma} if f.sigma else {}) for f in ident.fixed]
     doc["convention"] = {
         "values_from": f"nominal model {nominal_name}" if nominal_name else ident.convention,
         "parallel_links": ident.parallel,
@@ -92,6 +93,10 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "model_error_per_axis": a.model_error,
         "samples": int(ref.inliers.size),
         "rejected_rows": ident.rejected_rows,
+        **({} if ident.orientation is None else {"orientation": {
+            "note": "rows that measured the target frame's orientation (full-pose devices): RMS of the kept ones' "
+                    "rotation residuals (rad, 3D), each weighed by its sigma_r beside the positions' sigma",
+            "samples": ident.orientation[0], "rejected": ident.orientation[1], "rms_rad": ident.orientation[2]}}),
         "per_sweep": [
             {"sweep": s.sweep, "joint": s.joint, "samples": s.samples, "rejected": s.rejected, "rms": s.rms}
             for s in ident.sweeps
@@ -174,11 +179,28 @@ def validation_of(doc: dict[str, Any], model: str | None = None) -> dict[str, An
 
 def model_section(model: WrittenModel, tp_ids: tuple[int, ...]) -> dict[str, Any]:
     """``joints``, ``base``, ``tool`` and (several tracked points) ``tools`` of a written model; ``tool`` is the
-    smallest id's, so a reader of the plain contract still gets a valid model."""
+    smallest id's, so a reader of the plain contract still gets a valid model. Where orientations were measured
+    (full-pose targets), ``tool_frame``: the target frame in the last DH frame (row-major 4x4, its origin ``tool``),
+    and with several tracked points ``tool_frames`` for every id that has one."""
     doc = model_to_dict(model.model)
     if len(tp_ids) > 1:
         doc["tools"] = {int(i): _floats(t) for i, t in zip(tp_ids, model.tools, strict=True)}
+    frames = model.frames
+    if frames is not None:
+        poses = {int(i): _pose(r, t) for i, r, t in zip(tp_ids, frames, model.tools, strict=True)
+                 if np.all(np.isfinite(r))}
+        if int(tp_ids[0]) in poses:
+            doc["tool_frame"] = poses[int(tp_ids[0])]
+        if len(tp_ids) > 1:
+            doc["tool_frames"] = poses
     return doc
+
+
+def _pose(rotation: np.ndarray, origin: np.ndarray) -> list[list[float]]:
+    """A row-major 4x4 homogeneous transform of ``rotation`` (3, 3) and ``origin`` (3,)."""
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rotation, origin
+    return _floats(pose)
 
 
 def lines_to_dict(lines: AxisLines) -> dict[str, Any]:

@@ -27,7 +27,7 @@ from identify.estimator.measurements import Measurements
 from identify.estimator.timing import SweepStreams, coarse_clock_offset, interpolate_joints
 from identify.io.csvio import CsvContent, format_measurements
 from kinematics.joint_errors import Coupling
-from session.records import PointRecord
+from session.records import FrameRecord, PointRecord
 from session.rows import points_seen
 from session.schema import SessionError
 from session.store import SessionFile
@@ -102,14 +102,15 @@ def export_csv(session: SessionFile, path: str | Path, force: bool = False) -> i
 
 def _step_measurements(session: SessionFile) -> Measurements:
     rows, points = session.measured_rows()
-    return measurements_from(rows, points, session.plan.joint_types, session.coupling)
+    return measurements_from(rows, points, session.plan.joint_types, session.coupling, session.measured_frames())
 
 
 def measurements_from(rows: list[dict[str, Any]], points: dict[int, list[PointRecord]], joint_types: str,
-                      coupling: Coupling | None) -> Measurements:
+                      coupling: Coupling | None, frames: dict[int, list[FrameRecord]] | None = None) -> Measurements:
     """The measurement-CSV rows of ok step ``rows`` (plan order): one row per tracked point seen, q = the actual
     readings, ``coupling`` as recorded. Home re-measurements become held-out free poses (joint 0, role check);
-    ``sigma`` only when every row has one; ``tp`` the point's id."""
+    ``sigma`` only when every row has one; ``tp`` the point's id; with a full-pose device the target frame's averaged
+    orientation (``frames``: plan index -> per point) as ``rotvec``/``sigma_r`` (NaN for a row without one)."""
     entries = [(r, *seen) for r in rows for seen in points_seen(r, points)]
     n, m = len(joint_types), len(entries)
     q = np.array([r["q_act"] for r, *_ in entries], dtype=float).reshape(m, n)
@@ -121,7 +122,14 @@ def measurements_from(rows: list[dict[str, Any]], points: dict[int, list[PointRe
     sigmas = [s for *_, s in entries]
     sigma = np.array(sigmas, dtype=float) if entries and None not in sigmas else None
     tp = np.array([t for _, t, _, _ in entries], dtype=np.int64)
-    return Measurements(joint_types, q, xyz, sweep, joint, sigma, check, has_role=True, tp=tp, coupling=coupling)
+    rotvec = sigma_r = None
+    if frames:
+        turned = {(i, f.tp): f for i, seen in frames.items() for f in seen}
+        found = [turned.get((r["plan_index"], t)) for r, t, _, _ in entries]
+        rotvec = np.array([f.rotvec if f else (np.nan,) * 3 for f in found], dtype=float).reshape(m, 3)
+        sigma_r = np.array([np.nan if f is None or f.sigma_r is None else f.sigma_r for f in found], dtype=float)
+    return Measurements(joint_types, q, xyz, sweep, joint, sigma, check, has_role=True, tp=tp, coupling=coupling,
+                        rotvec=rotvec, sigma_r=sigma_r)
 
 
 @dataclass(frozen=True)
@@ -179,6 +187,8 @@ def with_streams(streams: list[StreamData], steps: Measurements) -> tuple[Measur
                    row=np.arange(1, m0 + m1 + 1), tp=np.concatenate([steps.tp, cat["tp"]]),
                    t=np.concatenate([t_steps, cat["t"]]),
                    streamed=np.concatenate([np.zeros(m0, bool), np.ones(m1, bool)]),
+                   rotvec=None if steps.rotvec is None else np.vstack([steps.rotvec, np.full((m1, 3), np.nan)]),
+                   sigma_r=None if steps.sigma_r is None else np.concatenate([steps.sigma_r, np.full(m1, np.nan)]),
                    clock_offset=offset)
     gaps = sum(len(s.joint_gaps) + len(s.tracker_gaps) for s in streams)
     return meas, StreamSummary(offset, estimate.per_sweep, m1, dropped, gaps)

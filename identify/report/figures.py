@@ -59,7 +59,7 @@ def deviations(ident: Identification, fit: Measurements, joint: int) -> tuple[Ar
     model, ref = ident.model, ident.refinement
     j = joint - 1
     rows = fit.joint == joint
-    q, res = ref.q[rows], ref.residuals[rows]
+    q, res = ref.q[: len(rows)][rows], ref.residuals[: len(rows)][rows]  # (orientation rows follow the positions)
     frames = frames_from_joints(model, q)
     z, o = frames[:, j, :3, 2], frames[:, j, :3, 3]
     if model.joint_types[j] == "R":

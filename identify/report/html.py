@@ -18,6 +18,7 @@ import html
 import io
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -68,6 +69,23 @@ def png_data_uri(fig: Figure) -> str:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI, bbox_inches="tight")
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def positions_view(ident: Identification, m: int) -> Identification:
+    """``ident`` with its plain model's refinement record cut to the ``m`` position rows (orientation rows of
+    full-pose data follow them and are summed up in ``ident.orientation``), for the figures in metres."""
+    ref = ident.refinement
+    if ident.orientation is None or len(ref.residuals) - ident.orientation[0] != m:
+        return ident  # (the caller refuses measurements of another size)
+    cut = replace(ref, residuals=ref.residuals[:m], inliers=ref.inliers[:m], q=ref.q[:m], points=ref.points[:m])
+    return replace(ident, models={**ident.models, "plain": replace(ident.plain, refinement=cut)})
+
+
+def orientation_line(orientation: tuple[int, int, float]) -> str:
+    """One line on the orientation rows: how many, rejected, and their RMS residual (mrad, 3D)."""
+    count, rejected, rms = orientation
+    return (f"orientations (full-pose readings): {count} fitted, {rejected} rejected as outliers, residual RMS "
+            f"{rms * 1e3:.4f} mrad (3D), each weighed by its sigma_r beside the positions' sigma")
 
 
 def _fit_rows(meas: Measurements) -> NDArray[np.bool_]:
@@ -335,6 +353,7 @@ def report_html(
     mounting surface and the plan's swept envelope for the 3D view (see :func:`figure_frames`).
     """
     fit = meas.subset(_fit_rows(meas))
+    ident = positions_view(ident, len(fit))
     if len(fit) != len(ident.refinement.residuals):
         raise ValueError(f"meas has {len(fit)} fitted rows, the identification {len(ident.refinement.residuals)}: "
                          "pass the measurements it was made from")
@@ -389,6 +408,7 @@ def report_html(
              f"{s.rms * MM:.4f}"] for s in ident.sweeps]
     body.append('<section id="sweeps"><h2>Residuals per sweep</h2>'
                 + _table(["sweep", "joint", "samples", "rejected", "RMS [mm]"], rows)
+                + ("" if ident.orientation is None else f"<p>{_e(orientation_line(ident.orientation))}</p>")
                 + _figure_html(figure_sweeps(ident, fit), "Residual norm of every fitted sample, per sweep")
                 + "</section>")
     if session is not None:

@@ -68,6 +68,10 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
              "noise and model error not separable (no sweeps, no --noise)")
     lines.append(f"fit: {int(ref.inliers.sum())} samples, residual RMS {ident.rms * 1e3:.4f} mm (3D), {split}, "
                  f"condition number {ref.condition:.3g}")
+    if ident.orientation is not None:
+        count, rejected, rms = ident.orientation
+        lines.append(f"orientations (full-pose readings): {count} fitted, {rejected} rejected as outliers, residual "
+                     f"RMS {rms * 1e3:.4f} mrad (3D); positions {int(ref.inliers.sum()) - count + rejected} samples")
     worst = max(ident.sweeps, key=lambda s: s.rms if np.isfinite(s.rms) else -1.0)
     lines.append("per sweep RMS [mm]: " + ", ".join(
         f"{_sweep_name(s)} " + (f"{s.rms * 1e3:.4f}" if np.isfinite(s.rms) else "none kept") for s in ident.sweeps

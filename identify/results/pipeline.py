@@ -19,8 +19,9 @@ from identify.estimator.adequacy import Adequacy
 from identify.estimator.cpa import DEFAULT_PARALLEL_TOL, GeometricResult
 from identify.estimator.estimate import best_start
 from identify.estimator.extensions import Decision, TermSet
+from identify.estimator.hold import nominal_lines
 from identify.estimator.measurements import Measurements
-from identify.estimator.poe import AxisLines
+from identify.estimator.poe import AxisLines, points_from_lines
 from identify.estimator.refine import Refinement
 from identify.results import verdict as checks
 from identify.results.predict import Predictor
@@ -36,6 +37,7 @@ from identify.results.stages import (
     fits_from_starts,
     held_out,
     joint_errors,
+    orientation_fit,
     recommended,
     sweep_fits,
     verdict_of,
@@ -76,6 +78,7 @@ class Identification:
     warnings: list[str] = field(default_factory=list)
     clock: ClockFit | None = None
     domain: Array | None = None
+    orientation: tuple[int, int, float] | None = None  # orientation rows: count, rejected, RMS residual (rad)
 
     @property
     def plain(self) -> WrittenModel:
@@ -157,7 +160,7 @@ class Identification:
     def rms(self) -> float:
         """RMS 3D residual of the fitted inliers under the recommended model, m."""
         fit = self.used.fit
-        return float(np.sqrt(np.mean(np.sum(fit.residuals[fit.inliers] ** 2, axis=1))))
+        return float(np.sqrt(np.mean(np.sum(fit.residuals[fit.inliers & fit.positions] ** 2, axis=1))))
 
     @property
     def geometric_rms(self) -> float:
@@ -237,17 +240,27 @@ def identify(
     coupling = meas.coupling
     meas, warnings = checked_measurements(meas, nominal)
     conventional = np.zeros((meas.n_joints, 4)) if nominal is None else nominal.dh_table()
-    rows = fit_rows(meas, noise)
+    rows = fit_rows(meas, noise, warnings)
     geo, fits = fits_from_starts(rows, nominal, conventional, parallel_tol, robust, warnings)
     best, adequacy, clock_test = clock_tested(best_start(fits, rows.data), rows, robust)
     torques = None if links is None or nominal is None else (lambda x: gravity_torques(nominal, links, x))
     # joint errors referenced to the readings' zero, not to this data set's home: the extended model's DH offsets
     # then mean the same on every data set of the arm (a home that moved with the split moved them by c·τ(home))
     empty = TermSet((), np.zeros(meas.n_joints), torques)
-    cap = robot_size(best.lines, rows.meas.points) if max_offset is None else max_offset  # size before joint errors
+    size = robot_size(best.lines, rows.meas.points)  # before joint errors
+    cap = size if max_offset is None else max_offset
+    # what the data do not determine is held at the nominal placed on them; not yet for arms whose first joint is
+    # prismatic, whose size (from its axis, which has no position) is not the arm's
+    inl = best.inliers
+    reference = None if nominal is None or meas.joint_types[0] != "R" else nominal_lines(
+        nominal, best.q[inl], rows.data.points[inl], rows.data.tp_index[inl], best.lines.home)
+    if reference is not None:  # a nominal the data contradict is no measurement of the arm (the nominal check says so)
+        missed = points_from_lines(reference, best.q[inl], rows.data.tp_index[inl]) - rows.data.points[inl]
+        if np.sqrt(np.mean(np.sum(missed**2, axis=1))) > checks.NOMINAL_TOLERANCE * size:
+            reference = None
     write = partial(written_model, tp_ids=tuple(meas.tp_ids), conventional=conventional, nominal=nominal,
                     parallel_tol=parallel_tol, max_offset=cap, unit=rows.unit, declared=rows.declared,
-                    sigma=rows.meas.sigma)
+                    sigma=rows.meas.sigma, reference=reference, size=size)
     best, adequacy, extended, decisions = (joint_errors(best, adequacy, rows, empty) if extensions
                                            else (best, adequacy, None, []))
     models = written_models(write, rows, best, adequacy, empty, extended)
@@ -265,7 +278,8 @@ def identify(
         validations=validations,
         geometric=geo,
         sweeps=sweeps,
-        rejected_rows=[int(r) for r in rows.meas.row[~models[use].fit.inliers]],
+        rejected_rows=[int(r) for r in rows.meas.row[~models[use].fit.inliers & ~rows.meas.oriented]],
+        orientation=orientation_fit(rows, models[use].refinement),
         convention="nominal" if nominal is not None else "zero",
         verdict=verdict,
         start=models["plain"].fit.start,

@@ -22,7 +22,8 @@ from identify.estimator.estimate import FitData, LinesFit, along_arc, fit, fit_k
 from identify.estimator.extend import select_terms
 from identify.estimator.extensions import Decision, TermSet, candidates
 from identify.estimator.identifiability import Identifiability, identifiability
-from identify.estimator.measurements import Measurements, in_dh_joints, prepared_joints, validate
+from identify.estimator.measurements import Measurements, in_dh_joints, orientation_rows, prepared_joints, validate
+from identify.estimator.orientation import matrices_from_rotvecs
 from identify.estimator.outliers import sweep_neighbours
 from identify.estimator.poe import LineProblem, points_from_lines
 from identify.estimator.refine import Refinement, full_jacobian, parameter_names
@@ -70,7 +71,9 @@ class ClockFit:
 
 @dataclass(frozen=True)
 class FitRows:
-    """The fit rows (``check`` rows left out) as the estimator sees them. ``meas``: those rows, DH joints;
+    """The fit rows (``check`` rows left out) as the estimator sees them. ``meas``: those rows, DH joints, each
+    measured orientation a row of its own after the position rows (``meas.oriented`` marks them:
+    :func:`identify.estimator.measurements.orientation_rows`);
     ``data``: their prepared readings (unread joints named), tracker-frame points (m), weights 1/sigma, tracked
     points and neighbour groups; ``home`` (n,) every joint's home reading (rad or m); ``numbers`` {sweep id:
     1-based sweep number}; ``sweep_group`` (m,) each row's sweep number (0: free pose); ``unit``: the weights'
@@ -110,10 +113,13 @@ def checked_measurements(meas: Measurements, nominal: DHModel | None) -> tuple[M
     return meas, warnings
 
 
-def fit_rows(meas: Measurements, noise: float | None) -> FitRows:
+def fit_rows(meas: Measurements, noise: float | None, warnings: list[str] | None = None) -> FitRows:
     """The rows of ``meas`` that are not held out, prepared for the fit; ``noise``: the declared noise (m per axis),
-    which a ``sigma`` column overrides. Neighbours (for the outlier test) share a sweep and a tracked point."""
-    fitm = meas.subset(~meas.check)
+    which a ``sigma`` column overrides. Neighbours (for the outlier test) share a sweep, a tracked point and a kind
+    (position or orientation). Appends to ``warnings`` the orientations left unused."""
+    fitm, notes = orientation_rows(meas.subset(~meas.check))
+    if warnings is not None:
+        warnings.extend(notes)
     home = home_from_measurements(fitm)
     q, unknown = prepared_joints(fitm, home)
     tp_index = np.searchsorted(meas.tp_ids, fitm.tp)
@@ -121,10 +127,13 @@ def fit_rows(meas: Measurements, noise: float | None) -> FitRows:
     numbers = {s: k + 1 for k, s in enumerate(np.unique(fitm.sweep[fitm.joint > 0]))}
     sweep_group = np.array([numbers.get(int(s), 0) if j > 0 else 0 for s, j in zip(fitm.sweep, fitm.joint,
                                                                                      strict=True)])
-    group = np.where(sweep_group > 0, sweep_group * len(meas.tp_ids) + tp_index, 0)
+    oriented = fitm.oriented
+    kinds = 2 if np.any(oriented) else 1
+    group = np.where(sweep_group > 0, (sweep_group * len(meas.tp_ids) + tp_index) * kinds + oriented, 0)
     timing = None if fitm.t is None else retiming(fitm.t, fitm.streamed, fitm.sweep, q)
-    data = FitData(q, fitm.points, weights, unknown, tp_index, group, fitm.joint, timing)
-    unit = 1.0 if fitm.sigma is None else float(np.median(fitm.sigma))
+    rotations = matrices_from_rotvecs(fitm.rotvec) if np.any(oriented) else None
+    data = FitData(q, fitm.points, weights, unknown, tp_index, group, fitm.joint, timing, rotations)
+    unit = 1.0 if fitm.sigma is None else float(np.median(fitm.sigma[~oriented]))
     declared = unit if fitm.sigma is not None else noise
     return FitRows(fitm, data, home, numbers, sweep_group, unit, declared)
 
@@ -191,13 +200,30 @@ def held_out(models: dict[str, WrittenModel], check_rows: Measurements, tp_ids: 
 
 def sweep_fits(rows: FitRows, ref: Refinement, warnings: list[str]) -> list[SweepFit]:
     """Residuals of every sweep, then of the free poses (when any), under the refinement ``ref``; appends a warning
-    for each sweep with rejected rows."""
-    joint, group = rows.meas.joint, rows.sweep_group
-    sweeps = [_sweep_fit(int(sid), int(joint[group == g][0]), ref, group == g) for sid, g in rows.numbers.items()]
+    for each sweep with rejected rows, and one naming the rows whose orientation alone was rejected (metres: the
+    position rows; orientations are summed up in :func:`orientation_fit`)."""
+    joint, group, positions = rows.meas.joint, rows.sweep_group, ~rows.meas.oriented
+    sweeps = [_sweep_fit(int(sid), int(joint[group == g][0]), ref, (group == g) & positions)
+              for sid, g in rows.numbers.items()]
     if np.any(joint == 0):
-        sweeps.append(_sweep_fit(0, 0, ref, joint == 0))
+        sweeps.append(_sweep_fit(0, 0, ref, (joint == 0) & positions))
     warnings.extend(f"sweep {sw.sweep}: {sw.rejected} sample(s) rejected as outliers" for sw in sweeps if sw.rejected)
+    turned = rows.meas.oriented & ~ref.inliers
+    if np.any(turned):
+        lines = ", ".join(str(int(r)) for r in rows.meas.row[turned][:10])
+        warnings.append(f"{int(turned.sum())} orientation(s) rejected as outliers, their positions kept: line(s) "
+                        f"{lines}{' ...' if turned.sum() > 10 else ''}")
     return sweeps
+
+
+def orientation_fit(rows: FitRows, ref: Refinement) -> tuple[int, int, float] | None:
+    """The orientation rows' (count, rejected, RMS 3D residual of the kept ones, rad) under ``ref``; None without."""
+    turning = rows.meas.oriented
+    if not np.any(turning):
+        return None
+    kept = ref.residuals[turning & ref.inliers]
+    rms = float(np.sqrt(np.mean(np.sum(kept**2, axis=1)))) if len(kept) else float("nan")
+    return int(turning.sum()), int(np.sum(turning & ~ref.inliers)), rms
 
 
 def clock_fit(model: WrittenModel, offset: float, test: ClockSplit | None) -> ClockFit | None:
@@ -247,7 +273,8 @@ def verdict_of(models: dict[str, WrittenModel], use: str, decisions: list[Decisi
     found = [
         checks.model_fit(used.fit_rms, used.adequacy, _cause(models, decisions), noise_typed,
                          rows.meas.sigma is not None),
-        checks.conditioning(used.condition, _identifiability(used, size)),
+        checks.conditioning(used.condition, _identifiability(used, size), () if used.held is None else used.held.names,
+                            used.held is not None and used.held.model_error),
         checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
         plain.dh_check,
     ]

@@ -132,9 +132,12 @@ def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None, noise
                  f"residuals {mm(a.residual)} per axis, consistent with {reference}")
 
 
-def conditioning(condition: float, found: Identifiability | None = None) -> Check:
+def conditioning(condition: float, found: Identifiability | None = None, at_nominal: tuple[str, ...] = (),
+                 model_error: bool = False) -> Check:
     """Whether the data determine the written parameters. ``found`` speaks of each parameter (its σ against its
     own scale, near redundancies, parameters held because the data do not separate them, a model error's reach);
+    ``at_nominal``: what was held at the nominal because the data did not determine it (``model_error``: or a model
+    error the fit cannot hold could move it);
     the condition number of the scaled axis-line fit only fails a numerically singular problem (and decides alone
     when ``found`` is None)."""
     if not condition < CONDITION_FAIL:
@@ -157,6 +160,12 @@ def conditioning(condition: float, found: Identifiability | None = None) -> Chec
     if found.held:
         parts.append(f"{', '.join(found.held)} not separated by the data from other parameters: held at their "
                      "conventional values")
+    if at_nominal:  # the result is only the nominal there: right, but not a calibration of it
+        cause = ", or a model error the fit cannot hold could move it," if model_error else ""
+        parts.append(f"the data do not determine the model{cause} along directions that move "
+                     + ", ".join(dict.fromkeys(at_nominal)) + ": held at the nominal placed on the data, its "
+                     "tolerance in every stated accuracy (see fixed); poses that move those joints further, or a "
+                     "second tracked point off the last axis, would determine them")
     if parts:
         return Check("conditioning", "warn", condition, CONDITION_FAIL, "; ".join(parts) + number)
     w = found.worst

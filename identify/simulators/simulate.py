@@ -3,7 +3,9 @@
 A true robot (kinematics/truth.py, shared with mock mode's simulated rig) is a nominal DH model with seeded
 perturbations, placed at a random pose in the tracker frame with a TP off every axis. Sweeps move one joint at a
 time about a home pose; free poses move all joints. The tracker sees the true TP plus isotropic Gaussian noise
-(metres) and optional gross outliers. Every random draw comes from the ``numpy.random.Generator`` passed in.
+(metres) and optional gross outliers; a full-pose device (6-DoF probe, camera target) also sees the target frame's
+orientation with isotropic noise (rad, a small random turn in the tracker frame). Every random draw comes from the
+``numpy.random.Generator`` passed in.
 """
 
 from __future__ import annotations
@@ -15,8 +17,9 @@ from numpy.typing import NDArray
 
 from identify.estimator.geometry import perpendicular_basis, rotation_about_axis, unit
 from identify.estimator.measurements import Measurements
+from identify.estimator.orientation import matrices_from_rotvecs, rotvecs_from_matrices
 from identify.estimator.poe import AxisLines, points_from_lines
-from kinematics.dh import DHModel, frames_from_joints, points_from_joints
+from kinematics.dh import DHModel, flange_frames, frames_from_joints, points_from_joints
 from kinematics.truth import random_base, random_truth
 
 Array = NDArray[np.float64]
@@ -76,6 +79,25 @@ def observe(
     bad = rng.choice(len(q), size=outliers, replace=False) if outliers else np.zeros(0, dtype=np.int64)
     points[bad] += unit(rng.normal(size=(len(bad), 3))) * outlier_size
     return points, np.sort(bad)
+
+
+def observe_frames(truth: DHModel, tool_rotation: Array, q: Array, rng: np.random.Generator, noise_r: float
+                   ) -> Array:
+    """Target-frame orientations (m, 3) as rotation vectors (rad, tracker frame) seen by a full-pose device with
+    isotropic noise ``noise_r`` (rad per axis): the true frame is ``truth``'s last DH frame times ``tool_rotation``
+    (3, 3, the target frame in the last DH frame), turned by ``exp(noise)``."""
+    rotation, _ = flange_frames(truth, q)
+    noisy = matrices_from_rotvecs(rng.normal(0.0, noise_r, size=(len(q), 3))) @ rotation @ tool_rotation
+    return rotvecs_from_matrices(noisy)
+
+
+def with_orientations(meas: Measurements, truth: DHModel, tool_rotation: Array, rng: np.random.Generator,
+                      noise: float, noise_r: float) -> Measurements:
+    """``meas`` (simulated from ``truth`` with ``noise`` m per axis) as a full-pose device's: every row with the
+    target frame's orientation (:func:`observe_frames`, ``noise_r`` rad per axis) and both sigmas declared."""
+    q = np.where(np.isnan(meas.q), 0.0, meas.q)
+    rotvec = observe_frames(truth, tool_rotation, q, rng, noise_r)
+    return replace(meas, rotvec=rotvec, sigma_r=np.full(len(meas), noise_r), sigma=np.full(len(meas), noise))
 
 
 def simulate(

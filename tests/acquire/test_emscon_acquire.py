@@ -74,3 +74,51 @@ def test_dry_run_says_what_the_tracker_will_be_asked(tmp_path, capsys):
     assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1?meas_time=1", "--config", str(site),
                  "--dry-run"]) == 0
     assert "measure timeout" not in capsys.readouterr().out  # the spec's option wins over the site file's
+
+
+def test_emscon_sim_continuous_session_with_faults_identifies_the_truth(tmp_path, capsys):
+    """``--mode continuous``: every sweep streamed by continuous measurement by time, stamped on the tracker's own
+    clock (its origin the tracker's boot: the fitted clock offset is the server's boot on the robot's clock); flagged
+    points, a restart and garbage mid-stream are gaps, no sweep is lost. (A broken beam is tested on the wall clock,
+    tests/drivers/trackers/test_emscon_stream.py: its relock every 0.2 s of wall time lets most of a sweep pass on
+    the mock's virtual clock.)"""
+    site = tmp_path / "site.yaml"
+    site.write_text("schema: 1\nplan:\n  check_poses: 4\n  stream_rate: 50\n")
+    path = tmp_path / "c.session"
+    # packets (10 per virtual s) 2-59 stream the first sweep, 60-140 the second: each fault well inside a sweep, the
+    # garbage 35 packets from the second one's end (a reconnect's wall time lets virtual time pass unstreamed)
+    tracker = "emscon:sim?timeout=0.5&fault=stream_prism@30,stream_drop@75,stream_garbage@105"
+    assert main(["--robot", ROBOT, "--tracker", tracker, "--mode", "continuous", "--config", str(site),
+                 "--session", str(path), "--quiet"]) == 0
+    capsys.readouterr()
+    with Session.open(path) as session:
+        assert session.outcome() == "complete" and not session.missing_indices()
+        assert all(s.status == "ok" for s in session.steps())
+        meas = session.to_measurements()
+        boot = session.steps()[0].t_start  # within the run's first seconds: the server starts at connect
+    with sqlite3.connect(path) as db:
+        gaps = db.execute("SELECT count(*) FROM stream_gaps WHERE device = 'tracker'").fetchone()[0]
+        rates = {r for (r,) in db.execute("SELECT tracker_rate FROM streams")}
+    assert gaps == 3 and rates == {50.0}
+    doc = yaml.safe_load(path.with_suffix(".result.yaml").read_text())
+    offset = doc["clock"]["offset_s"]  # robot time = tracker time + offset; tracker time = rig time - boot
+    assert abs(offset - (boot - 5000.25)) < 60 and doc["clock"]["offset_std_s"] < 1e-4
+    truth = SimulatedRig.from_spec(RobotSpec.parse(ROBOT), TrackerSpec.parse("mock"), VirtualClock()).truth
+    model = model_from_dict(doc)
+    q_check = random_poses(load_robot("ur5e").limits, 200, np.random.default_rng(0))
+    err = points_from_joints(model, q_check) - points_from_joints(truth, q_check)
+    rms = np.sqrt(np.mean(np.sum(err**2, axis=1)))
+    bound = prediction_rms_bound(truth, meas.q[~meas.check], q_check, NOISE)
+    assert rms < 2.5 * bound, (rms, bound)
+
+
+def test_dry_run_of_a_continuous_plan_says_the_time_separation(tmp_path, capsys):
+    site = tmp_path / "site.yaml"
+    site.write_text("schema: 1\nplan:\n  stream_rate: 300\n")
+    assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1", "--mode", "continuous", "--config", str(site),
+                 "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "measure continuously by time during each of the 6 sweeps: a point every 3 ms (333.333 per second)" in out
+    assert "stamped with the tracker's own clock" in out and "a gap, and the measurement started again" in out
+    assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1", "--mode", "step", "--dry-run"]) == 0
+    assert "continuously" not in capsys.readouterr().out  # a stop-and-go plan streams nothing

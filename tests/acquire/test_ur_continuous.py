@@ -292,3 +292,49 @@ def test_ctrl_c_mid_sweep_stops_the_arm_and_the_run_ends_aborted(tmp_path: Path)
         streams = db.execute("SELECT id, status FROM streams").fetchall()
         samples = db.execute("SELECT count(*) FROM tracker_samples").fetchone()[0]
     assert [status for _, status in streams] == ["interrupted"] and samples > 100
+
+
+def test_a_continuous_session_with_a_leica_tracker_is_timed_by_the_trackers_clock(tmp_path: Path, capsys) -> None:
+    """``acquire --robot ur5e@HOST --tracker emscon:HOST:PORT --mode continuous``: every sweep streamed by the emScon
+    emulator's continuous measurement by time, each point stamped with the tracker's own clock (its boot as origin,
+    on the emulated clock: any time scale works); flagged points early in the first sweep and a broken beam mid-way
+    through joint 6's sweep (the measurement ends, the client starts it again once the beam is back) are one gap
+    each; the clock offset found is the tracker's boot within its uncertainty, the model as good as the noise
+    allows."""
+    site = tmp_path / "site.yaml"
+    site.write_text(SITE)
+    path = tmp_path / "ur.session"
+    start, end = joint6_sweep(site)
+    with EmulatorProcess(time_scale=SCALE, native_rate=True, rate=RATE) as emu:
+        port = emu.serve_emscon(NOISE, 3, "stream_prism@20")  # packet 20 of 50 or more in the first sweep's stream
+        truth, boot = emu.truth(), emu.emscon_boot()
+        beam = MidSweep(emu, start, end, 2.5, lambda e: e.inject_emscon("stream_lost") or "injected")
+        beam.start()
+        try:
+            code = acquire(["--robot", f"ur5e@{emu.host}?rtde_frequency={RATE:g}", "--tracker",
+                            f"emscon:127.0.0.1:{port}?meas_time=0.01&timeout=1", "--mode", "continuous", "--yes",
+                            "--config", str(site), "--session", str(path), "--quiet"])
+        finally:
+            beam.done.set()
+            beam.join(2.0)
+        out, err = capsys.readouterr()
+        connections = emu.emscon_connections()
+    assert code == 0, err
+    assert beam.result == "injected", "the beam was not broken mid-sweep"
+    assert "verdict: pass" in out and connections == 1  # a broken beam needs no new link
+    with Session.open(path) as session:
+        assert session.outcome() == "complete" and all(s.status == "ok" for s in session.steps())
+        meas = session.to_measurements()
+    with sqlite3.connect(path) as db:
+        gaps = db.execute("SELECT count(*) FROM stream_gaps WHERE device = 'tracker'").fetchone()[0]
+        streams = db.execute("SELECT count(*) FROM streams WHERE status = 'complete'").fetchone()[0]
+    assert streams == 6 and gaps == 2 and meas.streamed.sum() > 3000
+    doc = yaml.safe_load(path.with_suffix(".result.yaml").read_text())
+    clock = doc["clock"]  # robot time = tracker time + offset: the tracker's boot on the controller's clock
+    assert abs(clock["offset_s"] - boot) < max(5 * clock["offset_std_s"], 1e-6), (clock["offset_s"] - boot)
+    assert abs(clock["drift"]) < 5 * clock["drift_std"] + 1e-9
+    model = model_from_dict(doc)
+    q_check = random_poses(load_robot("ur5e").limits, 200, np.random.default_rng(0))
+    err_model = points_from_joints(model, q_check) - points_from_joints(truth, q_check)
+    rms = float(np.sqrt(np.mean(np.sum(err_model**2, axis=1))))
+    assert rms < 3.0 * prediction_rms_bound(truth, meas.q[~meas.check], q_check, NOISE)

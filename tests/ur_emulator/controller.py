@@ -116,6 +116,7 @@ class UREmulator(ControllerServers):
         self._frozen: dict[str, Any] | None = None  # the state the stream repeats while frozen
         self._trackers: list[Any] = []
         self._emscon: list[Any] = []  # simulated emScon servers (serve_emscon)
+        self._ipp: list[Any] = []  # simulated I++ servers (serve_ipp)
 
     # --- lifecycle ------------------------------------------------------------------------------------------
 
@@ -141,7 +142,7 @@ class UREmulator(ControllerServers):
     def close(self) -> None:
         self._running = False
         self.rig._stop_requested = True
-        for tracker in [*self._trackers, *self._emscon]:
+        for tracker in [*self._trackers, *self._emscon, *self._ipp]:
             tracker.stop()
         for s in [*self._servers, *list(self._connections)]:
             with contextlib.suppress(OSError):
@@ -240,6 +241,27 @@ class UREmulator(ControllerServers):
         server = EmsconSimServer(self.rig, noise=noise, seed=seed, faults=parse_faults(faults) if faults else ())
         self._emscon.append(server)
         return int(server.port)
+
+    def serve_ipp(self, noise: float = 2e-5, seed: int = 0) -> int:
+        """Start a simulated I++ DME server (tests/ipp_device.py, loopback TCP, with ``OnMoveReportE`` reports at the
+        rate asked) measuring this emulator's true TP (noise m per axis). Its reports run on the wall clock and are
+        stamped by the client on arrival: stream with it at time scale 1 only. Returns its port
+        (``ipp://127.0.0.1:PORT``)."""
+        from tests.ipp_device import IppServer
+
+        server = IppServer(self.rig, noise=noise, seed=seed, move_reports=True)
+        self._ipp.append(server)
+        return int(server.port)
+
+    def inject_emscon(self, fault: str, count: int = 1) -> None:
+        """The last simulated emScon server's ``inject`` (drivers/trackers/emscon_sim.py): a fault on its next
+        measurement, or for a ``stream_`` fault its next continuous packet."""
+        self._emscon[-1].inject(fault, count)
+
+    def emscon_boot(self) -> float:
+        """The emulated time (s) at which the last simulated emScon tracker's clock read 0: a continuous point stamped
+        ``t`` by it was taken at controller time ``t + emscon_boot()`` (its drift is 0)."""
+        return float(self._emscon[-1].boot)
 
     def emscon_connections(self) -> int:
         """Connections the simulated emScon servers accepted so far (one per link the client opened)."""

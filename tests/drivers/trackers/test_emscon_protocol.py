@@ -35,7 +35,7 @@ def test_frame_splits_a_stream_and_keeps_an_incomplete_packet() -> None:
 
 
 @pytest.mark.parametrize("junk", [b"\xff\xff\xff\x7f\x00\x00\x00\x00", b"\x04\x00\x00\x00\x00\x00\x00\x00",
-                                  struct.pack("<iI", 5000, 0)])
+                                  struct.pack("<iI", es.MAX_PACKET + 1, 0)])
 def test_a_header_that_is_no_packet_is_a_bad_reading(junk: bytes) -> None:
     with pytest.raises(BadReading, match="out of step"):
         es.frame(junk + b"\x00" * 8)
@@ -78,3 +78,47 @@ def test_reflector_names_are_utf16_and_status_bodies_decode() -> None:
     assert es.decode(es.error_packet(49, 10004)) == es.ErrorPacket(49, 10004)
     assert es.status_text(10004) == "status 10004 (measurement status not ready)" and es.status_text(7) == "status 7"
     assert es.software_version(es.text_field("3.6.1")) == "3.6.1"
+
+
+def test_continuous_time_params_are_four_int32() -> None:
+    # SetContinuousTimeModeParamsCT: 28 bytes, GetContinuousTimeModeParamsRT: 32 (the header's layout, pack 4)
+    assert es.set_continuous_time_params(4) == bytes.fromhex("1c000000 00000000 1e000000 04000000" + "00000000" * 3)
+    answer = es.reply(es.C_GET_CONTINUOUS_TIME, 0, struct.pack("<iiiI", 4, 0, 0, 0))
+    assert len(answer) == 32 and es.continuous_time_params(es.decode(answer).body) == (4, 0, False, 0)
+    with pytest.raises(BadReading, match="GetContinuousTimeModeParams has 8 data bytes, not 16"):
+        es.decode(es.reply(es.C_GET_CONTINUOUS_TIME, 0, b"\x00" * 8))
+
+
+def test_continuous_result_layout_and_round_trip() -> None:
+    # MultiMeasResultT: a 48-byte head (header, status, lNumberOfResults, measMode, bIsTryMode, 3 doubles), then
+    # 36 bytes per MeasValueT (status, lTime1, lTime2, 3 doubles); MeasValue2T: 92 (sizes of the header's structs)
+    values = [[1.0, 2.0, 3.0], [-1.5, 0.25, 2.0]]
+    packet = es.multi_result([0, 3], [5001, 5001], [4000, 8000], values, (20.5, 1001.0, 45.0))
+    head = struct.pack("<iIIiIi3d", 120, es.DT_MULTI, 0, 2, es.MM_CONTINUOUS_TIME, 0, 20.5, 1001.0, 45.0)
+    points = struct.pack("<Iii3d", 0, 5001, 4000, *values[0]) + struct.pack("<Iii3d", 3, 5001, 8000, *values[1])
+    assert packet == head + points
+    result = es.decode(packet)
+    assert isinstance(result, es.MultiResult) and result.std is None and result.mode == es.MM_CONTINUOUS_TIME
+    assert result.point_status.tolist() == [0, 3] and result.time1.tolist() == [5001, 5001]
+    assert result.time2.tolist() == [4000, 8000] and result.values.tolist() == values
+    assert (result.temperature, result.pressure, result.humidity) == (20.5, 1001.0, 45.0)
+    extended = es.multi_result([0], [7], [1], [values[0]], (20.0, 1000.0, 50.0), std=[[3e-6, 4e-6, 0.0]])
+    assert len(extended) == 48 + 92 and struct.unpack_from("<iI", extended) == (140, es.DT_MULTI2)
+    assert struct.unpack_from("<7d", extended, 48 + 36) == (3e-6, 4e-6, 0.0, 5e-6, 0.0, 0.0, 0.0)
+    assert es.decode(extended).std.tolist() == [[3e-6, 4e-6, 0.0]]
+    with pytest.raises(BadReading, match="says it holds 3 points"):
+        es.decode(packet[:12] + struct.pack("<i", 3) + packet[16:])
+
+
+def test_6dof_probe_result_layout_and_round_trip() -> None:
+    # ProbeStationaryResultT: 376 bytes; the tip at byte 48, the quaternion at 184, the environment at 352
+    packet = es.probe_stationary_result((1.0, 2.0, 3.0), (1e-5, 2e-5, 2e-5), (0.5, 0.5, 0.5, 0.5), (0.1, 0.2, 0.3),
+                                        (1e-4, 1e-4, 2e-4), (21.0, 990.0, 40.0), probe_id=7)
+    assert len(packet) == 376 and struct.unpack_from("<iI", packet) == (376, es.DT_PROBE_STATIONARY)
+    assert struct.unpack_from("<3d", packet, 48) == (1.0, 2.0, 3.0)
+    assert struct.unpack_from("<4d", packet, 184) == (0.5, 0.5, 0.5, 0.5)
+    assert struct.unpack_from("<3d", packet, 352) == (21.0, 990.0, 40.0)
+    result = es.decode(packet)
+    assert isinstance(result, es.ProbeResult) and result.probe_id == 7 and result.mode == es.MM_6D_STATIONARY
+    assert result.quaternion == (0.5, 0.5, 0.5, 0.5) and result.angles == (0.1, 0.2, 0.3)
+    assert result.position_std == (1e-5, 2e-5, 2e-5) and result.angles_std == (1e-4, 1e-4, 2e-4)
