@@ -23,10 +23,15 @@ demo: $(STAMP)
 	$(BIN)/acquire verify --result $$s.result.yaml --robot mock:ur5e \
 	    --tracker mock --session $$s-verify.session
 
-# the 15 slowest tests are listed at the end, so that the suite's cost stays visible where it runs (CI included)
+# every test: on two workers (pytest-xdist; tests/conftest.py: one BLAS thread each), then the timing-sensitive
+# ones (marked realtime) alone, so that no test of ours competes with them; each run lists its slowest tests, so
+# that the suite's cost stays visible where it runs (CI included). The fast subset: $(BIN)/pytest -m "not slow"
 test: $(STAMP)
 	$(BIN)/ruff check .
-	$(BIN)/pytest --durations=15
+	status=0; \
+	$(BIN)/pytest -n 2 -m "not realtime" --durations=15 || status=1; \
+	$(BIN)/pytest -m realtime --durations=5 || status=1; \
+	exit $$status
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -21,6 +21,7 @@ REQUIRED = {
     "yourdfpy": "yourdfpy",
     "hypothesis": "hypothesis",
     "CESAPI": "CESAPI",
+    "xdist": "pytest-xdist",
 }
 
 

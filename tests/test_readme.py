@@ -54,6 +54,7 @@ def folder(tmp_path_factory):
     return here
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("command", RUN)
 def test_a_readme_command_runs_as_written(command, folder):
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
@@ -62,6 +63,7 @@ def test_a_readme_command_runs_as_written(command, folder):
     assert "Traceback" not in done.stderr
 
 
+@pytest.mark.slow
 def test_the_cell_snippet_is_a_site_file_that_plans(folder):
     """The README's cell.yaml, with the command the README gives for it."""
     line = re.search(r"`(acquire [^`]*--config cell\.yaml)`", README)

@@ -31,7 +31,7 @@ from acquire.planning.plan_modes import build_mode_plan, format_modes, mode_site
 from acquire.planning.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.planning.plan_target import TargetError, candidates, choose, format_tradeoff, replan_for_rate
 from acquire.running.orchestrator import RunResult, StopRequest
-from acquire.running.resume import ResumeRefused, resume_settings
+from acquire.running.resume import ResumeRefused, resume_settings, session_model
 from acquire.running.runner import finish, run_session
 from acquire.running.session import Session
 from acquire.running.stream_loop import check_streams
@@ -96,6 +96,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     """Plan (or the session's plan), show it, then connect and record; ``session`` is the session to resume
     (open for writing, or for reading in a dry run) or None for a new one."""
     changes: tuple[str, ...] = ()
+    model_note = ""
     if session is not None:
         if "verification" in (session.header.get("config") or {}):
             raise UsageError(f"{session.path} is a verification session: resume it with acquire verify --resume")
@@ -106,11 +107,14 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         tracker_spec = settings.tracker if args.tracker else without_faults(settings.tracker)
         site, plan, path, changes = settings.site, session.plan, args.resume, settings.changes
         base_site, no_stream = site, ""
+        robot_model, model_note = session_model(session.header, robot_spec)
         if not args.dry_run and _died_after_its_last_step(session, args.remeasure_missing):
+            if model_note:
+                print(model_note)
             session.begin_run()  # closes the dead run; nothing connects or moves
             session.end_run("complete")
             return finish(RunResult("complete", "", 0, len(session.missing_indices())), session, args.resume,
-                           load_robot(robot_spec.model))
+                           robot_model)
         if not args.dry_run and _nothing_to_do(session, args.remeasure_missing):
             return 0
     else:
@@ -121,7 +125,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         base_site, no_stream = tracker_site(site_from_args(args), args, tracker_spec)  # what the tracker states
         site = mode_site(base_site, args.mode, args.free_poses)
         check_units(args, site, tracker_spec)
-        path, plan = None, None
+        path, plan, robot_model = None, None, None
     if args.json and not args.dry_run:
         raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")
     rehearsal = tracker_spec is None
@@ -134,7 +138,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         from drivers.sim.pairing import check_pairing
 
         check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
-    robot_model = load_robot(robot_spec.model)
+    if robot_model is None:
+        robot_model = load_robot(robot_spec.model)
     planned = args.target_accuracy is not None or args.max_robot_time is not None
     tradeoff = None
     if planned:
@@ -173,6 +178,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         return 0
     if session is not None:
         say(_resuming(session))
+    if model_note:
+        say(model_note)
     say(format_plan(plan, robot_model, duration, accuracy, "camera" if camera is not None else "tracker"))
     if camera is not None:
         say("\n".join(["", *camera.lines(plan)]))
@@ -197,7 +204,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         path = args.session or _default_session_path(robot_model.name)
     confirm(robot_spec, args, plan)
     opening = time.monotonic()
-    robot, tracker, clock = open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io)
+    robot, tracker, clock = open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io, robot_model)
     connected = clock.now() - (time.monotonic() - opening)  # the connect's wall time, on the run's clock
     released = False
     try:

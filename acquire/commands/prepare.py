@@ -177,9 +177,10 @@ def open_traced_tracker(tracker_spec: TrackerSpec, rig: SimulatedRig | None, sit
 
 
 def open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: bool, site: SiteConfig,
-                 trace_io: Path | None = None) -> tuple[Robot, Tracker, Clock]:
+                 trace_io: Path | None = None, model: RobotModel | None = None) -> tuple[Robot, Tracker, Clock]:
     """The robot and tracker opened and connected (within the site's connect timeout, s), and the run's clock:
-    mock mode's simulated rig behind mock devices, on a virtual clock unless ``realtime``."""
+    mock mode's simulated rig behind mock devices, on a virtual clock unless ``realtime``. ``model``: the robot
+    model to drive (a resumed session's recorded one), None for the one ``robot_spec`` names."""
     from drivers.registry import open_robot
 
     clock = WallClock() if realtime or robot_spec.backend != "mock" else VirtualClock()
@@ -187,8 +188,8 @@ def open_devices(robot_spec: RobotSpec, tracker_spec: TrackerSpec, realtime: boo
     if robot_spec.backend == "mock" or tracker_spec.backend == "mock":
         from drivers.sim.rig import SimulatedRig
 
-        rig = SimulatedRig.from_spec(robot_spec, tracker_spec, clock)
-    robot = open_robot(robot_spec, rig=rig, site=site)
+        rig = SimulatedRig.from_spec(robot_spec, tracker_spec, clock, model)
+    robot = open_robot(robot_spec, rig=rig, site=site, model=model)
     tracker = open_traced_tracker(tracker_spec, rig, site, trace_io)
     robot.connect(site.timeouts.connect)
     tracker.connect(site.timeouts.connect)

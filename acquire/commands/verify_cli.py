@@ -17,7 +17,7 @@ from acquire.commands.prepare import UsageError, check_start, confirm, open_devi
 from acquire.commands.verify_options import build_parser
 from acquire.planning.plan import estimate_duration, plan_clearance
 from acquire.planning.plan_report import format_clearance
-from acquire.running.resume import resume_settings
+from acquire.running.resume import resume_settings, session_model
 from acquire.running.runner import run_session
 from acquire.running.session import Session
 from acquire.verification.verify import MODES, VerifyError, build, design, header, problems
@@ -217,7 +217,9 @@ def _resume(args: argparse.Namespace, session: Session) -> int:
     if options["--cycles"] is not None:
         raise UsageError(f"--cycles {args.cycles}: the session's test has {info['cycles']}; a resume cannot change it")
     settings = resume_settings(session.header, args.robot, args.tracker, args.config, options)
-    robot = load_robot(settings.robot.model)
+    robot, model_note = session_model(session.header, settings.robot)
+    if model_note:
+        print(model_note)
     robot_spec = settings.robot if args.robot else without_faults(settings.robot)
     tracker_spec = settings.tracker if args.tracker else without_faults(settings.tracker)
     if args.dry_run:
@@ -237,7 +239,7 @@ def _resume(args: argparse.Namespace, session: Session) -> int:
 def _measure(args, session: Session | None, path: Path, plan, robot_spec: RobotSpec, tracker_spec: TrackerSpec,
              site, robot: RobotModel, config: dict[str, Any] | None, settings=None) -> int:
     """Connect, check the first move, record the steps, then analyse and write the outputs."""
-    robot_dev, tracker, clock = open_devices(robot_spec, tracker_spec, args.realtime, site)
+    robot_dev, tracker, clock = open_devices(robot_spec, tracker_spec, args.realtime, site, model=robot)
     try:
         first = 0 if session is None else session.next_index()
         check_start(robot_dev, plan, robot, site, first or 0, session)

@@ -6,7 +6,8 @@ may give a new robot address (``--robot ur5e@NEW``), a new tracker port or host 
 backend) or a site file with new hosts, tracker settings, timeouts or retries: these are connection details,
 used from then on and listed so that the session can record them as an event. Anything that would change the
 plan (the robot model or backend, a simulated device's world, the steps, samples, sweep ranges, free poses,
-speeds...) is refused with one line naming the option; so is a site file that cannot be read.
+speeds...) is refused with one line naming the option; so is a site file that cannot be read. The robot model
+is the one the session records (a model file of the operator's, moved or edited since, cannot change the plan).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from config.files import read_yaml
+from config.robots import ConfigError, RobotModel, load_robot, robot_from_document
 from config.site import FIELDS, SiteConfig, load_site
 from drivers.spec import RobotSpec, TrackerSpec
 
@@ -76,6 +78,25 @@ def resume_settings(header: dict[str, Any], robot: str | None = None, tracker: s
             raise ResumeRefused(f"{option} {value}: the session's plan has {getattr(old_site, name)}; a resume "
                                 "cannot change the plan (start a new session for another plan)")
     return ResumeSettings(new_robot, new_tracker, replace(site, source=f"{old_site.source} + resume"), tuple(changes))
+
+
+def session_model(header: dict[str, Any], spec: RobotSpec) -> tuple[RobotModel, str]:
+    """The robot model a resumed session plans and moves with, and one line saying why it is not the file's ('' when
+    it is). A bundled model (``spec.model`` a name) is loaded by name; a model file's session records the model itself
+    (``config.robot_model``): that record is used when the file has moved or changed since. ConfigError when the
+    session records no model and the file cannot be read."""
+    recorded = (header.get("config") or {}).get("robot_model")
+    if not spec.model_is_file or not isinstance(recorded, dict):
+        return load_robot(spec.model), ""
+    try:
+        current = load_robot(spec.model)
+    except ConfigError:
+        current = None
+    if current is not None and current.document == recorded:
+        return current, ""
+    what = "is not there" if not Path(spec.model).exists() else "has changed since the session was planned"
+    model = robot_from_document(recorded, spec.model)  # the file's path: the spec still names the same model
+    return model, f"robot: {spec.model} {what}; the resume uses the model the session records ({model.name})"
 
 
 def _robot(old: RobotSpec, new: RobotSpec, text: str) -> RobotSpec:

@@ -185,8 +185,9 @@ class SimulatedRig:
 
     @classmethod
     def from_spec(cls, robot: RobotSpec | str, tracker: TrackerSpec | str | None = None,
-                  clock: Clock | None = None) -> SimulatedRig:
-        """The rig of ``mock:MODEL?...`` and ``mock?...`` (options, faults included); clock default VirtualClock."""
+                  clock: Clock | None = None, model: RobotModel | None = None) -> SimulatedRig:
+        """The rig of ``mock:MODEL?...`` and ``mock?...`` (options, faults included); clock default VirtualClock.
+        ``model``: the robot model to simulate (a resumed session's recorded one), None for the one MODEL names."""
         robot = robot if isinstance(robot, RobotSpec) else RobotSpec.parse(robot)
         tracker = tracker if tracker is None or isinstance(tracker, TrackerSpec) else TrackerSpec.parse(tracker)
         if not robot.is_mock:
@@ -208,7 +209,7 @@ class SimulatedRig:
                 raise BackendUnavailable(f"the simulated camera needs OpenCV: {install_hint('vision')}") from exc
             t["fault"], t["seed"], view = rig_settings(tracker)
         try:
-            model = load_robot(robot.model)
+            model = model if model is not None else load_robot(robot.model)
         except ConfigError as exc:
             raise SpecError(f"robot spec {str(robot)!r}: {exc}") from exc
         if camera and world["points"] > 1:

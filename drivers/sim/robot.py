@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from config.robots import RobotModel
 from drivers.base import Array, DeviceIdentity, RobotState
 from drivers.clock import Clock
 from drivers.errors import ConnectionFailed, DeviceTimeout, EmergencyStop, ProtectiveStop, RobotFault, SpecError
@@ -155,14 +156,15 @@ class SimulatedRobot(JointStreaming):
 
 
 def open_robot(spec: RobotSpec | str, *, rig: SimulatedRig | None = None, clock: Clock | None = None,
-               site: object = None) -> SimulatedRobot:
-    """The simulated robot of ``mock:MODEL?...`` on ``rig`` (made from the spec, with ``clock``, when None).
-    ``site`` (the site configuration every factory is given) is not needed by a simulated device."""
+               site: object = None, model: RobotModel | None = None) -> SimulatedRobot:
+    """The simulated robot of ``mock:MODEL?...`` on ``rig`` (made from the spec, with ``clock`` and ``model``, when
+    None; ``model`` None: the one MODEL names). ``site`` (the site configuration every factory is given) is not
+    needed by a simulated device."""
     spec = spec if isinstance(spec, RobotSpec) else RobotSpec.parse(spec)
     if not spec.is_mock:
         raise SpecError(f"drivers.sim opens mock robots only (mock:MODEL), got {str(spec)!r}")
     if rig is None:
-        return SimulatedRobot(SimulatedRig.from_spec(spec, None, clock))
+        return SimulatedRobot(SimulatedRig.from_spec(spec, None, clock, model))
     if clock is not None and clock is not rig.clock:
         raise ValueError("the clock belongs to the rig: give it to SimulatedRig.from_spec, not open_robot")
     same = (Path(spec.model).resolve() == Path(rig.model.path).resolve() if spec.model_is_file

@@ -130,8 +130,9 @@ def _options(spec: RobotSpec) -> dict[str, Any]:
     return out
 
 
-def open_robot(spec: RobotSpec | str, rig: object = None, site: Any = None) -> URRobot:
-    """The UR robot of ``spec`` (unconnected). The host is the spec's, else the site configuration's."""
+def open_robot(spec: RobotSpec | str, rig: object = None, site: Any = None, model: RobotModel | None = None) -> URRobot:
+    """The UR robot of ``spec`` (unconnected). The host is the spec's, else the site configuration's. ``model``: the
+    robot model (a resumed session's recorded one), None for the one ``spec`` names."""
     spec = spec if isinstance(spec, RobotSpec) else RobotSpec.parse(spec)
     if spec.backend != "ur":
         raise SpecError(f"drivers.ur opens real UR robots (MODEL@HOST), got {str(spec)!r}")
@@ -146,7 +147,7 @@ def open_robot(spec: RobotSpec | str, rig: object = None, site: Any = None) -> U
         raise SpecError(f"no address for robot {str(spec)!r}: write {spec.model}@HOST or set robot.hosts."
                         f"{spec.model.lower()} (or robot.host) in the site file")
     try:
-        model = load_robot(spec.model)
+        model = model if model is not None else load_robot(spec.model)
     except ConfigError as exc:
         raise SpecError(f"robot spec {str(spec)!r}: {exc}") from exc
     if not model.vendor.lower().startswith("universal"):

@@ -20,7 +20,7 @@ import yaml
 from common import __version__, fit_width, stop_signals
 from common.errors import InputError, install_hint
 from common.outputs import check_outputs, write_output
-from common.units import as_typed, slip_hint
+from common.units import as_typed
 from config.robots import RobotModel
 from identify.applications.calibrated import recorded_model, robot_model
 from identify.commands.options import SUBCOMMANDS, build_parser
@@ -198,7 +198,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     _check_exports(args, meas.joint_types)
     meas = _with_coupling(meas, args.coupling, robot, content.notes)
     ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset,
-                     noise=args.noise, links=robot.links if robot else None, extensions=args.extensions == "auto")
+                     noise=args.noise, links=robot.links if robot else None, extensions=args.extensions == "auto",
+                     noise_typed=as_typed(args, "noise"))
     ident.warnings[:0] = content.notes
     if header is not None:  # a session: how much of its plan was recorded is part of the verdict
         from identify.results import verdict as checks
@@ -213,7 +214,6 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         if section := controller_section(factory_calibration(header)[0], meas.joint_types):
             doc["controller"] = section
-    _noise_hint(args, doc)
     if args.out:
         _write_atomic(Path(args.out), yaml.safe_dump(doc, sort_keys=False, width=120))
     reference, note = _factory_reference(header, meas.joint_types) if header is not None else (None, "")
@@ -266,16 +266,6 @@ def _rows(meas: Measurements, rows: str) -> Measurements:
                              f"session's range starts and home): too few for the {unknowns} parameters of a fit "
                              "from free poses; use --rows all or --rows streamed")
     return meas.subset(fitted | meas.check)
-
-
-def _noise_hint(args: argparse.Namespace, doc: dict[str, Any]) -> None:
-    """A ``--noise`` ten times above the residuals (m per axis) is a unit slip: say so on stderr, repeating what was
-    typed and what to write (the verdict's model_fit check warns too)."""
-    residual = (doc.get("noise") or {}).get("residual_per_axis")
-    if args.noise is None or not residual or args.noise <= 10 * residual:
-        return
-    hint = slip_hint("--noise", as_typed(args, "noise"), args.noise)
-    print(f"identify: note: {hint} (the residuals are {residual * 1e3:.3g} mm per axis)", file=sys.stderr)
 
 
 def _with_coupling(meas: Measurements, path: str | None, robot: RobotModel | None, notes: list[str]) -> Measurements:

@@ -1,4 +1,5 @@
-"""Cramér-Rao bounds for predicted TP positions (DESIGN.md: accuracy targets).
+"""Cramér-Rao bounds for predicted TP positions: the accuracy no calibration of the same data can beat, which
+plans, verdicts and benchmarks are measured against (docs/method.md, "How far to trust it").
 
 For isotropic tracker noise ``sigma`` (m per axis) and fitted joint readings ``q_fit``, the covariance
 of any unbiased estimate of the model's prediction at ``q_check`` is at least

@@ -1,4 +1,4 @@
-"""Which joint errors beyond the DH table the data support (DESIGN.md note 8), and their regressors.
+"""Which joint errors beyond the DH table the data support, and their regressors (README: "Real robots").
 
 Candidates, per joint the data move (:mod:`kinematics.joint_errors` for the equations): reading scale,
 once-per-turn error (revolute joints; sin and cos together) and, when the robot model gives link masses,

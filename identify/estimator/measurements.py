@@ -1,6 +1,6 @@
 """Measurements: joint readings and tracked-point positions, grouped in sweeps (pure data, no I/O).
 
-Rows follow the measurement CSV contract of DESIGN.md: ``sweep`` id, the 1-based ``joint`` moved in
+Rows follow the measurement CSV (README, "File contracts"): ``sweep`` id, the 1-based ``joint`` moved in
 that sweep (0 for free poses), joint readings ``q`` (rad for R, m for P; NaN where a moved joint's
 reading was not logged), the TP ``points`` in the tracker frame (metres) and the id ``tp`` of the tracked
 point each row sees (several reflectors at one pose: one row each). With a ``coupling`` the readings are

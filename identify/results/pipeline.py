@@ -219,12 +219,14 @@ def identify(
     noise: float | None = None,
     links: LinkMasses | None = None,
     extensions: bool = True,
+    noise_typed: str | None = None,
 ) -> Identification:
     """Identify the DH model from ``meas`` (fit rows; ``check`` rows are only used for validation).
 
     ``nominal`` (optional) starts a second fit (and the only one for free poses without sweeps), supplies
     the conventional values of redundant parameters and the signs of the x axes, and is checked against
-    the data. ``noise`` (m per axis): the tracker's declared noise (the ``sigma`` column overrides it).
+    the data. ``noise`` (m per axis): the tracker's declared noise (the ``sigma`` column overrides it);
+    ``noise_typed``: it as the operator typed it (``--noise 50um``), which a unit slip's hint repeats.
     ``max_offset`` (m): how far exact DH may move a near-parallel pair's ``d`` before the convention is kept
     (None: the robot's size, :func:`identify.results.written.robot_size`). ``links`` (with ``nominal``): link masses,
     for compliance; ``extensions``: select joint errors the fit rows support (:mod:`identify.estimator.extensions`).
@@ -268,7 +270,7 @@ def identify(
     sweeps = sweep_fits(rows, models[use].refinement, warnings)
     clock = clock_fit(models[use], meas.clock_offset, clock_test)
     verdict = verdict_of(models, use, decisions, validations, sweeps, clock, rows, check_rows, nominal, meas.tp_ids,
-                         why_plain)
+                         why_plain, noise_typed)
     add_notes(models, use, decisions, len(fits), rows, warnings)
     return Identification(
         models=models,

@@ -1,8 +1,9 @@
 """Predictions of an identified model: controller readings in, tracked point (tracker frame, m) out.
 
-The chain of DESIGN.md's extensions: readings -> DH joint values (coupling) -> joint errors
-(:mod:`identify.estimator.extensions`) -> the axis lines (:mod:`identify.estimator.poe`), which are the identified model
-exactly (the DH table equals them when its ``dh_table`` check passes). Uncertainty from the fit's full covariance.
+The chain of the extended model (README, "Two models, one file"): readings -> DH joint values (coupling) ->
+joint errors (:mod:`identify.estimator.extensions`) -> the axis lines (:mod:`identify.estimator.poe`), which are the
+identified model exactly (the DH table equals them when its ``dh_table`` check passes). Uncertainty from the fit's
+full covariance.
 """
 
 from __future__ import annotations

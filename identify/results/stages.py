@@ -261,15 +261,18 @@ def recommended(models: dict[str, WrittenModel], validations: dict[str, Validati
 
 def verdict_of(models: dict[str, WrittenModel], use: str, decisions: list[Decision], validations: dict[str, Validation],
                sweeps: list[SweepFit], clock: ClockFit | None, rows: FitRows, check_rows: Measurements,
-               nominal: DHModel | None, tp_ids: list[int], why_plain: str = "") -> checks.Verdict:
+               nominal: DHModel | None, tp_ids: list[int], why_plain: str = "",
+               noise_typed: str | None = None) -> checks.Verdict:
     """The checks of the recommended model ``models[use]`` (:mod:`identify.results.verdict`): fit, conditioning,
     outliers, the DH table; then, when they apply, the clock and the nominal model; and the held-out rows, or
-    that nothing was held out. ``why_plain``: why joint errors in ``models`` are not recommended."""
+    that nothing was held out. ``why_plain``: why joint errors in ``models`` are not recommended; ``noise_typed``:
+    the declared noise as typed (``--noise``), for the hint of a unit slip."""
     used, plain = models[use], models["plain"]
     inl = used.fit.inliers
     size = robot_size(plain.lines, rows.meas.points)
     found = [
-        checks.model_fit(used.fit_rms, used.adequacy, _cause(models, decisions)),
+        checks.model_fit(used.fit_rms, used.adequacy, _cause(models, decisions), noise_typed,
+                         rows.meas.sigma is not None),
         checks.conditioning(used.condition, _identifiability(used, size), () if used.held is None else used.held.names,
                             used.held is not None and used.held.model_error),
         checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),

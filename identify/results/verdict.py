@@ -1,6 +1,7 @@
 """Whether a result can be trusted: named checks with their numbers, and the verdict they add up to.
 
-Shape fixed in DESIGN.md: ``{status: pass | warn | fail, checks: [{name, status, value, limit, message}]}``.
+Its shape in the result YAML is fixed (other tools read it; README, "The verdict"):
+``{status: pass | warn | fail, checks: [{name, status, value, limit, message}]}``.
 A check passes, warns (the result is usable with the caveat its message states in numbers) or fails (do
 not use the model). The verdict is the worst of its checks. Limits are stated as constants with why.
 """
@@ -14,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from scipy.stats import chi2
 
+from common.units import slip_hint
 from identify.estimator.adequacy import Adequacy
 from identify.estimator.identifiability import LEVEL, Identifiability
 
@@ -77,9 +79,20 @@ def mm(value: float) -> str:
     return f"{value * 1e3:.3g} mm"
 
 
-def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None) -> Check:
+def _slip(declared: float, typed: str | None, column: bool) -> str:
+    """What was given and what was probably meant, for a declared noise (m per axis) far above the residuals."""
+    if column:
+        return (f"the sigma column, median {mm(declared)}, is in the positions' unit: a sigma in mm beside "
+                "positions in metres?")
+    return slip_hint("--noise", typed if typed is not None else f"{declared:g}", declared)
+
+
+def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None, noise_typed: str | None = None,
+              noise_column: bool = False) -> Check:
     """Residuals against the noise: gross misfit fails, detected model error warns (uncertainties inflated).
-    ``cause``: what the joint-error selection found (the kinds of error selected and what they explain)."""
+    ``cause``: what the joint-error selection found (the kinds of error selected and what they explain). For the
+    hint of a unit slip: ``noise_typed``, the ``--noise`` text as typed (None: the declared noise was given in
+    metres); ``noise_column``, the declared noise is the data's ``sigma`` column."""
     a = adequacy
     if rms_3d > GROSS_MISFIT:
         why = (f"{cause}; a DH model with these joint errors still does not describe the data"
@@ -97,8 +110,8 @@ def model_fit(rms_3d: float, adequacy: Adequacy, cause: str | None = None) -> Ch
     if a.declared is not None and a.residual * UNIT_SLIP < a.declared:
         return Check("model_fit", "warn", a.residual, a.declared / UNIT_SLIP,
                      f"residuals {mm(a.residual)} per axis are {a.declared / a.residual:.3g}x below {reference}: "
-                     "a unit slip? (--noise 0.05 is metres; write 0.05mm); the uncertainties, and the limits "
-                     "compensation and verification take from them, are that much too loose")
+                     f"a unit slip? ({_slip(a.declared, noise_typed, noise_column)}); the uncertainties, and the "
+                     "limits compensation and verification take from them, are that much too loose")
     if a.detected and a.model_error == 0.0:  # the excess does not follow the arcs: nothing the predictions share
         found = f"; {cause}" if cause else ""
         return Check("model_fit", "warn", a.white, None,

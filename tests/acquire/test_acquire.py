@@ -86,6 +86,7 @@ def test_simulated_and_real_devices_are_refused_together_before_the_plan(tmp_pat
     assert "needs mock devices on both sides" in err and err.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_protective_stop_pauses_and_resume_completes_without_duplicates(tmp_path, capsys):
     code, path = _run(tmp_path, robot=ROBOT + "&fault=protective_stop@20")
     assert code == 1
@@ -100,6 +101,7 @@ def test_protective_stop_pauses_and_resume_completes_without_duplicates(tmp_path
         assert [r.outcome for r in session.runs()] == ["failed", "complete"]
 
 
+@pytest.mark.slow
 def test_lost_target_is_retried_then_the_step_is_missing_and_measured_again_at_the_end(tmp_path):
     code, path = _run(tmp_path, tracker="mock?fault=target_lost@10x4")
     assert code == 0
@@ -128,6 +130,7 @@ def test_robot_faults_stop_the_run_and_keep_what_was_recorded(tmp_path, capsys, 
         assert session.outcome() == "failed"
 
 
+@pytest.mark.slow
 def test_export_and_offline_identify_of_a_session(tmp_path, capsys):
     from identify.commands.cli import main as identify_main
 
@@ -159,6 +162,7 @@ def _logged_steps(log: Path) -> int:
         return 0
 
 
+@pytest.mark.slow
 def test_sigkill_at_random_moments_then_resume_equals_an_uninterrupted_run(tmp_path):
     """Kill the real command with SIGKILL at random moments, resume until complete: every plan step is
     recorded exactly once, with the commanded poses of the plan and positions that agree with an
@@ -203,6 +207,7 @@ def test_sigkill_at_random_moments_then_resume_equals_an_uninterrupted_run(tmp_p
     assert np.abs(diff).max() < 8 * NOISE
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_motion_closes_the_session_and_prints_the_resume_command(tmp_path):
     """SIGINT to a real-time mock run mid-plan: exit 130, the run recorded as aborted, resumable."""
     path = tmp_path / "c.session"
@@ -238,6 +243,7 @@ def test_a_real_robot_never_moves_without_confirmation(tmp_path, monkeypatch, ca
     assert not (tmp_path / "r.session").exists()
 
 
+@pytest.mark.slow
 def test_log_file_records_every_step(tmp_path):
     log = tmp_path / "run.log"
     code, path = _run(tmp_path, "--log", str(log))

@@ -95,6 +95,7 @@ def _modes(out: str) -> dict[str, tuple[int, float]]:
     return rows
 
 
+@pytest.mark.slow
 def test_dry_run_compares_the_three_modes(capsys) -> None:
     tables = {}
     for mode in ("step", "continuous", "both"):
@@ -151,6 +152,7 @@ def mixed(tmp_path_factory) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_a_mixed_session_exports_both_kinds_of_rows(mixed: Path, tmp_path: Path, capsys) -> None:
     with Session.open(mixed) as session:
         assert plan_mode(session.plan) == "both" and session.header["schema"] == 3
@@ -173,6 +175,7 @@ def test_a_mixed_session_exports_both_kinds_of_rows(mixed: Path, tmp_path: Path,
         assert kinds == {False, True}, joint
 
 
+@pytest.mark.slow
 def test_a_mixed_session_is_identified_within_its_uncertainties(mixed: Path) -> None:
     result = mixed.with_suffix(".result.yaml")
     model, doc = load_result(str(result))
@@ -203,6 +206,7 @@ def test_a_mixed_session_is_identified_within_its_uncertainties(mixed: Path) -> 
     assert abs(clock["offset_s"] - offset) < 0.5e-3  # the target, for the record
 
 
+@pytest.mark.slow
 def test_stop_and_go_rows_check_the_streams_timing(mixed: Path, tmp_path: Path, capsys) -> None:
     step, streamed = tmp_path / "step.yaml", tmp_path / "streamed.yaml"
     assert identify_main([str(mixed), "--rows", "step", "--out", str(step)]) == 0
@@ -250,6 +254,7 @@ def _streams(path: Path) -> list[tuple]:
         return db.execute("SELECT plan_index, attempt, status, superseded FROM streams ORDER BY id").fetchall()
 
 
+@pytest.mark.slow
 def test_a_mixed_session_resumes_after_stops_in_either_kind_of_sweep(tmp_path: Path, capsys) -> None:
     (tmp_path / "site.yaml").write_text(SITE)
     path = tmp_path / "r.session"

@@ -80,6 +80,7 @@ def test_the_predicted_camera_noise_errs_high_against_its_readings_at_home():
     assert 1.0 < predicted / measured < 4.0, (predicted, measured)
 
 
+@pytest.mark.slow
 def test_a_step_measured_again_keeps_the_total_and_the_verdict_counts_missing_steps(tmp_path):
     """Before, the total grew by one for each step recorded missing (256 -> 375 in the README's camera example)."""
     path, log = tmp_path / "s.session", tmp_path / "run.log"

@@ -274,6 +274,7 @@ def test_a_crash_mid_sweep_loses_at_most_a_second_and_the_resume_redoes_the_swee
 # --- the command line ------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_cli_continuous_session_end_to_end_and_export(tmp_path: Path, capsys) -> None:
     site = tmp_path / "site.yaml"
     site.write_text("schema: 1\nplan:\n  check_poses: 4\n  stream_speed: 0.8\n")

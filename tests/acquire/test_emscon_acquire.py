@@ -8,6 +8,7 @@ import json
 import sqlite3
 
 import numpy as np
+import pytest
 import yaml
 
 from acquire.commands.cli import main
@@ -26,6 +27,7 @@ NOISE = 5e-5  # emscon:sim's default noise, m per axis
 TRACKER = "emscon:sim?meas_time=0.01&timeout=0.3&fault=beam_broken@20x2,drop@40,garbage@60,silence@80"
 
 
+@pytest.mark.slow
 def test_emscon_sim_session_with_faults_identifies_the_truth(tmp_path, capsys):
     path = tmp_path / "s.session"
     assert main(["--robot", ROBOT, "--tracker", TRACKER, "--session", str(path), *SMALL]) == 0
@@ -58,6 +60,7 @@ def test_emscon_sim_options_are_checked_in_one_line(tmp_path, capsys):
         assert code == 2 and words in err and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_dry_run_says_what_the_tracker_will_be_asked(tmp_path, capsys):
     site = tmp_path / "site.yaml"
     site.write_text("schema: 1\ntracker:\n  settings: {temperature: 21.5, pressure: 990, humidity: 40, "

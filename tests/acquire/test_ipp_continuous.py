@@ -12,6 +12,7 @@ import sqlite3
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from acquire.planning.plan_continuous import build_continuous_plan
 from acquire.planning.plan_target import replan_for_rate
@@ -35,6 +36,7 @@ NOISE = 2e-5  # m per axis per report
 HALF = 0.5  # rad: each joint swept over home ± HALF
 
 
+@pytest.mark.slow
 def test_continuous_session_against_a_standard_ipp_server(tmp_path: Path) -> None:
     model = load_robot("ur5e")
     home = np.asarray(model.home, dtype=float)
@@ -91,6 +93,7 @@ def test_continuous_session_against_a_standard_ipp_server(tmp_path: Path) -> Non
     assert rms < 3 * bound, (rms, bound, spread)
 
 
+@pytest.mark.slow
 def test_a_target_the_standard_rate_cannot_reach_is_refused_before_anything_moves(tmp_path: Path, capsys) -> None:
     """``--target-accuracy`` plans at the site's 250 Hz; a standard I++ server then streams 10 reports/s, and the
     confirmed plan no longer reaches the target: one line, exit 2, no session, the arm never commanded. The real
@@ -109,6 +112,7 @@ def test_a_target_the_standard_rate_cannot_reach_is_refused_before_anything_move
     assert not (tmp_path / "s.session").exists() and moved is None
 
 
+@pytest.mark.slow
 def test_at_the_standard_rate_a_new_plan_keeps_its_poses_and_sweeps_slower() -> None:
     """The plan shown at 250 Hz, built again for the 10 reports/s a standard server takes: the same poses and
     joint-space paths (so the checks shown hold), sweeps at 0.25 rad/s at most, a longer robot time said in the

@@ -90,6 +90,7 @@ def test_the_dry_run_plans_for_the_target_and_a_step_plan_keeps_the_operators_st
     assert "modes (--mode step | continuous | both)" not in out  # the trade-off table replaces the mode table
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("extra", "message"), [
     (["--target-accuracy", "0.001mm", "--mode", "step", "--steps", "12"], "no plan considered reaches 0.001 mm"),
     (["--max-robot-time", "10s", "--mode", "step", "--steps", "12"], "no plan fits in 0:00:10"),
@@ -104,6 +105,7 @@ def test_an_unreachable_or_misplaced_target_is_refused_in_one_line(capsys, extra
     assert err.count("\n") == 1 and message in err and "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_the_chosen_plan_is_the_one_the_session_gets(capsys, continuous):
     """The plan acquire goes on with (its JSON) is the chosen candidate's: its ranges and speeds, not the
     default plan's."""

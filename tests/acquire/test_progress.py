@@ -151,6 +151,7 @@ def _pty_run(argv: list[str], cols: int, cwd: Path | None = None) -> str:
     return re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out.decode(errors="replace"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cols", [80, 50])
 def test_the_bar_fits_a_real_terminal_and_shows_wall_clock_time(tmp_path, cols):
     acquire = str(Path(sys.executable).with_name("acquire"))
@@ -165,6 +166,7 @@ def test_the_bar_fits_a_real_terminal_and_shows_wall_clock_time(tmp_path, cols):
         assert re.search(r"simulated 0:0[1-9]:\d\d", last) and "joint 3 sweep" in text
 
 
+@pytest.mark.slow
 def test_a_session_and_its_verification_fit_an_80_column_terminal(tmp_path):
     """What ``make demo`` prints (plan, progress, identification, verification), on a real 80-column terminal:
     no line wider, the DH table's four columns side by side."""

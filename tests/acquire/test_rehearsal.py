@@ -25,6 +25,7 @@ def _plan(site_path, fraction: float):
     return build_plan(load_robot("ur5e"), site)
 
 
+@pytest.mark.slow
 def test_rehearsal_against_the_emulator_moves_through_the_plan_at_a_quarter_speed(tmp_path, monkeypatch,
                                                                                    capsys) -> None:
     pytest.importorskip("rtde_control", reason="ur_rtde is not installed (pip install 'ur-rtde==1.6.5', the ur extra)")

@@ -46,6 +46,7 @@ def test_a_bad_model_or_an_empty_spec_is_refused(text):
         RobotSpec.parse(text)
 
 
+@pytest.mark.slow
 def test_a_mock_session_of_a_model_file_records_it_and_resumes_from_another_folder(tmp_path, monkeypatch, capsys):
     """Named relative to the working folder; the session keeps the absolute path, so a dry-run resume from another
     folder plans with the same model."""
@@ -67,6 +68,29 @@ def test_a_mock_session_of_a_model_file_records_it_and_resumes_from_another_fold
     (cell / "cell7_arm.yaml").rename(tmp_path / "moved.yaml")  # the session still reads offline: its own model
     assert identify_main([str(path)]) == 0
     assert "cell7_arm" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_a_resume_uses_the_model_the_session_records_when_the_file_has_moved_or_changed(tmp_path, capsys):
+    """The plan was checked with the recorded model: a resume drives with it, saying why in one line."""
+    arm = _arm(tmp_path)
+    path = tmp_path / "s.session"
+    assert main(["--robot", f"mock:{arm}?fault=protective_stop@5", "--tracker", "mock", "--session", str(path),
+                 *SMALL]) == 1
+    capsys.readouterr()
+    arm.write_text(arm.read_text().replace("cell7_arm", "cell7_arm_v2"))  # edited since: not the session's model
+    assert main(["--resume", str(path), "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert f"robot: {arm} has changed since the session was planned; the resume uses the model the session " \
+           "records (cell7_arm)" in out.splitlines() and "Plan for cell7_arm (" in out
+    arm.rename(tmp_path / "moved.yaml")
+    assert main(["--resume", str(path), "--quiet"]) == 0
+    out, err = capsys.readouterr()
+    assert f"robot: {arm} is not there; the resume uses the model the session records (cell7_arm)" \
+           in out.splitlines() and err == ""
+    with Session.open(path) as session:
+        assert session.outcome() == "complete"
+        assert [s.plan_index for s in session.steps()] == list(range(len(session.plan.steps)))
 
 
 def test_a_model_file_is_validated_as_the_bundled_ones_are(tmp_path, capsys):

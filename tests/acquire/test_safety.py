@@ -171,6 +171,7 @@ def test_segment_distances_match_a_brute_force_sampling() -> None:
     assert np.all(box <= sampled + 1e-6) and np.all(sampled - box <= np.linalg.norm(p1 - p0, axis=1) / 200 + 1e-9)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", robot_names())
 def test_default_plan_of_every_bundled_robot_is_clear(name: str) -> None:
     robot = load_robot(name)
@@ -192,17 +193,18 @@ def test_the_issue_plan_is_now_clipped() -> None:
     assert any(note.startswith("joint 2 sweep clipped to") and "mounting surface" in note for note in plan.notes)
 
 
+@pytest.mark.slow
 def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
-    """400 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
-    robot: each plan is clear by the independent check (every step exactly, the moves at 8 samples per rad to
-    keep the test near half a minute), or refused with one line; a refusal naming a joint and angle is a real
-    contact. About 30 site files per bundled robot (1,000 cost 90 s of the suite; when written: 235 accepted, 165
-    refused)."""
+    """210 random site files (sweep ranges, margins, clearances, tools, boxes, cylinders) over every bundled
+    robot: each plan is clear by the independent check (every step exactly, the moves at 8 samples per rad), or
+    refused with one line; a refusal naming a joint and angle is a real contact. 15 site files per bundled robot,
+    5 of each way of giving ranges (the planner is 2/3 of the cost: 400 files took 100 s of a loaded suite, 1,000
+    took 90 s of an idle one; 400 gave 235 accepted, 165 refused; these 210 give 122 and 88)."""
     rng = np.random.default_rng(2026)
     names = robot_names()
     robots = {name: load_robot(name) for name in names}
     accepted = refused = 0
-    for trial in range(400):
+    for trial in range(15 * len(names)):  # robot trial % 14, mode trial % 3: each pair 5 times
         robot = robots[names[trial % len(names)]]
         n = robot.n_joints
         ranges = []
@@ -254,9 +256,10 @@ def test_random_site_files_give_clear_plans_or_one_line_refusals() -> None:
         accepted += 1
         assert_safe(plan, robot, site, per_rad=8.0)
     print(f"{accepted} plans accepted, {refused} refused")
-    assert accepted >= 70 and refused >= 40, (accepted, refused)
+    assert accepted >= 37 and refused >= 21, (accepted, refused)  # both outcomes exercised (as 70 and 40 of 400)
 
 
+@pytest.mark.slow
 def test_a_fixture_in_the_way_clips_the_sweep_and_a_colliding_range_is_refused(tmp_path, capsys) -> None:
     ur = load_robot("ur5e")
     q = ur.home.copy()
@@ -290,6 +293,7 @@ def test_a_fixture_in_the_way_clips_the_sweep_and_a_colliding_range_is_refused(t
     assert "Traceback" not in err
 
 
+@pytest.mark.slow
 def test_dry_run_shows_the_clearance_and_json_is_the_design_contract(capsys) -> None:
     assert acquire(["--robot", "ur5e", "--tracker", "mock", "--dry-run"]) == 0
     out = capsys.readouterr().out

@@ -16,6 +16,7 @@ from acquire.commands.cli import main
 from acquire.running.session import Session
 from tests._session_steps import recorded_steps
 
+pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
 ROBOT = "mock:ur5e?seed=3"
 SMALL = ["--steps", "12", "--samples", "3", "--free-poses", "6", "--quiet"]
 COMMAND = [str(Path(sys.executable).with_name("acquire"))]
@@ -33,6 +34,7 @@ def _handler_installed(pid: int, signum: int, timeout: float = 20.0) -> None:
         time.sleep(0.005)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("signum", "said"), [(signal.SIGTERM, "stopped by SIGTERM"),
                                               (signal.SIGHUP, "stopped by SIGHUP")])
 def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, capsys, signum, said):
@@ -63,6 +65,7 @@ def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, capsys, signum, s
         assert sorted(s.plan_index for s in session.steps()) == list(range(total))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 @pytest.mark.parametrize("delay", [0.0, 0.6])
 def test_a_stop_during_start_up_is_one_line_without_a_traceback(tmp_path, signum, delay):

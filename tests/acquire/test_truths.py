@@ -116,6 +116,7 @@ def test_joint_errors_move_the_points_by_the_delta_q_the_spec_implies() -> None:
     assert min(shifts) > 5e-5  # tenths of a millimetre: what the identification has to find
 
 
+@pytest.mark.slow
 def test_acquire_runs_the_issue_mock_spec_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path, csv = tmp_path / "m.session", tmp_path / "m.csv"
     code = main(["--robot", "mock:ur10e?compliance=1e-6&points=3", "--tracker", "mock", "--session", str(path),

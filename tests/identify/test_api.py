@@ -29,6 +29,7 @@ def _readme_example() -> tuple[str, list[str]]:
     return code, shown
 
 
+@pytest.mark.slow
 def test_the_readme_example_runs_and_prints_what_the_readme_shows() -> None:
     code, shown = _readme_example()
     out = io.StringIO()

@@ -243,6 +243,7 @@ def _session_then_check(folder: str) -> tuple[int, int, str]:
     return acquired, code, out.getvalue()
 
 
+@pytest.mark.slow
 def test_check_reads_a_session_file(tmp_path):
     from tests._single_thread import run_single_threaded
 

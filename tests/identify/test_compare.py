@@ -51,6 +51,7 @@ def draws(count: int) -> list[tuple[bool, list[str], float, float, float]]:
     return out
 
 
+@pytest.mark.slow
 def test_no_change_is_not_called_a_change_and_a_005_degree_offset_change_is_found() -> None:
     """A -> B: no significant change in >= 95 % of the draws (the test's false-alarm rate is 1 %); A -> C: a
     significant change naming theta3 (and nothing else) in >= 95 %, of the size simulated within its uncertainty."""
@@ -76,6 +77,7 @@ def _result(tmp_path, name: str, truth, seed, robot=ROBOT) -> str:
     return str(path)
 
 
+@pytest.mark.slow
 def test_compare_command_results_html_json_and_refusals(tmp_path, capsys) -> None:
     pytest.importorskip("matplotlib")
     truth = random_truth(ROBOT.nominal, ROBOT.home, np.random.default_rng(3))
@@ -132,6 +134,7 @@ def two_sessions(folder: str) -> tuple[list[int], int, str]:
     return codes, code, out.getvalue()
 
 
+@pytest.mark.slow
 def test_compare_sessions_of_the_mock_rig(tmp_path) -> None:
     codes, code, out = run_single_threaded(two_sessions, str(tmp_path))
     assert codes == [0, 0] and code == 0, out

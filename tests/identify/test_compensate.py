@@ -157,6 +157,7 @@ def compensation_draws(seeds: list[int]) -> list[tuple[float, float, float, int]
     return out
 
 
+@pytest.mark.slow
 def test_compensated_targets_are_reached_at_the_predicted_accuracy_and_nominal_misses_by_the_truth() -> None:
     """With the identified model the real TP lands within 1.2x the RMS the covariance predicts (pooled over 3
     draws of 200 targets; no single draw beyond 1.5x); with the nominal model it misses by the truth's deviation

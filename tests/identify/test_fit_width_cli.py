@@ -29,6 +29,7 @@ def results(tmp_path_factory):
     return folder, out.getvalue()
 
 
+@pytest.mark.slow
 def test_the_report_fits_80_columns_with_the_dh_table_whole(results):
     _, text = results
     lines = text.splitlines()

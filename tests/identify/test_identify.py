@@ -41,6 +41,7 @@ def _rms_error(model, truth, q):
     return float(np.sqrt(np.mean(np.sum((points_from_joints(model, q) - points_from_joints(truth, q)) ** 2, axis=1))))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", FAMILIES)
 @pytest.mark.parametrize("with_nominal", [True, False])
 def test_zero_noise_reproduces_truth(name, with_nominal):
@@ -51,6 +52,7 @@ def test_zero_noise_reproduces_truth(name, with_nominal):
     assert err < 1e-9
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", FAMILIES)
 @pytest.mark.parametrize(("noise", "arc"), [(1e-5, None), (5e-5, np.radians(20)), (5e-4, None)])
 def test_noisy_accuracy_within_bound(name, noise, arc):
@@ -107,6 +109,7 @@ def test_fixed_parameters_take_nominal_values_and_are_explained():
     assert all(ident.std[ident.refinement.free] > 0)
 
 
+@pytest.mark.slow
 def test_reported_uncertainty_matches_monte_carlo_spread():
     """30 repetitions: the mean reported standard uncertainty of a few DH values matches their empirical
     spread within 35 % (the sampling error of a 30-draw standard deviation is about 13 %)."""

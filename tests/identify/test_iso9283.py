@@ -51,6 +51,7 @@ def _figures(sets: dict) -> dict[str, float]:
     return {**out, "ap_a": float(o.ap[0]), "rp_a": float(o.rp[0])}
 
 
+@pytest.mark.slow
 def test_monte_carlo_uncertainty_matches_the_spread_of_repeats() -> None:
     """The stated uncertainty (Monte-Carlo from one run's visits) against the standard deviation of each figure over
     independent simulated runs. With 150 runs the spread itself is known to 1/sqrt(298) = 5.8 %: 20 % is 3.4

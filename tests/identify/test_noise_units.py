@@ -47,7 +47,8 @@ def test_noise_in_millimetres_is_read_as_such_and_a_bare_millimetre_value_warns(
     assert fit["status"] == "pass"
     assert right["noise"]["declared_per_axis"] == pytest.approx(SAMPLE_NOISE, rel=1e-12)
     slip = {c["name"]: c for c in _identify("0.05", capsys)["verdict"]["checks"]}["model_fit"]
-    assert slip["status"] == "warn" and "unit slip" in slip["message"] and "write 0.05mm" in slip["message"]
+    assert slip["status"] == "warn" and "unit slip" in slip["message"]
+    assert "(--noise 0.05 is read as 50 mm; did you mean 0.05mm?)" in slip["message"]
     assert slip["value"] == pytest.approx(SAMPLE_NOISE, rel=0.2)  # the residual noise: the sample's own
 
 
@@ -59,10 +60,14 @@ def test_a_noise_without_a_known_unit_is_refused_in_one_line(capsys):
     assert len(err.splitlines()) == 1 and "--noise" in err and "0.05mm" in err
 
 
-def test_identify_repeats_what_was_typed_when_the_noise_is_a_unit_slip(capsys):
-    """The verdict's hint is one text; the command's note repeats the typed value and its fix (issue 39, item 2)."""
-    assert main([str(SAMPLE), "--noise", "50mm", "--json"]) == 0
-    err = capsys.readouterr().err
-    assert "--noise 50mm is read as 50 mm; did you mean 50um?" in err
-    assert main([str(SAMPLE), "--noise", "50um", "--json"]) == 0
-    assert "did you mean" not in capsys.readouterr().err
+def test_the_verdict_repeats_what_was_typed_when_the_noise_is_a_unit_slip(capsys):
+    """The model_fit check says what was typed and what was probably meant (issue 39, items 2 and 14c)."""
+    fit = {c["name"]: c for c in _identify("50mm", capsys)["verdict"]["checks"]}["model_fit"]
+    assert "(--noise 50mm is read as 50 mm; did you mean 50um?)" in fit["message"]
+    fit = {c["name"]: c for c in _identify("50um", capsys)["verdict"]["checks"]}["model_fit"]
+    assert fit["status"] == "pass" and "did you mean" not in fit["message"]
+
+
+def test_a_sigma_column_in_millimetres_is_named_as_the_slip():
+    check = verdict.model_fit(SIGMA, _white_noise_fit(1e3 * SIGMA), noise_column=True)
+    assert check.status == "warn" and "the sigma column, median 10 mm, is in the positions' unit" in check.message

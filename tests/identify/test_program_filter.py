@@ -27,6 +27,7 @@ ROBOT = load_robot("ur5e")
 ROOT = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.slow
 def test_a_filtered_program_of_50_targets_lands_where_it_was_meant_on_the_true_arm() -> None:
     """Four simulated arms, each with a 50-target program (poses, joint lists, named ones): the true TP lands within
     1.2x the predicted RMS pooled over the draws, each target within 3x its own prediction; the identified model at
@@ -174,6 +175,7 @@ def test_before_is_the_controller_s_factory_calibration_when_the_result_records_
     assert "controller model (before): factory calibration" in csv_out.read_text()
 
 
+@pytest.mark.slow
 def test_the_readme_s_program_filter_runs_as_written(tmp_path) -> None:
     """The README's example: identify the sample, filter the example program; the kept lines are listed."""
     import os
@@ -261,10 +263,10 @@ def test_a_tcp_the_filter_cannot_know_is_refused_unless_tool_gives_it(result, tm
 
 def test_the_program_report_fits_an_80_column_terminal(result, tmp_path, capsys, monkeypatch) -> None:
     """Kept lines quote the program (up to 159 columns before, issue 39 item 10): wrapped to the terminal."""
-    program = tmp_path / "cycle.script"
-    program.write_bytes(PROGRAM.encode())
+    (tmp_path / "cycle.script").write_bytes(PROGRAM.encode())
     monkeypatch.setenv("COLUMNS", "80")
-    assert main(["compensate", str(result), "--program", str(program), "--out", str(tmp_path / "o.script"),
+    monkeypatch.chdir(tmp_path)  # a path is never broken: the pytest folder's (longer under xdist) is not the test's
+    assert main(["compensate", str(result), "--program", "cycle.script", "--out", "o.script",
                  "--tool", "0,0,0.1"]) == 3
     printed = capsys.readouterr().out.splitlines()
     assert max(map(len, printed)) <= 80 and any(line.startswith("  line 17: movec") for line in printed)

@@ -169,6 +169,7 @@ def test_cli_records_coupling_tools_and_extensions_and_exports_say_what_they_lac
     assert "move together" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_report_shows_every_tracked_point_the_coupling_and_the_joint_error_decisions(tmp_path):
     robot = load_robot("fanuc_lrmate200id")
     rng = np.random.default_rng(146)

@@ -62,6 +62,7 @@ def test_offset_recovered_from_a_coarse_start():
     assert result.validation is not None and result.validation.rms < result.validation.expected
 
 
+@pytest.mark.slow
 def test_without_the_clock_fit_the_timing_error_shows():
     meas, nominal = session(3, SETTINGS)
     synced = identify(meas, nominal, noise=NOISE)

@@ -116,6 +116,7 @@ def _stream_session(seed: int) -> tuple[Measurements, object]:
     return joined(stream, poses), nominal
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("outliers", [0, 12])
 def test_a_session_solved_as_tall_identifies_what_minpack_does(monkeypatch, outliers):
     meas, nominal = _stream_session(5)

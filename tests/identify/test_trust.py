@@ -235,6 +235,7 @@ def _strict_json(text: str) -> dict:
     return json.loads(text, parse_constant=refuse)
 
 
+@pytest.mark.slow
 def test_nonsense_fails_its_verdict_with_exit_3_and_valid_json(tmp_path, capsys):
     """Symptom 9: --joints RRRRRP on 6R data gave exit 0 with a 106 mm residual; --robot ur10e on UR5e data
     reported Δa2 = +188 mm without a word; --json printed NaN."""

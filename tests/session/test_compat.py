@@ -58,6 +58,7 @@ def test_an_old_session_reads_and_exports_as_before(tmp_path: Path) -> None:
     db.close()
 
 
+@pytest.mark.slow
 def test_an_old_session_resumes_and_keeps_its_records(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = _old_session(tmp_path)
     with Session.open(path) as session:

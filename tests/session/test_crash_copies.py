@@ -62,6 +62,7 @@ def _hot_journal(path: Path) -> bool:
         return journal.read(len(JOURNAL_MAGIC)) == JOURNAL_MAGIC
 
 
+@pytest.mark.slow
 def test_sigkill_then_copy_the_session_file_alone_and_resume_the_copy(tmp_path: Path) -> None:
     site = tmp_path / "fast.yaml"
     site.write_text(FAST_SITE)
@@ -134,6 +135,7 @@ def test_sigkill_then_copy_the_session_file_alone_and_resume_the_copy(tmp_path: 
           f"{len(originals)} original sessions, {time.monotonic() - t0:.1f} s")
 
 
+@pytest.mark.slow
 def test_two_writers_started_together_one_runs_the_other_exits_2_at_once(tmp_path: Path) -> None:
     """Two fresh ``acquire --resume`` processes (the installed entry point, acquire/commands/launch.py) started
     together."""

@@ -29,8 +29,9 @@ from acquire.running.stream_loop import COMMIT_PERIOD
 from drivers.sim.stream import robot_time_of_stamps
 from tests._acquire_writer import ROOT, Writer
 
-pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not hasattr(os, "fork"),
-                                reason="needs SIGKILL and fork")
+pytestmark = [pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not hasattr(os, "fork"),
+                                 reason="needs SIGKILL and fork"),
+              pytest.mark.realtime]  # timing-sensitive: make test runs these alone, after the rest
 
 # quick stop-and-go moves (no settling), so the first sweep starts within a second or two; the sweeps themselves
 # run at their planned speed (1 rad/s: each sweep takes 3.5-7 s)
@@ -70,6 +71,7 @@ def _committed(path: Path) -> tuple[int, int, int, float]:
     return int(batches), int(tracker), int(joints), float(last or 0.0)
 
 
+@pytest.mark.slow
 def test_sigkill_mid_sweep_keeps_the_committed_batches_and_the_resume_redoes_the_sweep(tmp_path: Path) -> None:
     site = tmp_path / "fast.yaml"
     site.write_text(FAST_SITE)

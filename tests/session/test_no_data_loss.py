@@ -79,6 +79,7 @@ def test_identify_out_equal_to_the_input_csv_is_refused(tmp_path: Path, capsys) 
     assert good.read_bytes() == before
 
 
+@pytest.mark.slow
 def test_identify_out_equal_to_the_input_session_is_refused(session_copy: Path, capsys) -> None:
     before = session_copy.read_bytes()
     for option in ("--out", "--report", "--json-out", "--csv"):
@@ -282,6 +283,7 @@ def _interrupted(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("extra", "named"), [
     (["--steps", "20"], "--steps 20"),
     (["--samples", "9"], "--samples 9"),
@@ -312,6 +314,7 @@ def test_resume_refuses_what_would_change_the_plan(tmp_path: Path, capsys, monke
     del before  # the lock's writer record may be refreshed; the steps and runs are what must not change
 
 
+@pytest.mark.slow
 def test_resume_takes_new_connection_details_and_records_them(tmp_path: Path, capsys) -> None:
     path = _interrupted(tmp_path)
     site = tmp_path / "site.yaml"
@@ -355,6 +358,7 @@ def test_a_complete_session_is_reported_and_nothing_moves(session_copy: Path, ca
     assert not session_copy.with_suffix(".result.yaml").exists()  # nothing rewritten (none was copied here)
 
 
+@pytest.mark.slow
 def test_a_run_that_died_after_its_last_step_is_closed_and_identified_on_resume(session_copy: Path, capsys,
                                                                                 monkeypatch) -> None:
     """Killed after the last step's commit, before the run was closed and the session identified: the resume
@@ -375,6 +379,7 @@ def test_a_run_that_died_after_its_last_step_is_closed_and_identified_on_resume(
     assert session_copy.with_suffix(".result.yaml").exists() and session_copy.with_suffix(".report.html").exists()
 
 
+@pytest.mark.slow
 def test_missing_steps_are_measured_again_on_request_keeping_the_first_attempt(tmp_path: Path, capsys) -> None:
     path = tmp_path / "m.session"
     log = tmp_path / "run.log"

@@ -101,6 +101,7 @@ def test_calibration_refuses_too_few_views_in_one_line(tmp_path, capsys):
     assert "0 of 1 views" in err and err.count("\n") == 1
 
 
+@pytest.mark.slow
 def test_print_board_writes_true_scale_png_and_pdf(tmp_path, capsys):
     png = tmp_path / "m.png"
     assert main(["print-board", "--marker", "7", "--size", "0.05", "--dpi", "300", "--out", str(png)]) == 0
@@ -145,6 +146,7 @@ plan:
 """
 
 
+@pytest.mark.slow
 def test_mock_session_with_the_rendered_camera_is_identified(tmp_path, capsys):
     """mock:ur5e measured by aruco:sim (a 2x2 grid board at 0.8 m, 640x480): the readings' sigma is honest
     (reduced chi-square near 1), hardly any sample is rejected, and the identified model predicts the true

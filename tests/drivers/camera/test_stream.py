@@ -299,6 +299,7 @@ plan:
 """
 
 
+@pytest.mark.slow
 def test_continuous_mock_session_with_the_camera_recovers_its_latency(tmp_path, capsys):
     """mock:ur5e swept at constant speed, the rendered camera streaming at 30 Hz with 40 ms between exposure and
     stamp: the session completes, is identified, and the fitted clock offset is -40 ms within 3 of its reported

@@ -413,15 +413,18 @@ def test_open_checks_the_spec_against_the_rig() -> None:
     assert isinstance(alone.rig.clock, VirtualClock) and alone.joint_types == "RRPR"
 
 
-def test_two_hundred_moves_take_well_under_a_second() -> None:
+def test_two_hundred_moves_on_the_virtual_clock_do_not_wait() -> None:
+    """The virtual clock advances without sleeping: 200 moves, settles and measurements (over 100 s of robot time)
+    take a small share of that in wall time, however loaded the host."""
     rig, robot, tracker = make()
     t_virtual, t_wall = rig.clock.now(), time.perf_counter()
     for k in range(200):
         robot.move_joints(pose(j6=0.2 * (k % 10), j2=0.05 * (k % 3)), SPEED, ACC, timeout=30)
         robot.wait_until_still(0.5, timeout=5)
         assert len(tracker.measure(5, 1.0)) == 5
-    assert time.perf_counter() - t_wall < 0.8
-    assert rig.clock.now() - t_virtual > 200 * 0.5  # at least the settle times passed on the virtual clock
+    virtual = rig.clock.now() - t_virtual
+    assert virtual > 200 * 0.5  # at least the settle times passed on the virtual clock
+    assert time.perf_counter() - t_wall < 0.02 * virtual  # idle: under 0.3 s; a clock that slept: all of it
 
 
 def test_wall_clock_plays_at_real_speed() -> None:

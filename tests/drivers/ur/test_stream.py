@@ -23,6 +23,7 @@ from drivers.registry import open_robot
 from tests.ur_emulator import CMD_STOPJ, EmulatorProcess
 from tests.ur_emulator import connected_robot as connected
 
+pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
 HOME = np.array(load_robot("ur5e").home, dtype=float)
 SCALE, RATE = 4.0, 125.0  # emulated s per wall s; RTDE packages per emulated s
 PERIOD = 1.0 / RATE
@@ -102,7 +103,12 @@ def test_joint_stream_at_the_native_rate_with_controller_timestamps(emulator: Em
     first = batch.t[moving[0]]
     gap_before = moving[0] > 0 and (batch.t[moving[0] - 1], first) in set(batch.gaps)
     assert abs(first - start) < 2 * PERIOD or (gap_before and batch.t[moving[0] - 1] < start + PERIOD)
-    assert abs(batch.t[moving[-1]] - (start + duration)) < 0.1  # the last change near its end
+    # the last change (the first sample at the target: the last ticks still move ACC * PERIOD² / 2 = 48 µrad) near
+    # the move's end; the recording goes on past it for as long as the host takes to see motion_done, which load
+    # decides (the last sample, not the last change, was 105 ms late in a loaded run)
+    arrived = np.flatnonzero(np.abs(batch.q[:, 0] - batch.q[-1, 0]) > 1e-6)[-1] + 1
+    assert arrived < len(batch.t) and abs(batch.q[-1, 0] - (HOME + STEP)[0]) < 1e-3  # it stopped at the target
+    assert abs(batch.t[arrived] - (start + duration)) < 0.1
     # each sample's joints belong to its own timestamp: no speed beyond the commanded one (a package's q read
     # with a neighbour's timestamp would show a step twice the size)
     speed = np.abs(np.diff(batch.q[:, 0])) / np.diff(batch.t)

@@ -16,6 +16,7 @@ ROOT = Path(__file__).resolve().parents[3]
 SAMPLE = ROOT / "identify" / "data" / "sample_ur5e.csv"
 
 
+@pytest.mark.slow
 def test_every_export_is_written_and_consistent(tmp_path, capsys):
     pytest.importorskip("matplotlib")
     out = {k: tmp_path / f"r.{k}" for k in ("yaml", "html", "urdf", "cal", "py", "json", "csv")}
@@ -52,6 +53,7 @@ def test_ur_calibration_of_a_non_ur_robot_is_refused_before_identifying(tmp_path
     assert not (tmp_path / "c.yaml").exists()
 
 
+@pytest.mark.slow
 def test_acquire_writes_the_report_beside_the_session(tmp_path):
     pytest.importorskip("matplotlib")
     from acquire.commands.cli import main as acquire_main

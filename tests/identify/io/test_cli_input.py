@@ -361,6 +361,7 @@ def _process(*args) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("case", "needle"),
     [

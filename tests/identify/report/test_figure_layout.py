@@ -28,6 +28,7 @@ def identified():
     return robot, meas.subset(_fit_rows(meas)), ident
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("joint", range(1, 7))
 def test_each_joints_figure(identified, joint):
     _, fit, ident = identified

@@ -81,6 +81,7 @@ def _parse(text: str) -> _Collector:
     return collector
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ur5e", "track_ur5e", "scara"])
 def test_report_renders_with_sections_and_one_image_per_figure(name):
     robot, meas, ident = _identified(name)
@@ -98,6 +99,7 @@ def test_report_renders_with_sections_and_one_image_per_figure(name):
         assert f"<td>{s.sweep}</td>" in text
 
 
+@pytest.mark.slow
 def test_report_without_holdout_or_nominal_and_with_reference():
     robot, meas, ident = _identified("ur5e", check_poses=0, outliers=0)
     assert ident.validation is None
@@ -114,6 +116,7 @@ def test_report_rejects_measurements_it_was_not_made_from():
         report_html(ident, meas.subset(np.arange(len(meas)) > 3))
 
 
+@pytest.mark.slow
 def test_report_with_acquisition_record(session_path, tmp_path):
     robot, meas, ident = _identified("ur5e")
     with Session.open(session_path) as session:
@@ -143,6 +146,7 @@ window.addEventListener('load', function () {
 </script>"""
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed")
 def test_report_loads_in_headless_chromium(session_path, tmp_path):
     robot, meas, ident = _identified("ur5e")
@@ -161,6 +165,7 @@ def test_report_loads_in_headless_chromium(session_path, tmp_path):
         assert f'id="{section}"' in done.stdout
 
 
+@pytest.mark.slow
 def test_report_3d_view_shows_the_mounting_surface_and_the_swept_envelope():
     """With a cell view (acquire passes the plan's), the 3D view draws the surface and the envelope; the view is in
     the robot's base frame (DH frame 0), where the cell is given, so the arm stands upright."""
@@ -184,6 +189,7 @@ def test_report_3d_view_shows_the_mounting_surface_and_the_swept_envelope():
     assert any(type(c).__name__ == "Poly3DCollection" for c in ax.collections)  # the surface patch
 
 
+@pytest.mark.slow
 def test_report_headline_says_the_verdict_and_the_accuracy_before_and_after(tmp_path):
     """The first section: the verdict, then the TP error of the nominal model (placed on the identified one) and
     of the identified model at the held-out poses, predicted and measured, each with its uncertainty; with a
@@ -213,6 +219,7 @@ def test_report_headline_says_the_verdict_and_the_accuracy_before_and_after(tmp_
     assert "Verification (pass)" in head
 
 
+@pytest.mark.slow
 def test_notes_sit_under_a_neutral_heading_and_the_title_names_the_robot():
     """Before, "joint errors selected: none" and the reduced chi-square sat under an orange "Warnings" heading below
     a PASS, and the title named only the joint types."""

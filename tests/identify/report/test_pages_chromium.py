@@ -30,6 +30,7 @@ def _fits(html: str, folder) -> None:
     assert layout["scroll"] <= 0 and layout["sideways"] == [] and layout["overlaps"] == [], layout
 
 
+@pytest.mark.slow
 def test_the_identification_report(session_path, tmp_path):  # noqa: F811
     robot, meas, ident = _identified("ur5e")
     with Session.open(session_path) as session:
@@ -49,6 +50,7 @@ def test_the_verification_report(session_path, tmp_path):  # noqa: F811
         _fits(verification_html(summary, header, "sessions/demo-20261125-210830-verify.session", session), tmp_path)
 
 
+@pytest.mark.slow
 def test_the_trend_page(tmp_path):
     robot, _, first = _identified("ur5e")
     models = [CalibratedModel.from_identification(i) for i in (first, _identified("ur5e", seed=8)[2])]
