@@ -32,7 +32,7 @@ import numpy as np
 
 from config.robots import load_robot
 from identify.estimator.bounds import prediction_rms_bound
-from identify.estimator.refine import full_jacobian
+from identify.estimator.dh_vector import full_jacobian
 from identify.results.pipeline import identify
 from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import DHModel, points_from_joints

@@ -32,8 +32,9 @@ import numpy as np
 
 from config.robots import load_robot
 from identify.estimator.bounds import full_pose_covariance, full_pose_rms_bound
+from identify.estimator.dh_vector import parameter_names
 from identify.estimator.orientation import matrices_from_rotvecs
-from identify.estimator.refine import parallel_links, parameter_names, select_free
+from identify.estimator.refine import parallel_links, select_free
 from identify.io.result_io import result_to_dict
 from identify.results.pipeline import identify
 from identify.simulators.simulate import random_poses, simulate, with_orientations

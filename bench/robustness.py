@@ -45,7 +45,8 @@ from scipy.stats import binom
 from bench.robustness_cells import FANUC_SIM, GRID_ROBOT, gravity_sag, grid_scenario
 from config.robots import RobotModel
 from config.robots import load_robot as _load_robot
-from identify.estimator.poe import AxisLines, fit_lines, points_from_lines
+from identify.estimator.estimate import fit_lines
+from identify.estimator.poe import AxisLines, points_from_lines
 from identify.results import pipeline
 from identify.simulators.simulate import (
     Scenario,
@@ -127,7 +128,8 @@ def lines_bound(lines: AxisLines, q_fit: Array, unknown: NDArray[np.bool_], move
 
 class Oracle:
     """The bench's self-check (``--oracle``): a maximum-likelihood fit of the axis lines
-    (identify.estimator.poe.fit_lines) started at the truth, to the clean fitted rows that have readings, with the true
+    (identify.estimator.estimate.fit_lines) started at the truth, to the clean fitted rows that have readings, with
+    the true
     outliers as its rejections and the lines bound at its own estimate as its reported uncertainty. Its ratio near 1
     shows the bound is attainable on a case; it needs readings, so it does not run the positions-only and jogged
     cases."""

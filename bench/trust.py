@@ -29,7 +29,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from config.robots import load_robot
-from identify.estimator.refine import parameter_names, vector_from_model
+from identify.estimator.dh_vector import parameter_names, vector_from_model
 from identify.results.pipeline import identify
 from identify.simulators.simulate import simulate
 from kinematics.truth import random_truth

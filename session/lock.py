@@ -13,6 +13,8 @@ import os
 import sqlite3
 from pathlib import Path
 
+from session.schema import SessionBusy, SessionError
+
 try:
     import fcntl
 except ImportError:  # not POSIX: no lock (one writer is then the operator's job)
@@ -108,3 +110,13 @@ def _flock_pid(path: Path) -> int | None:
     except (OSError, ValueError):
         return None
     return None
+
+
+def lock_for_writing(path: Path, shown: Path) -> int:
+    """The write lock of ``path`` (:func:`write_lock`), ``shown`` in its messages, errors as SessionError."""
+    try:
+        return write_lock(path)
+    except Locked as exc:
+        raise SessionBusy(busy_message(shown, exc.holder)) from None
+    except OSError as exc:
+        raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None

@@ -44,7 +44,7 @@ from common import __version__, stop_signals
 from common.outputs import OutputError, check_target, commit_file
 from drivers.base import DeviceIdentity
 from kinematics.joint_errors import Coupling
-from session.lock import Locked, busy_message, write_lock
+from session.lock import lock_for_writing
 from session.lock import unlock as _unlock
 from session.plan import Plan
 from session.records import FrameRecord, PointRecord, StepRecord
@@ -63,7 +63,6 @@ from session.schema import (
     POINTS_SCHEMA,
     SCHEMA_VERSION,
     STREAMS_SCHEMA,
-    SessionBusy,
     SessionError,
     check_magic,
     configure,
@@ -147,7 +146,7 @@ class SessionFile:
             finally:
                 conn.close()
             fsync_path(temp)
-            lock_fd = _lock(temp, path)  # the lock is on the file (inode): it stays when the file is linked
+            lock_fd = lock_for_writing(temp, path)  # the lock is on the file (inode): it stays when the file is linked
             commit_file(temp, path, force=False)  # a hard link: fails if path exists, even in a race
         except OutputError:
             _unlock(lock_fd)
@@ -171,7 +170,7 @@ class SessionFile:
         foreign file, or one written by a newer schema."""
         path = Path(path)
         check_magic(path)
-        lock_fd = _lock(path, path) if write else None
+        lock_fd = lock_for_writing(path, path) if write else None
         return cls._open(path, lock_fd)
 
     @classmethod
@@ -490,13 +489,3 @@ class SessionFile:
             db.execute("COMMIT")
         except sqlite3.Error as exc:
             raise SessionError(f"{self.path}: cannot {what} ({exc})") from None
-
-
-def _lock(path: Path, shown: Path) -> int:
-    """The write lock of ``path`` (:func:`session.lock.write_lock`), errors as SessionError."""
-    try:
-        return write_lock(path)
-    except Locked as exc:
-        raise SessionBusy(busy_message(shown, exc.holder)) from None
-    except OSError as exc:
-        raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None

@@ -6,7 +6,8 @@ from __future__ import annotations
 from typing import Any
 
 from drivers.sim.rig import SimulatedRig
-from drivers.trackers.emscon_sim import EMSCON_FAULTS, REFLECTORS, SHIFT, EmsconSimServer
+from drivers.trackers.emscon_server import EMSCON_FAULTS
+from drivers.trackers.emscon_sim import REFLECTORS, SHIFT, EmsconSimServer
 
 __all__ = ["EMSCON_FAULTS", "REFLECTORS", "SHIFT", "EmsconServer", "open_emscon"]
 

@@ -13,7 +13,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.estimator.refine import full_jacobian
+from identify.estimator.dh_vector import full_jacobian
 from kinematics.dh import DHModel
 
 Array = NDArray[np.float64]

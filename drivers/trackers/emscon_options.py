@@ -55,7 +55,8 @@ class EmsconSettings:
         try:
             noise = float(raw.get("noise", 5e-5))
             seed = int(str(raw.get("seed", rig.tracker_seed)))
-            from drivers.trackers.emscon_sim import EmsconSimServer, parse_faults
+            from drivers.trackers.emscon_server import parse_faults
+            from drivers.trackers.emscon_sim import EmsconSimServer
 
             faults = parse_faults(str(raw["fault"])) if "fault" in raw else ()
             if not (math.isfinite(noise) and noise >= 0 and seed >= 0):

@@ -46,7 +46,6 @@ which the virtual clock runs on: such a fault costs a larger part of a sweep the
 from __future__ import annotations
 
 import contextlib
-import re
 import socket
 import struct
 import threading
@@ -57,11 +56,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from drivers.trackers import emscon_protocol as es
+from drivers.trackers import emscon_server as served
+from drivers.trackers.emscon_server import EMSCON_FAULTS, STREAM_FAULTS
 from drivers.trackers.socket_reads import accept_each
 
-STREAM_FAULTS = ("stream_lost", "stream_prism", "stream_garbage", "stream_drop", "stream_silence")
-EMSCON_FAULTS = ("beam_broken", "lost_during", "warming_up", "not_ready", "garbage", "silence", "drop", "split",
-                 *STREAM_FAULTS)
 PACKET_PERIOD = 0.1  # s of the rig's clock between continuous result packets
 UPTIME = 5000.25  # s the tracker's clock had run when the server started (its stamps' origin is its boot)
 SHIFT = (0.5, -0.2, 0.1)  # m: the transformation the server applies until the client switches it off
@@ -72,21 +70,6 @@ VERSION = (3, 6, 1234)
 SERIAL = 392001
 
 
-_FAULT = re.compile(r"([a-z_]+)(?:@([0-9]+))?(?:x([0-9]+))?\Z")
-
-
-def parse_faults(text: str) -> tuple[tuple[str, int, int], ...]:
-    """``NAME[@N][xK],...`` -> ((name, at, count), ...) (``at`` 1 without ``@N``); ValueError in one line."""
-    out = []
-    for item in text.split(","):
-        match = _FAULT.match(item)
-        if not match or match.group(1) not in EMSCON_FAULTS:
-            raise ValueError(f"fault {item!r} must be NAME[@N][xCOUNT] with NAME one of {', '.join(EMSCON_FAULTS)}")
-        at, count = int(match.group(2) or 1), int(match.group(3) or 1)
-        if at < 1 or count < 1:
-            raise ValueError(f"fault {item!r}: numbers start at 1")
-        out.append((match.group(1), at, count))
-    return tuple(out)
 
 
 class EmsconSimServer:
@@ -200,13 +183,13 @@ class EmsconSimServer:
         send = link.send
 
         def ok(body: bytes = b"", change: int | None = None) -> bool:
-            send(es.reply(code, 0, body))
+            send(served.reply(code, 0, body))
             if change is not None and self.settings[4]:
-                send(es.status_change(change))
+                send(served.status_change(change))
             return True
 
         def refuse(status: int) -> bool:
-            send(es.reply(code, status))
+            send(served.reply(code, status))
             return True
 
         if code == es.C_START_MEASUREMENT:
@@ -219,7 +202,7 @@ class EmsconSimServer:
         if code == es.C_GET_SYSTEM_STATUS:
             status = es.SystemStatus(0, es.TPS_INITIALIZED if self.initialized else 3, 3, 2, VERSION,
                                      self.settings[0], 0, SERIAL)
-            return ok(es.system_status_body(status))
+            return ok(served.system_status_body(status))
         if code == es.C_INITIALIZE:
             time.sleep(self.init_time)
             self.initialized = True
@@ -228,7 +211,7 @@ class EmsconSimServer:
             self.units = struct.unpack("<5I", payload)
             return ok(change=6)
         if code == es.C_GET_UNITS:
-            return ok(es.units_body(self.units))
+            return ok(served.units_body(self.units))
         if code == es.C_SET_COORD_SYS:
             kind = struct.unpack("<I", payload)[0]
             if kind != es.CS_RHR:
@@ -241,7 +224,7 @@ class EmsconSimServer:
             self.settings = struct.unpack("<I8i", payload)
             return ok(change=8)
         if code == es.C_GET_SYSTEM_SETTINGS:
-            return ok(es.settings_body(self.settings))
+            return ok(served.settings_body(self.settings))
         if code == es.C_SET_ENVIRONMENT:
             values = struct.unpack("<3d", payload)
             if not (-20 <= values[0] <= 60 and 500 <= values[1] <= 1200 and 0 <= values[2] <= 100):
@@ -249,10 +232,10 @@ class EmsconSimServer:
             self.environment = values
             return ok(change=2)
         if code == es.C_GET_ENVIRONMENT:
-            return ok(es.environment_body(self.environment))
+            return ok(served.environment_body(self.environment))
         if code == es.C_GET_REFLECTORS:
             for rid, kind, offset, name in REFLECTORS:
-                send(es.reply(code, 0, es.reflector_body(len(REFLECTORS), rid, kind, offset, name)))
+                send(served.reply(code, 0, served.reflector_body(len(REFLECTORS), rid, kind, offset, name)))
             return True
         if code == es.C_SET_REFLECTOR:
             rid = struct.unpack("<i", payload)[0]
@@ -286,7 +269,7 @@ class EmsconSimServer:
         if code == es.C_GET_TRACKER_STATUS:
             return ok(struct.pack("<I", es.TRACKER_READY if self.initialized and not self.broken else 0))
         if code == es.C_GET_SOFTWARE_VERSION:
-            return ok(es.text_field("emScon emulator {}.{}.{}".format(*VERSION)))
+            return ok(served.text_field("emScon emulator {}.{}.{}".format(*VERSION)))
         return refuse(2)
 
     def _measure(self, link: _Link) -> bool:
@@ -300,7 +283,7 @@ class EmsconSimServer:
         code = es.C_START_MEASUREMENT
         send = link.send
         if link.measuring:
-            send(es.reply(code, 1))  # server busy: one measurement at a time
+            send(served.reply(code, 1))  # server busy: one measurement at a time
             return True
         self._end_stream(link, flush=False)  # one that ended by itself (beam lost, count reached)
         if fault == "drop":
@@ -309,21 +292,21 @@ class EmsconSimServer:
             return True
         if fault == "beam_broken":
             if unsolicited and not self.broken:
-                send(es.status_change(es.SSC_NOT_READY))
+                send(served.status_change(es.SSC_NOT_READY))
             self.broken = True
-            send(es.reply(code, 10004))
+            send(served.reply(code, 10004))
             return True
         if fault in ("warming_up", "not_ready"):
-            send(es.reply(code, 10012 if fault == "warming_up" else 10014))
+            send(served.reply(code, 10012 if fault == "warming_up" else 10014))
             return True
         if not self.initialized:
-            send(es.reply(code, 39))
+            send(served.reply(code, 39))
             return True
         if self.broken:
             self.broken = False
             if unsolicited:
-                send(es.status_change(es.SSC_READY))
-        send(es.reply(code, 0))
+                send(served.status_change(es.SSC_READY))
+        send(served.reply(code, 0))
         if self.mode == es.MM_CONTINUOUS_TIME:
             link.stream = _Stream(self.rig.clock.now(), self.continuous[0] / 1000, self.continuous[1])
             link.thread = threading.Thread(target=self._stream_loop, args=(link,), daemon=True,
@@ -331,7 +314,7 @@ class EmsconSimServer:
             link.thread.start()
             return True
         if fault == "lost_during":
-            send(es.error_packet(code, 10009))
+            send(served.error_packet(code, 10009))
             return True
         if self.mode == es.MM_6D_STATIONARY:
             return self._probe(link)
@@ -341,7 +324,7 @@ class EmsconSimServer:
         self.rig.clock.sleep(self.stationary[0] / 1000)  # the stationary measurement's duration
         true = np.asarray(self.rig.true_point(), dtype=float)
         values, std = self._reported(true[None, :])
-        packet = es.single_result(tuple(values[0]), tuple(std), self.environment)  # type: ignore[arg-type]
+        packet = served.single_result(tuple(values[0]), tuple(std), self.environment)  # type: ignore[arg-type]
         self.measurements += 1  # counted before it leaves: a client may read the truth as soon as it has the result
         self.truths.append(true)
         if fault == "split":
@@ -365,7 +348,7 @@ class EmsconSimServer:
         angles = tuple(float(a) for a in rotation.as_euler("xyz"))
         self.measurements += 1  # counted before it leaves, as a stationary result
         self.probe_truths.append(pose)
-        link.send(es.probe_stationary_result(tuple(values[0]), std, (w, x, y, z), angles,  # type: ignore[arg-type]
+        link.send(served.probe_stationary_result(tuple(values[0]), std, (w, x, y, z), angles,  # type: ignore[arg-type]
                                              (self.angle_noise,) * 3, self.environment))
         return True
 
@@ -416,9 +399,9 @@ class EmsconSimServer:
             stream.ended.set()  # lNumberOfPoints taken: the measurement ends after this packet
         if fault == "stream_lost":
             if self.settings[4]:
-                link.send(es.status_change(es.SSC_NOT_READY))
+                link.send(served.status_change(es.SSC_NOT_READY))
             self.broken = True
-            link.send(es.error_packet(es.C_START_MEASUREMENT, 10004))
+            link.send(served.error_packet(es.C_START_MEASUREMENT, 10004))
             stream.ended.set()
             return
         if fault == "stream_drop":
@@ -437,7 +420,7 @@ class EmsconSimServer:
         seconds = np.floor(stamp)
         micro = np.minimum(np.round((stamp - seconds) * 1e6), 999_999)
         status = np.full(len(k), 3 if fault == "stream_prism" else 0)
-        if link.send(es.multi_result(status, seconds, micro, values, self.environment)):
+        if link.send(served.multi_result(status, seconds, micro, values, self.environment)):
             self.streamed.extend(zip(tau.tolist(), true, strict=True))
 
     def _end_stream(self, link: _Link, flush: bool) -> None:

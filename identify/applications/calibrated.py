@@ -20,9 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from common.errors import InputError
+from identify.estimator.dh_vector import full_jacobian, parameter_names
 from identify.estimator.geometry import rotation_about_axis
 from identify.estimator.poe import AxisLines
-from identify.estimator.refine import full_jacobian, parameter_names
 from identify.results.predict import Predictor
 from kinematics.dh import DHModel, frames_from_joints, model_from_dict
 

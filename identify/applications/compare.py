@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2, norm
 
 from identify.applications.calibrated import CalibratedModel
-from identify.estimator.refine import parameter_names
+from identify.estimator.dh_vector import parameter_names
 from identify.simulators.simulate import random_poses
 from kinematics.dh import DH_NAMES
 

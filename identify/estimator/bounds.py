@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from identify.estimator.refine import full_jacobian, orientation_jacobian
+from identify.estimator.dh_vector import full_jacobian, orientation_jacobian
 from kinematics.dh import DHModel
 
 Array = NDArray[np.float64]

@@ -34,9 +34,12 @@ from scipy.stats import chi2
 from scipy.stats import f as f_dist
 
 from identify.estimator.linalg import column_basis
-from identify.estimator.refine import NOISE_FLOOR, OUTLIER_PROBABILITY, inlier_mask
 
 Array = NDArray[np.float64]
+
+OUTLIER_PROBABILITY = 0.01  # chance that a clean data set has any sample flagged as an outlier
+ROBUST_CORE = 0.975  # share of clean samples the robust noise covariance is estimated from
+NOISE_FLOOR = 1e-8  # m: below this, residuals are rounding, not noise (no outlier is called on them)
 
 
 def leverages(jac_blocks: Array, unknown: NDArray[np.int64]) -> Array:
@@ -186,3 +189,39 @@ def _smooth(res: Array, runs: list[NDArray[np.int64]], keep: NDArray[np.bool_]) 
         d2 = np.sum((e / scale) ** 2, axis=1) / spread
         smooth = d2 <= limit
         keep[run[smooth & ~keep[run]]] = True  # it moves with its neighbours: systematic, not gross
+
+
+def inlier_mask(weighted_residuals: Array, n_free: int, probability: float = OUTLIER_PROBABILITY) -> NDArray[np.bool_]:
+    """Samples whose residual is within the chi-square(3) limit of a robust estimate of the noise.
+
+    The noise may be anisotropic even after weighting: one sigma per sample cannot say that a camera's
+    error is mostly along its line of sight (5-10x a lateral one). So the residuals' 3x3 covariance is
+    estimated robustly (per-axis median absolute deviation, then two passes over the samples within the
+    97.5 % chi-square(3) quantile, corrected for that truncation and for the fitted parameters) and each
+    sample's Mahalanobis distance is tested; for isotropic noise this is the usual test on the norm. The
+    limit makes OUTLIER_PROBABILITY the chance that a clean data set loses any sample, whatever its size
+    (Bonferroni), so a large session does not shed clean samples. Since the covariance is itself estimated
+    from the samples, the limit is Hotelling's (a scaled F) rather than chi-square(3): with a few hundred
+    samples the difference is a few per cent, but it halves the false alarms of small sessions.
+    ``probability``: the chance for these samples (a share of OUTLIER_PROBABILITY when they are a group of a
+    larger data set)."""
+    res = np.asarray(weighted_residuals, dtype=float).reshape(-1, 3)
+    count = res.size
+    inflate = count / max(count - n_free, 1)  # residuals of a fit are smaller than the noise
+    floor = NOISE_FLOOR**2 * np.eye(3)
+    cov = np.diag((1.4826 * np.median(np.abs(res), axis=0)) ** 2) * inflate + floor
+    core = chi2.ppf(ROBUST_CORE, 3)
+    truncation = ROBUST_CORE / chi2.cdf(core, 5)  # E[r rᵀ | d² < core] = cov · cdf5(core) / cdf3(core)
+    used = len(res)  # samples behind the covariance estimate
+    for _ in range(2):
+        distance2 = np.einsum("ij,jk,ik->i", res, np.linalg.inv(cov), res)
+        core_rows = res[distance2 <= core]
+        if len(core_rows) <= 3:
+            break
+        cov = core_rows.T @ core_rows / len(core_rows) * truncation * inflate + floor
+        used = len(core_rows)
+    distance2 = np.einsum("ij,jk,ik->i", res, np.linalg.inv(cov), res)
+    per_sample = probability / len(res)
+    dof = max(used - n_free / 3.0, 5.0)  # of the covariance estimate, per axis
+    limit = 3.0 * dof / (dof - 2.0) * f_dist.isf(per_sample, 3, dof - 2.0)  # Hotelling's T² for 3 dimensions
+    return distance2 <= limit

@@ -30,9 +30,8 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
-from identify.estimator.geometry import cross, perpendicular_basis, rotation_about_axis, turned, unit
+from identify.estimator.geometry import cross, perpendicular_basis, rotation_about_axis, turned
 from identify.estimator.linalg import project_out
 from identify.estimator.orientation import (
     inverse_left_jacobians,
@@ -42,7 +41,6 @@ from identify.estimator.orientation import (
     rotation_residuals,
 )
 from identify.estimator.sync import Retiming
-from identify.estimator.tall_lsq import is_tall, solve_tall
 from kinematics.dh import DHModel, frames_from_joints, points_from_joints
 
 Array = NDArray[np.float64]
@@ -478,73 +476,3 @@ class LeastSquares(NamedTuple):
     residuals: Array
     terms: JointTerms
     timing: Retiming | None = None
-
-
-def fit_lines(start: AxisLines, q: Array, points: Array, weights: Array | None = None,
-              unknown: NDArray[np.int64] | None = None, loss: str = "linear",
-              scale: float = 1.0, tp_index: NDArray[np.int64] | None = None,
-              terms: JointTerms | None = None, timing: Retiming | None = None,
-              rotations: Array | None = None) -> LeastSquares:
-    """Least-squares axis lines and TP for readings ``q`` (m, n) and TP ``points`` (m, 3) (and the target frame's
-    ``rotations`` (m, 3, 3) of orientation rows, NaN elsewhere: see :class:`LineProblem`).
-
-    ``weights`` (m,) = 1/sigma per sample; ``unknown`` marks rows whose one joint was not read, ``tp_index``
-    each row's tracked point, ``terms`` the joint errors and ``timing`` the clock correction to fit (see
-    :class:`LineProblem`);
-    ``loss``/``scale`` select a robust loss of scipy's ``least_squares`` (scale in weighted units).
-    """
-    weights = np.ones(len(q)) if weights is None else weights
-    problem = LineProblem(start, q, points, weights, unknown, tp_index, terms, timing, rotations)
-    n_nuisance = int(np.sum(problem.unknown >= 0))
-    linear = loss == "linear"
-    method = "lm" if linear and 3 * len(q) >= problem.size + n_nuisance else "trf"
-    tall = is_tall(3 * len(q), problem.size)
-    if method == "lm" and tall:
-        x = solve_tall(problem.residuals, problem.jacobian, _warm_start(problem), STOP_SIGMAS)
-    else:
-        # a tall robust fit only serves to find the outliers: every WARM_STRIDE-th row holds thousands, and the
-        # residuals of every row below are taken at its lines
-        fitted = _every(problem, WARM_STRIDE) if tall else problem
-        tol = converged_tolerance(3 * len(fitted.q)) if linear else 1e-8
-        x = least_squares(fitted.residuals, np.zeros(fitted.size), jac=fitted.jacobian, method=method,
-                          loss=loss, f_scale=scale, x_scale="jac", xtol=tol, ftol=tol, gtol=tol,
-                          max_nfev=200 if linear else 60).x
-    lines, _ = problem.lines(x)
-    lines = _canonical(lines)
-    coefs, tau = problem.coefs(x), problem.tau(x)
-    q_solved = problem.joints(lines, coefs, tau)
-    residuals = problem.residuals_at(lines, q_solved)
-    return LeastSquares(lines, q_solved, residuals, JointTerms(problem.terms.regressors, problem.terms.joints, coefs),
-                        None if timing is None else replace(timing, tau=tau))
-
-
-WARM_STRIDE = 10  # a tall fit starts from a fit of every 10th row (√10 σ off, one step away); a robust one stops there
-
-
-def _every(problem: LineProblem, stride: int) -> LineProblem:
-    """The same problem (same parameters) on every ``stride``-th row of ``problem``."""
-    rows = np.arange(0, len(problem.q), stride)
-    sub = LineProblem(problem.start, problem.q[rows], problem.points[rows], problem.weights[rows],
-                      problem.unknown[rows], None if problem.tp_index is None else problem.tp_index[rows],
-                      problem.terms.subset(rows), None if problem.timing is None else problem.timing.subset(rows),
-                      None if problem.rotations is None else problem.rotations[rows])
-    return sub if sub.oriented_tps == problem.oriented_tps else problem  # (the same parameters, or every row)
-
-
-def _warm_start(problem: LineProblem) -> Array:
-    """The parameters (increments on ``problem``'s start) fitted to every :data:`WARM_STRIDE`-th row: from there one
-    Gauss–Newton step on every row reaches the optimum, and one more Jacobian of every row confirms it (three
-    without this start, whose first step is large)."""
-    sub = _every(problem, WARM_STRIDE)
-    return solve_tall(sub.residuals, sub.jacobian, np.zeros(sub.size), STOP_SIGMAS)
-
-
-def _canonical(lines: AxisLines) -> AxisLines:
-    """Each revolute line's point moved to the foot of the perpendicular from the TP at home."""
-    pts = lines.points.copy()
-    for i, t in enumerate(lines.joint_types):
-        if t == "R":
-            d = lines.directions[i]
-            pts[i] = pts[i] + ((lines.tp_home - pts[i]) @ d) * d
-    return AxisLines(lines.joint_types, pts, np.array([unit(d) for d in lines.directions]), lines.home,
-                     lines.tp_home, lines.extra_tps, lines.orientations)

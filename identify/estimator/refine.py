@@ -16,11 +16,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
-from scipy.stats import f as f_dist
 
-from identify.estimator.geometry import cross, left_jacobian, skew
+from identify.estimator.dh_vector import (  # the full vector's pieces, used here and imported from here elsewhere
+    dh_index,
+    full_jacobian,
+    model_from_vector,
+    orientation_jacobian,
+    parameter_names,
+    prior_rows,
+    vector_from_model,
+)
 from identify.estimator.linalg import triangle
 from identify.estimator.orientation import (
     inverse_left_jacobians,
@@ -29,103 +35,17 @@ from identify.estimator.orientation import (
     mean_rotation,
     rotation_residuals,
 )
+from identify.estimator.outliers import NOISE_FLOOR, inlier_mask
 from identify.estimator.poe import STOP_SIGMAS, converged_tolerance
 from identify.estimator.tall_lsq import is_tall, solve_tall
-from kinematics.dh import DH_NAMES, DHModel, flange_frames, points_from_joints, running_frames
+from kinematics.dh import DH_NAMES, DHModel, flange_frames, points_from_joints
 
 Array = NDArray[np.float64]
 
-BASE_NAMES = ("base.rx", "base.ry", "base.rz", "base.x", "base.y", "base.z")
-TOOL_NAMES = ("tool.x", "tool.y", "tool.z")
-OUTLIER_PROBABILITY = 0.01  # chance that a clean data set has any sample flagged as an outlier
-ROBUST_CORE = 0.975  # share of clean samples the robust noise covariance is estimated from
-NOISE_FLOOR = 1e-8  # m: below this, residuals are rounding, not noise (no outlier is called on them)
 RANK_TOL = 1e-7
 RESIDUAL_FLOOR = 1e-12  # m: rounding level of residuals, floor of the noise in the significance test
 RELEASE_PROBABILITY = 1e-3  # false-alarm rate of the test that releases the parallel-axis convention
 DEFAULT_MAX_OFFSET = float("inf")  # m: exact DH wherever the data resolve a near-parallel pair's misalignment
-
-
-def parameter_names(n: int) -> list[str]:
-    """Names of the full parameter vector for ``n`` joints, e.g. ``theta3``, ``base.rx``."""
-    return [*BASE_NAMES, *TOOL_NAMES, *(f"{name}{i}" for i in range(1, n + 1) for name in DH_NAMES)]
-
-
-def dh_index(joint: int, name: str) -> int:
-    """Index in the full vector of DH value ``name`` of 1-based ``joint``."""
-    return 9 + 4 * (joint - 1) + DH_NAMES.index(name)
-
-
-def model_from_vector(start: DHModel, vector: Array) -> DHModel:
-    """The model at full parameter ``vector`` (base rotation relative to ``start.base``)."""
-    base = np.eye(4)
-    base[:3, :3] = Rotation.from_rotvec(vector[:3]).as_matrix() @ start.base[:3, :3]
-    base[:3, 3] = vector[3:6]
-    table = vector[9:].reshape(-1, 4)
-    return replace(start.with_dh_table(table), base=base, tool=vector[6:9].copy())
-
-
-def vector_from_model(model: DHModel) -> Array:
-    """Full parameter vector of ``model`` with zero base rotation increment."""
-    return np.concatenate([np.zeros(3), model.base[:3, 3], model.tool, model.dh_table().ravel()])
-
-
-JACOBIAN_ROWS = 4096  # rows whose Jacobian is formed at once (its temporaries stay in cache: twice as fast)
-
-
-def full_jacobian(model: DHModel, q: Array, omega: Array | None = None) -> tuple[Array, Array]:
-    """Predicted TP (m, 3) and its Jacobian (m, 3, 9 + 4n) with respect to the full vector."""
-    q = np.asarray(q, dtype=float)
-    if len(q) <= JACOBIAN_ROWS:
-        return _full_jacobian_rows(model, q, omega)
-    p, jac = np.empty((len(q), 3)), np.empty((len(q), 3, 9 + 4 * model.n_joints))
-    for start in range(0, len(q), JACOBIAN_ROWS):
-        rows = slice(start, start + JACOBIAN_ROWS)
-        p[rows], jac[rows] = _full_jacobian_rows(model, q[rows], omega)
-    return p, jac
-
-
-def _full_jacobian_rows(model: DHModel, q: Array, omega: Array | None) -> tuple[Array, Array]:
-    """:func:`full_jacobian` of a block of rows."""
-    m, n = len(q), model.n_joints
-    p = points_from_joints(model, q)
-    jac = np.zeros((m, 3, 9 + 4 * n))
-    rel_base = p - model.base[:3, 3]
-    jl = np.eye(3) if omega is None else left_jacobian(omega)
-    jac[:, :, 0:3] = -skew(rel_base) @ jl
-    jac[:, :, 3:6] = np.eye(3)
-    frames = running_frames(model, q)
-    _, _, z_prev, o_prev = next(frames)
-    for i, frame in enumerate(frames):
-        x_cur, _, z_cur, o_cur = frame
-        col = 9 + 4 * i
-        jac[:, :, col] = cross(z_prev, p - o_prev)
-        jac[:, :, col + 1] = z_prev
-        jac[:, :, col + 2] = x_cur
-        jac[:, :, col + 3] = cross(x_cur, p - o_cur)
-        z_prev, o_prev = z_cur, o_cur
-    jac[:, :, 6:9] = np.stack(frame[:3], axis=2)  # the last frame's rotation
-    return p, jac
-
-
-def orientation_jacobian(model: DHModel, q: Array, omega: Array | None = None) -> tuple[Array, Array]:
-    """Rotation of DH frame n (m, 3, 3) and the turn of it (m, 3, 9 + 4n; rad per unit of each full-vector parameter,
-    tracker frame) at joint values ``q`` (m, n): a joint's theta turns it about z_{i-1}, its alpha about x_i, the base
-    rotation (its increment ``omega``) as itself; lengths and the tool do not turn it."""
-    q = np.asarray(q, dtype=float)
-    n = model.n_joints
-    jac = np.zeros((len(q), 3, 9 + 4 * n))
-    jac[:, :, 0:3] = np.eye(3) if omega is None else left_jacobian(omega)
-    frames = running_frames(model, q)
-    _, _, z_prev, _ = next(frames)
-    frame = None
-    for i, frame in enumerate(frames):
-        x_cur, _, z_cur, _ = frame
-        jac[:, :, 9 + 4 * i] = z_prev
-        jac[:, :, 9 + 4 * i + 3] = x_cur
-        z_prev = z_cur
-    rotation = np.stack(frame[:3], axis=2) if frame is not None else np.broadcast_to(model.base[:3, :3], (len(q), 3, 3))
-    return rotation, jac
 
 
 def parallel_links(model: DHModel, parallel_tol: float) -> list[int]:
@@ -372,16 +292,6 @@ def target_frames(model: DHModel, q: Array, rotations: Array, tp_index: NDArray[
     return out
 
 
-def prior_rows(free: NDArray[np.bool_], sigma: Array) -> Array:
-    """Rows (k, free count) that measure each ``free`` value of the full vector with a finite ``sigma`` to that
-    sigma: a prior's Jacobian (and its information, stacked with the data's)."""
-    own = sigma[free]
-    keep = np.flatnonzero(np.isfinite(own))
-    out = np.zeros((len(keep), int(free.sum())))
-    out[np.arange(len(keep)), keep] = 1.0 / own[keep]
-    return out
-
-
 def _solve(problem: _Problem, x0: Array, loss: str, scale: float) -> Array:
     """Least-squares solve; the robust (outlier-finding) pass needs less precision than the final one."""
     linear = loss == "linear"
@@ -523,42 +433,6 @@ def refine(
         notes.append(f"reduced chi-square {scale2:.3g} (1 when the given sigma is right)")
     return Refinement(model, free, covariance, noise, inliers, residuals, float(s_scaled[0] / s_scaled[-1]), cost,
                       q, points, notes, tools)
-
-
-def inlier_mask(weighted_residuals: Array, n_free: int, probability: float = OUTLIER_PROBABILITY) -> NDArray[np.bool_]:
-    """Samples whose residual is within the chi-square(3) limit of a robust estimate of the noise.
-
-    The noise may be anisotropic even after weighting: one sigma per sample cannot say that a camera's
-    error is mostly along its line of sight (5-10x a lateral one). So the residuals' 3x3 covariance is
-    estimated robustly (per-axis median absolute deviation, then two passes over the samples within the
-    97.5 % chi-square(3) quantile, corrected for that truncation and for the fitted parameters) and each
-    sample's Mahalanobis distance is tested; for isotropic noise this is the usual test on the norm. The
-    limit makes OUTLIER_PROBABILITY the chance that a clean data set loses any sample, whatever its size
-    (Bonferroni), so a large session does not shed clean samples. Since the covariance is itself estimated
-    from the samples, the limit is Hotelling's (a scaled F) rather than chi-square(3): with a few hundred
-    samples the difference is a few per cent, but it halves the false alarms of small sessions.
-    ``probability``: the chance for these samples (a share of OUTLIER_PROBABILITY when they are a group of a
-    larger data set)."""
-    res = np.asarray(weighted_residuals, dtype=float).reshape(-1, 3)
-    count = res.size
-    inflate = count / max(count - n_free, 1)  # residuals of a fit are smaller than the noise
-    floor = NOISE_FLOOR**2 * np.eye(3)
-    cov = np.diag((1.4826 * np.median(np.abs(res), axis=0)) ** 2) * inflate + floor
-    core = chi2.ppf(ROBUST_CORE, 3)
-    truncation = ROBUST_CORE / chi2.cdf(core, 5)  # E[r rᵀ | d² < core] = cov · cdf5(core) / cdf3(core)
-    used = len(res)  # samples behind the covariance estimate
-    for _ in range(2):
-        distance2 = np.einsum("ij,jk,ik->i", res, np.linalg.inv(cov), res)
-        core_rows = res[distance2 <= core]
-        if len(core_rows) <= 3:
-            break
-        cov = core_rows.T @ core_rows / len(core_rows) * truncation * inflate + floor
-        used = len(core_rows)
-    distance2 = np.einsum("ij,jk,ik->i", res, np.linalg.inv(cov), res)
-    per_sample = probability / len(res)
-    dof = max(used - n_free / 3.0, 5.0)  # of the covariance estimate, per axis
-    limit = 3.0 * dof / (dof - 2.0) * f_dist.isf(per_sample, 3, dof - 2.0)  # Hotelling's T² for 3 dimensions
-    return distance2 <= limit
 
 
 def _with_conventions(model: DHModel, free: NDArray[np.bool_], conventional: Array | None) -> tuple[DHModel, int]:

@@ -15,9 +15,9 @@ import yaml
 from common import __version__
 from identify.applications.calibrated import CalibratedModel, ResultError
 from identify.applications.domain import domain_to_dict
+from identify.estimator.dh_vector import parameter_names
 from identify.estimator.extensions import EQUATIONS, UNITS
 from identify.estimator.poe import AxisLines
-from identify.estimator.refine import parameter_names
 from identify.results.pipeline import Identification
 from identify.results.written import WrittenModel
 from kinematics.dh import DH_NAMES, DHModel, model_to_dict

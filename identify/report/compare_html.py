@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from common import __version__
 from identify.applications.calibrated import CalibratedModel
 from identify.applications.compare import Comparison, dh_label, displacement
-from identify.estimator.refine import parameter_names
+from identify.estimator.dh_vector import parameter_names
 from identify.report.html import _CSS, _e, _figure_html, _table, _when
 from identify.simulators.simulate import random_poses
 

@@ -19,11 +19,11 @@ from identify.estimator.adequacy import Adequacy
 from identify.estimator.cpa import DEFAULT_PARALLEL_TOL, GeometricResult
 from identify.estimator.estimate import best_start
 from identify.estimator.extensions import Decision, TermSet
-from identify.estimator.hold import nominal_lines
 from identify.estimator.measurements import Measurements
 from identify.estimator.poe import AxisLines, points_from_lines
 from identify.estimator.refine import Refinement
 from identify.results import verdict as checks
+from identify.results.hold import nominal_lines
 from identify.results.predict import Predictor
 from identify.results.stages import (
     ClockFit,

@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 
 from common.errors import InputError
 from identify.estimator.adequacy import Adequacy, assess
-from identify.estimator.clock_split import ClockSplit, split_clock
 from identify.estimator.cpa import GeometricResult, home_from_measurements
+from identify.estimator.dh_vector import full_jacobian, parameter_names
 from identify.estimator.estimate import FitData, LinesFit, along_arc, fit, fit_kept, place_nominal, readmit
 from identify.estimator.extend import select_terms
 from identify.estimator.extensions import Decision, TermSet, candidates
@@ -26,10 +26,11 @@ from identify.estimator.measurements import Measurements, in_dh_joints, orientat
 from identify.estimator.orientation import matrices_from_rotvecs
 from identify.estimator.outliers import sweep_neighbours
 from identify.estimator.poe import LineProblem, points_from_lines
-from identify.estimator.refine import Refinement, full_jacobian, parameter_names
+from identify.estimator.refine import Refinement
 from identify.estimator.starts import starts
 from identify.estimator.sync import retiming
 from identify.results import verdict as checks
+from identify.results.clock_split import ClockSplit, split_clock
 from identify.results.validation import Validation
 from identify.results.validation import validate as validate_model
 from identify.results.written import UNDETERMINED, WrittenModel, robot_size
@@ -55,7 +56,7 @@ class ClockFit:
     tracker time + ``offset`` + ``drift`` · (tracker time − ``t_ref``). ``offset`` (s) is the recording's
     coarse offset plus the fitted correction; ``*_std`` their standard uncertainties (``drift`` None when not
     fitted: streams shorter than :data:`identify.estimator.sync.DRIFT_SPAN`); ``rows`` the streamed rows fitted.
-    ``test``: whether the sweeps needed an offset each (:mod:`identify.estimator.clock_split`); when they did,
+    ``test``: whether the sweeps needed an offset each (:mod:`identify.results.clock_split`); when they did,
     ``sweeps`` lists (sweep id, offset s, std s) per streamed sweep, ``offset`` is their inverse-variance
     mean and ``offset_std`` the largest of their uncertainties."""
 
@@ -149,7 +150,7 @@ def fits_from_starts(rows: FitRows, nominal: DHModel | None, conventional: Array
 
 def clock_tested(best: LinesFit, rows: FitRows, robust: bool) -> tuple[LinesFit, Adequacy, ClockSplit | None]:
     """``best`` refitted with one clock offset per sweep when the streamed sweeps need it
-    (:mod:`identify.estimator.clock_split`), its adequacy, and the test (None without streamed sweeps)."""
+    (:mod:`identify.results.clock_split`), its adequacy, and the test (None without streamed sweeps)."""
     adequacy = _adequacy(best, rows)
     best, test = split_clock(best, rows.data, robust, max(adequacy.residual, rows.declared or 0.0) ** 2 / rows.unit**2)
     if test is not None and test.split:

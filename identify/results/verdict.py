@@ -20,7 +20,7 @@ from identify.estimator.adequacy import Adequacy
 from identify.estimator.identifiability import LEVEL, Identifiability
 
 if TYPE_CHECKING:
-    from identify.estimator.clock_split import ClockSplit
+    from identify.results.clock_split import ClockSplit
 
 STATUSES = ("pass", "warn", "fail")
 
@@ -306,7 +306,7 @@ def timing(offset_std: float, speed: float, noise: float, split: ClockSplit | No
            offsets: Sequence[float] = ()) -> Check:
     """The streamed rows' clock fit: the offset's uncertainty (s) times the RMS speed of the tracked point
     (m/s) is the position error the timing leaves; it warns when that reaches the tracker noise (m). It also
-    warns when the sweeps needed one offset each (``split``: :class:`identify.estimator.clock_split.ClockSplit`;
+    warns when the sweeps needed one offset each (``split``: :class:`identify.results.clock_split.ClockSplit`;
     ``offsets`` s, per sweep): the clocks changed their relation during the session."""
     effect = offset_std * speed
     status = "warn" if effect > noise else "pass"

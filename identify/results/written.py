@@ -16,9 +16,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from identify.estimator.adequacy import Adequacy
+from identify.estimator.dh_vector import full_jacobian, parameter_names, prior_rows
 from identify.estimator.estimate import FitData, LinesFit
 from identify.estimator.extensions import TermSet
-from identify.estimator.hold import (
+from identify.estimator.identifiability import LEVEL
+from identify.estimator.linalg import project_out, scaled_inverse
+from identify.estimator.poe import AxisLines, LineProblem, points_from_lines
+from identify.estimator.refine import Refinement, TableFit, fit_table, orientation_blocks
+from identify.results import verdict as checks
+from identify.results.dh_output import DHOutput, dh_output, near_parallel
+from identify.results.hold import (
     Hold,
     NominalPrior,
     held_fit,
@@ -27,20 +34,6 @@ from identify.estimator.hold import (
     table_prior,
     undetermined,
 )
-from identify.estimator.identifiability import LEVEL
-from identify.estimator.linalg import project_out, scaled_inverse
-from identify.estimator.poe import AxisLines, LineProblem, points_from_lines
-from identify.estimator.refine import (
-    Refinement,
-    TableFit,
-    fit_table,
-    full_jacobian,
-    orientation_blocks,
-    parameter_names,
-    prior_rows,
-)
-from identify.results import verdict as checks
-from identify.results.dh_output import DHOutput, dh_output, near_parallel
 from identify.results.predict import Predictor
 from kinematics.dh import DHModel, flange_frames, frames_from_joints
 
@@ -176,7 +169,7 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     (timed as ``fit``); ``unit``: the weights' scale (median sigma, or 1); ``declared``: the tracker noise
     declared (m per axis) or None; ``sigma`` (m,) per-row uncertainties or None; ``reference``: the nominal's
     lines placed on the data (None without a nominal), where the directions the data do not determine for a
-    robot of ``size`` (m) are held (:mod:`identify.estimator.hold`); the rest as in
+    robot of ``size`` (m) are held (:mod:`identify.results.hold`); the rest as in
     :func:`identify.results.pipeline.identify`."""
     data = data.timed(fit.timing)
     lines, inl = fit.lines, fit.inliers
@@ -288,7 +281,7 @@ def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, 
     """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH table
     refitted under that convention on every tracked point's rows (so the cost it adds is a likelihood ratio,
     chi-square when the axes are parallel), and with ``held`` on the nominal's values too
-    (:func:`identify.estimator.hold.table_prior`, tolerances times ``scale``); the tools (k, 3), that cost with
+    (:func:`identify.results.hold.table_prior`, tolerances times ``scale``); the tools (k, 3), that cost with
     the RMS gap to the lines, and
     the nominal's tolerances of the full vector (rad, m; None unless ``held``)."""
     out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
@@ -363,7 +356,7 @@ def _held_reason(std: float, tolerance: float, size: float) -> str:
 
 def _flange_sigma(n: int, tolerance: Array | None) -> Array:
     """The full vector's sigmas (rad or m) of frame n's DH values where they are the nominal's (``tolerance``: the
-    nominal's, :func:`identify.estimator.hold.table_prior`; None without a nominal), zeros elsewhere."""
+    nominal's, :func:`identify.results.hold.table_prior`; None without a nominal), zeros elsewhere."""
     out = np.zeros(9 + 4 * n)
     if tolerance is not None:
         last = slice(9 + 4 * (n - 1), 9 + 4 * n)

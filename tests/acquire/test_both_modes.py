@@ -220,7 +220,7 @@ def test_stop_and_go_rows_check_the_streams_timing(mixed: Path, tmp_path: Path, 
     assert identify_main(["compare", str(step), str(streamed)]) == 0
     assert "no significant change" in capsys.readouterr().out
     # one stream's stamps 1 ms late (a tracker clock that jumped for one sweep): the streamed fit gives that sweep
-    # its own offset (identify/estimator/clock_split.py), says so in its timing check, and still agrees with the
+    # its own offset (identify/results/clock_split.py), says so in its timing check, and still agrees with the
     # stop-and-go rows
     jumped = tmp_path / "jumped.session"
     shutil.copyfile(mixed, jumped)

@@ -169,7 +169,8 @@ def test_mock_settings_are_typed_with_defaults() -> None:
     assert tracker == {"noise": 1e-4, "latency": 0.002, "dropout": 0.02, "seed": None,
                        "fault": (FaultSpec("target_lost", 10, 3),), "points": None, "moved": (0.0, 0.0, 0.0),
                        "turned": (0.0, -90.0, 10.0), "occlusion": None,
-                       "rate": 250.0, "clock_offset": 0.0, "drift": 0.0, "stamp_jitter": 0.0, "lost": (0.0, 2.0)}
+                       "rate": 250.0, "clock_offset": 0.0, "drift": 0.0, "stamp_jitter": 0.0, "lost": (0.0, 2.0),
+                       "orientation": 0.0}
     for bad in ("1,2", "1,2,x", "1,2,nan", "1,2,3,4"):
         with pytest.raises(SpecError, match="must be X,Y,Z: three finite numbers"):
             TrackerSpec.parse(f"mock?moved={bad}").mock_settings()

@@ -1,4 +1,4 @@
-"""The hold's pieces (identify/estimator/hold.py): the reference as increments, and the nominal as a prior."""
+"""The hold's pieces (identify/results/hold.py): the reference as increments, and the nominal as a prior."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import yaml
 
 from config.robots import load_robot
 from identify.applications.calibrated import CalibratedModel
-from identify.estimator.hold import NominalPrior, increments
 from identify.estimator.poe import LineProblem, lines_from_model
 from identify.io.result_io import result_to_dict
+from identify.results.hold import NominalPrior, increments
 from identify.results.pipeline import identify
 from identify.simulators.simulate import random_poses
 from identify.simulators.simulate_joints import RealArm, measure

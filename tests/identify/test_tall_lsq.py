@@ -12,9 +12,9 @@ from scipy.optimize import least_squares
 import identify.estimator.linalg as linalg
 import identify.estimator.tall_lsq as tall_lsq
 from config.robots import load_robot
+from identify.estimator.dh_vector import vector_from_model
 from identify.estimator.extensions import score_statistics
 from identify.estimator.measurements import Measurements
-from identify.estimator.refine import vector_from_model
 from identify.estimator.tall_lsq import solve_tall
 from identify.results.pipeline import identify
 from identify.simulators.simulate import random_poses

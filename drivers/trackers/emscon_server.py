@@ -1,0 +1,133 @@
+"""What an emScon server sends (the emulator in :mod:`drivers.trackers.emscon_sim` and the protocol's tests): answer,
+error, status-change and result packets, and the bodies of the answers a client reads with
+:mod:`drivers.trackers.emscon_protocol`. Little-endian, the header's sizes and types as there.
+"""
+
+from __future__ import annotations
+
+import re
+import struct
+from typing import Any
+
+import numpy as np
+
+from drivers.trackers.emscon_protocol import (  # the layouts a client reads, written here
+    _ENVIRONMENT,
+    _MULTI,
+    _PROBE_STATIONARY,
+    _REFLECTOR,
+    _SETTINGS,
+    _SINGLE,
+    _SYSTEM_STATUS,
+    _UNITS,
+    DT_COMMAND,
+    DT_ERROR,
+    DT_MULTI,
+    DT_MULTI2,
+    DT_PROBE_STATIONARY,
+    DT_SINGLE,
+    DT_STATUS_CHANGE,
+    HEADER,
+    MM_6D_STATIONARY,
+    MM_CONTINUOUS_TIME,
+    MM_STATIONARY,
+    SystemStatus,
+    _point_dtype,
+)
+
+STREAM_FAULTS = ("stream_lost", "stream_prism", "stream_garbage", "stream_drop", "stream_silence")
+EMSCON_FAULTS = ("beam_broken", "lost_during", "warming_up", "not_ready", "garbage", "silence", "drop", "split",
+                 *STREAM_FAULTS)
+_FAULT = re.compile(r"([a-z_]+)(?:@([0-9]+))?(?:x([0-9]+))?\Z")
+
+
+def reply(code: int, status: int = 0, body: bytes = b"") -> bytes:
+    """The answer packet to command ``code``."""
+    return HEADER.pack(HEADER.size + 8 + len(body), DT_COMMAND) + struct.pack("<II", code, status) + body
+
+
+def error_packet(code: int, status: int) -> bytes:
+    return HEADER.pack(16, DT_ERROR) + struct.pack("<II", code, status)
+
+
+def status_change(code: int) -> bytes:
+    return HEADER.pack(12, DT_STATUS_CHANGE) + struct.pack("<I", code)
+
+
+def single_result(values: tuple[float, float, float], std: tuple[float, float, float], environment_: tuple[float,
+                  float, float], status: int = 0, mode: int = MM_STATIONARY) -> bytes:
+    """An ``ES_DT_SingleMeasResult`` (pointing errors and a-priori deviations zero; totals from ``std``)."""
+    total = float(sum(s * s for s in std) ** 0.5)
+    doubles = (*values, *std, total, 0.0, 0.0, 0.0, *std, total, *environment_)
+    return HEADER.pack(HEADER.size + _SINGLE.size, DT_SINGLE) + _SINGLE.pack(status, mode, 0, *doubles)
+
+
+def multi_result(point_status: Any, time1: Any, time2: Any, values: Any, environment_: tuple[float, float, float],
+                 std: Any = None, status: int = 0, mode: int = MM_CONTINUOUS_TIME) -> bytes:
+    """A continuous result of k points (``ES_DT_MultiMeasResult``; with ``std`` (k, 3), ``...2``, whose totals
+    are computed and covariances zero): per point its status, ``lTime1``, ``lTime2`` and values (k, 3)."""
+    kind = DT_MULTI if std is None else DT_MULTI2
+    values = np.asarray(values, dtype=float).reshape(-1, 3)
+    rows = np.zeros(len(values), _point_dtype(kind))
+    rows["status"], rows["time1"], rows["time2"], rows["values"] = point_status, time1, time2, values
+    if std is not None:
+        rows["std"] = std
+        rows["total"] = np.sqrt(np.sum(np.square(std), axis=1))
+    head = _MULTI.pack(status, len(rows), mode, 0, *environment_)
+    return HEADER.pack(HEADER.size + len(head) + rows.nbytes, kind) + head + rows.tobytes()
+
+
+def probe_stationary_result(position: tuple[float, float, float], position_std: tuple[float, float, float],
+                            quaternion: tuple[float, float, float, float], angles: tuple[float, float, float],
+                            angles_std: tuple[float, float, float], environment_: tuple[float, float, float],
+                            probe_id: int = 1, status: int = 0) -> bytes:
+    """An ``ES_DT_StationaryProbeMeasResult`` (totals from the deviations, covariances and a-priori values zero,
+    trigger not pressed, rotation status 1: valid, tip OK, tip adapter 1)."""
+    total = float(sum(x * x for x in position_std) ** 0.5)
+    angle_total = float(sum(x * x for x in angles_std) ** 0.5)
+    doubles = (*position, *position_std, total, 0.0, 0.0, 0.0, *position_std, total, 0.0, 0.0, 0.0, *quaternion,
+               *angles, *angles_std, angle_total, 0.0, 0.0, 0.0, *angles_std, angle_total, 0.0, 0.0, 0.0,
+               *environment_)
+    body = _PROBE_STATIONARY.pack(status, MM_6D_STATIONARY, 0, 0, 1, probe_id, 0, 0, 1, 0, *doubles)
+    return HEADER.pack(HEADER.size + len(body), DT_PROBE_STATIONARY) + body
+
+
+def text_field(text: str) -> bytes:
+    """32 UTF-16LE code units, zero-padded (names and versions)."""
+    raw = text.encode("utf-16-le")[:64]
+    return raw + b"\x00" * (64 - len(raw))
+
+
+def units_body(codes: tuple[int, ...]) -> bytes:
+    return _UNITS.pack(*codes)
+
+
+def environment_body(values: tuple[float, float, float]) -> bytes:
+    return _ENVIRONMENT.pack(*values)
+
+
+def settings_body(settings: tuple[int, ...]) -> bytes:
+    return _SETTINGS.pack(*settings)
+
+
+def reflector_body(total: int, rid: int, target_type: int, offset: float, name: str) -> bytes:
+    return _REFLECTOR.pack(total, rid, target_type, offset, text_field(name))
+
+
+def system_status_body(status: SystemStatus) -> bytes:
+    return _SYSTEM_STATUS.pack(status.last_status, status.processor, status.laser, status.adm, *status.version,
+                               status.weather_monitor, status.flags, status.serial)
+
+
+def parse_faults(text: str) -> tuple[tuple[str, int, int], ...]:
+    """``NAME[@N][xK],...`` -> ((name, at, count), ...) (``at`` 1 without ``@N``); ValueError in one line."""
+    out = []
+    for item in text.split(","):
+        match = _FAULT.match(item)
+        if not match or match.group(1) not in EMSCON_FAULTS:
+            raise ValueError(f"fault {item!r} must be NAME[@N][xCOUNT] with NAME one of {', '.join(EMSCON_FAULTS)}")
+        at, count = int(match.group(2) or 1), int(match.group(3) or 1)
+        if at < 1 or count < 1:
+            raise ValueError(f"fault {item!r}: numbers start at 1")
+        out.append((match.group(1), at, count))
+    return tuple(out)
