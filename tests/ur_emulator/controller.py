@@ -236,7 +236,8 @@ class UREmulator(ControllerServers):
         """Start a simulated Leica emScon server (drivers/trackers/emscon_sim.py, loopback TCP) measuring this
         emulator's true TP (noise m per axis; its measurement time passes on the emulator's clock); ``faults``:
         ``NAME[@N][xK],...`` as ``emscon:sim?fault=``. Returns its port (``emscon:127.0.0.1:PORT``)."""
-        from drivers.trackers.emscon_sim import EmsconSimServer, parse_faults
+        from drivers.trackers.emscon_server import parse_faults
+        from drivers.trackers.emscon_sim import EmsconSimServer
 
         server = EmsconSimServer(self.rig, noise=noise, seed=seed, faults=parse_faults(faults) if faults else ())
         self._emscon.append(server)
