@@ -37,7 +37,7 @@ def gram(g: Array, block: int = 48) -> Array:
 def whitened(model: DHModel, *qs: Array) -> list[Array]:
     """Jacobians (m_i, 3, r) of the TP at each pose set w.r.t. the parameter combinations they determine.
 
-    The columns of the full Jacobian (:func:`identify.estimator.refine.full_jacobian`) are scaled to unit norm over
+    The columns of the full Jacobian (:func:`identify.estimator.dh_vector.full_jacobian`) are scaled to unit norm over
     all sets, then projected on the eigenvectors of the information of all sets whose singular value is
     above ``SUBSPACE_TOL`` of the largest: redundant combinations (which change no prediction; on the
     nominal models they sit below 1e-15, the others above 1e-3) drop out. A small Gram matrix and its

@@ -38,7 +38,7 @@ class CalibratedModel:
     """A forward model with the covariance of its parameters.
 
     ``model``: DH table, ``base`` (tracker <- frame 0) and default ``tool`` (TP in frame n). ``free`` (9 + 4n,)
-    marks the parameters of :func:`identify.estimator.refine.parameter_names` that ``covariance`` (m, rad squared) is
+    marks the parameters of :func:`identify.estimator.dh_vector.parameter_names` that ``covariance`` (m, rad squared) is
     over (None: a model known exactly, e.g. a nominal one). ``predictor``: what predicts where the result has it (None:
     the DH table alone). ``model_error``: m per axis, what the model cannot hold; ``noise``: the tracker's, m per
     axis. ``tools``: TP id -> tool (m, frame n). ``name``: what it is. ``held`` (9 + 4n,): sigmas (m, rad) of fixed

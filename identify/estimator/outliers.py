@@ -6,7 +6,7 @@ shared by neighbouring samples. Only the first are outliers. So a sample is reje
 
 1. its studentised residual (divided by sqrt(1 - leverage), so thin sweeps' well-fitted samples are not
    judged by the scale of the others) fails the Bonferroni-corrected Hotelling test of
-   :func:`identify.estimator.refine.inlier_mask` (sweep rows and free poses on scales of their own: model error
+   :func:`inlier_mask` (sweep rows and free poses on scales of their own: model error
    grows away from home, where the free poses are), and
 2. within its sweep (ordered by the moved joint's value), it also departs from the straight line through
    its two neighbours by more than the noise of such second differences allows, at the same per-sample

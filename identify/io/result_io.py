@@ -216,8 +216,8 @@ def lines_to_dict(lines: AxisLines) -> dict[str, Any]:
 
 def covariance_to_dict(model: WrittenModel) -> dict[str, Any]:
     """The parameters' covariance, for compensation, verification and comparison (identify/applications/calibrated.py):
-    ``parameters`` (the free names of :func:`identify.estimator.refine.parameter_names`; base rotation a rotation vector
-    applied on the left of ``base``) and ``matrix`` (their covariance, m and rad squared: the DH table's), and
+    ``parameters`` (the free names of :func:`identify.estimator.dh_vector.parameter_names`; base rotation a rotation
+    vector applied on the left of ``base``) and ``matrix`` (their covariance, m and rad squared: the DH table's), and
     ``predictor``: the covariance of what predicts (the axis lines' minimal parameters, the tracked points', then
     the joint-error coefficients: :class:`identify.results.predict.Predictor`)."""
     names = parameter_names(model.model.n_joints)

@@ -3,7 +3,7 @@
 DH is exact for any chain of lines, but near-parallel consecutive axes put their common normal far away
 (``d`` ~ link length / misalignment). Exact DH is used unless it would move such a ``d`` more than
 ``max_offset`` from its conventional value; those links keep the parallel-axis convention, and the caller
-measures what that costs. The covariance of the DH values (full vector of :mod:`identify.estimator.refine`) is the
+measures what that costs. The covariance of the DH values (full vector of :mod:`identify.estimator.dh_vector`) is the
 lines' covariance mapped through the conversion's Jacobian (forward differences); values held by a
 convention have zero rows.
 """

@@ -133,7 +133,7 @@ def nominal_scale(offset: Array, sigma: Array, covariance: Array | None) -> floa
 
 
 def table_prior(nominal: DHModel, table: DHModel, scale: float = 1.0) -> tuple[Array, Array]:
-    """The nominal as a measurement of a DH ``table``'s full parameter vector (:mod:`identify.estimator.refine`):
+    """The nominal as a measurement of a DH ``table``'s full parameter vector (:mod:`identify.estimator.dh_vector`):
     the nominal's values and their tolerances, :data:`HELD_TOLERANCE` rad for theta and alpha,
     :data:`LINK_TOLERANCE` m for d and a, both times ``scale`` (:func:`nominal_scale`) (one link's values, where
     the axis lines' positions accumulate the errors
