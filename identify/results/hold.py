@@ -8,13 +8,12 @@ than :data:`identify.estimator.identifiability.LEVEL` of the robot's size is *no
 fit cannot hold, or the noise, puts it anywhere along that direction (a UR with one reflector next to axis 6 wrote
 a5 = 186 mm, alpha5 = -152 deg where the arm has 0 and -90, and a tool on the flange inherited centimetres).
 
-With a nominal model, the nominal placed on the data is a measurement too (:class:`NominalPrior`): of where the
-end effector's points go over the whole joint space, each direction of the model known to :data:`HELD_TOLERANCE` of
-the robot's size (a real arm's geometry differs from its catalogue model by a millimetre or two per metre of reach).
-The maximum a posteriori fit of the data and that prior keeps what the data determine (their sigma is far below the
-tolerance there, so the prior moves them by a negligible fraction of it), takes the nominal where the data say
-nothing, and weighs the two in between; the prior is nonlinear, so a fit that wandered far is brought back along
-the data's own valley. The covariance afterwards carries the nominal's own error, so every accuracy stated from it
+With a nominal model, the nominal placed on the data is a measurement too: of each axis line
+(:class:`NominalPrior`) and of each DH value (:func:`table_prior`), to tolerances a real arm keeps about its
+catalogue model, widened where the data show this arm farther from it (:func:`nominal_scale`). The maximum a
+posteriori fit of the data and that prior keeps what the data determine (their sigma is far below the tolerance
+there, so the prior moves them by a negligible fraction of it), takes the nominal where the data say nothing, and
+weighs the two in between. The covariance afterwards carries the nominal's own error, so every accuracy stated from it
 accounts for the held values; the directions the data alone leave undetermined are named (:func:`undetermined`).
 Units: m, rad; frames: tracker.
 """
@@ -29,7 +28,7 @@ from scipy.optimize import least_squares
 
 from identify.estimator.estimate import FitData, LinesFit, place_nominal
 from identify.estimator.geometry import perpendicular_basis
-from identify.estimator.identifiability import LEVEL
+from identify.estimator.identifiability import LEVEL, LOADING
 from identify.estimator.poe import AxisLines, JointTerms, LineProblem, lines_from_model
 from kinematics.dh import DHModel, frames_from_joints
 
@@ -39,18 +38,15 @@ HELD_TOLERANCE = 0.002  # rad, and of the robot's size (m): 1 sigma of a real ar
 # m, 1 sigma of one link's length or offset about the catalogue's: machined lengths up to 1 m hold +-0.3..0.8 mm
 # (ISO 2768-m), and calibrated arms differ from their catalogue tables by tenths of a millimetre to a millimetre
 LINK_TOLERANCE = 1e-3
-LOADING = 0.3  # loading of a held direction's (unit) vector on a parameter that names it
 
 
 @dataclass(frozen=True)
 class Hold:
-    """What was held at the reference: the directions the data do not determine, ``directions`` (h, p) rows over
-    the problem's parameters (scaled by the lever arms, so ``directions @ x`` is metres of end-effector motion),
-    their standard uncertainty from the data alone ``std`` (h,) (m of that motion), the ``tolerance`` (m) the
-    reference is known to along each, what each moves (``names``, e.g. ``axis 6``, ``tracked point 1``), and
-    whether a model error the fit cannot hold counted (``model_error``)."""
+    """What was held at the reference: for each direction the data do not determine, its standard uncertainty from
+    the data alone ``std`` (h,) (m of end-effector motion), the ``tolerance`` (m) the reference is known to along
+    it, and what it moves (``names``, e.g. ``axis 6``, ``tracked point 1``); whether a model error the fit cannot
+    hold counted (``model_error``)."""
 
-    directions: Array
     std: Array
     tolerance: float
     names: tuple[str, ...]
@@ -65,19 +61,17 @@ class NominalPrior:
     to :data:`HELD_TOLERANCE` rad and its position across itself to :data:`HELD_TOLERANCE` of the robot's ``size``
     (m), about the reference's (:func:`increments`); tracked points, joint errors and clock are left to the data
     (a nominal says nothing of them). The tolerances are widened by :func:`nominal_scale` where the data show this
-    arm farther from its nominal than they say (``covariance``: the fit's, without the prior), or by a given
-    ``scale``. Its residuals are in units of those tolerances, so stacked with the data's (in units of their noise)
-    they make the maximum a posteriori problem. Parameters as ``problem``'s
-    (:class:`identify.estimator.poe.LineProblem`)."""
+    arm farther from its nominal than they say (``covariance``: the fit's, without the prior). Its residuals are in
+    units of those tolerances, so stacked with the data's (in units of their noise) they make the maximum a
+    posteriori problem. Parameters as ``problem``'s (:class:`identify.estimator.poe.LineProblem`)."""
 
-    def __init__(self, problem: LineProblem, reference: AxisLines, size: float, covariance: Array | None = None,
-                 scale: float | None = None):
+    def __init__(self, problem: LineProblem, reference: AxisLines, size: float, covariance: Array | None = None):
         self._reference = increments(problem, reference)
         sigma = []
         for kind in problem.types:
             sigma += [HELD_TOLERANCE] * 2 + ([HELD_TOLERANCE * size] * 2 if kind == "R" else [])
         self._sigma = np.array(sigma)
-        self.scale = nominal_scale(self._reference[:len(sigma)], self._sigma, covariance) if scale is None else scale
+        self.scale = nominal_scale(self._reference[:len(sigma)], self._sigma, covariance)
         self._sigma *= self.scale
         self._size = problem.size
 
@@ -157,7 +151,7 @@ def undetermined(covariance: Array, metric: Array, size: float, names: list[str]
     """The directions of ``covariance`` (p, p; m and rad) not determined for a robot of ``size`` (m): 3 sigma of
     motion of the end effector's points, plus ``bias`` sigma for a model error the fit cannot hold, beyond
     :data:`LEVEL` of it, or known no better than the nominal is. ``metric`` (p, p): the mean square motion (m²) of those
-    points per unit change of the parameters (:func:`line_metric`, :func:`table_metric`); ``names`` (k <= p): what
+    points per unit change of the parameters (:func:`line_metric`); ``names`` (k <= p): what
     each of the first k parameters is (e.g. ``axis 6``), the only ones held (the others, such as joint errors and
     clock, follow them through their correlation). ``bias``: the worst least-squares shift a model error ε per axis
     over N rows gives a direction of standard uncertainty σ is ``ε sqrt(3N) / s · σ`` (s the noise the covariance
@@ -173,7 +167,7 @@ def undetermined(covariance: Array, metric: Array, size: float, names: list[str]
     directions[:, :k] = vectors[:, far].T @ root
     lever = np.sqrt(np.clip(np.diag(metric)[:k], 0.0, None))
     moved = [(covariance[:k, :k] @ a[:k]) * lever for a in directions]  # what each parameter moves along it
-    return Hold(directions, std[far], HELD_TOLERANCE * size,
+    return Hold(std[far], HELD_TOLERANCE * size,
                 tuple(_label(m / max(float(np.linalg.norm(m)), 1e-300), names) for m in moved), bias > 0.0)
 
 

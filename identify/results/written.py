@@ -200,7 +200,7 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
         found = undetermined(inv * variance, line_metric(problem), size, names, bias)
         held = found if len(found) else None
         scale = prior.scale
-        rows = NominalPrior(problem, reference, size, scale=scale).jacobian() * np.sqrt(variance)
+        rows = prior.jacobian() * np.sqrt(variance)  # constant: the same at the held lines as at the start
         covariance = scaled_inverse(np.vstack([jac_blocks.reshape(-1, problem.size), rows]))[0] * variance
     lines_cov = covariance[: lines.n_parameters, : lines.n_parameters]
     near, beyond = near_parallel(lines, lines_cov, conventional, nominal, parallel_tol, max_offset)
