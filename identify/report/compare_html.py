@@ -32,7 +32,7 @@ def figure_trend(names: list[str], models: list[CalibratedModel], labels: list[s
     index = {n: k for k, n in enumerate(parameter_names(models[0].n_joints))}
     cols = min(3, len(names))
     rows = math.ceil(len(names) / cols)
-    fig = Figure(figsize=(3.6 * cols, 2.8 * rows))
+    fig = Figure(figsize=(3.6 * cols, 2.8 * rows), layout="constrained")
     axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
     x = np.arange(len(models))
     for ax, name in zip(axes, names, strict=False):
@@ -50,7 +50,6 @@ def figure_trend(names: list[str], models: list[CalibratedModel], labels: list[s
         ax.set_xlabel("calibration", fontsize=8)
     for ax in axes[len(names):]:
         ax.set_visible(False)
-    fig.tight_layout()
     return fig
 
 
@@ -62,7 +61,7 @@ def figure_displacement(models: list[CalibratedModel], labels: list[str], q: np.
     worst = np.array([np.max(np.linalg.norm(d, axis=1)) for d, _ in stats]) * 1e3
     expected = np.array([e for _, e in stats]) * 1e3
     expected[0] = 0.0
-    fig = Figure(figsize=(8, 3.2))
+    fig = Figure(figsize=(8, 3.2), layout="constrained")
     ax = fig.add_subplot()
     x = np.arange(len(models))
     ax.plot(x, rms, "o-", label="RMS")

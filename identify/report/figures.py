@@ -129,7 +129,7 @@ def figure_frames(ident: Identification, fit: Measurements, cell: dict[str, Any]
     pts = (fit.points @ inv[:3, :3].T + inv[:3, 3]) * MM
     origins = frames[:, :3, 3] * MM
     span = float(np.ptp(np.vstack([pts, origins, tp]), axis=0).max()) or 100.0
-    fig = Figure(figsize=(11, 5.2))
+    fig = Figure(figsize=(11, 5.2), layout="constrained")
     ax = fig.add_subplot(1, 2, 1, projection="3d")
     top = fig.add_subplot(1, 2, 2)
     ax.scatter(pts[:, 0], pts[:, 1], pts[:, 2], s=2, color="#999", alpha=0.35, label="measured TP")
@@ -162,13 +162,13 @@ def figure_frames(ident: Identification, fit: Measurements, cell: dict[str, Any]
     ax.tick_params(labelsize=7)
     ax.view_init(elev=22, azim=-60)
     ax.set_title("3D, robot base frame", fontsize=10)
-    fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="lower left", ncol=3, frameon=False)  # off the data
+    fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="outside lower left", ncol=3,
+               frameon=False)  # below the plots, off the data
     top.set_aspect("equal", adjustable="datalim")
     top.set_xlabel("x [mm]")
     top.set_ylabel("y [mm]")
     top.set_title("top view (joint axes dashed: revolute orange, prismatic purple)", fontsize=10)
     top.grid(True, lw=0.3)
-    fig.subplots_adjust(wspace=0.4)  # the 3D view's z label stands out to its right: room before the top view's
     return fig
 
 
