@@ -109,6 +109,15 @@ class Writer:
             if f"{word} {value}" == text:
                 return
 
+    def until_acks(self, count: int) -> int | None:
+        """Read the child's lines until it has recorded ``count`` steps (None) or ended (its exit code)."""
+        while True:
+            word, value = self._line()
+            if word == "exit":
+                return int(value)
+            if word == "ack" and len(self.acked()) >= count:
+                return None
+
     def acked(self) -> set[int]:
         return {int(line.split()[1]) for line in self.lines if line.startswith("ack ")}
 

@@ -3,6 +3,7 @@ injected faults, and crash/resume through real SIGKILLs of the real command."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sqlite3
@@ -24,6 +25,7 @@ from drivers.spec import RobotSpec, TrackerSpec
 from identify.estimator.bounds import prediction_rms_bound
 from identify.simulators.simulate import random_poses
 from kinematics.dh import model_from_dict, points_from_joints
+from tests._acquire_writer import Writer
 from tests._session_steps import recorded_steps
 
 ROBOT = "mock:ur5e?seed=3"
@@ -154,47 +156,35 @@ def test_bad_specs_and_sessions_give_one_line_and_exit_2(tmp_path, capsys):
     assert len(lines) == 3 and all(line.startswith("acquire: error:") for line in lines)
 
 
-def _logged_steps(log: Path) -> int:
-    """Steps a run has recorded so far, from its --log file (0 before the file exists)."""
-    try:
-        return sum(1 for line in log.read_text().splitlines() if " step " in line)
-    except (OSError, UnicodeDecodeError):
-        return 0
-
-
 @pytest.mark.slow
 def test_sigkill_at_random_moments_then_resume_equals_an_uninterrupted_run(tmp_path):
-    """Kill the real command with SIGKILL at random moments, resume until complete: every plan step is
-    recorded exactly once, with the commanded poses of the plan and positions that agree with an
-    uninterrupted run of the same simulated robot within the tracker noise."""
+    """Kill the real command (``acquire``'s main in a forked child: tests/_acquire_writer.py, which spares each run
+    the interpreter's start-up and the end-of-run identification) with SIGKILL at random moments, resume until
+    complete: every plan step is recorded exactly once, with the commanded poses of the plan and positions that
+    agree with an uninterrupted run of the same simulated robot within the tracker noise."""
     reference = tmp_path / "ref.session"
-    cmd = [sys.executable, "-m", "acquire.commands.cli", "--robot", ROBOT, "--tracker", "mock", *SMALL]
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
-    subprocess.run([*cmd, "--session", str(reference)], check=True, capture_output=True, env=env, timeout=120)
+    first = ["--robot", ROBOT, "--tracker", "mock", *SMALL]
     path = tmp_path / "crash.session"
-    log = tmp_path / "run.log"
     rng = np.random.default_rng(7)
     kills = 0
-    for _ in range(40):
-        args = ["--resume", str(path), "--quiet"] if path.exists() else ["--session", str(path)]
-        base = [sys.executable, "-m", "acquire.commands.cli"] if path.exists() else cmd
-        wanted = int(rng.integers(1, 10))
-        log.unlink(missing_ok=True)
-        # progress from the run's own log (one line per recorded step), not from the session: a reader polling
-        # a session written back to back (virtual clock) waits for the writer's commits and may time out
-        proc = subprocess.Popen([*base, *args, "--log", str(log)], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, env=env)
-        deadline = time.monotonic() + 60
-        while proc.poll() is None and _logged_steps(log) < wanted and time.monotonic() < deadline:
-            time.sleep(0.002)
-        if proc.poll() is None:
-            time.sleep(float(rng.uniform(0.0, 0.003)))  # land anywhere in the next step, commit included
-            proc.send_signal(signal.SIGKILL)
-            proc.wait()
+    writer = Writer(tmp_path)
+    try:
+        writer.start([*first, "--session", reference])
+        assert writer.finish() == 0
+        for _ in range(40):
+            pid = writer.start(["--resume", path, "--quiet"] if path.exists() else [*first, "--session", path])
+            code = writer.until_acks(int(rng.integers(1, 10)))  # steps recorded (committed) by this run
+            if code is None:
+                time.sleep(float(rng.uniform(0.0, 0.003)))  # land anywhere in the next step, commit included
+                with contextlib.suppress(ProcessLookupError):  # it may have just ended (and been reaped)
+                    os.kill(pid, signal.SIGKILL)
+                code = writer.finish()
+            if code == 0:
+                break
+            assert code == -signal.SIGKILL, code
             kills += 1
-            continue
-        if proc.returncode == 0:
-            break
+    finally:
+        writer.close()
     assert kills >= 8, kills
     with Session.open(path) as crashed, Session.open(reference) as ref:
         got, want = crashed.steps(), ref.steps()
