@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> tuple[Check, ResultModels, Measurements, li
     doc, meas, notes = load(args)
     try:
         if args.noise is not None:
+            check_noise_stated(args.noise, as_typed(args, "noise"), meas.sigma)
             check_noise(args.noise, as_typed(args, "noise"), _check(doc, meas, None, args.refit_tool))
         models = result_models(doc, meas.q, meas.tp, args.noise)
         check = check_models(meas.points, meas.q, meas.tp, models.models, models.use, args.refit_tool)
@@ -96,6 +97,23 @@ def check_noise(noise: float, typed: str | None, check: Check) -> None:
     if noise > UNIT_SLIP * scatter:
         raise InputError(f"{slip_hint('--noise', typed, noise)} ({noise / scatter:.0f}x the scatter these data "
                          f"show, {mm(scatter)} per axis in-sample: no tracker is noisier than its own data)")
+
+
+STATED_SLIP = 100.0  # a stated noise this many times the sigma the rows carry: a unit slip (an average of n readings
+# states the reading's sigma / sqrt(n), so a true noise can be some ten times a row's sigma, a slip is 1000 times)
+
+
+def check_noise_stated(noise: float, typed: str | None, sigma: Any) -> None:
+    """InputError (one line) when ``noise`` (m per axis, typed as ``typed``) is more than :data:`STATED_SLIP` times
+    the median per-axis sigma the data's rows carry (a session's, or a CSV ``sigma`` column; None: no check). It
+    holds where :func:`check_noise` cannot: data of another arm or tool scatter far from the result, and that
+    scatter hides a noise 1000x too large."""
+    if sigma is None or not np.any(np.isfinite(sigma)):
+        return
+    stated = float(np.nanmedian(sigma))
+    if stated > 0 and noise > STATED_SLIP * stated:
+        raise InputError(f"{slip_hint('--noise', typed, noise)} ({noise / stated:.0f}x the sigma these data state, "
+                         f"{mm(stated)} per axis (median of the rows))")
 
 
 def as_dict(check: Check, models: ResultModels, meas: Measurements, notes: list[str]) -> dict[str, Any]:

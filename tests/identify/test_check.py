@@ -89,6 +89,25 @@ def test_another_arm_of_the_same_model_fails(first, tmp_path, capsys):
     assert out.startswith("FAIL") and max(len(line) for line in out.splitlines()) <= 80
 
 
+def test_a_noise_1000x_the_sigma_of_another_arms_data_is_refused(first, tmp_path, capsys):
+    """Issue 39, item 1, with data the result does not fit (another arm: 100s of times the noise in-sample, which
+    hides any slip): ``--noise 0.05`` (50 mm) turned its FAIL into a WARN, exit 0. Rows that state their sigma
+    (a session's, a CSV ``sigma`` column) show the slip: refused, one line; in its unit the check fails as it
+    should."""
+    doc, _ = first
+    other = _session(random_truth(ROBOT.nominal, ROBOT.home, np.random.default_rng(77)), 3)
+    other = replace(other, sigma=np.full(len(other.row), NOISE))
+    result, data = tmp_path / "r.yaml", tmp_path / "other.csv"
+    result.write_text(yaml.safe_dump(doc))
+    data.write_text(format_measurements(other))
+    assert main(["check", str(result), str(data), "--noise", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "--noise 0.05 is read as 50 mm; did you mean 0.05mm? (1000x the sigma" \
+        in err, err
+    assert main(["check", str(result), str(data), "--noise", "0.05mm"]) == 3
+    assert capsys.readouterr().out.startswith("FAIL")
+
+
 def test_gross_errors_are_found_and_do_not_break_the_registration(first):
     doc, truth = first
     meas = _session(_moved(truth, 5)[0], 6)
