@@ -26,6 +26,21 @@ seconds and microseconds of the tracker's clock, as the public ROS driver ``beck
 reading on every packet (drivers/trackers/emscon_stream.py): microseconds within [0, 10^6) and points one time
 separation apart, else the stream is refused in one line rather than mis-timed.
 
+6-DoF probes (T-Mac class): ``ES_MM_6DStationary`` answers one ``ES_DT_StationaryProbeMeasResult`` (``type`` 4,
+:class:`ProbeResult`), ``ES_MM_6DContinuousTime`` streams ``ES_DT_ContinuousProbeMeasResult`` packets (``type`` 5,
+:class:`ProbeMultiResult`): header, ``status``, ``lNumberOfResults``, ``measMode``, ``bIsTryMode``, probe id, field
+number, tip status, tip adapter id and interface, the environment, then per point ``status``, trigger status,
+``lRotationStatus``, ``lTime1``, ``lTime2`` and 24 doubles (the tip's position, its deviations, total and
+covariances; the quaternion; rotation angles with their deviations, total and covariances).
+What the header verifies and what is inferred (ES_C_API_Def.h of beckjac/emscon_ros, TPI 3.6): the packet types, the
+field order, types and sizes of both probe results and the bit meaning of ``lRotationStatus`` (``Status6D`` bit 0:
+valid, ``Error6D`` bit 1, ``Frozen6DValues`` bit 5; the bit order is the LSB-first allocation of the compilers the
+header was written for) are verified; the quaternion's convention is not in the header: it is read as
+(q0 scalar, q1, q2, q3) of the rotation taking probe-frame vectors to the tracker frame, the reading of the emScon
+sample client in emscon_ros's first commits (it prints the columns of that matrix as the probe's axes): inferred,
+as is ``lTime1`` s + ``lTime2`` µs. The rotation angles' deviations are taken as the orientation's per-axis
+deviation (a small-angle reading of Euler-angle deviations: inferred).
+
 Text fields (reflector names, the software version) are 32 UTF-16LE code units, zero-padded.
 """
 
@@ -43,7 +58,7 @@ MAX_PACKET = 1 << 18  # bytes: above the longest packet this client reads (a con
 
 #: ES_DataType
 DT_COMMAND, DT_ERROR, DT_SINGLE, DT_MULTI, DT_NIVEL, DT_REFLECTOR_POS, DT_STATUS_CHANGE = 0, 1, 2, 3, 6, 7, 8
-DT_PROBE_STATIONARY, DT_SINGLE2, DT_MULTI2 = 4, 9, 10
+DT_PROBE_STATIONARY, DT_PROBE_CONTINUOUS, DT_SINGLE2, DT_MULTI2 = 4, 5, 9, 10
 
 #: ES_Command values the client and the emulator use
 C_GET_SYSTEM_STATUS, C_GET_TRACKER_STATUS, C_SET_UNITS, C_GET_UNITS, C_INITIALIZE = 1, 2, 5, 6, 7
@@ -71,7 +86,9 @@ COMMAND_NAMES = {
 #: ES_LengthUnit meter, ES_AngleUnit radian, ES_TemperatureUnit Celsius, ES_PressureUnit mbar, ES_HumidityUnit %RH
 UNITS_SI = (0, 0, 0, 0, 0)
 CS_RHR = 0  # ES_CoordinateSystemType: right-handed rectangular (X, Y, Z)
-MM_STATIONARY, MM_CONTINUOUS_TIME, MM_6D_STATIONARY = 0, 1, 6  # ES_MeasMode
+MM_STATIONARY, MM_CONTINUOUS_TIME, MM_6D_STATIONARY, MM_6D_CONTINUOUS_TIME = 0, 1, 6, 7  # ES_MeasMode
+#: lRotationStatus bits (struct RotationStatus): Status6D (the rotation is valid), Error6D, Frozen6DValues
+ROTATION_VALID, ROTATION_ERROR, ROTATION_FROZEN = 1, 2, 32
 #: ES_MeasurementStatus of each point of a continuous result (0 all OK; others "should be treated with care")
 POINT_STATUS = {0: "all OK", 1: "speed warning", 2: "speed exceeded", 3: "prism error", 4: "trigger time violation"}
 TPS_INITIALIZED = 5  # ES_TrackerProcessorStatus
@@ -113,6 +130,9 @@ _MULTI = struct.Struct("<IiIi3d")  # status, lNumberOfResults, measMode, bIsTryM
 #: deviations, total, covariances and a-priori ones; 17-20: the quaternion; 21-23: rotation angles; 24-37 their
 #: deviations and covariances; 38-40: the environment): 376 bytes in all
 _PROBE_STATIONARY = struct.Struct("<IIiIiiiIii41d")
+#: ProbeContinuousResultT after the header: status, lNumberOfResults, measMode, bIsTryMode, probe id, field number,
+#: tipStatus, tip adapter id and interface, environment (3 doubles); then the points (:func:`_probe_point_dtype`)
+_PROBE_MULTI = struct.Struct("<IiIiiiIii3d")
 _CONTINUOUS_TIME = struct.Struct("<iiiI")  # lTimeSeparation (ms), lNumberOfPoints, bUseRegion, regionType
 _VERSION = struct.Struct("<iii")
 _UNITS = struct.Struct("<5I")
@@ -249,7 +269,42 @@ class ProbeResult:
     humidity: float
 
 
-Packet = Reply | ErrorPacket | StatusChange | SingleResult | MultiResult | ProbeResult | OtherPacket
+@dataclass(frozen=True, eq=False)
+class ProbeMultiResult:
+    """A continuous 6-DoF result (``ES_DT_ContinuousProbeMeasResult``): the packet's ``status``, ``mode``,
+    ``try_mode``, ``probe_id``, ``tip_status``, the environment, and per point (k rows) ``point_status``
+    (:data:`POINT_STATUS`), ``rotation_status`` (bits :data:`ROTATION_VALID`...), ``time1``, ``time2`` (raw
+    ``lTime1``, ``lTime2``), ``values`` (k, 3) the tip's position and ``std`` (k, 3) its deviations (units set),
+    ``quaternion`` (k, 4) (q0, q1, q2, q3), ``angles_std`` (k, 3) the rotation angles' deviations. Its point fields
+    are named as :class:`MultiResult`'s, so a stream reads both alike."""
+
+    status: int
+    mode: int
+    try_mode: bool
+    probe_id: int
+    tip_status: int
+    temperature: float
+    pressure: float
+    humidity: float
+    point_status: np.ndarray
+    rotation_status: np.ndarray
+    time1: np.ndarray
+    time2: np.ndarray
+    values: np.ndarray
+    std: np.ndarray
+    quaternion: np.ndarray
+    angles_std: np.ndarray
+
+
+def rotation_ok(rotation_status: int | np.ndarray) -> bool | np.ndarray:
+    """A 6-DoF result's orientation can be used: valid, no error, not frozen (``lRotationStatus`` bits)."""
+    bits = np.asarray(rotation_status, dtype=np.int64)
+    good = ((bits & ROTATION_VALID) != 0) & ((bits & (ROTATION_ERROR | ROTATION_FROZEN)) == 0)
+    return bool(good) if good.ndim == 0 else good
+
+
+Packet = (Reply | ErrorPacket | StatusChange | SingleResult | MultiResult | ProbeResult | ProbeMultiResult
+          | OtherPacket)
 
 
 def frame(buffer: bytes) -> tuple[list[bytes], bytes]:
@@ -310,6 +365,8 @@ def decode(packet: bytes) -> Packet:
         return ProbeResult(v[0], v[1], bool(v[2]), v[3], v[4], v[5], v[7], v[8], (d[0], d[1], d[2]),
                            (d[3], d[4], d[5]), (d[17], d[18], d[19], d[20]), (d[21], d[22], d[23]),
                            (d[24], d[25], d[26]), d[38], d[39], d[40])
+    if kind == DT_PROBE_CONTINUOUS:
+        return _probe_multi_result(body)
     if kind in (DT_NIVEL, DT_REFLECTOR_POS):
         return OtherPacket(kind, packet)
     raise BadReading(f"a packet of unknown type {kind} ({size} bytes)")
@@ -335,6 +392,30 @@ def _multi_result(kind: int, body: bytes) -> MultiResult:
     return MultiResult(status, mode, bool(try_mode), temperature, pressure, humidity, rows["status"].astype(np.int64),
                        rows["time1"].astype(np.int64), rows["time2"].astype(np.int64), rows["values"].astype(float),
                        std)
+
+
+def _probe_point_dtype() -> np.dtype:
+    """One point of a continuous 6-DoF result (``ProbeMeasValueT``, 212 bytes)."""
+    return np.dtype({"names": ["status", "trigger", "rotation", "time1", "time2", "position", "std", "total",
+                               "covariance", "quaternion", "angles", "angles_std", "angles_total", "angles_covariance"],
+                     "formats": ["<u4", "<u4", "<i4", "<i4", "<i4", ("<f8", 3), ("<f8", 3), "<f8", ("<f8", 3),
+                                 ("<f8", 4), ("<f8", 3), ("<f8", 3), "<f8", ("<f8", 3)]})
+
+
+def _probe_multi_result(body: bytes) -> ProbeMultiResult:
+    point = _probe_point_dtype()
+    if len(body) < _PROBE_MULTI.size:
+        raise BadReading(f"a continuous 6-DoF result of {HEADER.size + len(body)} bytes is too short")
+    status, count, mode, try_mode, probe_id, _field, tip, _adapter, _interface, *env = _PROBE_MULTI.unpack_from(body)
+    if count < 0 or len(body) != _PROBE_MULTI.size + count * point.itemsize:
+        raise BadReading(f"a continuous 6-DoF result of {HEADER.size + len(body)} bytes says it holds {count} points "
+                         f"({HEADER.size + _PROBE_MULTI.size + max(count, 0) * point.itemsize} bytes expected)")
+    rows = np.frombuffer(body, point, count, _PROBE_MULTI.size)
+    return ProbeMultiResult(status, mode, bool(try_mode), probe_id, tip, env[0], env[1], env[2],
+                            rows["status"].astype(np.int64), rows["rotation"].astype(np.int64),
+                            rows["time1"].astype(np.int64), rows["time2"].astype(np.int64),
+                            rows["position"].astype(float), rows["std"].astype(float),
+                            rows["quaternion"].astype(float), rows["angles_std"].astype(float))
 
 
 # --- what the client sends ----------------------------------------------------------------------------------

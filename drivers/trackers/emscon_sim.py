@@ -7,10 +7,16 @@ Set/GetCoordinateSystemType (right-handed rectangular only; others: status 2, no
 Set/GetSystemSettings, Set/GetEnvironmentParams, GetReflectors / Set/GetReflector, Set/GetMeasurementMode
 (stationary, continuous by time, 6-DoF stationary), Set/GetStationaryModeParams, Set/GetContinuousTimeModeParams,
 StartMeasurement (stationary: the answer, then one ``ES_DT_SingleMeasResult`` after the measurement time on the
-rig's clock; continuous: the answer, then ``ES_DT_MultiMeasResult`` packets; 6-DoF: one
-``ES_DT_StationaryProbeMeasResult`` of a probe whose frame is the flange's moved to the TP, its quaternion (q0
-scalar) taking probe-frame vectors to the tracker frame), StopMeasurement, GetTrackerStatus,
+rig's clock; continuous: the answer, then ``ES_DT_MultiMeasResult`` packets; 6-DoF stationary: one
+``ES_DT_StationaryProbeMeasResult``; 6-DoF continuous by time: ``ES_DT_ContinuousProbeMeasResult`` packets as the
+continuous ones), StopMeasurement, GetTrackerStatus,
 GetSystemSoftwareVersion; any other command is answered with status 2 (not implemented).
+
+6-DoF probe (T-Mac class): the probe's frame is the rig's first target frame (``rig.true_frames``: a fixed frame
+on the flange, the mock's 6-DoF target; the flange's own axes on a rig without one) with its origin, the measuring
+tip, at the TP; the tip has the positions' noise, the orientation is turned by a random rotation of ``angle_noise``
+rad per axis (stated as each rotation angle's deviation); the quaternion (q0 scalar first) takes probe-frame vectors
+to the tracker frame (drivers/trackers/emscon_protocol.py: the reading this client infers).
 
 Continuous by time: the points are the rig's true TP at times ``lTimeSeparation`` ms apart on the rig's clock (the
 first at the StartMeasurement), each with the noise; every :data:`PACKET_PERIOD` s of that clock the points due so
@@ -31,7 +37,8 @@ change "not ready", then the answer with status 10004; the next measurement that
 ``lost_during`` (answer OK, then an ``ES_DT_Error`` packet: status 10009, no stationary result), ``warming_up``
 (status 10012), ``not_ready`` (status 10014), ``garbage`` (answer OK, then 40 bytes that are no packet),
 ``silence`` (no answer), ``drop`` (the server closes the connection), ``split`` (the result arrives in three
-pieces 10 ms apart: must still parse).
+pieces 10 ms apart: must still parse), ``pose_invalid`` (a 6-DoF result whose rotation status says error: too few
+LEDs seen).
 
 Faults during a continuous measurement (``inject`` or ``fault=NAME[@N][xK]``, ``@N`` counting the continuous result
 packets over the server's life): ``stream_lost`` (the beam breaks: status change "not ready", an ``ES_DT_Error``
@@ -247,7 +254,7 @@ class EmsconSimServer:
             return ok(struct.pack("<i", self.reflector))
         if code == es.C_SET_MEAS_MODE:
             mode = struct.unpack("<I", payload)[0]
-            if mode not in (es.MM_STATIONARY, es.MM_CONTINUOUS_TIME, es.MM_6D_STATIONARY):
+            if mode not in (es.MM_STATIONARY, es.MM_CONTINUOUS_TIME, es.MM_6D_STATIONARY, es.MM_6D_CONTINUOUS_TIME):
                 return refuse(2)
             self.mode = mode
             return ok(change=17)
@@ -307,8 +314,9 @@ class EmsconSimServer:
             if unsolicited:
                 send(served.status_change(es.SSC_READY))
         send(served.reply(code, 0))
-        if self.mode == es.MM_CONTINUOUS_TIME:
-            link.stream = _Stream(self.rig.clock.now(), self.continuous[0] / 1000, self.continuous[1])
+        if self.mode in (es.MM_CONTINUOUS_TIME, es.MM_6D_CONTINUOUS_TIME):
+            link.stream = _Stream(self.rig.clock.now(), self.continuous[0] / 1000, self.continuous[1],
+                                  self.mode == es.MM_6D_CONTINUOUS_TIME)
             link.thread = threading.Thread(target=self._stream_loop, args=(link,), daemon=True,
                                            name="emscon-sim-stream")
             link.thread.start()
@@ -317,7 +325,7 @@ class EmsconSimServer:
             send(served.error_packet(code, 10009))
             return True
         if self.mode == es.MM_6D_STATIONARY:
-            return self._probe(link)
+            return self._probe(link, fault == "pose_invalid")
         if fault == "garbage":
             send(b"\xff\xff\xff\x7f" + bytes(self.rng.integers(0, 256, 36, dtype=np.uint8)))
             return True
@@ -335,22 +343,36 @@ class EmsconSimServer:
             send(packet)
         return True
 
-    def _probe(self, link: _Link) -> bool:
-        """A 6-DoF stationary result: the probe is the flange's frame moved to the TP (its measuring tip); the tip
-        with the noise, the orientation turned by a random rotation of ``angle_noise`` rad per axis."""
+    def _probe(self, link: _Link, invalid: bool = False) -> bool:
+        """A 6-DoF stationary result (module doc); ``invalid``: its rotation status says error (bits 0, 1, 2:
+        valid, error, not enough LEDs)."""
         self.rig.clock.sleep(self.stationary[0] / 1000)
-        pose = np.asarray(self.rig.flange_pose(), dtype=float).copy()
-        pose[:3, 3] = self.rig.true_point()
+        pose = self.probe_pose()
         values, std = self._reported(pose[None, :3, 3])
-        turn = Rotation.from_rotvec(self.rng.normal(0.0, self.angle_noise, 3))
-        rotation = turn * Rotation.from_matrix(pose[:3, :3])
-        x, y, z, w = rotation.as_quat()
-        angles = tuple(float(a) for a in rotation.as_euler("xyz"))
+        quaternion = self._turned(pose[None, :3, :3])[0]
         self.measurements += 1  # counted before it leaves, as a stationary result
         self.probe_truths.append(pose)
-        link.send(served.probe_stationary_result(tuple(values[0]), std, (w, x, y, z), angles,  # type: ignore[arg-type]
-                                             (self.angle_noise,) * 3, self.environment))
+        angles = tuple(float(a) for a in Rotation.from_quat(np.roll(quaternion, -1)).as_euler("xyz"))
+        link.send(served.probe_stationary_result(tuple(values[0]), std, tuple(quaternion), angles,  # type: ignore[arg-type]
+                                                 (self.angle_noise,) * 3, self.environment,
+                                                 rotation_status=0b111 if invalid else 1))
         return True
+
+    def probe_pose(self, tau: float | None = None) -> np.ndarray:
+        """The probe's true pose at rig time ``tau`` (default now): 4x4, tracker frame <- probe frame, m (module
+        doc)."""
+        pose = np.eye(4)
+        frames = getattr(self.rig, "true_frames", None)
+        pose[:3, :3] = frames(tau)[0] if frames is not None else np.asarray(self.rig.flange_pose(tau))[:3, :3]
+        pose[:3, 3] = self.rig.true_point(tau)
+        return pose
+
+    def _turned(self, rotations: np.ndarray) -> np.ndarray:
+        """True orientations (k, 3, 3) -> the quaternions (k, 4), q0 scalar first, the probe reports: each turned
+        by a random rotation of ``angle_noise`` rad per axis."""
+        turn = Rotation.from_rotvec(self.rng.normal(0.0, self.angle_noise, (len(rotations), 3)))
+        x, y, z, w = (turn * Rotation.from_matrix(rotations)).as_quat().T
+        return np.column_stack([w, x, y, z])
 
     def _reported(self, true: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float]]:
         """True points (k, 3) m -> what the server reports (k, 3) in its units and settings, and each axis's
@@ -414,13 +436,22 @@ class EmsconSimServer:
             link.send(b"\xff\xff\xff\x7f" + bytes(self.rng.integers(0, 256, 36, dtype=np.uint8)))
             return
         tau = stream.start + k * stream.separation
-        true = np.array([self.rig.true_point(float(t)) for t in tau], dtype=float)
-        values, _ = self._reported(true)  # the standard statistic mode: no deviations per point
         stamp = np.asarray(self.tracker_time(tau))
         seconds = np.floor(stamp)
         micro = np.minimum(np.round((stamp - seconds) * 1e6), 999_999)
         status = np.full(len(k), 3 if fault == "stream_prism" else 0)
-        if link.send(served.multi_result(status, seconds, micro, values, self.environment)):
+        if stream.six_dof:
+            poses = np.array([self.probe_pose(float(t)) for t in tau])
+            true = poses[:, :3, 3]
+            values, std = self._reported(true)
+            packet = served.probe_continuous_result(status, seconds, micro, values, std,
+                                                    self._turned(poses[:, :3, :3]), self.angle_noise,
+                                                    self.environment)
+        else:
+            true = np.array([self.rig.true_point(float(t)) for t in tau], dtype=float)
+            values, _ = self._reported(true)  # the standard statistic mode: no deviations per point
+            packet = served.multi_result(status, seconds, micro, values, self.environment)
+        if link.send(packet):
             self.streamed.extend(zip(tau.tolist(), true, strict=True))
 
     def _end_stream(self, link: _Link, flush: bool) -> None:
@@ -439,10 +470,10 @@ class EmsconSimServer:
 
 class _Stream:
     """A continuous measurement: points every ``separation`` s of the rig's clock from ``start``, ``limit`` of
-    them (0: no end); ``sent`` so far, the last packet's rig time."""
+    them (0: no end), 6-DoF ones (``six_dof``) or positions; ``sent`` so far, the last packet's rig time."""
 
-    def __init__(self, start: float, separation: float, limit: int) -> None:
-        self.start, self.separation, self.limit = start, separation, limit
+    def __init__(self, start: float, separation: float, limit: int, six_dof: bool = False) -> None:
+        self.start, self.separation, self.limit, self.six_dof = start, separation, limit, six_dof
         self.sent = 0
         self.last_packet = start
         self.ended = threading.Event()
