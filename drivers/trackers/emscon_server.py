@@ -39,7 +39,7 @@ from drivers.trackers.emscon_protocol import (  # the layouts a client reads, wr
     _probe_point_dtype,
 )
 
-STREAM_FAULTS = ("stream_lost", "stream_prism", "stream_garbage", "stream_drop", "stream_silence")
+STREAM_FAULTS = ("stream_lost", "stream_prism", "stream_garbage", "stream_drop", "stream_silence", "stream_error")
 EMSCON_FAULTS = ("beam_broken", "lost_during", "warming_up", "not_ready", "garbage", "silence", "drop", "split",
                  "pose_invalid", *STREAM_FAULTS)
 _FAULT = re.compile(r"([a-z_]+)(?:@([0-9]+))?(?:x([0-9]+))?\Z")

@@ -45,7 +45,9 @@ packets over the server's life): ``stream_lost`` (the beam breaks: status change
 packet for StartMeasurement with status 10004, the measurement ends; the next K StartMeasurement commands are
 answered 10004 as a ``beam_broken``), ``stream_prism`` (the next K packets' points have status 3, prism error),
 ``stream_garbage`` (40 bytes that are no packet instead of the packet's), ``stream_drop`` (the server closes the
-connection), ``stream_silence`` (the link goes silent: no packet and no answer until the client closes it). On the
+connection), ``stream_silence`` (the link goes silent: no packet and no answer until the client closes it),
+``stream_error`` (an ``ES_DT_Error`` packet for StartMeasurement with status 36, unknown error: the measurement ends,
+and nothing says the beam is the cause). On the
 mock's virtual clock the client's waits (a relock every 0.2 s, the silence timeout, a reconnect) are wall time, during
 which the virtual clock runs on: such a fault costs a larger part of a sweep there than on a real tracker.
 """
@@ -424,6 +426,10 @@ class EmsconSimServer:
                 link.send(served.status_change(es.SSC_NOT_READY))
             self.broken = True
             link.send(served.error_packet(es.C_START_MEASUREMENT, 10004))
+            stream.ended.set()
+            return
+        if fault == "stream_error":
+            link.send(served.error_packet(es.C_START_MEASUREMENT, 36))
             stream.ended.set()
             return
         if fault == "stream_drop":
