@@ -54,6 +54,8 @@ def test_emscon_sim_session_with_faults_identifies_the_truth(tmp_path, capsys):
 def test_emscon_sim_options_are_checked_in_one_line(tmp_path, capsys):
     for tracker, words in (("emscon:sim?fault=explode", "fault 'explode' must be NAME"),
                            ("emscon:sim?noise=-1", "noise=-1"),
+                           ("emscon:sim?probe=7dof", "option probe=7dof must be none or 6dof"),
+                           ("emscon:sim?angle_noise=1", "angle_noise=1"),
                            ("emscon:127.0.0.9", "needs mock devices on both sides")):
         code = main(["--robot", ROBOT, "--tracker", tracker, "--session", str(tmp_path / "x.session"), *SMALL])
         err = capsys.readouterr().err
@@ -122,6 +124,11 @@ def test_dry_run_of_a_continuous_plan_says_the_time_separation(tmp_path, capsys)
     assert "stamped with the tracker's own clock" in out and "a gap, and the measurement started again" in out
     assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1", "--mode", "step", "--dry-run"]) == 0
     assert "continuously" not in capsys.readouterr().out  # a stop-and-go plan streams nothing
+    assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1?probe=6dof", "--mode", "both", "--config",
+                 str(site), "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "measure a 6-DoF probe (T-Mac class)" in out and "measure stationary 6-DoF poses of 1 s" in out
+    assert "6-DoF points, of which the sweep records the tip's position" in out
 
 
 def test_a_tracker_error_mid_sweep_ends_the_run_resumable_in_one_line(tmp_path, capsys):
