@@ -116,6 +116,8 @@ class ProbeMeasurement:
         """One 6-DoF reading (module doc): ``position`` the tip (m, tracker frame), ``rotvec`` the probe frame's
         rotation (rad), ``sigma`` and ``sigma_r`` as stated, ``timestamp`` the host's receive time."""
         result, stamp = self._probe_result(deadline)
+        if result.status != 0:  # the result's own status (a beam lost while measuring...): as a stationary one's
+            raise self._status_error(es.C_START_MEASUREMENT, result.status)
         pose = pose_of(result, self.where, stamp)
         status = self._environment_status((result.temperature, result.pressure, result.humidity),
                                           "ok" if not result.try_mode else "ok, try mode")
