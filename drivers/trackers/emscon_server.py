@@ -1,12 +1,16 @@
 """What an emScon server sends (the emulator in :mod:`drivers.trackers.emscon_sim` and the protocol's tests): answer,
 error, status-change and result packets, and the bodies of the answers a client reads with
-:mod:`drivers.trackers.emscon_protocol`. Little-endian, the header's sizes and types as there.
+:mod:`drivers.trackers.emscon_protocol` (little-endian, the header's sizes and types as there); and the emulator's
+connection (:class:`Link`) and continuous measurement (:class:`Stream`) it sends them on.
 """
 
 from __future__ import annotations
 
+import contextlib
 import re
+import socket
 import struct
+import threading
 from typing import Any
 
 import numpy as np
@@ -152,3 +156,51 @@ def parse_faults(text: str) -> tuple[tuple[str, int, int], ...]:
             raise ValueError(f"fault {item!r}: numbers start at 1")
         out.append((match.group(1), at, count))
     return tuple(out)
+
+
+class Stream:
+    """A continuous measurement: points every ``separation`` s of the rig's clock from ``start``, ``limit`` of
+    them (0: no end), 6-DoF ones (``six_dof``) or positions; ``sent`` so far, the last packet's rig time."""
+
+    def __init__(self, start: float, separation: float, limit: int, six_dof: bool = False) -> None:
+        self.start, self.separation, self.limit, self.six_dof = start, separation, limit, six_dof
+        self.sent = 0
+        self.last_packet = start
+        self.ended = threading.Event()
+        self.ended_itself = False  # the beam was lost or the count reached: nothing left to send
+
+
+class Link:
+    """One client connection: its socket, what is sent on it (the command handler and the stream share it), the
+    continuous measurement running on it; ``muted``: a silent link sends nothing."""
+
+    def __init__(self, conn: socket.socket) -> None:
+        self.conn = conn
+        self.closed = self.muted = False
+        self.stream: Stream | None = None
+        self.thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+
+    @property
+    def measuring(self) -> bool:
+        """A continuous measurement runs on this link."""
+        return self.stream is not None and not self.stream.ended.is_set()
+
+    def send(self, data: bytes) -> bool:
+        """Send ``data``; False when it did not leave (a closed or silent link)."""
+        with self._lock:
+            if self.closed or self.muted:
+                return False
+            try:
+                self.conn.sendall(data)
+            except OSError:
+                self.closed = True
+                return False
+            return True
+
+    def close(self) -> None:
+        """The server hangs up (the serving loop sees it and ends)."""
+        with self._lock:
+            self.closed = True
+            with contextlib.suppress(OSError):
+                self.conn.shutdown(socket.SHUT_RDWR)

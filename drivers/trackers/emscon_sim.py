@@ -54,7 +54,6 @@ which the virtual clock runs on: such a fault costs a larger part of a sweep the
 
 from __future__ import annotations
 
-import contextlib
 import socket
 import struct
 import threading
@@ -121,7 +120,7 @@ class EmsconSimServer:
         self._schedule = list(faults)
         self._lock = threading.Lock()
         self._stop = threading.Event()
-        self._link: _Link | None = None
+        self._link: served.Link | None = None
         self.received = bytearray()
         self._thread = threading.Thread(target=accept_each, args=(self._server, self._serve_connection, self._stop),
                                         daemon=True, name="emscon-sim")
@@ -159,7 +158,7 @@ class EmsconSimServer:
         self.connections += 1
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         conn.settimeout(0.05)
-        link = self._link = _Link(conn)
+        link = self._link = served.Link(conn)
         buffer = b""
         try:
             while not self._stop.is_set() and not link.closed:
@@ -186,7 +185,7 @@ class EmsconSimServer:
         finally:
             self._end_stream(link, flush=False)
 
-    def _answer(self, link: _Link, code: int, payload: bytes) -> bool:
+    def _answer(self, link: served.Link, code: int, payload: bytes) -> bool:
         """Answer one command; False to close the connection."""
         self.commands.append(code)
         send = link.send
@@ -281,7 +280,7 @@ class EmsconSimServer:
             return ok(served.text_field("emScon emulator {}.{}.{}".format(*VERSION)))
         return refuse(2)
 
-    def _measure(self, link: _Link) -> bool:
+    def _measure(self, link: served.Link) -> bool:
         with self._lock:
             self.started += 1
             for name, at, count in self._schedule:
@@ -317,7 +316,7 @@ class EmsconSimServer:
                 send(served.status_change(es.SSC_READY))
         send(served.reply(code, 0))
         if self.mode in (es.MM_CONTINUOUS_TIME, es.MM_6D_CONTINUOUS_TIME):
-            link.stream = _Stream(self.rig.clock.now(), self.continuous[0] / 1000, self.continuous[1],
+            link.stream = served.Stream(self.rig.clock.now(), self.continuous[0] / 1000, self.continuous[1],
                                   self.mode == es.MM_6D_CONTINUOUS_TIME)
             link.thread = threading.Thread(target=self._stream_loop, args=(link,), daemon=True,
                                            name="emscon-sim-stream")
@@ -345,7 +344,7 @@ class EmsconSimServer:
             send(packet)
         return True
 
-    def _probe(self, link: _Link, invalid: bool = False) -> bool:
+    def _probe(self, link: served.Link, invalid: bool = False) -> bool:
         """A 6-DoF stationary result (module doc); ``invalid``: its rotation status says error (bits 0, 1, 2:
         valid, error, not enough LEDs)."""
         self.rig.clock.sleep(self.stationary[0] / 1000)
@@ -387,7 +386,7 @@ class EmsconSimServer:
 
     # --- continuous measurement ---------------------------------------------------------------------------
 
-    def _stream_loop(self, link: _Link) -> None:
+    def _stream_loop(self, link: served.Link) -> None:
         """One packet per PACKET_PERIOD s of the rig's clock (several at once when the clock jumped, as a
         virtual clock does), until the measurement ends."""
         stream = link.stream
@@ -398,7 +397,7 @@ class EmsconSimServer:
                 stream.ended_itself = stream.ended.is_set()
             stream.ended.wait(0.002)
 
-    def _send_points(self, link: _Link, stream: _Stream, until: float) -> None:
+    def _send_points(self, link: served.Link, stream: served.Stream, until: float) -> None:
         """One packet of the points due by rig time ``until``, or the packet's fault."""
         stream.last_packet = until
         due = int(np.floor((until - stream.start) / stream.separation + 1e-9)) + 1
@@ -460,7 +459,7 @@ class EmsconSimServer:
         if link.send(packet):
             self.streamed.extend(zip(tau.tolist(), true, strict=True))
 
-    def _end_stream(self, link: _Link, flush: bool) -> None:
+    def _end_stream(self, link: served.Link, flush: bool) -> None:
         """Stop the continuous measurement of ``link`` (``flush``: its due points sent first, as StopMeasurement
         does)."""
         stream, thread = link.stream, link.thread
@@ -472,51 +471,3 @@ class EmsconSimServer:
         if flush and not link.closed and not link.muted and not stream.ended_itself:
             self._send_points(link, stream, self.rig.clock.now())
         link.stream, link.thread = None, None
-
-
-class _Stream:
-    """A continuous measurement: points every ``separation`` s of the rig's clock from ``start``, ``limit`` of
-    them (0: no end), 6-DoF ones (``six_dof``) or positions; ``sent`` so far, the last packet's rig time."""
-
-    def __init__(self, start: float, separation: float, limit: int, six_dof: bool = False) -> None:
-        self.start, self.separation, self.limit, self.six_dof = start, separation, limit, six_dof
-        self.sent = 0
-        self.last_packet = start
-        self.ended = threading.Event()
-        self.ended_itself = False  # the beam was lost or the count reached: nothing left to send
-
-
-class _Link:
-    """One client connection: its socket, what is sent on it (the command handler and the stream share it), the
-    continuous measurement running on it; ``muted``: a silent link sends nothing."""
-
-    def __init__(self, conn: socket.socket) -> None:
-        self.conn = conn
-        self.closed = self.muted = False
-        self.stream: _Stream | None = None
-        self.thread: threading.Thread | None = None
-        self._lock = threading.Lock()
-
-    @property
-    def measuring(self) -> bool:
-        """A continuous measurement runs on this link."""
-        return self.stream is not None and not self.stream.ended.is_set()
-
-    def send(self, data: bytes) -> bool:
-        """Send ``data``; False when it did not leave (a closed or silent link)."""
-        with self._lock:
-            if self.closed or self.muted:
-                return False
-            try:
-                self.conn.sendall(data)
-            except OSError:
-                self.closed = True
-                return False
-            return True
-
-    def close(self) -> None:
-        """The server hangs up (the serving loop sees it and ends)."""
-        with self._lock:
-            self.closed = True
-            with contextlib.suppress(OSError):
-                self.conn.shutdown(socket.SHUT_RDWR)
