@@ -5,14 +5,15 @@ frame's orientation as a rotation vector, each with its deviation), and ``measur
 measurement as a 4x4 pose.
 
 The exchange: ``SetMeasurementMode(6DStationary)``, ``StartMeasurement``, its answer, then one
-``ES_DT_StationaryProbeMeasResult`` (drivers/trackers/emscon_protocol.py): the measuring tip's position and the
+``ES_DT_StationaryProbeMeasResult`` (drivers/trackers/emscon_6dof.py): the measuring tip's position and the
 probe's orientation, as a quaternion and as rotation angles. The pose is built from the quaternion, read as
 (q0 scalar, q1, q2, q3) of the rotation taking probe-frame vectors to the tracker frame: the header does not define
-it (inferred; emscon_protocol.py says what is verified and what is not), so a real T-Mac's first poses should be
+it (inferred; emscon_6dof.py says what is verified and what is not), so a real T-Mac's first poses should be
 checked against a known motion (turn the flange about its own axis: the rotation vector's change must be that
-axis, in the tracker frame) before they are trusted. A result whose status is not OK, whose rotation status says it
-is not valid (:func:`~drivers.trackers.emscon_protocol.rotation_ok`: bit 0 clear, error or frozen values) is an
-:class:`InvalidPose`, one whose quaternion is not of unit length a BadReading (the orchestrator retries both).
+axis, in the tracker frame) before they are trusted. A result whose status is not OK raises the tracker's status
+error (BeamLost, TrackerNotReady...), as a stationary one does; one whose rotation status says it is not valid
+(:func:`~drivers.trackers.emscon_6dof.rotation_ok`: bit 0 clear, error or frozen values) is an :class:`InvalidPose`,
+one whose quaternion is not of unit length a BadReading (the orchestrator retries both).
 
 A reading's ``sigma`` is the RMS of the tip's three deviations (m), its ``sigma_r`` the RMS of the rotation angles'
 three deviations (rad: taken as the orientation's per-axis deviation, a small-angle reading of Euler-angle

@@ -16,7 +16,7 @@ GetSystemSoftwareVersion; any other command is answered with status 2 (not imple
 on the flange, the mock's 6-DoF target; the flange's own axes on a rig without one) with its origin, the measuring
 tip, at the TP; the tip has the positions' noise, the orientation is turned by a random rotation of ``angle_noise``
 rad per axis (stated as each rotation angle's deviation); the quaternion (q0 scalar first) takes probe-frame vectors
-to the tracker frame (drivers/trackers/emscon_protocol.py: the reading this client infers).
+to the tracker frame (drivers/trackers/emscon_6dof.py: the reading this client infers).
 
 Continuous by time: the points are the rig's true TP at times ``lTimeSeparation`` ms apart on the rig's clock (the
 first at the StartMeasurement), each with the noise; every :data:`PACKET_PERIOD` s of that clock the points due so
