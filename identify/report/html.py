@@ -71,7 +71,7 @@ def png_data_uri(fig: Figure) -> str:
     """``data:image/png;base64,...`` of ``fig`` at :data:`DPI`, drawn once: the figure's layout engine (constrained
     layout, given here to a figure that has none) keeps every label inside the canvas as it draws, and the canvas
     is encoded as drawn. (``savefig`` draws twice with a layout engine or ``bbox_inches="tight"``: a pass to lay out
-    or measure, then the real one; that second pass was two thirds of the report's time.)"""
+    or measure, then the real one, which cost the report a third more CPU time: docs/benchmarks.md, section 24.)"""
     if fig.get_layout_engine() is None:
         fig.set_layout_engine("constrained")
     fig.set_dpi(DPI)
