@@ -34,17 +34,6 @@ from identify.estimator.orientation import matrices_from_rotvecs
 
 Array = NDArray[np.float64]
 
-SENSORS = ("fixed", "flange")
-
-
-def parse_sensor(text: str) -> str:
-    """The ``# sensor:`` metadata (``fixed`` or ``flange``); InputError for anything else."""
-    value = text.strip().lower()
-    if value not in SENSORS:
-        raise InputError(f"'# sensor:' must be fixed or flange, got {text.strip()!r}")
-    return value
-
-
 def turned_round(meas: Measurements) -> tuple[Measurements, Array]:
     """``meas`` of a flange camera (the board's pose in the camera frame on every row) as the estimator's rows (the
     camera's view-point frame in the board frame, module docstring), and the view point c (3,), m, camera frame.
