@@ -225,7 +225,11 @@ class SimulatedRig:
         except ValueError as exc:
             raise SpecError(f"robot spec {str(robot)!r}: {exc}") from None
         rig.robot_spec, rig.tracker_spec = robot, tracker
-        if view is not None:
+        if view is not None and tracker is not None and tracker.options.get("mount") == "flange":
+            from drivers.camera.flange_camera import face_board
+
+            face_board(rig, *view)  # the camera on the flange, the board in front of it at home
+        elif view is not None:
             rig.face_tracker(*view)
         return rig
 
