@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from common.errors import InputError
 from identify.estimator.measurements import Measurements
 from identify.estimator.orientation import matrices_from_rotvecs
+from identify.estimator.poe import points_from_lines, target_rotations
 
 Array = NDArray[np.float64]
 
@@ -81,3 +82,24 @@ def flange_document(doc: dict[str, Any], view_point: Array) -> dict[str, Any]:
     if isinstance(model, dict) and "tool_frame" in model:
         out["extensions"] = {**out["extensions"], "model": {**model, **flange_frames(model, view_point)}}
     return out
+
+
+def frame_point_covariances(written: Any, q: Array, offset: Array, step: float = 1e-7) -> Array:
+    """Covariance (m, 3, 3), m², of the predicted position of the point ``offset`` (3,), m in the target frame (a
+    flange camera's view-point frame: the camera's axes at the view point; e.g. the flange or the camera's centre),
+    at DH joint values ``q`` (m, n), from the ``written`` model's (:class:`identify.results.written.WrittenModel`,
+    plain) covariance over its axis lines, tracked point and the target frame's turn. The Jacobian by central
+    differences of ``step`` in each parameter."""
+    problem = written.problem
+    k = problem.n_lines
+    q = np.atleast_2d(np.asarray(q, dtype=float))
+    offset = np.asarray(offset, dtype=float)
+
+    def predict(x_lines: Array) -> Array:
+        x = np.zeros(problem.size)
+        x[:k] = x_lines
+        lines, _ = problem.lines(x)
+        return points_from_lines(lines, q) + np.einsum("mij,j->mi", target_rotations(lines, q), offset)
+
+    jac = np.stack([(predict(e * step) - predict(-e * step)) / (2 * step) for e in np.eye(k)], axis=2)
+    return jac @ written.covariance[:k, :k] @ np.swapaxes(jac, 1, 2)
