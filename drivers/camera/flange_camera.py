@@ -11,24 +11,23 @@ recorded as the session's scale reference. Without it the board's print is unver
 and identify checks the scale against the robot's nominal lengths (identify/sensors/scale.py).
 
 Simulated (``aruco:sim?mount=flange``, mock robots only): the camera sits on the flange at :data:`CAMERA_MOUNT`
-and :func:`face_board` places the board: at the home pose it lies ``distance`` m down the camera's line of sight,
-facing it, turned by ``tilt`` about the camera's x axis and by ``roll`` about its line of sight (the rig's
-"tracker frame" is the board's). ``printed`` (default 1) is the true board's size over the declared one: the camera
-renders the true board, the detection uses the declared one (a misprint the fit cannot see by itself). Frames and
+and the rig places the board (:meth:`drivers.sim.rig.SimulatedRig.face_board`): at the home pose it lies
+``distance`` m down the camera's line of sight, facing it, turned by ``tilt`` about the camera's x axis and by
+``roll`` about its line of sight (the rig's "tracker frame" is the board's). ``printed`` (default 1) is the true
+board's size over the declared one: the camera renders the true board, the detection uses the declared one (a
+misprint the fit cannot see by itself). Frames and
 units: metres, radians; 4x4 transforms ``A <- B``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from drivers.camera.renderer import SimulatedCamera
-from kinematics.dh import frames_from_joints
 
 Array = NDArray[np.float64]
 
@@ -47,17 +46,6 @@ def facing_board(distance: float, tilt: float = 0.0, roll: float = 0.0) -> Array
     out[:3, :3] = turn @ np.diag([1.0, -1.0, -1.0])  # the board's z (out of the print) back at the camera
     out[:3, 3] = [0.0, 0.0, distance]
     return out
-
-
-def face_board(rig: Any, distance: float, tilt: float = 0.0, roll: float = 0.0, mount: Array = CAMERA_MOUNT) -> None:
-    """Re-place ``rig``'s true base (board frame <- DH frame 0) so that at the home pose the flange camera at
-    ``mount`` sees the board as :func:`facing_board` puts it. The DH table stays as it was."""
-    from drivers.sim.world import true_joints
-
-    home = true_joints(rig.readings_of(rig.model.home), rig.coupling, rig.joint_errors, rig.truth, rig.model.links)
-    flange = frames_from_joints(replace(rig.truth, base=np.eye(4)), home)[0, -1]  # DH frame 0 <- flange
-    board = flange @ mount @ facing_board(distance, tilt, roll)  # DH frame 0 <- board
-    rig.truth = replace(rig.truth, base=np.linalg.inv(board))
 
 
 class SimulatedFlangeCamera(SimulatedCamera):

@@ -10,7 +10,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from identify.estimator.measurements import Measurements
-from identify.io.result_io import finite
 from identify.results.pipeline import Identification
 from identify.results.verdict import with_session_check
 from identify.sensors.flange import flange_document, turned_round
@@ -56,4 +55,4 @@ def documented(doc: dict[str, Any], rows: SensorRows, scale: ScaleResult) -> dic
         doc = {**doc, "scale": scale.as_dict(effect_rms(rows.meas.points, scale.sigma))}
     if rows.view_point is not None:
         doc = flange_document(doc, rows.view_point)
-    return finite(doc)
+    return doc

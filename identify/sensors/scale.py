@@ -83,16 +83,16 @@ class ScaleResult:
     check: Check | None
 
     def as_dict(self, effect_rms: float | None = None) -> dict[str, Any]:
-        out: dict[str, Any] = {"reference": self.reference, "relative_sigma": self.sigma}
+        out: dict[str, Any] = {"reference": self.reference, "relative_sigma": _finite(self.sigma)}
         if self.nominal is not None:
             out["ratio_to_nominal"] = self.nominal.ratio
             out["ratio_sigma"] = self.nominal.sigma
             out["lengths"] = list(self.nominal.lengths)
         if effect_rms is not None:
-            out["effect_rms"] = effect_rms
-        out["note"] = ("relative_sigma: the device's length scale, 1 sigma; a prediction at p (device frame) errs by "
-                       "|p| times it, which no held-out row can show (they share the scale); effect_rms: that error, "
-                       "RMS over the fit poses, m")
+            out["effect_rms"] = _finite(effect_rms)
+        out["note"] = ("relative_sigma: the device's length scale, 1 sigma (null: unknown); a prediction at p "
+                       "(device frame) errs by |p| times it, which no held-out row can show (they share the scale); "
+                       "effect_rms: that error, RMS over the fit poses, m")
         return out
 
 
@@ -147,6 +147,11 @@ def effect_rms(predicted: Array, sigma: float) -> float:
     if math.isinf(sigma):
         return math.inf
     return float(sigma * np.sqrt(np.mean(np.sum(np.asarray(predicted, dtype=float) ** 2, axis=1))))
+
+
+def _finite(value: float) -> float | None:
+    """``value``, None when it is not finite (an unknown scale: YAML and JSON have no infinity)."""
+    return float(value) if math.isfinite(value) else None
 
 
 def _percent(offset: float) -> str:
