@@ -211,7 +211,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                                                                   checks.missing_steps(*header["missing_steps"])))
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input),
                          nominal_model=robot.document if robot else None)
-    doc = documented(doc, rows, scale)
+    doc = documented(doc, rows, scale, ident)
     if header is not None:  # the controller's own calibration: what the arm runs today ("before")
         from identify.applications.controller import controller_section
         from session.rows import factory_calibration
