@@ -1,11 +1,11 @@
 """A camera on the flange and a printed board: the arm's kinematics without a tracker (docs/benchmarks.md, section 24).
 
-    PYTHONPATH=. .venv/bin/python -m bench.flange_camera [--seeds 3] [--views 50] [--jobs 2] [--quick]
+    PYTHONPATH=. .venv/bin/python -m bench.flange_camera [--seeds 3] [--views 40] [--jobs 1] [--quick]
 
 Each case is one rendered session of a simulated UR5e (``mock:ur5e?seed=S``: its true DH table perturbed 0.5 mm and
 1 mrad per value) with a 1280x720 camera (60° horizontal field of view, noise 2 grey levels, blur 0.5 px) on the
 flange (drivers/camera/flange_camera.py, ``aruco:sim?mount=flange``) seeing a ChArUco board on the table: A4 (11x8
-squares of 25 mm) or A3 (15x11 of 26 mm). Real OpenCV detection on every image (``refine=edges``, 5 frames a view).
+squares of 25 mm) or A3 (15x11 of 26 mm). Real OpenCV detection on every image (``refine=edges``, 3 frames a view).
 
 1. The plan: one reading at home places the board in the base frame (nominal kinematics and the nominal camera
    mount); ``--views`` views that keep the whole board in the image, 0.3-0.75 m away, within 40° of its normal, any
@@ -20,9 +20,10 @@ squares of 25 mm) or A3 (15x11 of 26 mm). Real OpenCV detection on every image (
    ratio (the issue's target: RMS <= 0.3 mm and ratio within 1 ± 0.3); the same RMS for the usual hand-eye
    calibration of the same images (Park and Martin's method, as ``cv2.calibrateHandEye`` has it: OpenCV 5.0's
    Python binding lacks that function; nominal kinematics; the board's place from the mean over the views).
-4. The scale: the A4 case of the first seed again with a board printed 0.3 % large, once with the caliper's
-   reading given and once with the printed (nominal) size only: the first must pass, the second must fail the
-   ``scale`` check (reported, not absorbed).
+4. The scale: the A4 case of the first seed again with a board printed 0.5 % large and the caliper's reading given
+   (must meet the targets), and with boards printed 0.3 % and 0.5 % large declared at their nominal size: the
+   ``scale`` check must not pass, and where it only warns (a misprint within the arm's own length tolerance) the
+   stated accuracy must cover the error (RMS <= 1.3 x stated): reported, not absorbed.
 
 Robot time (virtual clock of the rig: moves, settling, frames) and the number of images are reported per case.
 Exit status 1 when a case misses a target.
@@ -61,12 +62,12 @@ from kinematics.dh import frames_from_joints
 BOARDS = {"A4": (11, 8, 0.025, 0.018, 0.45), "A3": (15, 11, 0.026, 0.019, 0.6)}  # cols, rows, square, marker, distance
 WIDTH, HEIGHT, FOV = 1280, 720, 60.0
 SQUARE_SIGMA = 2e-6  # m: ten squares measured with a caliper to ±0.02 mm
-FRAMES = 5
+FRAMES = 3
 CHECK_SHARE = 0.25
 CHECK_POSES = 300
 TARGET_RMS = 3e-4  # m
 TARGET_RATIO = (0.7, 1.3)
-MISPRINT = 1.003
+MISPRINTS = (1.003, 1.005)  # the true board's size over its nominal one (a print 0.3 % and 0.5 % large)
 SPEED, ACCELERATION = 1.0, 2.0  # rad/s, rad/s² of the calibration moves
 
 
@@ -101,11 +102,12 @@ class Outcome:
 
 def _spec(case: Case) -> str:
     cols, rows, square, marker, distance = BOARDS[case.board]
-    measured = square * case.printed if case.caliper else square  # the caliper reads the true squares
+    # the caliper reads the true squares, and the board is declared at that size; otherwise at its nominal one
+    declared, printed = (square * case.printed, 1.0) if case.caliper else (square, case.printed)
     sigma = f"&square_sigma={SQUARE_SIGMA}" if case.caliper else ""
-    return (f"aruco:sim?mount=flange&board=charuco&cols={cols}&rows={rows}&square={measured!r}"
-            f"&size={marker * measured / square!r}{sigma}&width={WIDTH}&height={HEIGHT}&fov={FOV}"
-            f"&distance={distance}&tilt=8&roll=5&frames={FRAMES}&printed={case.printed}&seed={case.seed}")
+    return (f"aruco:sim?mount=flange&board=charuco&cols={cols}&rows={rows}&square={declared!r}"
+            f"&size={marker * declared / square!r}{sigma}&width={WIDTH}&height={HEIGHT}&fov={FOV}"
+            f"&distance={distance}&tilt=8&roll=5&frames={FRAMES}&printed={printed!r}&seed={case.seed}")
 
 
 def _pose(reading) -> np.ndarray:
@@ -223,15 +225,15 @@ def _hand_eye_rms(nominal, q: np.ndarray, readings: list, q_check: np.ndarray, t
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.flange_camera", description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=3, help="simulated arms per board (default 3)")
-    parser.add_argument("--views", type=int, default=50, help="views planned per session (default 50)")
-    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: all cores)")
+    parser.add_argument("--views", type=int, default=40, help="views planned per session (default 40)")
+    parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1: rendering is memory-bound)")
     parser.add_argument("--quick", action="store_true", help="one A4 session of 30 views and the scale cases")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     views = 30 if args.quick else args.views
     cases = [Case(board, seed, views) for board in (("A4",) if args.quick else BOARDS)
              for seed in range(1, (1 if args.quick else args.seeds) + 1)]
-    cases += [Case("A4", 1, views, MISPRINT, True), Case("A4", 1, views, MISPRINT, False)]
+    cases += [Case("A4", 1, views, MISPRINTS[-1], True)] + [Case("A4", 1, views, p, False) for p in MISPRINTS]
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
             results = list(pool.map(run_case, cases))
@@ -251,8 +253,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{r.seconds:>5.0f}")
         if case.caliper and (r.rms > TARGET_RMS or r.scale == "fail"):
             missed.append(r.label)
-        if not case.caliper and r.scale != "fail":
-            missed.append(r.label + " (a wrong scale passed)")
+        if not case.caliper and (r.scale == "pass" or (r.scale == "warn" and r.rms > 1.3 * r.stated)):
+            missed.append(r.label + " (a wrong scale passed, or was stated too small)")
     good = [(r.rms, r.stated) for c, r in zip(cases, results, strict=True) if c.caliper]
     pooled = math.sqrt(np.mean([a**2 for a, _ in good]) / np.mean([b**2 for _, b in good]))
     print(f"pooled ratio sqrt(mean RMS^2 / mean stated^2) over the cases with the caliper's scale: {pooled:.2f} "
