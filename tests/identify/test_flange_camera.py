@@ -163,3 +163,20 @@ def test_the_view_check_says_why_the_board_is_not_seen() -> None:
     assert seen.tolist() == [True, True, False] and reasons[2] == OUT_OF_VIEW
     assert board_in_view(ROBOT.nominal, q[:2], MOUNT, BOARD, replace(CAMERA, max_angle=0.01))[1] == ["", GRAZING]
     assert board_in_view(ROBOT.nominal, q[:1], MOUNT, BOARD, replace(CAMERA, far=0.45))[1] == [TOO_FAR]
+
+
+def test_identify_reads_a_flange_csv_and_writes_the_cameras_frames(tmp_path, capsys) -> None:
+    import yaml
+
+    from identify.commands.cli import main
+
+    _, meas = _truth_and_rows()
+    path = tmp_path / "flange.csv"
+    path.write_text(format_measurements(meas), encoding="utf-8")
+    out = tmp_path / "result.yaml"
+    assert main([str(path), "--robot", "ur5e", "--out", str(out)]) == 0  # warn: the scale is the nominal's
+    doc = yaml.safe_load(out.read_text(encoding="utf-8"))
+    assert doc["sensor"] == "flange" and doc["scale"]["reference"] == "nominal"
+    assert np.array(doc["sensor_frame"]).shape == (4, 4) and np.array(doc["target"]).shape == (4, 4)
+    assert 0 < doc["flange_accuracy_rms"] < 1e-3
+    assert "scale:" in capsys.readouterr().out  # the terminal's verdict line names the check
