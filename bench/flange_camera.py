@@ -5,7 +5,8 @@
 Each case is one rendered session of a simulated UR5e (``mock:ur5e?seed=S``: its true DH table perturbed 0.5 mm and
 1 mrad per value) with a 1280x720 camera (60° horizontal field of view, noise 2 grey levels, blur 0.5 px) on the
 flange (drivers/camera/flange_camera.py, ``aruco:sim?mount=flange``) seeing a ChArUco board on the table: A4 (11x8
-squares of 25 mm) or A3 (15x11 of 26 mm). Real OpenCV detection on every image (``refine=edges``, 3 frames a view).
+squares of 25 mm, ArUco 4X4_50) or A3 (15x11 of 26 mm, 4X4_100). Real OpenCV detection on every image
+(``refine=edges``, 3 frames a view).
 
 1. The plan: one reading at home places the board in the base frame (nominal kinematics and the nominal camera
    mount); ``--views`` views that keep the whole board in the image, 0.3-0.75 m away, within 40° of its normal, any
@@ -49,8 +50,10 @@ from scipy.spatial.transform import Rotation
 from acquire.planning.flange_views import FlangeCamera, flange_view_poses
 from config.robots import load_robot
 from drivers.camera.flange_camera import CAMERA_MOUNT
+from drivers.camera.tracker import parse_settings
 from drivers.registry import open_robot, open_tracker
 from drivers.sim.rig import SimulatedRig
+from drivers.spec import TrackerSpec
 from identify.estimator.measurements import Measurements
 from identify.io.result_io import result_to_dict
 from identify.results.pipeline import identify
@@ -59,7 +62,8 @@ from identify.sensors.flange import frame_point_covariances
 from identify.simulators.simulate import random_poses
 from kinematics.dh import frames_from_joints
 
-BOARDS = {"A4": (11, 8, 0.025, 0.018, 0.45), "A3": (15, 11, 0.026, 0.019, 0.6)}  # cols, rows, square, marker, distance
+#: cols, rows, square, marker (m), distance at home (m), dictionary
+BOARDS = {"A4": (11, 8, 0.025, 0.018, 0.45, "4X4_50"), "A3": (15, 11, 0.026, 0.019, 0.6, "4X4_100")}
 WIDTH, HEIGHT, FOV = 1280, 720, 60.0
 SQUARE_SIGMA = 2e-6  # m: ten squares measured with a caliper to ±0.02 mm
 FRAMES = 3
@@ -101,11 +105,11 @@ class Outcome:
 
 
 def _spec(case: Case) -> str:
-    cols, rows, square, marker, distance = BOARDS[case.board]
+    cols, rows, square, marker, distance, dictionary = BOARDS[case.board]
     # the caliper reads the true squares, and the board is declared at that size; otherwise at its nominal one
     declared, printed = (square * case.printed, 1.0) if case.caliper else (square, case.printed)
     sigma = f"&square_sigma={SQUARE_SIGMA}" if case.caliper else ""
-    return (f"aruco:sim?mount=flange&board=charuco&cols={cols}&rows={rows}&square={declared!r}"
+    return (f"aruco:sim?mount=flange&board=charuco&dict={dictionary}&cols={cols}&rows={rows}&square={declared!r}"
             f"&size={marker * declared / square!r}{sigma}&width={WIDTH}&height={HEIGHT}&fov={FOV}"
             f"&distance={distance}&tilt=8&roll=5&frames={FRAMES}&printed={printed!r}&seed={case.seed}")
 
@@ -136,7 +140,7 @@ def run_case(case: Case) -> Outcome:
 
     _, at_home = visit(home)
     board = frames_from_joints(nominal, home[None])[0, -1] @ CAMERA_MOUNT @ _pose(at_home)  # base <- board, a guess
-    cols, rows, square, _, _ = BOARDS[case.board]
+    cols, rows, square, *_ = BOARDS[case.board]
     intrinsics = camera.camera
     view = FlangeCamera(intrinsics.matrix, (WIDTH, HEIGHT), (cols * square, rows * square), near=0.3, far=0.75,
                         max_angle=math.radians(40.0), margin=0.04)
@@ -234,11 +238,16 @@ def main(argv: list[str] | None = None) -> int:
     cases = [Case(board, seed, views) for board in (("A4",) if args.quick else BOARDS)
              for seed in range(1, (1 if args.quick else args.seeds) + 1)]
     cases += [Case("A4", 1, views, MISPRINTS[-1], True)] + [Case("A4", 1, views, p, False) for p in MISPRINTS]
+    for case in cases:  # every spec is valid before hours of rendering start
+        parse_settings(TrackerSpec.parse(_spec(case)))
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
             results = list(pool.map(run_case, cases))
     else:
-        results = [run_case(c) for c in cases]
+        results = []
+        for case in cases:
+            results.append(run_case(case))
+            print(f"  done: {results[-1]}", file=sys.stderr, flush=True)
     print(f"UR5e, camera {WIDTH}x{HEIGHT} on the flange ({FOV:g}° wide), ChArUco boards, {FRAMES} frames a view, "
           f"{views} views planned, {CHECK_POSES} random poses over the joints' ranges for the truth")
     header = (f"{'case':<34} {'images':>6} {'robot s':>7} {'flange RMS mm':>13} {'stated mm':>9} {'ratio':>6} "
