@@ -14,7 +14,8 @@ squares of 25 mm, ArUco 4X4_50) or A3 (15x11 of 26 mm, 4X4_100). Real OpenCV det
    and the camera measures; a quarter of the views are held out (``role=check``).
 2. identify (``# sensor: flange``, --robot ur5e): the DH table, the camera on the flange and the board in the base
    frame in one fit (identify/sensors/flange.py). The board's scale is the caliper's: ``square_sigma`` 2 µm on a
-   25 mm square (10 squares measured to ±0.02 mm), so ``# scale_sigma`` 8e-5.
+   25 mm square (10 squares measured to ±0.02 mm), so ``# scale_sigma`` 8e-5; the reading itself is drawn with
+   that uncertainty (seeded), so the scale's share of the stated accuracy is realised in the error too.
 3. The truth: the flange (the true flange origin, a point fixed to the camera) at 300 random poses over every joint's
    range, in the board frame. Reported: RMS error of the identified model; the accuracy the result states there
    (the flange point's covariance from the fit, the model error, and the scale's ``|p| · scale_sigma``) and their
@@ -106,8 +107,10 @@ class Outcome:
 
 def _spec(case: Case) -> str:
     cols, rows, square, marker, distance, dictionary = BOARDS[case.board]
-    # the caliper reads the true squares, and the board is declared at that size; otherwise at its nominal one
-    declared, printed = (square * case.printed, 1.0) if case.caliper else (square, case.printed)
+    # the caliper reads the true squares within its uncertainty (a seeded draw), and the board is declared at that
+    # size; otherwise at its nominal one
+    reading = square * case.printed * (1.0 + np.random.default_rng([case.seed, 39]).normal(0.0, SQUARE_SIGMA / square))
+    declared, printed = (reading, square * case.printed / reading) if case.caliper else (square, case.printed)
     sigma = f"&square_sigma={SQUARE_SIGMA}" if case.caliper else ""
     return (f"aruco:sim?mount=flange&board=charuco&dict={dictionary}&cols={cols}&rows={rows}&square={declared!r}"
             f"&size={marker * declared / square!r}{sigma}&width={WIDTH}&height={HEIGHT}&fov={FOV}"
