@@ -63,8 +63,10 @@ from identify.sensors.flange import frame_point_covariances
 from identify.simulators.simulate import random_poses
 from kinematics.dh import frames_from_joints
 
-#: cols, rows, square, marker (m), distance at home (m), dictionary
-BOARDS = {"A4": (11, 8, 0.025, 0.018, 0.45, "4X4_50"), "A3": (15, 11, 0.026, 0.019, 0.6, "4X4_100")}
+#: cols, rows, square, marker (m), distance at home (m), dictionary, the views' depth range (m: the whole board in
+#: the image at any allowed angle needs the A3 farther)
+BOARDS = {"A4": (11, 8, 0.025, 0.018, 0.45, "4X4_50", (0.3, 0.75)),
+          "A3": (15, 11, 0.026, 0.019, 0.6, "4X4_100", (0.5, 0.95))}
 WIDTH, HEIGHT, FOV = 1280, 720, 60.0
 SQUARE_SIGMA = 2e-6  # m: ten squares measured with a caliper to ±0.02 mm
 FRAMES = 3
@@ -106,7 +108,7 @@ class Outcome:
 
 
 def _spec(case: Case) -> str:
-    cols, rows, square, marker, distance, dictionary = BOARDS[case.board]
+    cols, rows, square, marker, distance, dictionary, _ = BOARDS[case.board]
     # the caliper reads the true squares within its uncertainty (a seeded draw), and the board is declared at that
     # size; otherwise at its nominal one
     reading = square * case.printed * (1.0 + np.random.default_rng([case.seed, 39]).normal(0.0, SQUARE_SIGMA / square))
@@ -143,9 +145,9 @@ def run_case(case: Case) -> Outcome:
 
     _, at_home = visit(home)
     board = frames_from_joints(nominal, home[None])[0, -1] @ CAMERA_MOUNT @ _pose(at_home)  # base <- board, a guess
-    cols, rows, square, *_ = BOARDS[case.board]
+    cols, rows, square, *_, (near, far) = BOARDS[case.board]
     intrinsics = camera.camera
-    view = FlangeCamera(intrinsics.matrix, (WIDTH, HEIGHT), (cols * square, rows * square), near=0.3, far=0.75,
+    view = FlangeCamera(intrinsics.matrix, (WIDTH, HEIGHT), (cols * square, rows * square), near=near, far=far,
                         max_angle=math.radians(40.0), margin=0.04)
     plan = flange_view_poses(nominal, home, limits, CAMERA_MOUNT, board, view, case.views,
                              np.random.default_rng([case.seed, 36]))
@@ -235,12 +237,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--views", type=int, default=40, help="views planned per session (default 40)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1: rendering is memory-bound)")
     parser.add_argument("--quick", action="store_true", help="one A4 session of 30 views and the scale cases")
+    parser.add_argument("--boards", default="A4,A3", help="boards to run, of A4 and A3 (default A4,A3)")
+    parser.add_argument("--skip-scale", action="store_true", help="leave out the misprinted boards' sessions")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     views = 30 if args.quick else args.views
-    cases = [Case(board, seed, views) for board in (("A4",) if args.quick else BOARDS)
-             for seed in range(1, (1 if args.quick else args.seeds) + 1)]
-    cases += [Case("A4", 1, views, MISPRINTS[-1], True)] + [Case("A4", 1, views, p, False) for p in MISPRINTS]
+    boards = ["A4"] if args.quick else [b for b in args.boards.split(",") if b]
+    if not set(boards) <= set(BOARDS):
+        parser.error(f"--boards: of {', '.join(BOARDS)}")
+    cases = [Case(board, seed, views) for board in boards for seed in range(1, (1 if args.quick else args.seeds) + 1)]
+    if not args.skip_scale:
+        cases += [Case("A4", 1, views, MISPRINTS[-1], True)] + [Case("A4", 1, views, p, False) for p in MISPRINTS]
     for case in cases:  # every spec is valid before hours of rendering start
         parse_settings(TrackerSpec.parse(_spec(case)))
     if args.jobs > 1:
