@@ -9,9 +9,9 @@ squares of 25 mm, ArUco 4X4_50) or A3 (15x11 of 26 mm, 4X4_100). Real OpenCV det
 (``refine=edges``, 3 frames a view).
 
 1. The plan: one reading at home places the board in the base frame (nominal kinematics and the nominal camera
-   mount); ``--views`` views that keep the whole board in the image, 0.3-0.75 m away, within 40° of its normal, any
-   azimuth and roll ±90° (acquire/planning/flange_views.py), solved with the nominal; the arm moves to each, settles,
-   and the camera measures; a quarter of the views are held out (``role=check``).
+   mount); ``--views`` views that keep the whole board in the image, 0.3-0.75 m away (A3 0.5-0.95 m), within 40°
+   of its normal, any azimuth and roll ±90° (acquire/planning/flange_views.py), solved with the nominal; the arm
+   moves to each, settles, and the camera measures; a quarter of the views are held out (``role=check``).
 2. identify (``# sensor: flange``, --robot ur5e): the DH table, the camera on the flange and the board in the base
    frame in one fit (identify/sensors/flange.py). The board's scale is the caliper's: ``square_sigma`` 2 µm on a
    25 mm square (10 squares measured to ±0.02 mm), so ``# scale_sigma`` 8e-5; the reading itself is drawn with
