@@ -66,7 +66,7 @@ from kinematics.dh import frames_from_joints
 #: cols, rows, square, marker (m), distance at home (m), dictionary, the views' depth range (m: the whole board in
 #: the image at any allowed angle needs the A3 farther)
 BOARDS = {"A4": (11, 8, 0.025, 0.018, 0.45, "4X4_50", (0.3, 0.75)),
-          "A3": (15, 11, 0.026, 0.019, 0.6, "4X4_100", (0.5, 0.95))}
+          "A3": (15, 10, 0.027, 0.018, 0.6, "4X4_100", (0.5, 0.95))}
 WIDTH, HEIGHT, FOV = 1280, 720, 60.0
 SQUARE_SIGMA = 2e-6  # m: ten squares measured with a caliper to ±0.02 mm
 FRAMES = 3
