@@ -90,7 +90,8 @@ class Outcome:
                 "edge": info["edge"], "centre": info["centre"],
                 "before_model": info.get("before_model", "nominal model"), "duration_s": self.duration,
                 "drift_note": self.drift_note, "uncertainty": UNCERTAINTY,
-                "orientation": {"measured": self.orientation is None, "reason": self.orientation}}
+                "orientation": {"measured": self.orientation is None, "reason": self.orientation},
+                "domain": info.get("domain")}
 
 
 def _hours(seconds: float) -> str:
