@@ -5,7 +5,7 @@ URL form (``--tracker``)::
     aruco:SOURCE?camera=FILE[&marker=ID&size=M | &board=grid&cols=N&rows=N&size=M&gap=M
                  | &board=charuco&cols=N&rows=N&square=M&size=M | &layout=FILE][&dict=NAME][&first=ID]
                  [&tp=X,Y,Z][&refine=edges|apriltag|subpix|contour|none][&frames=N][&max_rms=PX]
-                 [&timeout=S][&retries=N]
+                 [&timeout=S][&retries=N][&mount=cell|flange][&square_sigma=M | &size_sigma=M]
 
 ``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a video file, an image folder or a
 glob (``run/*.png``; replay of a recorded run, ``frames`` images per reading), or ``sim`` (images rendered
@@ -21,6 +21,13 @@ Target (units: metres):
   ``dict``    the ArUco dictionary (default ``4X4_50``; e.g. ``5X5_100``, ``ARUCO_ORIGINAL``, ``APRILTAG_36h11``)
   ``tp``      the tracked point in the target frame (origin at the marker / board centre, x right, y up,
               z out of the printed face), ``X,Y,Z`` in metres (default ``0,0,0``: the centre)
+Where the camera is (drivers/camera/flange_camera.py):
+  ``mount``   ``cell`` (default): the camera stands in the cell and the target rides on the flange; ``flange``: the
+              camera rides on the flange (eye-in-hand) and sees a board fixed in the cell; the readings are the
+              board's pose in the camera frame and the session is a ``sensor: flange`` one
+  ``square_sigma`` (ChArUco) / ``size_sigma`` (grid, marker): the board was measured (``square=`` / ``size=`` is
+              the caliper's value) with this standard uncertainty, m: the scale reference (without it the print is
+              unverified and identify checks the scale against the robot's nominal lengths)
 Camera and measurement:
   ``camera``  the intrinsics file (OpenCV FileStorage: camera_matrix, distortion_coefficients,
               image_width, image_height); required except for ``sim``
@@ -36,7 +43,9 @@ Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), 
 (60), ``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of
 motion streak (0), ``fps`` frame rate, Hz (30), ``latency`` s from a frame's exposure to its timestamp (0),
 ``distance`` m from the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home
-(20, 10), ``seed`` (the robot's), ``fault`` as the mock tracker's (``target_lost`` hides the target,
+(20, 10; with ``mount=flange``: of the board seen from the flange camera at home), ``printed`` (``mount=flange``:
+the true board's size over the declared one, 1), ``seed`` (the robot's), ``fault`` as the mock tracker's
+(``target_lost`` hides the target,
 ``bad_reading`` shows a second copy, ``slow`` stops the frames, ``disconnect`` loses the camera); for streams
 ``drop`` (probability that the camera loses a frame, 0) and ``lost=D[@S]`` (the target hidden for D s from S s,
 default 2, into every stream). Any other option is rejected with one line.
@@ -82,6 +91,8 @@ from scipy.stats import f as f_dist
 
 from drivers.averaging import mean_orientation
 from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
+from drivers.camera.flange_camera import MOUNTS
+from drivers.camera.flange_camera import scale_sigma as flange_scale_sigma
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
 from drivers.camera.pose import CornerNoise, Pose, estimate_pose
 from drivers.camera.stream import FrameStreaming
@@ -101,9 +112,9 @@ from drivers.spec import TrackerSpec, parse_faults, parse_interval
 FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
         "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
-           "refine", "frames", "max_rms", "timeout", "retries")
+           "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
-               "tilt", "roll", "seed", "fault")
+               "tilt", "roll", "seed", "fault", "printed")
 SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
 OUTLIER_SIGMAS = 5.0
 CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
@@ -122,6 +133,8 @@ class Settings:
     retries: int
     camera_file: Path | None
     sim: dict[str, Any]
+    mount: str = "cell"  # where the camera is: "cell" or "flange" (drivers/camera/flange_camera.py)
+    scale_sigma: float | None = None  # relative uncertainty of the measured board's scale (None: not measured)
 
 
 def _fail(spec: TrackerSpec, why: str) -> SpecError:
@@ -170,10 +183,30 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
     if camera is None and not simulated:
         raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera")
     sim = _sim_settings(spec, raw) if simulated else {}
+    mount = str(raw.get("mount", "cell"))
+    if mount not in MOUNTS:
+        raise _fail(spec, f"option mount={mount} must be cell or flange")
     return Settings(target, tp, refine, _number(spec, raw, "frames", 5, int, 1, strict=False),
                     _number(spec, raw, "max_rms", 1.0), _number(spec, raw, "timeout", 2.0),
                     _number(spec, raw, "retries", 5, int, 0, strict=False),
-                    None if camera is None else Path(str(camera)), sim)
+                    None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target))
+
+
+def _scale_sigma(spec: TrackerSpec, raw: dict[str, Any], target: Target) -> float | None:
+    """The measured board's relative scale uncertainty from ``square_sigma`` (ChArUco) or ``size_sigma``."""
+    key = "square_sigma" if target.kind == "charuco" else "size_sigma"
+    other = "size_sigma" if key == "square_sigma" else "square_sigma"
+    if other in raw:
+        raise _fail(spec, f"option {other}= does not measure a {target.kind} target (give {key}=)")
+    if key not in raw:
+        return None
+    if target.kind == "layout":
+        raise _fail(spec, "a layout's scale comes from its file; size_sigma= is for a marker or a board")
+    sigma = _number(spec, raw, key, 0.0, low=0, strict=False)
+    size = float(raw["square" if key == "square_sigma" else "size"]) if key.split("_")[0] in raw else None
+    if size is None:
+        raise _fail(spec, f"option {key}= needs {key.split('_')[0]}= (the measured length, m)")
+    return flange_scale_sigma(size, sigma)
 
 
 def _target(spec: TrackerSpec, raw: dict[str, Any], dictionary: int) -> Target:
@@ -221,7 +254,8 @@ def _sim_settings(spec: TrackerSpec, raw: dict[str, Any]) -> dict[str, Any]:
            "drop": _number(spec, raw, "drop", 0.0, low=0, strict=False),
            "distance": _number(spec, raw, "distance", 1.0), "tilt": _number(spec, raw, "tilt", 20.0, low=-90),
            "roll": _number(spec, raw, "roll", 10.0, low=-360),
-           "seed": None if "seed" not in raw else _number(spec, raw, "seed", 0, int, 0, strict=False)}
+           "seed": None if "seed" not in raw else _number(spec, raw, "seed", 0, int, 0, strict=False),
+           "printed": _number(spec, raw, "printed", 1.0)}
     try:
         out["k1"] = float(raw.get("k1", 0.0))
         out["fault"] = parse_faults(str(raw["fault"]), "tracker") if "fault" in raw else ()
@@ -277,7 +311,8 @@ class ArucoTracker(FrameStreaming):
                    "camera_matrix": json.dumps(k.tolist()),
                    "distortion_coefficients": json.dumps(self.camera.distortion.tolist()),
                    "camera_file": "" if s.camera_file is None else str(s.camera_file),
-                   "stream_timestamps": getattr(self.source, "stamps", "none: this source cannot stream")}
+                   "stream_timestamps": getattr(self.source, "stamps", "none: this source cannot stream"),
+                   "mount": s.mount, "scale_sigma": "" if s.scale_sigma is None else repr(s.scale_sigma)}
         if math.isfinite(getattr(self.source, "rate", math.nan)):
             details["frame_rate"] = f"{self.source.rate:g}"
         return DeviceIdentity("tracker", "ArUco camera (OpenCV)", serial=str(self.spec.target),
@@ -421,6 +456,12 @@ def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) 
     mount = np.eye(4)
     mount[:3, 3] = rig.truth.tool - settings.tp  # the target's centre, so that its TP is the rig's true TP
     optics = Optics(noise=sim["noise"], blur=sim["blur"], motion=sim["motion"])
+    if settings.mount == "flange":
+        from drivers.camera.flange_camera import CAMERA_MOUNT, SimulatedFlangeCamera
+
+        flange = SimulatedFlangeCamera(rig, settings.target, camera, CAMERA_MOUNT, optics, sim["fps"], sim["latency"],
+                                       sim["drop"], sim["lost"], printed=sim["printed"])
+        return ArucoTracker(spec, settings, flange, camera)
     source = SimulatedCamera(rig, settings.target, camera, mount, optics, sim["fps"], sim["latency"], sim["drop"],
                              sim["lost"])
     return ArucoTracker(spec, settings, source, camera)
