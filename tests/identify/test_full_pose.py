@@ -231,3 +231,30 @@ def test_exports_carry_the_measured_tool_frame(tmp_path):
     error = rotation_residuals(tcp[:, :3, :3], measured)
     assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < 5 * NOISE_R
     assert np.abs(Rotation.from_matrix(frame).magnitude()) > 0.1  # the mounting turn is large: the test can fail
+
+
+def test_the_report_shows_orientation_residuals_and_the_wrists_determined_parameters():
+    """The report's full-pose section: each sweep's orientation residuals against sigma_r (reduced chi-square near
+    1 at the simulated noise), and the wrist's parameters with the fit's uncertainties, which match the 6-DoF bound
+    at the same poses; from the same poses' positions alone alpha5 and theta5 are bounded several times worse."""
+    pytest.importorskip("matplotlib")
+    from identify.estimator.dh_vector import dh_index
+    from identify.report.full_pose import turning_rows, wrist_bounds
+    from identify.report.html import report_html
+
+    _, _, _, six = _data()
+    ident = identify(six, nominal=ROBOT.nominal)
+    text = report_html(ident, six, ROBOT.nominal, "ur5e")
+    assert '<section id="full-pose">' in text and "bound, positions only" in text
+    chi = float(text.split("against their sigma_r: ")[1].split(" ")[0])
+    assert 0.6 < chi < 1.3, chi  # 72 orientations, 3 each: the mean of 216 squares / sigma_r², minus the fit's share
+    fit = six.subset(~six.check)
+    q = ident.refinement.q[-int(turning_rows(fit).sum()):]
+    with_turns, positions = wrist_bounds(ident, q, NOISE, NOISE_R)
+    for joint in (4, 5):
+        for name in ("theta", "d", "a", "alpha"):
+            i = dh_index(joint, name)
+            assert f"<td class=\"l\">{name}{joint}</td>" in text
+            assert abs(ident.std[i] / with_turns[i] - 1) < 0.15, (name, joint, ident.std[i], with_turns[i])
+    assert positions[dh_index(5, "alpha")] > 5 * with_turns[dh_index(5, "alpha")]
+    assert positions[dh_index(5, "theta")] > 5 * with_turns[dh_index(5, "theta")]
