@@ -74,6 +74,13 @@ def full_pose_section(ident: Identification, fit: Measurements, escape: Callable
                      "reduced chi²"], rows),
              figure_html(figure_orientations(residuals, kept, sweeps, joints, sigma_r),
                           "Orientation residual of every fitted sample, per sweep")]
+    held = ident.validations.get(ident.use)
+    turns = None if held is None else held.orientation
+    if turns is not None:
+        parts.append(f"<p>Held out: {turns.samples} orientations predicted from the written numbers (DH table and "
+                     f"tool_frame), RMS {turns.rms * MRAD:.4f} mrad (3D), max {turns.max * MRAD:.4f} mrad; expected "
+                     f"{turns.expected * MRAD:.4f} mrad (the model's uncertainty there, {turns.bound * MRAD:.4f} "
+                     "mrad, and the readings' sigma_r).</p>")
     stated = None if fit.sigma is None else fit.sigma[np.isfinite(fit.sigma)]
     sigma = float(np.median(stated)) if stated is not None and len(stated) else ref.noise
     parts.append(_wrist_html(ident, ref.q[-count:][kept], sigma, float(np.median(sigma_r[kept])), escape, table))

@@ -258,3 +258,39 @@ def test_the_report_shows_orientation_residuals_and_the_wrists_determined_parame
             assert abs(ident.std[i] / with_turns[i] - 1) < 0.15, (name, joint, ident.std[i], with_turns[i])
     assert positions[dh_index(5, "alpha")] > 5 * with_turns[dh_index(5, "alpha")]
     assert positions[dh_index(5, "theta")] > 5 * with_turns[dh_index(5, "theta")]
+
+
+def test_the_tool_frames_rotation_uncertainty_is_written_at_its_bound():
+    """The result writes tool_frame's rotation uncertainty (uncertainty.tool_frame_rotation, rad about the last DH
+    frame's axes): at the Cramér-Rao bound of the same poses and noise with the target frame's turn as 3 more
+    parameters (within 15 %: the fit's noise estimate), a fraction of a milliradian on ±20° arcs at 0.2 mrad."""
+    from identify.estimator.bounds import full_pose_jacobian
+
+    _, _, _, six = _data()
+    ident = identify(six, nominal=ROBOT.nominal)
+    written = np.array(result_to_dict(ident, ROBOT.nominal, "ur5e")["uncertainty"]["tool_frame_rotation"])
+    q = ident.refinement.q[: int(np.sum(~six.check))]
+    keep = np.concatenate([ident.refinement.free, [True] * 3])
+    jac = full_pose_jacobian(ident.model, q, NOISE, NOISE_R)[:, keep]
+    bound = np.sqrt(np.diag(np.linalg.inv(jac.T @ jac))[-3:])
+    assert np.all(np.abs(written / bound - 1) < 0.15), (written, bound)
+    assert np.all(written < 5e-4)
+
+
+def test_held_out_orientations_are_validated_against_their_expectation():
+    """The held-out rows' orientations are predicted from the written numbers (DH table, tool_frame): their 3D RMS
+    is near what sigma_r and the model's own uncertainty imply (0.6-1.5x over 8 poses), and it is written under
+    validation.plain.orientation; a written tool_frame turned by 5 mrad misses far beyond it."""
+    from identify.results.stages import _held_out_turns
+
+    _, _, _, six = _data(check=8)
+    ident = identify(six, nominal=ROBOT.nominal)
+    turns = ident.validations["plain"].orientation
+    assert turns is not None and turns.samples == 8
+    assert 0.6 < turns.rms / turns.expected < 1.5, (turns.rms, turns.expected)
+    assert 0 < turns.bound < turns.expected
+    doc = result_to_dict(ident, ROBOT.nominal, "ur5e")
+    assert doc["validation"]["plain"]["orientation"]["samples"] == 8
+    turned = replace(ident.plain, frames=matrices_from_rotvecs(np.array([[5e-3, 0.0, 0.0]])) @ ident.plain.frames)
+    worse = _held_out_turns(turned, six.subset(six.check), [1])
+    assert worse is not None and worse.rms > 3 * turns.expected

@@ -247,3 +247,18 @@ def test_readings_carry_the_board_orientation_with_the_covariance_propagated():
     z = np.sqrt(np.mean(np.sum(turns**2, axis=1) / 3 / sigma_r**2))
     assert 0.5 < z < 2.0, (z, turns, sigma_r)
     assert np.all(sigma_r < np.radians(1.0))  # a 10 cm marker at 0.7 m: well under a degree per reading
+
+
+@pytest.mark.slow
+def test_a_steps_stated_uncertainty_holds_at_oblique_views():
+    """Issue 35, item 6: at the oblique views a calibration's sweeps give, the detection's error for a view is the
+    same in every frame and reading of it (measured: bench/camera_honesty.py), so a step's average of readings is
+    not better than that. Each reading states that part (shared, shared_r) and a step's sigma and sigma_r keep it
+    undivided: the step's errors against the rendered truth over its stated sigmas have an RMS near 1 (8 views x 3
+    axes, 5 readings of 5 frames each as a session step: within 0.5-1.35; without the view's part this draw's
+    orientations gave 1.62, its positions 1.14)."""
+    from bench.camera_honesty import SPEC, draw, z
+
+    d = draw(1, 8, 5, SPEC)
+    assert 0.5 < z(d["rot"]) < 1.35, z(d["rot"])
+    assert 0.4 < z(d["pos"]) < 1.35, z(d["pos"])
