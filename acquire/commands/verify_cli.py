@@ -92,6 +92,8 @@ def format_design(info: dict[str, Any], robot: RobotModel, plan, duration: float
         lines.append(f"registration first: {len(info['register']['q'])} poses of its own (not the test's), "
                      f"commanded with the {info['register']['model']} model; the tracker frame is fitted on them")
     lines += [f"note: {n}" for n in info["notes"]]
+    if "domain" in info:  # sessions planned before results recorded it have none
+        lines.append(f"domain: {info['domain']['text']}")
     lines.append(f"total: {len(plan.steps)} steps x {plan.samples_per_step} samples; estimated duration "
                  f"{hms(duration)}")
     return "\n".join(lines)
@@ -125,13 +127,16 @@ def format_iso_extras(outcome: Outcome) -> list[str]:
     return lines
 
 
-def format_outcome(outcome: Outcome) -> str:
-    """The registration, AP/RP per pose and run ± their uncertainties, the other figures, then the verdict line."""
+def format_outcome(outcome: Outcome, domain: str | None = None) -> str:
+    """The registration, AP/RP per pose and run ± their uncertainties, the other figures, where the test poses lie
+    against the result's ``domain`` (one line; None: not recorded), then the verdict line."""
     lines = [] if outcome.registration is None else format_registration(outcome.registration)
     runs = {m: a.as_dict() for m, a in outcome.runs.items()}
     rows = [[f"P{k}", *(pose_cells(runs.get(m), f, k) for f in ("ap", "rp") for m in MODES)] for k in range(1, 6)]
     lines += fit_width.table(["[mm]", "AP before", "AP after", "RP before", "RP after"], rows)
     lines += format_iso_extras(outcome)
+    if domain:
+        lines += fit_width.wrap(f"domain: {domain}")
     lines.append(f"verdict: {outcome.status}: {outcome.message}")
     return "\n".join(lines)
 
@@ -139,7 +144,7 @@ def format_outcome(outcome: Outcome) -> str:
 def _finish(session: Session, path: Path, robot: RobotModel) -> tuple[Outcome, dict[str, Any]]:
     info = session.header["config"]["verification"]
     outcome = analyse(info, session.steps())
-    say(format_outcome(outcome))
+    say(format_outcome(outcome, (info.get("domain") or {}).get("text")))
     summary = outcome.as_dict(info)
     yaml_path, report_path = _outputs(path)
     write_output(yaml_path, yaml.safe_dump(summary, sort_keys=False, width=120), force=True)

@@ -46,6 +46,7 @@ from config.robots import RobotModel
 from config.site import SiteConfig
 from identify.applications.calibrated import CalibratedModel, ResultError, used_section
 from identify.applications.compensate import solve_ik
+from identify.applications.domain import result_outside
 from identify.applications.iso9283 import cube_poses, visit_order
 from identify.applications.result_models import result_models
 from kinematics.dh import DHModel
@@ -271,9 +272,12 @@ def problems(plan: Plan, robot: RobotModel, site: SiteConfig) -> list[str]:
 def header(d: Design, labels: list[list[Any]], identified: CalibratedModel, result: str, sha256: str,
            verdict: str | None, cycles: int, doc: dict[str, Any], before: str = "nominal model") -> dict[str, Any]:
     """What the session keeps to be analysed alone (JSON-able; m, rad); ``doc`` the result document, ``before``
-    the name of the model that commands the "before" visits."""
-    return {"register": register_header(doc, identified, d.register), "result": result, "result_sha256": sha256,
-            "before_model": before,
+    the name of the model that commands the "before" visits; ``domain``: the test poses against the joint ranges the
+    result was fitted on (its stated accuracy, and so the AP "after" this test expects, holds inside them)."""
+    found, line = result_outside(doc, d.q["after"])
+    domain = {"text": line, **({} if found is None else found.as_dict())}
+    return {"domain": domain, "register": register_header(doc, identified, d.register), "result": result,
+            "result_sha256": sha256, "before_model": before,
             "result_verdict": verdict, "cycles": cycles,
             "centre": d.centre.tolist(), "edge": d.edge, "targets": d.targets.tolist(),
             "rotation": None if d.rotation is None else d.rotation.tolist(),

@@ -100,7 +100,8 @@ class Outcome:
                 "before_model": info.get("before_model", "nominal model"), "duration_s": self.duration,
                 "drift_note": self.drift_note, "uncertainty": UNCERTAINTY,
                 "orientation": {"measured": self.orientation is None, "reason": self.orientation,
-                                "source": self.orientation_source}}
+                                "source": self.orientation_source},
+                "domain": info.get("domain")}
 
 
 def _hours(seconds: float) -> str:

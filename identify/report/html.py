@@ -28,6 +28,7 @@ from matplotlib.ticker import MaxNLocator
 from numpy.typing import NDArray
 
 from common import __version__
+from identify.applications.domain import outside
 from identify.estimator.extensions import UNITS
 from identify.estimator.measurements import Measurements
 from identify.report.figures import figure_frames, figure_joint
@@ -271,6 +272,31 @@ def _beyond_dh_section(ident: Identification, fit: Measurements) -> str:
     return "".join(parts) + "</section>"
 
 
+def _domain_section(ident: Identification, meas: Measurements) -> str:
+    """The joint ranges the recommended model was fitted on (its domain), and where the held-out poses lie."""
+    if ident.domain is None:
+        return ""
+    types = ident.model.joint_types
+    rows = [[str(j + 1), *(("-", "-", "-") if not np.all(np.isfinite(r)) else
+                           (_amount(r[0], k), _amount(r[1], k), _amount(r[1] - r[0], k)))]
+            for j, (r, k) in enumerate(zip(ident.domain, types, strict=True))]
+    text = ("<p>The joint values of the fitted rows span these ranges: the result's domain, recorded in its YAML. "
+            "The accuracies it states hold inside them; outside, it extrapolates, and every command that applies "
+            "it (<code>identify check</code>, <code>compensate</code>, <code>acquire verify</code>, "
+            "<code>compare</code>) says how many of its poses lie outside and by how much.</p>")
+    check = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
+    if len(check):
+        q = check.q if ident.coupling is None else ident.coupling.dh_from_readings(check.q)
+        text += f"<p>Held-out poses: {_e(outside(ident.domain, q, types).text())}.</p>"
+    return ('<section id="domain"><h2>Where the result holds</h2>' + text
+            + _table(["joint", "from", "to", "span"], rows) + "</section>")
+
+
+def _amount(value: float, kind: str) -> str:
+    """A joint value as read: degrees for a revolute joint, mm for a prismatic one."""
+    return f"{np.degrees(value):.1f}°" if kind == "R" else f"{value * MM:.1f} mm"
+
+
 def _acquisition_section(session: SessionFile) -> tuple[str, Figure | None]:
     header = session.header
     devices = []
@@ -406,6 +432,7 @@ def report_html(
                     f"RMS {v.expected * MM:.4f} mm (model bound {v.bound * MM:.4f} mm + tracker noise).</p>")
         body.append(_figure_html(figure_validation(errors, v.expected), "Errors at held-out poses"))
     body.append("</section>")
+    body.append(_domain_section(ident, meas))
     rows = [[str(s.sweep), "free" if s.joint == 0 else str(s.joint), str(s.samples), str(s.rejected),
              f"{s.rms * MM:.4f}"] for s in ident.sweeps]
     body.append('<section id="sweeps"><h2>Residuals per sweep</h2>'

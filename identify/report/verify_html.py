@@ -150,7 +150,9 @@ def verification_html(summary: dict[str, Any], header: dict[str, Any], source: s
                          _pose_rows(summary))
                 + _iso_extras(summary)
                 + _figure_html(figure_accuracy(summary), "AP and RP per pose, before and after compensation")
-                + "".join(f"<p>note: {_e(n)}</p>" for n in info.get("notes", [])) + "</section>")
+                + "".join(f"<p>note: {_e(n)}</p>" for n in info.get("notes", []))
+                + (f"<p>domain: {_e(summary['domain']['text'])}</p>" if summary.get("domain") else "")
+                + "</section>")
     if session is not None:
         text, fig = _acquisition_section(session)
         body.append('<section id="acquisition"><h2>Run record</h2>' + text

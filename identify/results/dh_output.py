@@ -50,7 +50,7 @@ def _vector(model: DHModel, base_rotation: Array) -> Array:
 PARALLEL_SIGMAS = 3.0  # axes whose angle is within this many standard uncertainties of 0 may be parallel
 
 
-def _axis_angle(lines: AxisLines, i: int) -> float:
+def axis_angle(lines: AxisLines, i: int) -> float:
     """Angle (rad) between the axes of joints i and i+1 (0-based), as lines (sign-free)."""
     return float(np.arccos(np.clip(abs(lines.directions[i] @ lines.directions[i + 1]), 0.0, 1.0)))
 
@@ -67,12 +67,12 @@ def near_parallel(lines: AxisLines, covariance: Array, conventional: Array, refe
     starts = np.cumsum([0] + [4 if t == "R" else 2 for t in lines.joint_types])  # first parameter of each joint
     near: dict[int, float] = {}
     for i in range(1, exact.n_joints):
-        angle = _axis_angle(lines, i - 1)
+        angle = axis_angle(lines, i - 1)
         grad = np.zeros(problem.size)
         for k in (*range(starts[i - 1], starts[i - 1] + 2), *range(starts[i], starts[i] + 2)):  # their tilts
             x = np.zeros(problem.size)
             x[k] = STEP
-            grad[k] = (_axis_angle(problem.lines(x)[0], i - 1) - angle) / STEP
+            grad[k] = (axis_angle(problem.lines(x)[0], i - 1) - angle) / STEP
         sigma = float(np.sqrt(max(grad @ covariance @ grad, 0.0)))
         if angle < max(parallel_tol, PARALLEL_SIGMAS * sigma):
             near[i] = _shift(exact, conventional, i)

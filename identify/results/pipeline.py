@@ -249,10 +249,9 @@ def identify(
     empty = TermSet((), np.zeros(meas.n_joints), torques)
     size = robot_size(best.lines, rows.meas.points)  # before joint errors
     cap = size if max_offset is None else max_offset
-    # what the data do not determine is held at the nominal placed on them; not yet for arms whose first joint is
-    # prismatic, whose size (from its axis, which has no position) is not the arm's
+    # what the data do not determine is held at the nominal placed on them
     inl = best.inliers
-    reference = None if nominal is None or meas.joint_types[0] != "R" else nominal_lines(
+    reference = None if nominal is None else nominal_lines(
         nominal, best.q[inl], rows.data.points[inl], rows.data.tp_index[inl], best.lines.home)
     if reference is not None:  # a nominal the data contradict is no measurement of the arm (the nominal check says so)
         missed = points_from_lines(reference, best.q[inl], rows.data.tp_index[inl]) - rows.data.points[inl]

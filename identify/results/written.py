@@ -24,7 +24,7 @@ from identify.estimator.linalg import project_out, scaled_inverse
 from identify.estimator.poe import AxisLines, LineProblem, points_from_lines
 from identify.estimator.refine import Refinement, TableFit, fit_table, orientation_blocks
 from identify.results import verdict as checks
-from identify.results.dh_output import DHOutput, dh_output, near_parallel
+from identify.results.dh_output import DHOutput, axis_angle, dh_output, near_parallel
 from identify.results.hold import (
     Hold,
     NominalPrior,
@@ -131,8 +131,18 @@ def points_with_tools(model: DHModel, tools: Array, q: Array, tp_index: NDArray[
 
 def robot_size(lines: AxisLines, points: Array) -> float:
     """The robot's size (m): the farthest measured tracked point from the first joint's axis point. No joint of
-    the arm lies farther out, so no DH ``d`` of a real near-parallel pair needs to reach beyond it."""
-    return float(np.max(np.linalg.norm(points - lines.points[0], axis=1)))
+    the arm lies farther out, so no DH ``d`` of a real near-parallel pair needs to reach beyond it.
+
+    A prismatic joint's axis has a direction and no position (its point is a convention, which may lie next to the
+    tracked point): an arm that starts with one (a track, a lifting column, a gantry) measures from its first
+    revolute axis instead, and at least the span of the measured points (the travel the data cover)."""
+    revolute = [k for k, kind in enumerate(lines.joint_types) if kind == "R"]
+    if revolute and revolute[0] == 0:
+        return float(np.max(np.linalg.norm(points - lines.points[0], axis=1)))
+    span = 2.0 * float(np.max(np.linalg.norm(points - points.mean(axis=0), axis=1)))
+    if not revolute:
+        return span
+    return max(span, float(np.max(np.linalg.norm(points - lines.points[revolute[0]], axis=1))))
 
 
 def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
@@ -228,11 +238,11 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     # the nominal as a measurement of the table too (when it was one of the lines)
     held_table = reference is not None and nominal is not None
     out, dh_fit, tools, gap, tolerance = _written_dh(lines, conventional, nominal, near, rows, adequacy.noise,
-                                                     held_table, scale)
+                                                     held_table, scale, max_offset)
     if near and gap[1] > checks.dh_limit(len(near)) and len(beyond) < len(near):
         # the data resolve the misalignment: exact DH wherever it stays within max_offset
         out, dh_fit, tools, gap, tolerance = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise,
-                                                         held_table, scale)
+                                                         held_table, scale, max_offset)
     first = tp_index == 0
     turned = rows.rotations_of(first)
     turning = turned is not None and bool(np.any(_finite(turned)))
@@ -303,14 +313,15 @@ def _finite(rotations: Array) -> NDArray[np.bool_]:
 
 
 def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, capped: dict[int, float],
-                rows: _FitRows, noise: float, held: bool = False, scale: float = 1.0
+                rows: _FitRows, noise: float, held: bool = False, scale: float = 1.0, reach: float = np.inf
                 ) -> tuple[DHOutput, TableFit | None, Array, tuple[float, float], Array | None]:
     """The DH conversion with ``capped`` links at the parallel-axis convention; with any capped, the DH table
     refitted under that convention on every tracked point's rows (so the cost it adds is a likelihood ratio,
     chi-square when the axes are parallel), and with ``held`` on the nominal's values too
     (:func:`identify.results.hold.table_prior`, tolerances times ``scale``); the tools (k, 3), that cost with
     the RMS gap to the lines, and
-    the nominal's tolerances of the full vector (rad, m; None unless ``held``)."""
+    the nominal's tolerances of the full vector (rad, m; None unless ``held``). A link between revolute axes whose
+    refitted ``d`` leaves ``reach`` (m) from its conventional value is capped too."""
     out = dh_output(lines, conventional, nominal, capped, with_jacobian=not capped)
     tools = _tools(out.model, lines)
     values, tolerance = table_prior(nominal, out.model, scale) if held and nominal is not None else (None, None)
@@ -319,6 +330,16 @@ def _written_dh(lines: AxisLines, conventional: Array, nominal: DHModel | None, 
     prior = None if tolerance is None else (values, tolerance / np.sqrt(rows.variance))  # in the rows' units
     dh_fit = fit_table(out.model, rows.q, rows.points, rows.sigma, conventional, sorted(capped), noise, False, 0.0,
                        rows.tp_index, tools, rows.rotations, prior)
+    # the refit may slide along what the data leave undetermined (two nearly parallel pairs in a row: only the sum
+    # of their d is known) to a d beyond the reach: that pair gets the convention too, and the table is refitted
+    # (d_i beyond it: of the pairs whose normal could have slid there, the nearest to parallel, one at a time)
+    types = lines.joint_types
+    far = {i: abs(float(dh_fit.model.d[i - 1] - conventional[i - 1, 1])) for i in range(1, len(types))
+           if i not in capped and types[i - 1] == types[i] == "R"}
+    far = {i: v for i, v in far.items() if not v <= reach}
+    if far:
+        i = min(far, key=lambda k: axis_angle(lines, k - 1))
+        return _written_dh(lines, conventional, nominal, {**capped, i: far[i]}, rows, noise, held, scale, reach)
     return out, dh_fit, dh_fit.tools, _dh_gap(dh_fit.model, dh_fit.tools, lines, rows), tolerance
 
 

@@ -119,6 +119,8 @@ def test_verification_on_the_mock_rig_matches_its_truth_and_resumes(tmp_path, ca
     assert measured["after"].max() < 2 * NOISE  # compensated: within twice the tracker noise
     report = session.with_suffix(".report.html").read_text()
     assert 'id="headline"' in report and "AP, pose accuracy" in report and "Verdict: PASS" in report
+    assert "domain: all 5 poses lie inside" in report and "domain: all 5 poses lie inside" in " ".join(out.split())
+    assert yaml.safe_load(session.with_suffix(".verify.yaml").read_text())["domain"]["poses_outside"] == 0
     # a verification session is neither identified nor resumed as an acquisition
     assert acquire(["--resume", str(session)]) == 2
     assert "acquire verify --resume" in capsys.readouterr().err
@@ -135,6 +137,14 @@ def test_verification_refusals_and_dry_run(tmp_path, capsys) -> None:
     assert acquire(["verify", "--result", str(result), "--dry-run"]) == 0
     out = capsys.readouterr().out
     assert "test cube" in out and "P5" in out and "dry run: nothing was connected or moved" in out
+    assert "domain: all 5 poses lie inside" in out  # full sweeps: the test poses are within the fitted ranges
+    narrow = yaml.safe_load(result.read_text())  # the same result fitted, say, on q1 in [-0.1, 0.1] rad only
+    narrow["domain"]["joints"][0] = [-0.1, 0.1]
+    (tmp_path / "narrow.yaml").write_text(yaml.safe_dump(narrow))
+    assert acquire(["verify", "--result", str(tmp_path / "narrow.yaml"), "--dry-run"]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "of 5 poses lie outside the result's fitted joint ranges" in out and "farthest: joint 1 by" in out
+    assert "a lower bound" in out
     far = tmp_path / "far.yaml"
     far.write_text("schema: 1\nverify: {cube_centre: [3.0, 0.0, 0.5], cube_edge: 0.2}\n")
     assert acquire(["verify", "--result", str(result), "--config", str(far), "--dry-run"]) == 2

@@ -13,8 +13,9 @@ from identify.estimator.poe import LineProblem, lines_from_model
 from identify.io.result_io import result_to_dict
 from identify.results.hold import NominalPrior, increments
 from identify.results.pipeline import identify
-from identify.simulators.simulate import random_poses
+from identify.simulators.simulate import random_poses, simulate
 from identify.simulators.simulate_joints import RealArm, measure
+from kinematics.dh import points_from_joints
 from kinematics.truth import perturbed_model, random_truth
 
 
@@ -70,3 +71,21 @@ def test_a_tool_on_the_flange_carries_the_nominals_flange_through_the_result_fil
     # d6 and a6 alone give 1.4 mm at any pose; the TP (on the axis, 100 mm out) carries none of it
     assert np.all(direct.expected_errors(q, tool=tool) > np.sqrt(2) * 1e-3)
     assert np.all(direct.expected_errors(q) < 0.5e-3)
+
+
+def test_an_arm_on_a_track_is_held_at_its_nominal_too():
+    """A UR5e on a linear track (first joint prismatic), ±20° arcs of 8 samples at 0.5 mm: the data leave the wrist
+    undetermined and the nominal holds it (the size is measured from the first revolute axis: the track's axis has
+    no position). Error at 200 poses over the joint space within what the result states there; the data-only fit
+    was 9-17 mm off on these arms."""
+    robot = load_robot("track_ur5e")
+    rng = np.random.default_rng(0)
+    truth = random_truth(robot.nominal, robot.home, rng)
+    q = random_poses(robot.limits, 200, rng)
+    meas, _ = simulate(truth, robot.home, robot.limits, rng, noise=5e-4, arc=np.radians(20), steps=8)
+    ident = identify(meas, robot.nominal, noise=5e-4)
+    assert ident.plain.held is not None
+    model = CalibratedModel.from_identification(ident)
+    error = np.sqrt(np.mean(np.sum((model.points(q) - points_from_joints(truth, q)) ** 2, axis=1)))
+    stated = np.sqrt(np.mean(model.expected_errors(q) ** 2))
+    assert error < 1.5 * stated and error < 5e-3

@@ -24,7 +24,7 @@ from kinematics.truth import random_truth
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
-SECTIONS = ("dh-table", "joints", "frames-3d", "validation", "sweeps")
+SECTIONS = ("dh-table", "joints", "frames-3d", "validation", "domain", "sweeps")
 
 
 class _Collector(HTMLParser):
@@ -97,6 +97,15 @@ def test_report_renders_with_sections_and_one_image_per_figure(name):
     assert f"vs {robot.name}" in text and "±" in text
     for s in ident.sweeps:
         assert f"<td>{s.sweep}</td>" in text
+    # the domain: the fitted rows' joint ranges, and how many held-out poses lie beyond them
+    fit = ~meas.check
+    fit[np.array(ident.rejected_rows, dtype=int) - 1] = False
+    low, high = meas.q[fit].min(axis=0), meas.q[fit].max(axis=0)
+    beyond = int(np.sum(np.any((meas.q[meas.check] < low - 1e-9) | (meas.q[meas.check] > high + 1e-9), axis=1)))
+    held = int(meas.check.sum())
+    assert (f"all {held} poses lie inside" if beyond == 0 else f"{beyond} of {held} poses lie outside") in text
+    assert (f"<td>{np.degrees(high[0] - low[0]):.1f}°</td>" if robot.nominal.joint_types[0] == "R"
+            else f"<td>{(high[0] - low[0]) * 1e3:.1f} mm</td>") in text
 
 
 @pytest.mark.slow
