@@ -34,11 +34,12 @@ from drivers.spec import RobotSpec, TrackerSpec
 
 SPEC = "aruco:sim?board=grid&cols=2&rows=2&size=0.05&tilt=0&distance=0.8"  # docs/benchmarks.md section 23's camera
 SPREAD = np.radians([15.0, 15.0, 15.0, 40.0, 40.0, 60.0])
-KINDS = ("pos", "rot", "pos1", "rot1", "pos_spread", "rot_spread", "sigma", "sigma_r")
+KINDS = ("pos", "rot", "pos1", "rot1", "pos_spread", "rot_spread", "sigma", "sigma_r", "q")
 
 
-def draw(seed: int, poses: int, readings: int, spec: str) -> dict[str, np.ndarray]:
-    """Per-axis error ratios of one arm (``seed``; module docstring) and the stated sigmas of its steps."""
+def draw(seed: int, poses: int, readings: int, spec: str, plan: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Per-axis error ratios of one arm (``seed``; module docstring) and the stated sigmas of its steps; ``plan``
+    (k, 6): the joint values to visit in turn (a session plan's) instead of random poses."""
     tracker_spec = TrackerSpec.parse(f"{spec}&seed={seed}")
     robot_spec = RobotSpec.parse(f"mock:ur5e?seed={seed}")
     rig = SimulatedRig.from_spec(robot_spec, tracker_spec, VirtualClock())
@@ -48,8 +49,11 @@ def draw(seed: int, poses: int, readings: int, spec: str) -> dict[str, np.ndarra
     rng = np.random.default_rng(seed)
     home = rig.rest_joints.copy()
     out: dict[str, list] = {k: [] for k in KINDS}
+    visits = iter(plan) if plan is not None else None
     while len(out["sigma"]) < poses:
-        q = home + rng.uniform(-SPREAD, SPREAD)
+        q = home + rng.uniform(-SPREAD, SPREAD) if visits is None else next(visits, None)
+        if q is None:
+            break
         robot.move_joints(q, np.full(len(q), 1.0), np.full(len(q), 2.0), 60.0)
         robot.wait_until_still(0.2, 10.0)
         try:
@@ -63,6 +67,7 @@ def draw(seed: int, poses: int, readings: int, spec: str) -> dict[str, np.ndarra
         out["pos"].append((mean - true_p) / sigma)
         out["rot"].append((Rotation.from_rotvec(frame.rotvec) * true_r.inv()).as_rotvec() / frame.sigma_r)
         out["sigma"].append(sigma)
+        out["q"].append(q)
         out["sigma_r"].append(frame.sigma_r)
         turns = np.array([(Rotation.from_rotvec(r.rotvec) * true_r.inv()).as_rotvec() for r in taken])
         points = np.array([r.position for r in taken]) - true_p
@@ -89,19 +94,30 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--poses", type=int, default=12)
     parser.add_argument("--readings", type=int, default=5)
     parser.add_argument("--bias", type=float, default=None, help="VIEW_BIAS_PX to state (default: the driver's)")
+    parser.add_argument("--turn-bias", type=float, default=None, help="VIEW_TURN_BIAS_PX (default: the driver's)")
+    parser.add_argument("--plan", default=None, help="visit this session's plan steps (in order) instead")
     parser.add_argument("--spec", default=SPEC)
     args = parser.parse_args(argv)
     if args.bias is not None:
         camera_pose.VIEW_BIAS_PX = args.bias
+    if args.turn_bias is not None:
+        camera_pose.VIEW_TURN_BIAS_PX = args.turn_bias
+    plan = None
+    if args.plan:
+        from session.store import SessionFile
+
+        with SessionFile.open(args.plan) as session:
+            plan = np.array([s.q for s in session.plan.steps])
     start = time.perf_counter()
-    print(f"camera: {args.spec}; view bias stated {camera_pose.VIEW_BIAS_PX:g} px; {args.poses} seen poses per "
-          f"draw, {args.readings} readings each")
+    print(f"camera: {args.spec}; view bias stated {camera_pose.VIEW_BIAS_PX:g} px, orientation "
+          f"{camera_pose.VIEW_TURN_BIAS_PX:g} px; {args.poses} seen poses per draw "
+          f"({'random' if plan is None else args.plan + ' plan'}), {args.readings} readings each")
     head = (f"{'draw':>4} {'sigma mm':>9} {'sigma_r mrad':>12} {'z pos':>6} {'z pos 1':>7} {'spread':>6} "
             f"{'z rot':>6} {'z rot 1':>7} {'spread':>6}")
     print(head)
     pooled: dict[str, list] = {}
     for seed in range(args.first, args.first + args.draws):
-        d = draw(seed, args.poses, args.readings, args.spec)
+        d = draw(seed, args.poses, args.readings, args.spec, None if plan is None else plan[seed::2])
         for k, v in d.items():
             pooled.setdefault(k, []).append(v)
         print(_row(str(seed), d))

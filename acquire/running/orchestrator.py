@@ -92,6 +92,8 @@ def average_readings(readings: list[TrackerReading]) -> tuple[Array, float | Non
 def mean_sigma(sigma: float, shared: float, n: int) -> float:
     """Per-axis standard uncertainty of the mean of ``n`` readings of one still view, each of ``sigma`` of which
     ``shared`` (in quadrature) is common to all of them (TrackerReading.shared): only the rest averages down."""
+    if shared == 0.0:
+        return sigma / np.sqrt(n)  # independent readings: exactly as before
     return float(np.sqrt(max(sigma**2 - shared**2, 0.0) / n + shared**2))
 
 

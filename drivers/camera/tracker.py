@@ -57,11 +57,13 @@ the frames scatter significantly more than C says (F-test), their spread is used
 detection errs by a fixed amount for each view of the target (the corners' localisation bias at that angle and
 scale: the same in every frame and every reading of a still view, so averaging does not reduce it). Each reading
 states it as ``shared`` (m) and ``shared_r`` (rad): the pose's sensitivity to a corner error of
-``drivers.camera.pose.VIEW_BIAS_PX`` pixels per coordinate, independent from corner to corner, and adds it in
-quadrature to sigma and sigma_r; the orchestrator divides only the rest by the number of readings of a step.
-VIEW_BIAS_PX is measured on rendered images (``bench/camera_honesty.py``, docs/benchmarks.md section 23): without
-it a step's orientation errors were 1.9x, its positions' 1.6x their stated sigmas at a calibration's oblique
-views. A camera's
+``drivers.camera.pose.VIEW_BIAS_PX`` (``VIEW_TURN_BIAS_PX`` for the orientation) pixels per coordinate, independent
+from corner to corner, and adds it in quadrature to sigma and sigma_r; the orchestrator divides only the rest by the
+number of readings of a step. Measured on rendered images at a calibration plan's views (``bench/camera_honesty.py``,
+docs/benchmarks.md section 23): without it a step's orientation errors were 2.7x, its positions' 2.4x their stated
+sigmas; VIEW_TURN_BIAS_PX = 0.015 px brings the orientations to 1.1-1.2x; VIEW_BIAS_PX stays 0 (a value that made
+the plan's positions honest over-stated milder views), so a camera's positions are still under-stated there. A
+camera's
 error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
 the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights
 (1 / sigma² per sample): the sum of squared weighted residuals has the expectation it would have for
@@ -373,7 +375,8 @@ class ArucoTracker(FrameStreaming):
                                            in zip(poses, kept, strict=True) if k])) / 3)
         sigma_r = _frame_sigma(model_r, turns, dof) / math.sqrt(n)
         # the detection's bias for this view: the same in every frame and every reading of it (not averaged)
-        bias = np.array([p.view_bias(tp, pose_math.VIEW_BIAS_PX) for (p, _), k in zip(poses, kept, strict=True) if k])
+        bias = np.array([p.view_bias(tp, pose_math.VIEW_BIAS_PX, pose_math.VIEW_TURN_BIAS_PX)
+                         for (p, _), k in zip(poses, kept, strict=True) if k])
         shared, shared_r = np.sqrt(np.mean(bias**2, axis=0))
         return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=math.hypot(sigma, shared), status=status,
                               rotvec=rotvec, sigma_r=math.hypot(sigma_r, shared_r), shared=float(shared),
