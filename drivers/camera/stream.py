@@ -148,8 +148,9 @@ class FrameStreaming(BufferedStreaming):
             self.detect_seconds += time.perf_counter() - started
         tp = self.settings.tp
         self._noise.add(pose)
-        shared, _ = pose.view_bias(tp, VIEW_BIAS_PX)  # the view's own error, as a polled reading states it
-        sigma = math.sqrt(max(float(np.trace(self._noise.covariance(pose, tp))), 0.0) / 3 + shared**2)
+        sigma = math.sqrt(max(float(np.trace(self._noise.covariance(pose, tp))), 0.0) / 3)
+        if VIEW_BIAS_PX > 0:  # the view's own error, as a polled reading states it
+            sigma = math.hypot(sigma, pose.view_bias(tp, VIEW_BIAS_PX)[0])
         if state.first_bad is not None:
             self._add_gap(state.last_good if state.last_good is not None else state.first_bad, frame.stamp)
         state.good(frame.stamp)
