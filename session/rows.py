@@ -118,6 +118,14 @@ def point_rows(db: sqlite3.Connection) -> dict[int, list[PointRecord]]:
     return out
 
 
+def spread_sigmas(db: sqlite3.Connection) -> set[tuple[int, int]]:
+    """(plan index, tracked point) of every step average whose ``sigma`` is the spread of its own kept readings: none
+    of them carried a device sigma (an I++ server, a profile without one), so the orchestrator estimated it."""
+    tp = "tp" if "tp" in columns(db, "readings") else "1"
+    return {(int(i), int(t)) for i, t in db.execute(
+        f"SELECT plan_index, {tp} FROM readings WHERE used = 1 GROUP BY plan_index, {tp} HAVING count(sigma) = 0")}
+
+
 def points_seen(row: dict[str, Any],
                 points: dict[int, list[PointRecord]]) -> list[tuple[int, tuple[float, ...], float | None]]:
     """(tp, position, sigma) of every point an ok step saw."""

@@ -56,6 +56,7 @@ from session.rows import (
     point_rows,
     reading_rows,
     retire_step,
+    spread_sigmas,
     step_rows,
 )
 from session.schema import (
@@ -442,6 +443,11 @@ class SessionFile:
         """What the stop-and-go measurements are made of: the ok steps other than streams as step rows (plan order,
         :func:`session.rows.step_rows`) and the per-point averages of the steps that saw several tracked points."""
         return step_rows(self._db, "WHERE status = 'ok' AND kind != 'stream'"), point_rows(self._db)
+
+    def spread_sigmas(self) -> set[tuple[int, int]]:
+        """(plan index, tracked point) of the step averages whose sigma is their readings' own spread
+        (:func:`session.rows.spread_sigmas`)."""
+        return spread_sigmas(self._db)
 
     def measured_frames(self) -> dict[int, list[FrameRecord]]:
         """The averaged target-frame orientations of the steps a full-pose device measured (plan index -> ascending

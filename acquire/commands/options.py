@@ -62,7 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "change)")
     p.add_argument("--tracker", help="tracker spec: serial:PORT?..., ipp://HOST, emscon:HOST[:PORT]?... (a Leica "
                    "laser tracker's emScon server, port 700: stationary points, and for continuous sweeps its "
-                   "continuous measurement by time stamped with the tracker's clock; emscon:sim with a mock robot), "
+                   "continuous measurement by time stamped with the tracker's clock; ?probe=6dof: a 6-DoF probe's "
+                   "full poses; emscon:sim with a mock robot), "
                    "aruco:..., mock, or none (motion rehearsal) (mock; on --resume: the session's, whose port or "
                    "host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")

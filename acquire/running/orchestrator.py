@@ -4,8 +4,9 @@ A plain loop over the plan's unrecorded steps (a continuous sweep, kind ``stream
 acquire/running/stream_loop.py) (so a resumed session continues where it stopped), then
 one more attempt at each step recorded as missing (the first attempt stays in the session). Each step is
 committed to the session before the next move. Tracker failures are retried a bounded number
-of times, then the step is recorded as missing and the run goes on; robot faults and lost connections
-stop the motion, end the run as failed and return (the session says how to resume); Ctrl-C, SIGTERM or SIGHUP
+of times, then the step is recorded as missing and the run goes on; robot faults, lost connections and any other
+device error (one a continuous sweep cannot go on with) stop the motion, end the run as failed and return (the
+session says how to resume); Ctrl-C, SIGTERM or SIGHUP
 stops the motion at once and ends the run as aborted. Every device call has a timeout.
 
 The plan is in DH joint values; a robot whose controller reports coupled readings (the session's ``coupling``,
@@ -29,7 +30,7 @@ from common import stop_signals
 from drivers.averaging import mean_orientation, robust_mean
 from drivers.base import Robot, RobotState, Tracker, TrackerReading
 from drivers.clock import Clock
-from drivers.errors import ConnectionFailed, DeviceTimeout, MeasurementError, RobotFault
+from drivers.errors import ConnectionFailed, DeviceTimeout, DriverError, MeasurementError, RobotFault
 from identify.estimator.geometry import circle_2d_algebraic, perpendicular_basis, plane_from_points
 from session.plan import Plan, Step
 from session.records import FrameRecord, PointRecord, StepRecord
@@ -226,12 +227,12 @@ class Orchestrator:
                 if self.on_progress is not None:
                     self.on_progress(replace(self._progress(step, record, count, total, started, sweep_points),
                                              again=retake))
-        except (RobotFault, ConnectionFailed, DeviceTimeout) as exc:
-            self.robot.stop()
+        except DriverError as exc:  # a robot fault, a lost link, a timeout, or any other device error (e.g. a
+            self.robot.stop()      # tracker status a continuous sweep cannot go on with): the run ends resumable
             if self.stop.requested:  # the operator's stop interrupted the motion: not a fault
                 return self._end("aborted", self.stop.reason, recorded)
             kind = {RobotFault: "robot fault", ConnectionFailed: "connection lost", DeviceTimeout: "timeout"}
-            label = next(v for k, v in kind.items() if isinstance(exc, k))
+            label = next((v for k, v in kind.items() if isinstance(exc, k)), "device error")
             self.session.event(label, str(exc))
             return self._end("failed", f"{label}: {exc}", recorded)
         except KeyboardInterrupt as exc:  # a second stop signal

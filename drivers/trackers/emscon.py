@@ -3,7 +3,7 @@
 Spec form (``--tracker``)::
 
     emscon:HOST[:PORT][?timeout=S&init_timeout=S&retries=N&meas_time=S&reflector=NAME|ID&initialize=auto|always
-                        &temperature=C&pressure=MBAR&humidity=PERCENT&trace=FILE]
+                        &probe=none|6dof&temperature=C&pressure=MBAR&humidity=PERCENT&trace=FILE]
 
 ``PORT`` defaults to 700 (the emScon server's). ``timeout``: s to wait for one answer (default 3; a measurement
 waits ``meas_time`` longer); ``init_timeout``: s an ``Initialize`` may take (default 120); ``retries``: extra
@@ -17,7 +17,8 @@ The site file's ``tracker.settings`` give the same keys; the spec's options win.
 
 Mock mode: ``emscon:sim[?noise=M&seed=N&fault=NAME[@N][xK],...&...]`` with ``--robot mock:MODEL`` runs this client
 against the simulated emScon server of drivers/trackers/emscon_sim.py on loopback, which measures the mock robot's
-rig (``noise`` m per axis, default 5e-5; ``seed`` of the noise, default the robot's; ``fault``: the server's
+rig (``noise`` m per axis, default 5e-5; ``angle_noise`` rad per axis of a 6-DoF probe's orientation, default 2e-5;
+``seed`` of the noise, default the robot's; ``fault``: the server's
 faults from measurement N on); every other option is the real tracker's.
 
 What the client does at connect (drivers/trackers/emscon_protocol.py speaks the packets): ``GetSystemStatus``
@@ -42,8 +43,12 @@ connect) up to ``retries`` times, so the step is not lost. Unsolicited status ch
 Continuous sweeps (``--mode continuous``): the tracker streams by continuous measurement by time, each point stamped
 with the tracker's own time (drivers/trackers/emscon_stream.py: the exchange, the stamps, its faults as gaps).
 
-6-DoF probes (T-Mac class): :meth:`~drivers.trackers.emscon_probe.ProbeMeasurement.measure_pose` takes one stationary
-6-DoF measurement as a pose (drivers/trackers/emscon_probe.py); sessions do not use it yet.
+6-DoF probes (T-Mac class), ``probe=6dof``: every reading is one stationary 6-DoF measurement, a full pose
+(drivers/trackers/emscon_probe.py): ``position`` the probe's tip, ``rotvec`` the probe frame's orientation in the
+tracker frame, ``sigma`` and ``sigma_r`` the server's deviations; sessions record both (their orientation rows), and
+identification uses them. Continuous sweeps measure by continuous 6-DoF measurement by time; their stream carries
+the tip's positions (a session's streamed rows have no orientation columns; drivers/trackers/emscon_stream.py).
+:meth:`~drivers.trackers.emscon_probe.ProbeMeasurement.measure_pose` gives one measurement as a 4x4 pose.
 """
 
 from __future__ import annotations
@@ -65,7 +70,7 @@ from drivers.spec import TrackerSpec
 from drivers.trace import ByteTrace, one_line
 from drivers.trackers import emscon_protocol as es
 from drivers.trackers.emscon_options import DEFAULT_PORT, parse_settings
-from drivers.trackers.emscon_probe import ProbeMeasurement
+from drivers.trackers.emscon_probe import InvalidPose, ProbeMeasurement
 from drivers.trackers.emscon_stream import ContinuousMeasurement
 from drivers.trackers.socket_reads import receive
 
@@ -98,11 +103,11 @@ class EmsconTracker(ContinuousMeasurement, ProbeMeasurement):
     :meth:`connect`: ``version`` (server), ``serial`` (tracker), ``environment`` (°C, mbar, %RH in force),
     ``reflector`` (id, name, target type, surface offset m), ``meas_time_ms`` (the stationary measurement time in
     force); ``events`` holds every unsolicited status change (time, text); ``reconnects`` counts links re-opened by
-    :meth:`measure` (a stream's: ``stream_counts``). ``measure_pose``: a 6-DoF probe's pose (not used by sessions)."""
+    :meth:`measure` (a stream's: ``stream_counts``). ``probe``: readings are a 6-DoF probe's full poses."""
 
     def __init__(self, host: str, port: int = DEFAULT_PORT, *, timeout: float = 3.0, init_timeout: float = 120.0,
                  retries: int = 2, meas_time: float = 1.0, reflector: str | None = None, initialize: str = "auto",
-                 environment: tuple[float, float, float] | None = None,
+                 probe: bool = False, environment: tuple[float, float, float] | None = None,
                  trace_io: str | Path | IO[str] | None = None, simulator: Callable[[], Any] | None = None) -> None:
         if initialize not in ("auto", "always"):
             raise ValueError(f"initialize must be auto or always, got {initialize!r}")
@@ -110,6 +115,7 @@ class EmsconTracker(ContinuousMeasurement, ProbeMeasurement):
         self.reply_timeout, self.init_timeout, self.retries = float(timeout), float(init_timeout), int(retries)
         self.meas_time_ms = round(meas_time * 1000)
         self.wanted_reflector, self.initialize, self.wanted_environment = reflector, initialize, environment
+        self.probe = bool(probe)
         self._trace = ByteTrace(trace_io)
         self._sock: socket.socket | None = None
         self._buffer = b""
@@ -162,17 +168,21 @@ class EmsconTracker(ContinuousMeasurement, ProbeMeasurement):
                    "reflector": f"{name} (id {rid}, {kind}, surface offset {offset:g} m)",
                    "environment": f"{t:g} degC, {p:g} mbar, {h:g} %RH"
                                   + (" (set)" if self.wanted_environment else " (the server's)"),
-                   "measurement": f"stationary, {self.meas_time_ms} ms",
+                   "measurement": (f"6-DoF probe (tip position and orientation), stationary, {self.meas_time_ms} ms"
+                                   if self.probe else f"stationary, {self.meas_time_ms} ms"),
                    "initialized": "by this client" if self.initialized_by_us else "already"}
         model = "Leica emScon tracker"
         if self.server is not None:
             model += " (simulated: emscon:sim)"
             details["noise"] = f"{self.server.noise:g}"
+            if self.probe:
+                details["angle_noise"] = f"{self.server.angle_noise:g}"
         return DeviceIdentity("tracker", model, serial=self.serial, firmware=self.version, details=details)
 
     def measure(self, count: int, timeout: float) -> list[TrackerReading]:
         """``count`` stationary readings of the reflector (m, tracker frame; ``sigma`` the RMS of the server's
-        three standard deviations, m per axis; ``timestamp`` the host's receive time); ``timeout`` bounds the call.
+        three standard deviations, m per axis; ``timestamp`` the host's receive time), or with ``probe`` of the
+        6-DoF probe (full poses: module doc); ``timeout`` bounds the call.
         Raises BeamLost (a TargetLost), TrackerNotReady, BadReading, DeviceTimeout, ConnectionFailed (module doc)."""
         check_measure_request(count, timeout)
         if not self._connected_once:
@@ -193,11 +203,13 @@ class EmsconTracker(ContinuousMeasurement, ProbeMeasurement):
                     self.reconnects += 1
                     self._trace.event("reconnecting")
                     self._open(deadline)
+                if self.probe:
+                    return self._probe_reading(deadline)
                 if self.measurement_mode != es.MM_STATIONARY:  # after a continuous or 6-DoF one on this link
                     self._call(es.set_measurement_mode(es.MM_STATIONARY), es.C_SET_MEAS_MODE, deadline)
                     self.measurement_mode = es.MM_STATIONARY
                 return self._stationary(deadline)
-            except EmsconStatus:
+            except (EmsconStatus, InvalidPose):
                 raise  # the tracker's own state: nothing a new link repairs
             except (ConnectionFailed, BadReading, DeviceTimeout) as exc:
                 last = exc
@@ -227,14 +239,19 @@ class EmsconTracker(ContinuousMeasurement, ProbeMeasurement):
             raise BadReading(f"{self.where}: a measurement result of {values.tolist()} m is not a position")
         std = np.array(packet.std, dtype=float)
         sigma = float(np.sqrt(np.mean(std**2))) if np.all(np.isfinite(std)) and std.max() > 0 else None
-        status = "ok" if not packet.try_mode else "ok, try mode"
-        used = (packet.temperature, packet.pressure, packet.humidity)
+        status = self._environment_status((packet.temperature, packet.pressure, packet.humidity),
+                                          "ok" if not packet.try_mode else "ok, try mode")
+        return TrackerReading(values, stamp, sigma, status)
+
+    def _environment_status(self, used: tuple[float, float, float], status: str) -> str:
+        """A reading's ``status`` with the environment its result was corrected with (``used``: degC, mbar, %RH)
+        when that is not the one recorded at connect (module doc)."""
         if any(abs(a - b) > tol for a, b, tol in zip(used, self.environment, ENVIRONMENT_STEP, strict=True)):
             self.environment = used  # the server's weather station moved on: the readings say so from here on
             self._trace.event(f"environment now {used}")
         if used != self.recorded_environment:
             status += ", environment {:g} degC, {:g} mbar, {:g} %RH".format(*used)
-        return TrackerReading(values, stamp, sigma, status)
+        return status
 
     # --- set-up -------------------------------------------------------------------------------------------
 
@@ -414,5 +431,5 @@ def open_tracker(spec: TrackerSpec | str, rig: Any = None, site: Any = None, *,
     simulator = settings.simulator(spec, rig) if settings.simulated else None
     return EmsconTracker(settings.host, settings.port, timeout=settings.timeout, init_timeout=settings.init_timeout,
                          retries=settings.retries, meas_time=settings.meas_time, reflector=settings.reflector,
-                         initialize=settings.initialize, environment=settings.environment,
+                         initialize=settings.initialize, probe=settings.probe, environment=settings.environment,
                          trace_io=trace_io if trace_io is not None else settings.trace, simulator=simulator)

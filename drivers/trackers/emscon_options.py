@@ -3,9 +3,11 @@ tracker will be asked to do, said before anything connects (``acquire --dry-run`
 
 Options (spec ``?key=value&...`` or the site file's ``tracker.settings``; the spec wins): ``timeout`` (s per
 answer, default 3), ``init_timeout`` (s, default 120), ``retries`` (default 2), ``meas_time`` (s per stationary
-measurement, default 1), ``reflector`` (name or id), ``initialize`` (``auto`` or ``always``), ``temperature`` (°C),
-``pressure`` (mbar), ``humidity`` (%RH): all three or none, ``trace`` (a file). ``emscon:sim`` also takes ``noise``
-(m per axis, default 5e-5), ``seed`` (default the robot's) and ``fault`` (drivers/trackers/emscon_sim.py).
+measurement, default 1), ``reflector`` (name or id), ``initialize`` (``auto`` or ``always``), ``probe`` (``none``
+or ``6dof``: a 6-DoF probe's full poses), ``temperature`` (°C), ``pressure`` (mbar), ``humidity`` (%RH): all three or
+none, ``trace`` (a file). ``emscon:sim`` also takes ``noise`` (m per axis, default 5e-5), ``angle_noise`` (rad per
+axis of the probe's orientation, default 2e-5), ``seed`` (default the robot's) and ``fault``
+(drivers/trackers/emscon_sim.py).
 """
 
 from __future__ import annotations
@@ -19,11 +21,12 @@ from drivers.errors import SpecError
 from drivers.spec import TrackerSpec
 
 DEFAULT_PORT = 700
-OPTIONS = ("timeout", "init_timeout", "retries", "meas_time", "reflector", "initialize", "temperature", "pressure",
-           "humidity", "trace")
-SIM_OPTIONS = ("noise", "seed", "fault")  # emscon:sim only
+OPTIONS = ("timeout", "init_timeout", "retries", "meas_time", "reflector", "initialize", "probe", "temperature",
+           "pressure", "humidity", "trace")
+SIM_OPTIONS = ("noise", "angle_noise", "seed", "fault")  # emscon:sim only
 FORM = ("emscon:HOST[:PORT][?timeout=S&init_timeout=S&retries=N&meas_time=S&reflector=NAME|ID&initialize=auto|always"
-        "&temperature=C&pressure=MBAR&humidity=PERCENT&trace=FILE]")
+        "&probe=none|6dof&temperature=C&pressure=MBAR&humidity=PERCENT&trace=FILE]")
+PROBES = ("none", "6dof")
 #: plausible environment parameters (°C, mbar, %RH): the server refuses others (meteo data out of range)
 ENVIRONMENT_RANGE = {"temperature": (-20.0, 60.0), "pressure": (500.0, 1200.0), "humidity": (0.0, 100.0)}
 _SECONDS = {"timeout": 3600.0, "init_timeout": 3600.0, "meas_time": 600.0}  # upper limits, s
@@ -41,6 +44,7 @@ class EmsconSettings:
     meas_time: float = 1.0
     reflector: str | None = None
     initialize: str = "auto"
+    probe: bool = False  # probe=6dof: a 6-DoF probe's full poses
     environment: tuple[float, float, float] | None = None
     trace: str | None = None
     simulated: bool = False
@@ -54,17 +58,18 @@ class EmsconSettings:
         raw = dict(self.sim)
         try:
             noise = float(raw.get("noise", 5e-5))
+            angle_noise = float(raw.get("angle_noise", 2e-5))
             seed = int(str(raw.get("seed", rig.tracker_seed)))
             from drivers.trackers.emscon_server import parse_faults
             from drivers.trackers.emscon_sim import EmsconSimServer
 
             faults = parse_faults(str(raw["fault"])) if "fault" in raw else ()
-            if not (math.isfinite(noise) and noise >= 0 and seed >= 0):
-                raise ValueError(f"noise={raw.get('noise')} must be >= 0 m and seed={raw.get('seed')} an integer "
-                                 ">= 0")
+            if not (math.isfinite(noise) and noise >= 0 and seed >= 0 and 0 <= angle_noise < 0.1):
+                raise ValueError(f"noise={raw.get('noise')} must be >= 0 m, angle_noise={raw.get('angle_noise')} in "
+                                 f"[0, 0.1) rad and seed={raw.get('seed')} an integer >= 0")
         except ValueError as exc:
             raise SpecError(f"tracker spec {str(spec)!r}: {' '.join(str(exc).split())}; expected {FORM}") from None
-        return lambda: EmsconSimServer(rig, noise=noise, seed=seed, faults=faults)
+        return lambda: EmsconSimServer(rig, noise=noise, seed=seed, faults=faults, angle_noise=angle_noise)
 
 
 def parse_settings(spec: TrackerSpec, site: Any = None) -> EmsconSettings:
@@ -112,8 +117,11 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> EmsconSettings:
     initialize = str(raw.get("initialize", "auto"))
     if initialize not in ("auto", "always"):
         raise bad("initialize", "auto or always")
+    probe = str(raw.get("probe", "none")).lower()
+    if probe not in PROBES:
+        raise bad("probe", " or ".join(PROBES))
     host, port = ("127.0.0.1", 0) if simulated else spec.address
-    return EmsconSettings(host, port or DEFAULT_PORT, initialize=initialize,
+    return EmsconSettings(host, port or DEFAULT_PORT, initialize=initialize, probe=probe == "6dof",
                           reflector=None if raw.get("reflector") is None else str(raw["reflector"]),
                           trace=None if raw.get("trace") is None else str(raw["trace"]), simulated=simulated,
                           sim=tuple((k, raw[k]) for k in SIM_OPTIONS if k in raw), **values)
@@ -150,14 +158,20 @@ def describe(spec: TrackerSpec, site: Any, samples_per_step: int, steps: int, sw
              "(no transformation, no station orientation)",
              f"  environment: {env}",
              f"  reflector: {reflector}"]
+    if s.probe:
+        lines.append("  measure a 6-DoF probe (T-Mac class): each reading the tip's position and the probe's "
+                     "orientation, with their deviations, recorded as full poses")
+    what = "6-DoF poses" if s.probe else "points"
     if steps:
-        lines.append(f"  measure stationary points of {s.meas_time:g} s: {samples_per_step} per step, {readings} in "
+        lines.append(f"  measure stationary {what} of {s.meas_time:g} s: {samples_per_step} per step, {readings} in "
                      f"all ({readings * s.meas_time / 60:.1f} min of measuring)")
     if sweeps:
         separation = continuous_separation(stream_rate)
         lines += [f"  measure continuously by time during each of the {sweeps} sweeps: a point every {separation} ms "
                   f"({1000 / separation:g} per second), each stamped with the tracker's own clock (the session fits "
-                  "its offset and drift to the robot's)",
+                  "its offset and drift to the robot's)"
+                  + ("; 6-DoF points, of which the sweep records the tip's position (streamed rows have no "
+                     "orientation)" if s.probe else ""),
                   "  in a sweep, a broken beam or lost reflector, flagged points, a dropped, garbled or silent link: "
                   "a gap, and the measurement started again (every 0.2 s until the beam is back; on a new link)"]
     lines.append(f"  faults: a broken beam or lost reflector, warming up or not ready: retried by the run; a dropped, "

@@ -26,6 +26,9 @@ seconds and microseconds of the tracker's clock, as the public ROS driver ``beck
 reading on every packet (drivers/trackers/emscon_stream.py): microseconds within [0, 10^6) and points one time
 separation apart, else the stream is refused in one line rather than mis-timed.
 
+6-DoF probe results (T-Mac class: ``type`` 4 and 5) are decoded by drivers/trackers/emscon_6dof.py, which says what
+the header verifies of them and what is inferred.
+
 Text fields (reflector names, the software version) are 32 UTF-16LE code units, zero-padded.
 """
 
@@ -37,13 +40,23 @@ from dataclasses import astuple, dataclass
 import numpy as np
 
 from drivers.errors import BadReading
+from drivers.trackers.emscon_6dof import _PROBE_MULTI as _PROBE_MULTI  # the 6-DoF packets, re-exported
+from drivers.trackers.emscon_6dof import _PROBE_STATIONARY as _PROBE_STATIONARY
+from drivers.trackers.emscon_6dof import ROTATION_ERROR as ROTATION_ERROR
+from drivers.trackers.emscon_6dof import ROTATION_FROZEN as ROTATION_FROZEN
+from drivers.trackers.emscon_6dof import ROTATION_VALID as ROTATION_VALID
+from drivers.trackers.emscon_6dof import ProbeMultiResult as ProbeMultiResult
+from drivers.trackers.emscon_6dof import ProbeResult as ProbeResult
+from drivers.trackers.emscon_6dof import _probe_point_dtype as _probe_point_dtype
+from drivers.trackers.emscon_6dof import probe_continuous_result, probe_stationary_result
+from drivers.trackers.emscon_6dof import rotation_ok as rotation_ok
 
 HEADER = struct.Struct("<iI")  # lPacketSize, type
 MAX_PACKET = 1 << 18  # bytes: above the longest packet this client reads (a continuous result of 2,800 points)
 
 #: ES_DataType
 DT_COMMAND, DT_ERROR, DT_SINGLE, DT_MULTI, DT_NIVEL, DT_REFLECTOR_POS, DT_STATUS_CHANGE = 0, 1, 2, 3, 6, 7, 8
-DT_PROBE_STATIONARY, DT_SINGLE2, DT_MULTI2 = 4, 9, 10
+DT_PROBE_STATIONARY, DT_PROBE_CONTINUOUS, DT_SINGLE2, DT_MULTI2 = 4, 5, 9, 10
 
 #: ES_Command values the client and the emulator use
 C_GET_SYSTEM_STATUS, C_GET_TRACKER_STATUS, C_SET_UNITS, C_GET_UNITS, C_INITIALIZE = 1, 2, 5, 6, 7
@@ -71,7 +84,8 @@ COMMAND_NAMES = {
 #: ES_LengthUnit meter, ES_AngleUnit radian, ES_TemperatureUnit Celsius, ES_PressureUnit mbar, ES_HumidityUnit %RH
 UNITS_SI = (0, 0, 0, 0, 0)
 CS_RHR = 0  # ES_CoordinateSystemType: right-handed rectangular (X, Y, Z)
-MM_STATIONARY, MM_CONTINUOUS_TIME, MM_6D_STATIONARY = 0, 1, 6  # ES_MeasMode
+MM_STATIONARY, MM_CONTINUOUS_TIME, MM_6D_STATIONARY, MM_6D_CONTINUOUS_TIME = 0, 1, 6, 7  # ES_MeasMode
+
 #: ES_MeasurementStatus of each point of a continuous result (0 all OK; others "should be treated with care")
 POINT_STATUS = {0: "all OK", 1: "speed warning", 2: "speed exceeded", 3: "prism error", 4: "trigger time violation"}
 TPS_INITIALIZED = 5  # ES_TrackerProcessorStatus
@@ -108,11 +122,6 @@ SSC_NOT_READY, SSC_BUSY, SSC_READY = 25, 26, 27
 _SINGLE = struct.Struct("<IIi17d")  # status, measMode, bIsTryMode, 17 doubles
 _SINGLE2 = struct.Struct("<IIi23d")
 _MULTI = struct.Struct("<IiIi3d")  # status, lNumberOfResults, measMode, bIsTryMode, environment
-#: ProbeStationaryResultT after the header: status, measMode, bIsTryMode, triggerStatus, lRotationStatus, probe id,
-#: field number, tipStatus, tip adapter id and interface, then 41 doubles (positions 0-16: the tip's position, its
-#: deviations, total, covariances and a-priori ones; 17-20: the quaternion; 21-23: rotation angles; 24-37 their
-#: deviations and covariances; 38-40: the environment): 376 bytes in all
-_PROBE_STATIONARY = struct.Struct("<IIiIiiiIii41d")
 _CONTINUOUS_TIME = struct.Struct("<iiiI")  # lTimeSeparation (ms), lNumberOfPoints, bUseRegion, regionType
 _VERSION = struct.Struct("<iii")
 _UNITS = struct.Struct("<5I")
@@ -224,32 +233,8 @@ class OtherPacket:
     data: bytes
 
 
-@dataclass(frozen=True)
-class ProbeResult:
-    """A 6-DoF stationary probe result (``ES_DT_StationaryProbeMeasResult``, T-Mac class probes): the measuring
-    tip's ``position`` (3,) and its standard deviations ``position_std`` (3,) in the units and coordinate system set,
-    the probe's orientation as ``quaternion`` (q0, q1, q2, q3) and as ``angles`` (rotation angles X, Y, Z) with
-    their standard deviations ``angles_std``, the ``rotation_status`` bits, probe and tip ids, the environment."""
-
-    status: int
-    mode: int
-    try_mode: bool
-    trigger: int
-    rotation_status: int
-    probe_id: int
-    tip_status: int
-    tip_adapter_id: int
-    position: tuple[float, float, float]
-    position_std: tuple[float, float, float]
-    quaternion: tuple[float, float, float, float]
-    angles: tuple[float, float, float]
-    angles_std: tuple[float, float, float]
-    temperature: float
-    pressure: float
-    humidity: float
-
-
-Packet = Reply | ErrorPacket | StatusChange | SingleResult | MultiResult | ProbeResult | OtherPacket
+Packet = (Reply | ErrorPacket | StatusChange | SingleResult | MultiResult | ProbeResult | ProbeMultiResult
+          | OtherPacket)
 
 
 def frame(buffer: bytes) -> tuple[list[bytes], bytes]:
@@ -303,13 +288,9 @@ def decode(packet: bytes) -> Packet:
     if kind in (DT_MULTI, DT_MULTI2):
         return _multi_result(kind, body)
     if kind == DT_PROBE_STATIONARY:
-        if len(body) != _PROBE_STATIONARY.size:
-            raise BadReading(f"a 6-DoF probe result of {size} bytes ({HEADER.size + _PROBE_STATIONARY.size} expected)")
-        v = _PROBE_STATIONARY.unpack(body)
-        d = v[10:]
-        return ProbeResult(v[0], v[1], bool(v[2]), v[3], v[4], v[5], v[7], v[8], (d[0], d[1], d[2]),
-                           (d[3], d[4], d[5]), (d[17], d[18], d[19], d[20]), (d[21], d[22], d[23]),
-                           (d[24], d[25], d[26]), d[38], d[39], d[40])
+        return probe_stationary_result(body)
+    if kind == DT_PROBE_CONTINUOUS:
+        return probe_continuous_result(body)
     if kind in (DT_NIVEL, DT_REFLECTOR_POS):
         return OtherPacket(kind, packet)
     raise BadReading(f"a packet of unknown type {kind} ({size} bytes)")

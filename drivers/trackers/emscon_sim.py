@@ -7,10 +7,16 @@ Set/GetCoordinateSystemType (right-handed rectangular only; others: status 2, no
 Set/GetSystemSettings, Set/GetEnvironmentParams, GetReflectors / Set/GetReflector, Set/GetMeasurementMode
 (stationary, continuous by time, 6-DoF stationary), Set/GetStationaryModeParams, Set/GetContinuousTimeModeParams,
 StartMeasurement (stationary: the answer, then one ``ES_DT_SingleMeasResult`` after the measurement time on the
-rig's clock; continuous: the answer, then ``ES_DT_MultiMeasResult`` packets; 6-DoF: one
-``ES_DT_StationaryProbeMeasResult`` of a probe whose frame is the flange's moved to the TP, its quaternion (q0
-scalar) taking probe-frame vectors to the tracker frame), StopMeasurement, GetTrackerStatus,
+rig's clock; continuous: the answer, then ``ES_DT_MultiMeasResult`` packets; 6-DoF stationary: one
+``ES_DT_StationaryProbeMeasResult``; 6-DoF continuous by time: ``ES_DT_ContinuousProbeMeasResult`` packets as the
+continuous ones), StopMeasurement, GetTrackerStatus,
 GetSystemSoftwareVersion; any other command is answered with status 2 (not implemented).
+
+6-DoF probe (T-Mac class): the probe's frame is the rig's first target frame (``rig.true_frames``: a fixed frame
+on the flange, the mock's 6-DoF target; the flange's own axes on a rig without one) with its origin, the measuring
+tip, at the TP; the tip has the positions' noise, the orientation is turned by a random rotation of ``angle_noise``
+rad per axis (stated as each rotation angle's deviation); the quaternion (q0 scalar first) takes probe-frame vectors
+to the tracker frame (drivers/trackers/emscon_6dof.py: the reading this client infers).
 
 Continuous by time: the points are the rig's true TP at times ``lTimeSeparation`` ms apart on the rig's clock (the
 first at the StartMeasurement), each with the noise; every :data:`PACKET_PERIOD` s of that clock the points due so
@@ -31,21 +37,23 @@ change "not ready", then the answer with status 10004; the next measurement that
 ``lost_during`` (answer OK, then an ``ES_DT_Error`` packet: status 10009, no stationary result), ``warming_up``
 (status 10012), ``not_ready`` (status 10014), ``garbage`` (answer OK, then 40 bytes that are no packet),
 ``silence`` (no answer), ``drop`` (the server closes the connection), ``split`` (the result arrives in three
-pieces 10 ms apart: must still parse).
+pieces 10 ms apart: must still parse), ``pose_invalid`` (a 6-DoF result whose rotation status says error: too few
+LEDs seen).
 
 Faults during a continuous measurement (``inject`` or ``fault=NAME[@N][xK]``, ``@N`` counting the continuous result
 packets over the server's life): ``stream_lost`` (the beam breaks: status change "not ready", an ``ES_DT_Error``
 packet for StartMeasurement with status 10004, the measurement ends; the next K StartMeasurement commands are
 answered 10004 as a ``beam_broken``), ``stream_prism`` (the next K packets' points have status 3, prism error),
 ``stream_garbage`` (40 bytes that are no packet instead of the packet's), ``stream_drop`` (the server closes the
-connection), ``stream_silence`` (the link goes silent: no packet and no answer until the client closes it). On the
+connection), ``stream_silence`` (the link goes silent: no packet and no answer until the client closes it),
+``stream_error`` (an ``ES_DT_Error`` packet for StartMeasurement with status 36, unknown error: the measurement ends,
+and nothing says the beam is the cause). On the
 mock's virtual clock the client's waits (a relock every 0.2 s, the silence timeout, a reconnect) are wall time, during
 which the virtual clock runs on: such a fault costs a larger part of a sweep there than on a real tracker.
 """
 
 from __future__ import annotations
 
-import contextlib
 import socket
 import struct
 import threading
@@ -112,7 +120,7 @@ class EmsconSimServer:
         self._schedule = list(faults)
         self._lock = threading.Lock()
         self._stop = threading.Event()
-        self._link: _Link | None = None
+        self._link: served.Link | None = None
         self.received = bytearray()
         self._thread = threading.Thread(target=accept_each, args=(self._server, self._serve_connection, self._stop),
                                         daemon=True, name="emscon-sim")
@@ -150,7 +158,7 @@ class EmsconSimServer:
         self.connections += 1
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         conn.settimeout(0.05)
-        link = self._link = _Link(conn)
+        link = self._link = served.Link(conn)
         buffer = b""
         try:
             while not self._stop.is_set() and not link.closed:
@@ -177,7 +185,7 @@ class EmsconSimServer:
         finally:
             self._end_stream(link, flush=False)
 
-    def _answer(self, link: _Link, code: int, payload: bytes) -> bool:
+    def _answer(self, link: served.Link, code: int, payload: bytes) -> bool:
         """Answer one command; False to close the connection."""
         self.commands.append(code)
         send = link.send
@@ -247,7 +255,7 @@ class EmsconSimServer:
             return ok(struct.pack("<i", self.reflector))
         if code == es.C_SET_MEAS_MODE:
             mode = struct.unpack("<I", payload)[0]
-            if mode not in (es.MM_STATIONARY, es.MM_CONTINUOUS_TIME, es.MM_6D_STATIONARY):
+            if mode not in (es.MM_STATIONARY, es.MM_CONTINUOUS_TIME, es.MM_6D_STATIONARY, es.MM_6D_CONTINUOUS_TIME):
                 return refuse(2)
             self.mode = mode
             return ok(change=17)
@@ -272,7 +280,7 @@ class EmsconSimServer:
             return ok(served.text_field("emScon emulator {}.{}.{}".format(*VERSION)))
         return refuse(2)
 
-    def _measure(self, link: _Link) -> bool:
+    def _measure(self, link: served.Link) -> bool:
         with self._lock:
             self.started += 1
             for name, at, count in self._schedule:
@@ -307,8 +315,9 @@ class EmsconSimServer:
             if unsolicited:
                 send(served.status_change(es.SSC_READY))
         send(served.reply(code, 0))
-        if self.mode == es.MM_CONTINUOUS_TIME:
-            link.stream = _Stream(self.rig.clock.now(), self.continuous[0] / 1000, self.continuous[1])
+        if self.mode in (es.MM_CONTINUOUS_TIME, es.MM_6D_CONTINUOUS_TIME):
+            link.stream = served.Stream(self.rig.clock.now(), self.continuous[0] / 1000, self.continuous[1],
+                                  self.mode == es.MM_6D_CONTINUOUS_TIME)
             link.thread = threading.Thread(target=self._stream_loop, args=(link,), daemon=True,
                                            name="emscon-sim-stream")
             link.thread.start()
@@ -317,7 +326,7 @@ class EmsconSimServer:
             send(served.error_packet(code, 10009))
             return True
         if self.mode == es.MM_6D_STATIONARY:
-            return self._probe(link)
+            return self._probe(link, fault == "pose_invalid")
         if fault == "garbage":
             send(b"\xff\xff\xff\x7f" + bytes(self.rng.integers(0, 256, 36, dtype=np.uint8)))
             return True
@@ -335,22 +344,36 @@ class EmsconSimServer:
             send(packet)
         return True
 
-    def _probe(self, link: _Link) -> bool:
-        """A 6-DoF stationary result: the probe is the flange's frame moved to the TP (its measuring tip); the tip
-        with the noise, the orientation turned by a random rotation of ``angle_noise`` rad per axis."""
+    def _probe(self, link: served.Link, invalid: bool = False) -> bool:
+        """A 6-DoF stationary result (module doc); ``invalid``: its rotation status says error (bits 0, 1, 2:
+        valid, error, not enough LEDs)."""
         self.rig.clock.sleep(self.stationary[0] / 1000)
-        pose = np.asarray(self.rig.flange_pose(), dtype=float).copy()
-        pose[:3, 3] = self.rig.true_point()
+        pose = self.probe_pose()
         values, std = self._reported(pose[None, :3, 3])
-        turn = Rotation.from_rotvec(self.rng.normal(0.0, self.angle_noise, 3))
-        rotation = turn * Rotation.from_matrix(pose[:3, :3])
-        x, y, z, w = rotation.as_quat()
-        angles = tuple(float(a) for a in rotation.as_euler("xyz"))
+        quaternion = self._turned(pose[None, :3, :3])[0]
         self.measurements += 1  # counted before it leaves, as a stationary result
         self.probe_truths.append(pose)
-        link.send(served.probe_stationary_result(tuple(values[0]), std, (w, x, y, z), angles,  # type: ignore[arg-type]
-                                             (self.angle_noise,) * 3, self.environment))
+        angles = tuple(float(a) for a in Rotation.from_quat(np.roll(quaternion, -1)).as_euler("xyz"))
+        link.send(served.probe_stationary_result(tuple(values[0]), std, tuple(quaternion), angles,  # type: ignore[arg-type]
+                                                 (self.angle_noise,) * 3, self.environment,
+                                                 rotation_status=0b111 if invalid else 1))
         return True
+
+    def probe_pose(self, tau: float | None = None) -> np.ndarray:
+        """The probe's true pose at rig time ``tau`` (default now): 4x4, tracker frame <- probe frame, m (module
+        doc)."""
+        pose = np.eye(4)
+        frames = getattr(self.rig, "true_frames", None)
+        pose[:3, :3] = frames(tau)[0] if frames is not None else np.asarray(self.rig.flange_pose(tau))[:3, :3]
+        pose[:3, 3] = self.rig.true_point(tau)
+        return pose
+
+    def _turned(self, rotations: np.ndarray) -> np.ndarray:
+        """True orientations (k, 3, 3) -> the quaternions (k, 4), q0 scalar first, the probe reports: each turned
+        by a random rotation of ``angle_noise`` rad per axis."""
+        turn = Rotation.from_rotvec(self.rng.normal(0.0, self.angle_noise, (len(rotations), 3)))
+        x, y, z, w = (turn * Rotation.from_matrix(rotations)).as_quat().T
+        return np.column_stack([w, x, y, z])
 
     def _reported(self, true: np.ndarray) -> tuple[np.ndarray, tuple[float, float, float]]:
         """True points (k, 3) m -> what the server reports (k, 3) in its units and settings, and each axis's
@@ -363,7 +386,7 @@ class EmsconSimServer:
 
     # --- continuous measurement ---------------------------------------------------------------------------
 
-    def _stream_loop(self, link: _Link) -> None:
+    def _stream_loop(self, link: served.Link) -> None:
         """One packet per PACKET_PERIOD s of the rig's clock (several at once when the clock jumped, as a
         virtual clock does), until the measurement ends."""
         stream = link.stream
@@ -374,7 +397,7 @@ class EmsconSimServer:
                 stream.ended_itself = stream.ended.is_set()
             stream.ended.wait(0.002)
 
-    def _send_points(self, link: _Link, stream: _Stream, until: float) -> None:
+    def _send_points(self, link: served.Link, stream: served.Stream, until: float) -> None:
         """One packet of the points due by rig time ``until``, or the packet's fault."""
         stream.last_packet = until
         due = int(np.floor((until - stream.start) / stream.separation + 1e-9)) + 1
@@ -404,6 +427,10 @@ class EmsconSimServer:
             link.send(served.error_packet(es.C_START_MEASUREMENT, 10004))
             stream.ended.set()
             return
+        if fault == "stream_error":
+            link.send(served.error_packet(es.C_START_MEASUREMENT, 36))
+            stream.ended.set()
+            return
         if fault == "stream_drop":
             link.close()
             return
@@ -414,16 +441,25 @@ class EmsconSimServer:
             link.send(b"\xff\xff\xff\x7f" + bytes(self.rng.integers(0, 256, 36, dtype=np.uint8)))
             return
         tau = stream.start + k * stream.separation
-        true = np.array([self.rig.true_point(float(t)) for t in tau], dtype=float)
-        values, _ = self._reported(true)  # the standard statistic mode: no deviations per point
         stamp = np.asarray(self.tracker_time(tau))
         seconds = np.floor(stamp)
         micro = np.minimum(np.round((stamp - seconds) * 1e6), 999_999)
         status = np.full(len(k), 3 if fault == "stream_prism" else 0)
-        if link.send(served.multi_result(status, seconds, micro, values, self.environment)):
+        if stream.six_dof:
+            poses = np.array([self.probe_pose(float(t)) for t in tau])
+            true = poses[:, :3, 3]
+            values, std = self._reported(true)
+            packet = served.probe_continuous_result(status, seconds, micro, values, std,
+                                                    self._turned(poses[:, :3, :3]), self.angle_noise,
+                                                    self.environment)
+        else:
+            true = np.array([self.rig.true_point(float(t)) for t in tau], dtype=float)
+            values, _ = self._reported(true)  # the standard statistic mode: no deviations per point
+            packet = served.multi_result(status, seconds, micro, values, self.environment)
+        if link.send(packet):
             self.streamed.extend(zip(tau.tolist(), true, strict=True))
 
-    def _end_stream(self, link: _Link, flush: bool) -> None:
+    def _end_stream(self, link: served.Link, flush: bool) -> None:
         """Stop the continuous measurement of ``link`` (``flush``: its due points sent first, as StopMeasurement
         does)."""
         stream, thread = link.stream, link.thread
@@ -435,51 +471,3 @@ class EmsconSimServer:
         if flush and not link.closed and not link.muted and not stream.ended_itself:
             self._send_points(link, stream, self.rig.clock.now())
         link.stream, link.thread = None, None
-
-
-class _Stream:
-    """A continuous measurement: points every ``separation`` s of the rig's clock from ``start``, ``limit`` of
-    them (0: no end); ``sent`` so far, the last packet's rig time."""
-
-    def __init__(self, start: float, separation: float, limit: int) -> None:
-        self.start, self.separation, self.limit = start, separation, limit
-        self.sent = 0
-        self.last_packet = start
-        self.ended = threading.Event()
-        self.ended_itself = False  # the beam was lost or the count reached: nothing left to send
-
-
-class _Link:
-    """One client connection: its socket, what is sent on it (the command handler and the stream share it), the
-    continuous measurement running on it; ``muted``: a silent link sends nothing."""
-
-    def __init__(self, conn: socket.socket) -> None:
-        self.conn = conn
-        self.closed = self.muted = False
-        self.stream: _Stream | None = None
-        self.thread: threading.Thread | None = None
-        self._lock = threading.Lock()
-
-    @property
-    def measuring(self) -> bool:
-        """A continuous measurement runs on this link."""
-        return self.stream is not None and not self.stream.ended.is_set()
-
-    def send(self, data: bytes) -> bool:
-        """Send ``data``; False when it did not leave (a closed or silent link)."""
-        with self._lock:
-            if self.closed or self.muted:
-                return False
-            try:
-                self.conn.sendall(data)
-            except OSError:
-                self.closed = True
-                return False
-            return True
-
-    def close(self) -> None:
-        """The server hangs up (the serving loop sees it and ends)."""
-        with self._lock:
-            self.closed = True
-            with contextlib.suppress(OSError):
-                self.conn.shutdown(socket.SHUT_RDWR)

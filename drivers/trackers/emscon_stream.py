@@ -7,6 +7,10 @@ no region) read back with ``GetContinuousTimeModeParams``, then ``StartMeasureme
 continuous result packets of the points measured since the last one until ``StopMeasurement``. A reader thread owns
 the link while the stream runs (``measure`` is refused); ``stop_stream`` has it send ``StopMeasurement`` and read
 up to its answer, so the last points are kept. The next stationary measurement sets the stationary mode again.
+With a 6-DoF probe (``probe=6dof``) the mode is continuous 6-DoF measurement by time
+(``ES_DT_ContinuousProbeMeasResult`` packets): the stream carries the tip's positions with each point's stated
+deviation as ``sigma``, and leaves out the points whose rotation status is not valid (as flagged points); the
+orientation is not streamed (a session's streamed rows have no orientation columns: its stop-and-go poses carry it).
 
 Timestamps: each point carries the tracker's time of the point (``lTime1`` s + ``lTime2`` µs of the tracker's own
 clock, read as the public ROS driver ``beckjac/emscon_ros`` reads them); the stream's ``t`` is that time, so the
@@ -69,6 +73,7 @@ class ContinuousMeasurement(BufferedStreaming):
     events: list[tuple[float, str]]
     recorded_environment: tuple[float, float, float]
     measurement_mode: int
+    probe: bool
     _sock: Any
     _trace: Any
     _connected_once: bool
@@ -116,8 +121,9 @@ class ContinuousMeasurement(BufferedStreaming):
     def _begin(self, separation_ms: int, deadline: float) -> bool:
         """Continuous mode, its time separation (read back), StartMeasurement; True when the beam does not reach
         the reflector yet (the measurement did not start)."""
-        self._call(es.set_measurement_mode(es.MM_CONTINUOUS_TIME), es.C_SET_MEAS_MODE, deadline)
-        self.measurement_mode = es.MM_CONTINUOUS_TIME
+        mode = es.MM_6D_CONTINUOUS_TIME if self.probe else es.MM_CONTINUOUS_TIME
+        self._call(es.set_measurement_mode(mode), es.C_SET_MEAS_MODE, deadline)
+        self.measurement_mode = mode
         self._call(es.set_continuous_time_params(separation_ms), es.C_SET_CONTINUOUS_TIME, deadline)
         taken = es.continuous_time_params(self._ask(es.C_GET_CONTINUOUS_TIME, deadline))[0]
         if taken != separation_ms:
@@ -190,7 +196,7 @@ class ContinuousMeasurement(BufferedStreaming):
         self._lost = self._begin(self.separation_ms, deadline)
 
     def _take(self, packet: es.Packet) -> None:
-        if isinstance(packet, es.MultiResult):
+        if isinstance(packet, es.MultiResult | es.ProbeMultiResult):
             self._points(packet)
         elif isinstance(packet, es.Reply) and packet.command == es.C_START_MEASUREMENT:
             if packet.status == 0:
@@ -210,8 +216,9 @@ class ContinuousMeasurement(BufferedStreaming):
                 self._broken = True
             self._other(packet)
 
-    def _points(self, packet: es.MultiResult) -> None:
-        """Keep the good points of a continuous result, with gaps where points are missing or flagged."""
+    def _points(self, packet: es.MultiResult | es.ProbeMultiResult) -> None:
+        """Keep the good points of a continuous result (3D or 6-DoF: the tip's), with gaps where points are missing
+        or flagged (a 6-DoF point also when its rotation status is not valid)."""
         micro = packet.time2
         if len(micro) and (micro.min() < 0 or micro.max() >= 1_000_000):
             raise StampError(f"{self.where}: a continuous result's point time has lTime2 = "
@@ -226,6 +233,8 @@ class ContinuousMeasurement(BufferedStreaming):
                              "time stamps cannot be read (use --mode step)")
         values = packet.values
         good = (packet.point_status == 0) & np.all(np.isfinite(values) & (np.abs(values) < 1e4), axis=1)
+        if isinstance(packet, es.ProbeMultiResult):
+            good &= es.rotation_ok(packet.rotation_status)
         sigma = (np.sqrt(np.mean(packet.std**2, axis=1)) if packet.std is not None
                  else np.full(len(t), math.nan))
         rows, gaps = [], []
@@ -248,8 +257,9 @@ class ContinuousMeasurement(BufferedStreaming):
             self.stream_counts["gaps"] += len(gaps)
         if flagged:
             self._trace.event(f"stream: {flagged} point(s) flagged ("
-                              + ", ".join(sorted({es.POINT_STATUS.get(int(s), str(int(s)))
-                                                  for s in packet.point_status[~good]})) + ")")
+                              + ", ".join(sorted({es.POINT_STATUS.get(int(s), str(int(s))) if s else
+                                                  "6-DoF rotation not valid" for s in packet.point_status[~good]}))
+                              + ")")
         used = (packet.temperature, packet.pressure, packet.humidity)
         if used != self._environment_seen:  # the server's weather station moved on: said once per change
             self._environment_seen = used
@@ -268,7 +278,7 @@ class ContinuousMeasurement(BufferedStreaming):
                 packet = self._packet(deadline, "StopMeasurement")
                 if isinstance(packet, es.Reply) and packet.command == es.C_STOP_MEASUREMENT:
                     return
-                if isinstance(packet, es.MultiResult):
+                if isinstance(packet, es.MultiResult | es.ProbeMultiResult):
                     self._points(packet)
                 elif not isinstance(packet, es.Reply | es.ErrorPacket):
                     self._other(packet)

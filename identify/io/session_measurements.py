@@ -3,6 +3,13 @@ identify's edge.
 
 Stop-and-go steps (:func:`measurements_from`): one row per ok step and tracked point seen, q = the ACTUAL joint
 readings, the averaged TP, the plan's sweep id, joint and role; home re-measurements become held-out free poses.
+A step whose readings carried no device sigma (an I++ server, a profile without one) has, in the session, the spread
+of its own few readings as its sigma: 5 readings give 12 degrees of freedom, a figure off by 20 % either way, and a
+fit that weighs rows by such figures as if known leans on the steps that happened to scatter little and finds a
+chi-square inflated by ν/(ν−2) (1.2 for 12), so its model check warns on a model that is right (and a step of fewer
+than 3 kept readings has none, which left the whole session without a sigma column). Those rows take the pooled
+spread instead (:func:`pooled_spread`): the per-reading noise pooled over every such step of the session, over the
+square root of the step's kept readings.
 Streams (continuous motion, :func:`with_streams`): every complete, current attempt whose stream step is recorded
 ok becomes rows: one per tracker sample (each tracked point), ``t`` its tracker time, ``q`` the joint stream
 interpolated (linearly) at robot time ``t + clock_offset``; ``clock_offset`` is the coarse estimate of
@@ -102,7 +109,34 @@ def export_csv(session: SessionFile, path: str | Path, force: bool = False) -> i
 
 def _step_measurements(session: SessionFile) -> Measurements:
     rows, points = session.measured_rows()
-    return measurements_from(rows, points, session.plan.joint_types, session.coupling, session.measured_frames())
+    meas = measurements_from(rows, points, session.plan.joint_types, session.coupling, session.measured_frames())
+    spread = session.spread_sigmas()
+    if not spread:
+        return meas
+    kept = {(r["plan_index"], p.tp): p.samples for r in rows for p in points.get(r["plan_index"], [])}
+    kept.update({(r["plan_index"], 1): r["samples"] for r in rows if r["plan_index"] not in points})
+    seen = [((r["plan_index"], tp), sigma) for r in rows for tp, _, sigma in points_seen(r, points)]  # rows' order
+    sigma = pooled_spread(np.array([np.nan if s is None else s for _, s in seen], dtype=float),
+                          np.array([kept.get(k, 0) for k, _ in seen], dtype=float),
+                          np.array([k in spread for k, _ in seen], dtype=bool))
+    return replace(meas, sigma=None if np.any(np.isnan(sigma)) else sigma)
+
+
+def pooled_spread(sigma: np.ndarray, samples: np.ndarray, estimated: np.ndarray) -> np.ndarray:
+    """Rows' ``sigma`` (m per axis, of their average; NaN: none) with those ``estimated`` from their own readings'
+    spread replaced by the pooled per-reading noise over sqrt(``samples`` kept) (module doc): each row of at least 2
+    readings contributes its per-reading variance ``samples · sigma²`` weighed by its 3 (samples − 1) degrees of
+    freedom; a row of fewer (no spread of its own, no sigma) takes the pooled figure too. Unchanged when no row
+    contributes."""
+    pool = estimated & (samples >= 2) & np.isfinite(sigma)
+    if not pool.any():
+        return sigma
+    dof = 3.0 * (samples[pool] - 1.0)
+    per_reading = float(np.sum(dof * samples[pool] * sigma[pool] ** 2) / np.sum(dof))
+    take = estimated & (samples >= 1)
+    out = sigma.copy()
+    out[take] = np.sqrt(per_reading / samples[take])
+    return out
 
 
 def measurements_from(rows: list[dict[str, Any]], points: dict[int, list[PointRecord]], joint_types: str,

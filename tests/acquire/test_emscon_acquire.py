@@ -54,6 +54,8 @@ def test_emscon_sim_session_with_faults_identifies_the_truth(tmp_path, capsys):
 def test_emscon_sim_options_are_checked_in_one_line(tmp_path, capsys):
     for tracker, words in (("emscon:sim?fault=explode", "fault 'explode' must be NAME"),
                            ("emscon:sim?noise=-1", "noise=-1"),
+                           ("emscon:sim?probe=7dof", "option probe=7dof must be none or 6dof"),
+                           ("emscon:sim?angle_noise=1", "angle_noise=1"),
                            ("emscon:127.0.0.9", "needs mock devices on both sides")):
         code = main(["--robot", ROBOT, "--tracker", tracker, "--session", str(tmp_path / "x.session"), *SMALL])
         err = capsys.readouterr().err
@@ -122,3 +124,38 @@ def test_dry_run_of_a_continuous_plan_says_the_time_separation(tmp_path, capsys)
     assert "stamped with the tracker's own clock" in out and "a gap, and the measurement started again" in out
     assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1", "--mode", "step", "--dry-run"]) == 0
     assert "continuously" not in capsys.readouterr().out  # a stop-and-go plan streams nothing
+    assert main(["--robot", "ur5e", "--tracker", "emscon:192.168.0.1?probe=6dof", "--mode", "both", "--config",
+                 str(site), "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert "measure a 6-DoF probe (T-Mac class)" in out and "measure stationary 6-DoF poses of 1 s" in out
+    assert "6-DoF points, of which the sweep records the tip's position" in out
+
+
+def test_a_tracker_error_mid_sweep_ends_the_run_resumable_in_one_line(tmp_path, capsys):
+    """A status the continuous measurement cannot go on with (an error packet for StartMeasurement with status 36,
+    unknown error: not a broken beam, not a lost link) stops the arm and the streams: the sweep's attempt is kept as
+    interrupted, the run ends as failed with the tracker's own words, the command says so in one line (exit 1), and
+    the resume redoes the sweep and completes."""
+    site = tmp_path / "site.yaml"
+    site.write_text("schema: 1\nplan:\n  check_poses: 4\n  stream_rate: 50\n")
+    path = tmp_path / "e.session"
+    args = ["--mode", "continuous", "--config", str(site), "--session", str(path), "--quiet"]
+    code = main(["--robot", ROBOT, "--tracker", "emscon:sim?timeout=0.5&fault=stream_error@30", *args])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1, err
+    assert "run failed (device error:" in err and "status 36 (unknown error)" in err and "--resume" in err
+    with Session.open(path) as session:
+        runs, events = session.runs(), session.events()
+        assert session.outcome() == "failed" and "status 36" in runs[-1].reason
+        assert any(kind == "device error" and "StartMeasurement failed" in text for *_, kind, text in events)
+    with sqlite3.connect(path) as db:
+        attempts = db.execute("SELECT plan_index, status FROM streams ORDER BY id").fetchall()
+    assert len(attempts) == 1 and attempts[0][1] == "interrupted"  # the samples up to the error are kept
+    assert main(["--resume", str(path), "--tracker", "emscon:sim?timeout=0.5", "--quiet"]) == 0
+    capsys.readouterr()
+    with Session.open(path) as session:
+        assert session.outcome() == "complete" and all(s.status == "ok" for s in session.steps())
+    with sqlite3.connect(path) as db:
+        statuses = [s for (s,) in db.execute("SELECT status FROM streams WHERE plan_index = ? ORDER BY id",
+                                             (attempts[0][0],))]
+    assert statuses == ["interrupted", "complete"]  # the resume redid the sweep

@@ -119,6 +119,13 @@ def test_ipp_tracker_session_with_a_server_restart(rig: SimulatedRig, tmp_path: 
     assert not any(e[2] == "retry" for e in events)  # the error was cleared and retried inside the driver
     warned = [r.status for s in steps for r in s.readings if r.status != "ok"]
     assert len(warned) == 1 and "warning 1009" in warned[0]  # the warning is kept in the session file
+    # I++ gives no sigma: each step's is the spread of its 3 readings (6 dof: a factor 2 either way; none for a step
+    # of 2 kept), and the identification takes the pooled spread instead (identify/io/session_measurements.py)
+    recorded = np.array([np.nan if s.sigma is None else s.sigma for s in steps])
+    assert np.nanmax(recorded) > 2 * np.nanmin(recorded)
+    kept = np.array([s.samples for s in steps], dtype=float)
+    assert meas.sigma is not None and len(meas.sigma) == len(steps)
+    assert np.all(np.abs(meas.sigma * np.sqrt(kept) / NOISE - 1) < 0.15), meas.sigma  # the device's noise
     _check_identified(rig, meas, ident)
 
 

@@ -232,14 +232,16 @@ class UREmulator(ControllerServers):
         self._trackers.append(device)
         return str(device.port)
 
-    def serve_emscon(self, noise: float = 2e-5, seed: int = 0, faults: str = "") -> int:
+    def serve_emscon(self, noise: float = 2e-5, seed: int = 0, faults: str = "", angle_noise: float = 2e-5) -> int:
         """Start a simulated Leica emScon server (drivers/trackers/emscon_sim.py, loopback TCP) measuring this
-        emulator's true TP (noise m per axis; its measurement time passes on the emulator's clock); ``faults``:
-        ``NAME[@N][xK],...`` as ``emscon:sim?fault=``. Returns its port (``emscon:127.0.0.1:PORT``)."""
+        emulator's true TP (noise m per axis; its measurement time passes on the emulator's clock) and, for a 6-DoF
+        probe, the rig's first target frame (``angle_noise`` rad per axis); ``faults``: ``NAME[@N][xK],...`` as
+        ``emscon:sim?fault=``. Returns its port (``emscon:127.0.0.1:PORT``)."""
         from drivers.trackers.emscon_server import parse_faults
         from drivers.trackers.emscon_sim import EmsconSimServer
 
-        server = EmsconSimServer(self.rig, noise=noise, seed=seed, faults=parse_faults(faults) if faults else ())
+        server = EmsconSimServer(self.rig, noise=noise, seed=seed, faults=parse_faults(faults) if faults else (),
+                                 angle_noise=angle_noise)
         self._emscon.append(server)
         return int(server.port)
 

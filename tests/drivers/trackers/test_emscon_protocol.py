@@ -64,8 +64,10 @@ def test_answers_of_a_known_command_must_have_its_size() -> None:
     with pytest.raises(BadReading, match="SetUnits has 4 data bytes, not 0"):
         es.decode(served.reply(es.C_SET_UNITS, 0, b"\x00" * 4))
     assert es.decode(served.reply(es.C_GET_ENVIRONMENT, 57)) == es.Reply(es.C_GET_ENVIRONMENT, 57)  # refused: no data
-    with pytest.raises(BadReading, match="unknown type 5"):
-        es.decode(struct.pack("<iII", 12, 5, 0))
+    with pytest.raises(BadReading, match="unknown type 99"):
+        es.decode(struct.pack("<iII", 12, 99, 0))
+    with pytest.raises(BadReading, match="continuous 6-DoF result of 12 bytes is too short"):
+        es.decode(struct.pack("<iII", 12, es.DT_PROBE_CONTINUOUS, 0))
     with pytest.raises(BadReading, match="status change packet of 16 bytes"):
         es.decode(struct.pack("<iIII", 16, es.DT_STATUS_CHANGE, 27, 0))
 

@@ -127,8 +127,9 @@ def test_stamps_that_are_not_seconds_and_microseconds_stop_the_stream(rig: Simul
 
 
 def test_a_6dof_probe_result_decodes_to_the_true_pose(rig: SimulatedRig) -> None:
-    """Not used by sessions yet: the emulator serves 6-DoF stationary results and the client turns them into
-    poses; the next stationary reading sets the stationary mode again."""
+    """``measure_pose``: the emulator serves 6-DoF stationary results and the client turns them into poses (as
+    readings with probe=6dof: tests/drivers/trackers/test_emscon_probe.py); the next stationary reading sets the
+    stationary mode again."""
     from drivers.trackers.emscon_probe import ProbePose
 
     angle = 2e-5  # rad per axis
