@@ -84,11 +84,14 @@ def calibrate(meas: Measurements, robot: str | None = None, noise: float | None 
               seed: int = 0) -> Result:
     """Identify ``meas`` (against the nominal model ``robot``, e.g. ``"ur5e"`` or a YAML path), holding out
     ``holdout`` of the free poses (seeded) to validate; ``noise`` the tracker's, m per axis, when known."""
+    from identify.sensors.evidence import checked, documented, for_estimator
+
     model = robot_model(robot)
-    meas = split_holdout(meas, holdout, seed)
-    ident = identify(meas, None if model is None else model.nominal, noise=noise)
-    doc = result_to_dict(ident, None if model is None else model.nominal, None if model is None else model.name,
-                         nominal_model=None if model is None else model.document)
+    nominal = None if model is None else model.nominal
+    rows = for_estimator(split_holdout(meas, holdout, seed))  # a flange camera's rows turned round
+    ident, scale = checked(identify(rows.meas, nominal, noise=noise), rows, nominal)
+    doc = documented(result_to_dict(ident, nominal, None if model is None else model.name,
+                                    nominal_model=None if model is None else model.document), rows, scale, ident)
     return Result(doc, CalibratedModel.from_identification(ident), ident, model)
 
 

@@ -128,6 +128,10 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         path, plan, robot_model = None, None, None
     if args.json and not args.dry_run:
         raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")
+    if tracker_spec is not None and tracker_spec.backend == "aruco" and tracker_spec.options.get("mount") == "flange":
+        raise UsageError("a camera on the flange (mount=flange) needs views that keep its board in sight, which "
+                         "acquire does not plan yet (its sweeps would lose the board): --probe reads it; identify "
+                         "takes a '# sensor: flange' CSV (README, 'A camera on the flange')")
     rehearsal = tracker_spec is None
     if tracker_spec is not None and tracker_spec.backend == "emscon":  # durations with the tracker's own time
         from drivers.trackers.emscon_options import parse_settings

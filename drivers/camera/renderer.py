@@ -232,6 +232,10 @@ class SimulatedCamera:
         self.rate = fps
         self.stamps = f"simulated: the rig's clock at exposure + latency {latency:g} s"
 
+    def target_pose(self, t: float) -> Array:
+        """The target's pose at rig time ``t``: 4x4, camera frame <- target frame (m): on the flange, at ``mount``."""
+        return self.rig.flange_pose(t) @ self.mount  # type: ignore[attr-defined]
+
     def open(self, timeout: float) -> None:
         self.rig.tracker_connected = True  # type: ignore[attr-defined]
 
@@ -257,7 +261,7 @@ class SimulatedCamera:
             raise DeviceTimeout(f"the simulated camera delivered no frame within {timeout:g} s")
         rig.clock.sleep(1.0 / self.fps)  # type: ignore[attr-defined]
         t = rig.clock.now()  # type: ignore[attr-defined]
-        pose = rig.flange_pose(t) @ self.mount  # type: ignore[attr-defined]
+        pose = self.target_pose(t)
         poses = [] if self._fault == "target_lost" else [pose]
         if self._fault == "bad_reading":
             twin = pose.copy()
@@ -292,7 +296,7 @@ class SimulatedCamera:
                 continue  # lost by the camera: its number is skipped
             tau = self._tau0 + k / self.fps
             hidden = self.lost[0] > 0 and lo - _EPS <= tau - self._tau0 <= hi + _EPS
-            poses = [] if hidden else [rig.flange_pose(tau) @ self.mount]  # type: ignore[attr-defined]
+            poses = [] if hidden else [self.target_pose(tau)]
             queue.put(Frame(k, tau + self.latency, self.renderer.render(poses, self._rng)), timeout)
 
     def stop_frames(self) -> None:

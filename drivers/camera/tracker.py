@@ -5,7 +5,7 @@ URL form (``--tracker``)::
     aruco:SOURCE?camera=FILE[&marker=ID&size=M | &board=grid&cols=N&rows=N&size=M&gap=M
                  | &board=charuco&cols=N&rows=N&square=M&size=M | &layout=FILE][&dict=NAME][&first=ID]
                  [&tp=X,Y,Z][&refine=edges|apriltag|subpix|contour|none][&frames=N][&max_rms=PX]
-                 [&timeout=S][&retries=N]
+                 [&timeout=S][&retries=N][&mount=cell|flange][&square_sigma=M | &size_sigma=M]
 
 ``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a video file, an image folder or a
 glob (``run/*.png``; replay of a recorded run, ``frames`` images per reading), or ``sim`` (images rendered
@@ -21,6 +21,13 @@ Target (units: metres):
   ``dict``    the ArUco dictionary (default ``4X4_50``; e.g. ``5X5_100``, ``ARUCO_ORIGINAL``, ``APRILTAG_36h11``)
   ``tp``      the tracked point in the target frame (origin at the marker / board centre, x right, y up,
               z out of the printed face), ``X,Y,Z`` in metres (default ``0,0,0``: the centre)
+Where the camera is (drivers/camera/flange_camera.py):
+  ``mount``   ``cell`` (default): the camera stands in the cell and the target rides on the flange; ``flange``: the
+              camera rides on the flange (eye-in-hand) and sees a board fixed in the cell; the readings are the
+              board's pose in the camera frame and the session is a ``sensor: flange`` one
+  ``square_sigma`` (ChArUco) / ``size_sigma`` (grid, marker): the board was measured (``square=`` / ``size=`` is
+              the caliper's value) with this standard uncertainty, m: the scale reference (without it the print is
+              unverified and identify checks the scale against the robot's nominal lengths)
 Camera and measurement:
   ``camera``  the intrinsics file (OpenCV FileStorage: camera_matrix, distortion_coefficients,
               image_width, image_height); required except for ``sim``
@@ -36,7 +43,9 @@ Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), 
 (60), ``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of
 motion streak (0), ``fps`` frame rate, Hz (30), ``latency`` s from a frame's exposure to its timestamp (0),
 ``distance`` m from the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home
-(20, 10), ``seed`` (the robot's), ``fault`` as the mock tracker's (``target_lost`` hides the target,
+(20, 10; with ``mount=flange``: of the board seen from the flange camera at home), ``printed`` (``mount=flange``:
+the true board's size over the declared one, 1), ``seed`` (the robot's), ``fault`` as the mock tracker's
+(``target_lost`` hides the target,
 ``bad_reading`` shows a second copy, ``slow`` stops the frames, ``disconnect`` loses the camera); for streams
 ``drop`` (probability that the camera loses a frame, 0) and ``lost=D[@S]`` (the target hidden for D s from S s,
 default 2, into every stream). Any other option is rejected with one line.
@@ -53,7 +62,17 @@ pose covariance propagated to the TP, divided by the frames kept. With ``refine=
 covariance comes from the edge-line fits (drivers/camera/refinement.py: corners of one side are correlated),
 scaled up when the reprojection residuals are larger than it predicts; otherwise the corners are taken as
 independent with the noise of the pooled reprojection residuals (never below ``drivers.camera.pose.SIGMA_PX_FLOOR``). If
-the frames scatter significantly more than C says (F-test), their spread is used instead. A camera's
+the frames scatter significantly more than C says (F-test), their spread is used instead. Beyond that noise, the
+detection errs by a fixed amount for each view of the target (the corners' localisation bias at that angle and
+scale: the same in every frame and every reading of a still view, so averaging does not reduce it). Each reading
+states it as ``shared`` (m) and ``shared_r`` (rad): the pose's sensitivity to a corner error of
+``drivers.camera.pose.VIEW_BIAS_PX`` (``VIEW_TURN_BIAS_PX`` for the orientation) pixels per coordinate, independent
+from corner to corner, and adds it in quadrature to sigma and sigma_r; the orchestrator divides only the rest by the
+number of readings of a step. Measured on rendered images at a calibration plan's views (``bench/camera_honesty.py``,
+docs/benchmarks.md section 23): without it a step's orientation errors were 2.7x, its positions' 2.4x their stated
+sigmas; VIEW_TURN_BIAS_PX = 0.015 px brings the orientations to 1.1-1.2x; VIEW_BIAS_PX stays 0 (a value that made
+the plan's positions honest over-stated milder views), so a camera's positions are still under-stated there. A
+camera's
 error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
 the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights
 (1 / sigma² per sample): the sum of squared weighted residuals has the expectation it would have for
@@ -82,6 +101,9 @@ from scipy.stats import f as f_dist
 
 from drivers.averaging import mean_orientation
 from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
+from drivers.camera import pose as pose_math
+from drivers.camera.flange_camera import MOUNTS
+from drivers.camera.flange_camera import scale_sigma as flange_scale_sigma
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
 from drivers.camera.pose import CornerNoise, Pose, estimate_pose
 from drivers.camera.stream import FrameStreaming
@@ -101,9 +123,9 @@ from drivers.spec import TrackerSpec, parse_faults, parse_interval
 FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
         "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
-           "refine", "frames", "max_rms", "timeout", "retries")
+           "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
-               "tilt", "roll", "seed", "fault")
+               "tilt", "roll", "seed", "fault", "printed")
 SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
 OUTLIER_SIGMAS = 5.0
 CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
@@ -122,6 +144,8 @@ class Settings:
     retries: int
     camera_file: Path | None
     sim: dict[str, Any]
+    mount: str = "cell"  # where the camera is: "cell" or "flange" (drivers/camera/flange_camera.py)
+    scale_sigma: float | None = None  # relative uncertainty of the measured board's scale (None: not measured)
 
 
 def _fail(spec: TrackerSpec, why: str) -> SpecError:
@@ -170,10 +194,30 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
     if camera is None and not simulated:
         raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera")
     sim = _sim_settings(spec, raw) if simulated else {}
+    mount = str(raw.get("mount", "cell"))
+    if mount not in MOUNTS:
+        raise _fail(spec, f"option mount={mount} must be cell or flange")
     return Settings(target, tp, refine, _number(spec, raw, "frames", 5, int, 1, strict=False),
                     _number(spec, raw, "max_rms", 1.0), _number(spec, raw, "timeout", 2.0),
                     _number(spec, raw, "retries", 5, int, 0, strict=False),
-                    None if camera is None else Path(str(camera)), sim)
+                    None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target))
+
+
+def _scale_sigma(spec: TrackerSpec, raw: dict[str, Any], target: Target) -> float | None:
+    """The measured board's relative scale uncertainty from ``square_sigma`` (ChArUco) or ``size_sigma``."""
+    key = "square_sigma" if target.kind == "charuco" else "size_sigma"
+    other = "size_sigma" if key == "square_sigma" else "square_sigma"
+    if other in raw:
+        raise _fail(spec, f"option {other}= does not measure a {target.kind} target (give {key}=)")
+    if key not in raw:
+        return None
+    if target.kind == "layout":
+        raise _fail(spec, "a layout's scale comes from its file; size_sigma= is for a marker or a board")
+    sigma = _number(spec, raw, key, 0.0, low=0, strict=False)
+    size = float(raw["square" if key == "square_sigma" else "size"]) if key.split("_")[0] in raw else None
+    if size is None:
+        raise _fail(spec, f"option {key}= needs {key.split('_')[0]}= (the measured length, m)")
+    return flange_scale_sigma(size, sigma)
 
 
 def _target(spec: TrackerSpec, raw: dict[str, Any], dictionary: int) -> Target:
@@ -221,7 +265,8 @@ def _sim_settings(spec: TrackerSpec, raw: dict[str, Any]) -> dict[str, Any]:
            "drop": _number(spec, raw, "drop", 0.0, low=0, strict=False),
            "distance": _number(spec, raw, "distance", 1.0), "tilt": _number(spec, raw, "tilt", 20.0, low=-90),
            "roll": _number(spec, raw, "roll", 10.0, low=-360),
-           "seed": None if "seed" not in raw else _number(spec, raw, "seed", 0, int, 0, strict=False)}
+           "seed": None if "seed" not in raw else _number(spec, raw, "seed", 0, int, 0, strict=False),
+           "printed": _number(spec, raw, "printed", 1.0)}
     try:
         out["k1"] = float(raw.get("k1", 0.0))
         out["fault"] = parse_faults(str(raw["fault"]), "tracker") if "fault" in raw else ()
@@ -277,7 +322,8 @@ class ArucoTracker(FrameStreaming):
                    "camera_matrix": json.dumps(k.tolist()),
                    "distortion_coefficients": json.dumps(self.camera.distortion.tolist()),
                    "camera_file": "" if s.camera_file is None else str(s.camera_file),
-                   "stream_timestamps": getattr(self.source, "stamps", "none: this source cannot stream")}
+                   "stream_timestamps": getattr(self.source, "stamps", "none: this source cannot stream"),
+                   "mount": s.mount, "scale_sigma": "" if s.scale_sigma is None else repr(s.scale_sigma)}
         if math.isfinite(getattr(self.source, "rate", math.nan)):
             details["frame_rate"] = f"{self.source.rate:g}"
         return DeviceIdentity("tracker", "ArUco camera (OpenCV)", serial=str(self.spec.target),
@@ -363,8 +409,13 @@ class ArucoTracker(FrameStreaming):
         model_r = math.sqrt(float(np.mean([np.trace(noise.orientation_covariance(p)) for (p, _), k
                                            in zip(poses, kept, strict=True) if k])) / 3)
         sigma_r = _frame_sigma(model_r, turns, dof) / math.sqrt(n)
-        return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=sigma, status=status, rotvec=rotvec,
-                              sigma_r=sigma_r)
+        # the detection's bias for this view: the same in every frame and every reading of it (not averaged)
+        bias = np.array([p.view_bias(tp, pose_math.VIEW_BIAS_PX, pose_math.VIEW_TURN_BIAS_PX)
+                         for (p, _), k in zip(poses, kept, strict=True) if k])
+        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0))
+        return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=math.hypot(sigma, shared), status=status,
+                              rotvec=rotvec, sigma_r=math.hypot(sigma_r, shared_r), shared=float(shared),
+                              shared_r=float(shared_r))
 
 
 def _frame_sigma(model: float, pts: Array, dof: int) -> float:
@@ -421,6 +472,12 @@ def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) 
     mount = np.eye(4)
     mount[:3, 3] = rig.truth.tool - settings.tp  # the target's centre, so that its TP is the rig's true TP
     optics = Optics(noise=sim["noise"], blur=sim["blur"], motion=sim["motion"])
+    if settings.mount == "flange":
+        from drivers.camera.flange_camera import CAMERA_MOUNT, SimulatedFlangeCamera
+
+        flange = SimulatedFlangeCamera(rig, settings.target, camera, CAMERA_MOUNT, optics, sim["fps"], sim["latency"],
+                                       sim["drop"], sim["lost"], printed=sim["printed"])
+        return ArucoTracker(spec, settings, flange, camera)
     source = SimulatedCamera(rig, settings.target, camera, mount, optics, sim["fps"], sim["latency"], sim["drop"],
                              sim["lost"])
     return ArucoTracker(spec, settings, source, camera)

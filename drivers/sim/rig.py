@@ -225,7 +225,11 @@ class SimulatedRig:
         except ValueError as exc:
             raise SpecError(f"robot spec {str(robot)!r}: {exc}") from None
         rig.robot_spec, rig.tracker_spec = robot, tracker
-        if view is not None:
+        if view is not None and tracker is not None and tracker.options.get("mount") == "flange":
+            from drivers.camera.flange_camera import CAMERA_MOUNT, facing_board
+
+            rig.face_board(CAMERA_MOUNT, facing_board(*view))  # the camera on the flange, the board before it at home
+        elif view is not None:
             rig.face_tracker(*view)
         return rig
 
@@ -294,6 +298,14 @@ class SimulatedRig:
         at_home = frames_from_joints(replace(self.truth, base=np.eye(4)), home)[0, -1]  # base <- flange
         facing = facing_flange(self.truth.tool, distance, tilt, roll)
         self.truth = replace(self.truth, base=facing @ np.linalg.inv(at_home))
+
+    def face_board(self, mount: Array, facing: Array) -> None:
+        """Re-place the true base for a camera on the flange at ``mount`` (flange <- camera) seeing a fixed board:
+        at home the board is at ``facing`` (camera <- board) and the tracker frame is the board's. DH table kept."""
+        home = true_joints(self.readings_of(self.model.home), self.coupling, self.joint_errors, self.truth,
+                           self.model.links)
+        at_home = frames_from_joints(replace(self.truth, base=np.eye(4)), home)[0, -1]  # base <- flange
+        self.truth = replace(self.truth, base=np.linalg.inv(at_home @ mount @ facing))
 
     @property
     def rest_joints(self) -> Array:

@@ -31,6 +31,7 @@ from identify.io.session_measurements import open_session, read_session
 from identify.io.verification_io import load_verification
 from identify.report.terminal import format_reference, format_report
 from identify.results.pipeline import Identification, identify, split_holdout
+from identify.sensors.evidence import checked, documented, for_estimator
 from kinematics.dh import frames_from_joints
 from kinematics.joint_errors import Coupling
 from session.schema import is_session_file
@@ -62,6 +63,8 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
         return "\n".join([f"identified from {args.input} by dh-calib {__version__}", carries, *export_notes(ident)])
 
     exact = export_figure(ident, meas, "exact")
+    if ident.lines.orientations is not None:  # full-pose data: the tool link is the measured target frame
+        exact += "; tool: the measured target frame (tool_frame)"
     plain = export_figure(ident, meas, "plain")
     if args.urdf or args.ur_calibration:
         flange = frames_from_joints(ident.model, ident.lines.home[None, :])[0, -1]
@@ -197,10 +200,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                          f"{meas.joint_types}")
     _check_exports(args, meas.joint_types)
     meas = _with_coupling(meas, args.coupling, robot, content.notes)
-    ident = identify(meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset,
+    rows = for_estimator(meas)  # a flange camera's rows turned round (identify/sensors/flange.py)
+    ident = identify(rows.meas, nominal, args.parallel_tol, robust=not args.no_robust, max_offset=args.max_offset,
                      noise=args.noise, links=robot.links if robot else None, extensions=args.extensions == "auto",
                      noise_typed=as_typed(args, "noise"))
     ident.warnings[:0] = content.notes
+    ident, scale = checked(ident, rows, nominal)
     if header is not None:  # a session: how much of its plan was recorded is part of the verdict
         from identify.results import verdict as checks
 
@@ -208,6 +213,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                                                                   checks.missing_steps(*header["missing_steps"])))
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input),
                          nominal_model=robot.document if robot else None)
+    doc = documented(doc, rows, scale, ident)
     if header is not None:  # the controller's own calibration: what the arm runs today ("before")
         from identify.applications.controller import controller_section
         from session.rows import factory_calibration

@@ -26,6 +26,11 @@ examples:
   identify measurements.csv --robot ur5e --out cal.yaml --report report.html
   identify sessions/ur5e-20261122-101500.session --noise 0.02mm
   identify measurements.csv --json
+  identify flange.csv --robot ur5e --out cal.yaml
+                         a camera on the flange ('# sensor: flange' rows: the
+                         board's pose in the camera frame): the arm, the
+                         camera's mount and the board's place in one fit; its
+                         scale from '# scale_sigma:' or the robot's lengths
 
 subcommands (each has its own --help):
   compare A B [C ...]    has the robot changed between calibrations (results

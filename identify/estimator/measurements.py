@@ -41,6 +41,11 @@ class Measurements:
     Full pose: ``rotvec`` (m, 3) the measured target frame's orientation in the tracker frame as a rotation vector
     (axis times angle, rad; NaN rows: that row measured a position only) and ``sigma_r`` (m,) its standard
     uncertainty per axis (rad, NaN where no orientation); ``points`` is then the frame's origin. None: no row has one.
+
+    ``sensor``: ``fixed`` (the device stands in the cell, the target rides on the robot) or ``flange`` (the device,
+    an eye-in-hand camera, rides on the flange and the rows are the fixed target's pose in its frame; identify turns
+    them round first: identify/sensors/flange.py). ``scale_sigma``: the relative standard uncertainty of the device's
+    length scale when a reference fixed it (a camera's board measured with a caliper), None when nothing did.
     """
 
     joint_types: str
@@ -59,6 +64,8 @@ class Measurements:
     clock_offset: float = 0.0
     rotvec: Array | None = None
     sigma_r: Array | None = None
+    sensor: str = "fixed"
+    scale_sigma: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_types", check_joint_types(self.joint_types))

@@ -7,6 +7,9 @@ metadata. Columns ``sweep,joint,q1..qN,x,y,z`` plus optional ``sigma``, ``role``
 Full pose (optional): ``rx,ry,rz`` the measured target frame's orientation in the device frame (rotation vector,
 rad; x, y, z is then the frame's origin) and ``sigma_r`` its standard uncertainty per axis (rad); rows without an
 orientation leave the four empty.
+The device: ``# sensor: fixed | flange`` (``flange``: an eye-in-hand camera, the rows are the fixed board's pose in
+its frame; identify/sensors/flange.py) and ``# scale_sigma: U | unknown`` (the relative standard uncertainty of the
+device's length scale; identify/sensors/scale.py).
 Continuous motion: ``# streamed: 3, 4`` lists the sweeps recorded while the robot moved (their joint values
 interpolated from the joint stream at robot time ``t + clock_offset``), ``# clock_offset: 0.0123`` (s).
 """
@@ -26,6 +29,7 @@ import yaml
 
 from common.errors import InputError
 from identify.estimator.measurements import Measurements, looks_like_millimetres
+from identify.sensors.metadata import format_scale_sigma, parse_scale_sigma, parse_sensor
 from kinematics.dh import check_joint_types
 from kinematics.joint_errors import Coupling
 
@@ -172,9 +176,11 @@ def parse_measurements(lines: Iterable[str], joints: str | None = None, units: s
                          "(the CSV contract uses metres)")
     coupling = parse_coupling(metadata["coupling"], n) if "coupling" in metadata else None
     streamed, offset = _streams(metadata, sweep, t)
+    sensor = parse_sensor(metadata["sensor"]) if "sensor" in metadata else "fixed"
+    scale = parse_scale_sigma(metadata["scale_sigma"]) if "scale_sigma" in metadata else None
     meas = Measurements(types, q, points, sweep, joint, sigma, check, line_numbers, has_role="role" in columns,
                         tp=tp, coupling=coupling, t=t, streamed=streamed, clock_offset=offset, rotvec=rotvec,
-                        sigma_r=sigma_r)
+                        sigma_r=sigma_r, sensor=sensor, scale_sigma=scale)
     return CsvContent(meas, metadata, notes)
 
 
@@ -362,8 +368,12 @@ def format_measurements(meas: Measurements, metadata: dict[str, str] | None = No
     if meas.has_streams:
         out.write(f"# streamed: {', '.join(str(s) for s in np.unique(meas.sweep[meas.streamed]))}\n")
         out.write(f"# clock_offset: {meas.clock_offset!r}\n")
+    if meas.sensor != "fixed":
+        out.write(f"# sensor: {meas.sensor}\n")
+    if meas.scale_sigma is not None:
+        out.write(f"# scale_sigma: {format_scale_sigma(meas.scale_sigma)}\n")
     for key, value in (metadata or {}).items():
-        if key not in ("coupling", "streamed", "clock_offset"):
+        if key not in ("coupling", "streamed", "clock_offset", "sensor", "scale_sigma"):
             out.write(f"# {key}: {value}\n")
     n = meas.n_joints
     header = ["sweep", "joint", *(f"q{j}" for j in range(1, n + 1)), "x", "y", "z"]

@@ -33,6 +33,7 @@ from common.outputs import OutputError, same_file, write_output
 from identify.estimator.measurements import Measurements
 from identify.estimator.timing import SweepStreams, coarse_clock_offset, interpolate_joints
 from identify.io.csvio import CsvContent, format_measurements
+from identify.sensors.metadata import UNKNOWN
 from kinematics.joint_errors import Coupling
 from session.records import FrameRecord, PointRecord
 from session.rows import points_seen
@@ -110,6 +111,7 @@ def export_csv(session: SessionFile, path: str | Path, force: bool = False) -> i
 def _step_measurements(session: SessionFile) -> Measurements:
     rows, points = session.measured_rows()
     meas = measurements_from(rows, points, session.plan.joint_types, session.coupling, session.measured_frames())
+    meas = replace(meas, **sensor_of(session.header))
     spread = session.spread_sigmas()
     if not spread:
         return meas
@@ -120,6 +122,17 @@ def _step_measurements(session: SessionFile) -> Measurements:
                           np.array([kept.get(k, 0) for k, _ in seen], dtype=float),
                           np.array([k in spread for k, _ in seen], dtype=bool))
     return replace(meas, sigma=None if np.any(np.isnan(sigma)) else sigma)
+
+
+def sensor_of(header: dict[str, Any]) -> dict[str, Any]:
+    """The device's ``sensor`` and ``scale_sigma`` as the session's tracker identity records them (a camera's
+    ``mount`` and ``scale_sigma`` details: drivers/camera/tracker.py): a flange camera's scale is unknown unless its
+    board was measured; a fixed device's own unless measured."""
+    details = (header.get("tracker") or {}).get("details") or {}
+    sensor = "flange" if details.get("mount") == "flange" else "fixed"
+    given = str(details.get("scale_sigma") or "")
+    scale = float(given) if given else (UNKNOWN if sensor == "flange" else None)
+    return {"sensor": sensor, "scale_sigma": scale}
 
 
 def pooled_spread(sigma: np.ndarray, samples: np.ndarray, estimated: np.ndarray) -> np.ndarray:

@@ -35,6 +35,7 @@ from identify.estimator.extensions import UNITS
 from identify.estimator.measurements import Measurements
 from identify.report.figures import figure_frames, figure_joint
 from identify.report.figures import focus_on_inliers as _focus_on_inliers
+from identify.report.full_pose import full_pose_section
 from identify.report.headline import accuracy_summary, headline_html
 from identify.report.terminal import format_clock
 from identify.results.pipeline import Identification
@@ -71,7 +72,7 @@ def png_data_uri(fig: Figure) -> str:
     """``data:image/png;base64,...`` of ``fig`` at :data:`DPI`, drawn once: the figure's layout engine (constrained
     layout, given here to a figure that has none) keeps every label inside the canvas as it draws, and the canvas
     is encoded as drawn. (``savefig`` draws twice with a layout engine or ``bbox_inches="tight"``: a pass to lay out
-    or measure, then the real one, which cost the report a third more CPU time: docs/benchmarks.md, section 24.)"""
+    or measure, then the real one, which cost the report a third more CPU time: docs/benchmarks.md, section 25.)"""
     if fig.get_layout_engine() is None:
         fig.set_layout_engine("constrained")
     fig.set_dpi(DPI)
@@ -389,6 +390,7 @@ def report_html(
     mounting surface and the plan's swept envelope for the 3D view (see :func:`figure_frames`).
     """
     fit = meas.subset(_fit_rows(meas))
+    full = ident
     ident = positions_view(ident, len(fit))
     if len(fit) != len(ident.refinement.residuals):
         raise ValueError(f"meas has {len(fit)} fitted rows, the identification {len(ident.refinement.residuals)}: "
@@ -447,7 +449,7 @@ def report_html(
                 + _table(["sweep", "joint", "samples", "rejected", "RMS [mm]"], rows)
                 + ("" if ident.orientation is None else f"<p>{_e(orientation_line(ident.orientation))}</p>")
                 + _figure_html(figure_sweeps(ident, fit), "Residual norm of every fitted sample, per sweep")
-                + "</section>")
+                + "</section>" + full_pose_section(full, fit, _e, _table, _figure_html))
     if session is not None:
         text, fig = _acquisition_section(session)
         body.append('<section id="acquisition"><h2>Acquisition record</h2>' + text
