@@ -120,3 +120,19 @@ def lock_for_writing(path: Path, shown: Path) -> int:
         raise SessionBusy(busy_message(shown, exc.holder)) from None
     except OSError as exc:
         raise SessionError(f"{shown}: cannot be opened for writing ({exc.strerror or exc})") from None
+
+
+def remove_dead_creations(path: Path) -> None:
+    """Remove the hidden files (``.NAME.creating-PID``) that a process killed while creating session ``path`` left
+    behind: never committed, so never a session; a live process's file is left alone."""
+    for stale in path.parent.glob(f".{path.name}.creating-*"):
+        pid = stale.name.rsplit("-", 1)[-1]
+        if not pid.isdigit():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            with contextlib.suppress(OSError):
+                stale.unlink()
+        except PermissionError:  # another user's live process
+            pass

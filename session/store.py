@@ -44,7 +44,7 @@ from common import __version__, stop_signals
 from common.outputs import OutputError, check_target, commit_file
 from drivers.base import DeviceIdentity
 from kinematics.joint_errors import Coupling
-from session.lock import lock_for_writing
+from session.lock import lock_for_writing, remove_dead_creations
 from session.lock import unlock as _unlock
 from session.plan import Plan
 from session.records import FrameRecord, PointRecord, StepRecord
@@ -140,6 +140,7 @@ class SessionFile:
         temp = path.with_name(f".{path.name}.creating-{os.getpid()}")
         lock_fd = None
         try:
+            remove_dead_creations(path)
             temp.unlink(missing_ok=True)
             conn = sqlite3.connect(temp, isolation_level=None)
             try:
@@ -495,3 +496,4 @@ class SessionFile:
             db.execute("COMMIT")
         except sqlite3.Error as exc:
             raise SessionError(f"{self.path}: cannot {what} ({exc})") from None
+
