@@ -48,7 +48,9 @@ class TrackerReading:
     (1..N) of the tracked point it sees (several reflectors or markers on the flange; 1 when there is one).
     Full-pose devices (6-DoF probes, camera targets) also give the target frame's orientation in the tracker frame,
     ``rotvec`` (3,) a rotation vector (rad; ``position`` is then the frame's origin), with its per-axis standard
-    uncertainty ``sigma_r`` (rad) when they report one."""
+    uncertainty ``sigma_r`` (rad) when they report one. ``shared`` (m) and ``shared_r`` (rad): the parts of
+    ``sigma`` and ``sigma_r`` (per axis, in quadrature) that every reading of the same still view shares (a
+    camera's detection bias for that view), which averaging readings does not reduce; None: readings independent."""
 
     position: Array
     timestamp: float
@@ -57,6 +59,8 @@ class TrackerReading:
     tp: int = 1
     rotvec: Array | None = None
     sigma_r: float | None = None
+    shared: float | None = None
+    shared_r: float | None = None
 
 
 @runtime_checkable

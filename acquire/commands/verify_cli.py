@@ -118,6 +118,7 @@ def format_iso_extras(outcome: Outcome) -> list[str]:
     turns = orientation_rows(runs)
     if turns:
         lines += fit_width.table(["orientation [mrad]", "before", "after"], turns)
+        lines += fit_width.wrap(f"orientation from {outcome.orientation_source}")
     elif outcome.orientation:
         lines += fit_width.wrap(f"orientation not measured: {outcome.orientation}")
     if outcome.runs:

@@ -84,8 +84,18 @@ def average_readings(readings: list[TrackerReading]) -> tuple[Array, float | Non
     # the device's own figure is steadier than the spread of a handful of readings; use the spread only
     # when the device gives none
     if device:
-        return mean, float(np.median(device)) / np.sqrt(int(used.sum())), used
+        shared = [r.shared for r in readings if r.shared is not None]
+        return mean, mean_sigma(float(np.median(device)), float(np.median(shared)) if shared else 0.0,
+                                int(used.sum())), used
     return mean, (spread_sigma if used.sum() >= 3 else None), used
+
+
+def mean_sigma(sigma: float, shared: float, n: int) -> float:
+    """Per-axis standard uncertainty of the mean of ``n`` readings of one still view, each of ``sigma`` of which
+    ``shared`` (in quadrature) is common to all of them (TrackerReading.shared): only the rest averages down."""
+    if shared == 0.0:
+        return sigma / np.sqrt(n)  # independent readings: exactly as before
+    return float(np.sqrt(max(sigma**2 - shared**2, 0.0) / n + shared**2))
 
 
 def average_points(readings: list[TrackerReading]) -> tuple[list[PointRecord], list[bool]]:
@@ -104,8 +114,8 @@ def average_points(readings: list[TrackerReading]) -> tuple[list[PointRecord], l
 
 def average_frames(readings: list[TrackerReading], used: list[bool]) -> tuple[FrameRecord, ...]:
     """Each tracked point's averaged target-frame orientation over its kept readings that carry one (full-pose
-    devices; empty otherwise): the chordal mean, with the device's sigma_r over sqrt(kept) when it states one, else
-    the readings' spread (None for fewer than 3)."""
+    devices; empty otherwise): the chordal mean, with the device's sigma_r over sqrt(kept) when it states one (its
+    shared part not divided: :func:`mean_sigma`), else the readings' spread (None for fewer than 3)."""
     out = []
     for tp in sorted({r.tp for r in readings if r.rotvec is not None}):
         mine = [r for r, keep in zip(readings, used, strict=True) if keep and r.tp == tp and r.rotvec is not None]
@@ -113,7 +123,9 @@ def average_frames(readings: list[TrackerReading], used: list[bool]) -> tuple[Fr
             continue
         mean, spread = mean_orientation(np.array([r.rotvec for r in mine], dtype=float))
         device = [r.sigma_r for r in mine if r.sigma_r is not None]
-        sigma_r = float(np.median(device)) / np.sqrt(len(mine)) if device else spread
+        shared = [r.shared_r for r in mine if r.shared_r is not None]
+        sigma_r = (mean_sigma(float(np.median(device)), float(np.median(shared)) if shared else 0.0, len(mine))
+                   if device else spread)
         out.append(FrameRecord(tp, tuple(float(v) for v in mean), sigma_r))
     return tuple(out)
 

@@ -44,7 +44,7 @@ from scipy.spatial.transform import Rotation
 from acquire.planning.plan import _per_joint, check_plan, plan_clearance
 from config.robots import RobotModel
 from config.site import SiteConfig
-from identify.applications.calibrated import CalibratedModel
+from identify.applications.calibrated import CalibratedModel, ResultError, used_section
 from identify.applications.compensate import solve_ik
 from identify.applications.domain import result_outside
 from identify.applications.iso9283 import cube_poses, visit_order
@@ -286,6 +286,18 @@ def header(d: Design, labels: list[list[Any]], identified: CalibratedModel, resu
             "noise": identified.noise, "steps": labels, "notes": list(d.notes),
             "approach": {m: d.approach[m].tolist() for m in MODES}, "approach_share": APPROACH_SHARE,
             "tool": identified.tool().tolist(),
-            "tools": {str(k): np.asarray(v).tolist() for k, v in (identified.tools or {}).items()}}
+            "tools": {str(k): np.asarray(v).tolist() for k, v in (identified.tools or {}).items()},
+            "tool_frame": tool_frame(doc)}
+
+
+def tool_frame(doc: dict[str, Any]) -> list[list[float]] | None:
+    """The rotation (3x3, last DH frame <- target frame) of the full-pose target the result measured (its
+    recommended model's ``tool_frame``), or None when the calibration measured positions only."""
+    try:
+        frame = used_section(doc).get("tool_frame")
+    except ResultError:
+        frame = None
+    frame = frame if frame is not None else doc.get("tool_frame")
+    return None if frame is None else np.asarray(frame, dtype=float)[:3, :3].tolist()
 
 

@@ -9,9 +9,13 @@ Per mode (before / after) and pose:
   approached from the first direction (+x), as the standard's one-directional test;
 - vAP (7.2) from the barycentres of the visits from the three directions (sessions planned before the test had
   approach directions have one, and no vAP);
-- orientation AP and RP (a, b, c about the base's x, y, z) where the result knows three or more tracked points on the
-  tool and the tracker saw them: each visit's attained orientation is the rigid fit of the points the commanded
-  pose (the target's position and the flange orientation the test commands) puts them at to the measured ones.
+- orientation AP and RP (7.2.1, 7.2.2; a, b, c about the base's x, y, z) from full-pose readings when the calibration
+  measured the target frame (the result's ``tool_frame``) and the tracker reads it (a 6-DoF probe, a camera's
+  board): each visit's attained orientation is the measured frame taken into the base frame, the commanded one the
+  flange orientation the test commands times ``tool_frame``. Otherwise from three or more tracked points on the tool
+  that the result knows and the tracker saw: each visit's attained orientation is the rigid fit of the points the
+  commanded pose (the target's position and the flange orientation the test commands) puts them at to the measured
+  ones. Either way the deviation is R_attained R_commandedᵀ as rotations about the base's fixed x, y, z axes.
 
 Uncertainty of every figure: Monte-Carlo (:func:`identify.applications.iso9283.monte_carlo`, 400 synthetic repeats of
 the cycles, each visit redrawn with the spread of its pose's visits pooled with the run's other poses and the tracker's
@@ -31,11 +35,14 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from acquire.verification.verify import AFTER_ALARM, DISTANCE_POSES, MODES, REGISTER
 from identify.applications.holds import MIN_POSES, ModelCheck, check_models, tabulated
 from identify.applications.iso9283 import (
+    FROM_FRAMES,
+    FROM_POINTS,
     Accuracy,
     Distance,
     Drift,
@@ -60,7 +67,8 @@ class Outcome:
     """The measured figures per mode (``runs``; a mode with no complete pose is absent), the verdict
     (pass | warn | fail | incomplete) and the line that says why, with numbers; ``registration``: the check that
     registered the tracker (None for a session planned without registration poses); ``duration``: s from the first
-    measurement to the last; ``orientation``: why orientation was not measured (None: it was)."""
+    measurement to the last; ``orientation``: why orientation was not measured (None: it was);
+    ``orientation_source``: what it was measured from (:data:`FROM_FRAMES` or :data:`FROM_POINTS`), else None."""
 
     runs: dict[str, Accuracy]
     status: str
@@ -69,6 +77,7 @@ class Outcome:
     registration: ModelCheck | None = None
     duration: float = 0.0
     orientation: str | None = None
+    orientation_source: str | None = None
 
     @property
     def drift_note(self) -> str:
@@ -90,7 +99,8 @@ class Outcome:
                 "edge": info["edge"], "centre": info["centre"],
                 "before_model": info.get("before_model", "nominal model"), "duration_s": self.duration,
                 "drift_note": self.drift_note, "uncertainty": UNCERTAINTY,
-                "orientation": {"measured": self.orientation is None, "reason": self.orientation},
+                "orientation": {"measured": self.orientation is None, "reason": self.orientation,
+                                "source": self.orientation_source},
                 "domain": info.get("domain")}
 
 
@@ -130,13 +140,15 @@ class _Visits:
 
 
 def _orientation_setup(info: dict[str, Any]) -> tuple[dict[int, Array] | None, str | None]:
-    """The tools (tp -> flange frame vector, m) when orientation can be measured, else None and why."""
+    """The tools (tp -> flange frame vector, m; empty when only the target frame can give it) when orientation can
+    be measured, else None and why."""
     tools = {int(k): np.array(v, dtype=float) for k, v in (info.get("tools") or {}).items()}
     if info.get("rotation") is None:
         return None, "the arm has fewer than six joints: the test commands no orientation"
-    if len(tools) < MIN_POINTS:
-        return None, (f"the result knows {_points(max(len(tools), 1))} on the tool; orientation needs "
-                      f"{MIN_POINTS} or more (calibrate with several reflectors)")
+    if len(tools) < MIN_POINTS and info.get("tool_frame") is None:
+        return None, (f"the result knows {_points(max(len(tools), 1))} on the tool and no target frame; orientation "
+                      f"needs a full-pose target (6-DoF probe, camera board) or {MIN_POINTS} or more points "
+                      "(calibrate with one of them)")
     return tools, None
 
 
@@ -144,14 +156,16 @@ def _points(n: int) -> str:
     return f"{n} tracked point{'s' if n != 1 else ''}"
 
 
-def _collect(info: dict[str, Any], records: list[Any], to_base: Any, tools: dict[int, Array] | None
-             ) -> tuple[dict[str, _Visits], int]:
-    """Every mode's visits in the base frame; the most tracked points seen at a visit."""
+def _collect(info: dict[str, Any], records: list[Any], to_base: Any, turn_to_base: Any,
+             tools: dict[int, Array] | None) -> tuple[dict[str, _Visits], int, int]:
+    """Every mode's visits in the base frame; the most tracked points seen at a visit; the visits whose orientation
+    came from a full-pose reading (``turn_to_base``: tracker-frame rotation (3, 3) -> base frame)."""
     targets = np.array(info["targets"], dtype=float)
     rotation = None if info.get("rotation") is None else np.array(info["rotation"], dtype=float)
     tool = np.array(info.get("tool") or [0.0, 0.0, 0.0], dtype=float)
+    frame = None if info.get("tool_frame") is None else np.array(info["tool_frame"], dtype=float)
     visits = {m: _Visits({}, {}, {}, {}, []) for m in MODES}
-    most = 0
+    most = full = 0
     for record in records:
         label = info["steps"][record.plan_index]
         if record.status != "ok" or label[0] not in MODES:
@@ -165,8 +179,18 @@ def _collect(info: dict[str, Any], records: list[Any], to_base: Any, tools: dict
             v.sigmas.setdefault(key, []).append(record.sigma)
         seen = record.positions()
         most = max(most, len(seen))
-        common = sorted(set(seen) & set(tools or {}))
-        if key[1] != 1 or tools is None or rotation is None or len(common) < MIN_POINTS:
+        if key[1] != 1 or tools is None or rotation is None:
+            continue
+        reading = _frame_reading(record, frame)
+        if reading is not None:  # the target frame measured: its own orientation, no rigid fit needed
+            attained = turn_to_base(Rotation.from_rotvec(reading.rotvec).as_matrix())
+            v.angles.setdefault(pose, []).append(Rotation.from_matrix(attained @ (rotation @ frame).T).as_euler("xyz"))
+            if reading.sigma_r is not None:
+                v.angle_noise.append(reading.sigma_r)
+            full += 1
+            continue
+        common = sorted(set(seen) & set(tools))
+        if len(common) < MIN_POINTS:
             continue
         flange = targets[pose - 1] - rotation @ tool
         commanded = np.array([flange + rotation @ tools[t] for t in common])
@@ -177,7 +201,16 @@ def _collect(info: dict[str, Any], records: list[Any], to_base: Any, tools: dict
             r = commanded - commanded.mean(axis=0)
             moment = np.sum(r**2) * np.eye(3) - r.T @ r
             v.angle_noise.append(float(np.mean(sig)) / math.sqrt(float(np.linalg.eigvalsh(moment)[-1])))
-    return visits, most
+    return visits, most, full
+
+
+def _frame_reading(record: Any, frame: Array | None) -> Any:
+    """The record's averaged orientation of the tracked point whose position it gives (the first seen: the one the
+    result's ``tool`` and ``tool_frame`` describe), or None (no full-pose reading, or no ``frame`` to compare)."""
+    if frame is None or not record.frames:
+        return None
+    first = record.points[0].tp if record.points else 1
+    return next((f for f in record.frames if f.tp == first), None)
 
 
 def _run(mode: str, targets: Array, positions: dict[Any, Array], v: _Visits, angles: dict[Any, Array]) -> Accuracy:
@@ -231,11 +264,22 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
     def to_base(x: Array) -> Array:
         return inv_r @ ((x if registration is None else registration.to_calibration(x)) - shift)
 
+    def turn_to_base(r: Array) -> Array:
+        return inv_r @ (r if registration is None else registration.rotation.T @ r)
+
     tools, why = _orientation_setup(info)
     targets = np.array(info["targets"], dtype=float)
-    visits, most = _collect(info, records, to_base, tools)
-    if why is None and most < MIN_POINTS:
+    visits, most, full = _collect(info, records, to_base, turn_to_base, tools)
+    source = None
+    if why is None and full:
+        source = FROM_FRAMES
+    elif why is None and most >= MIN_POINTS and len(tools or {}) >= MIN_POINTS:
+        source = FROM_POINTS
+    elif why is None:
         why = f"the tracker saw {_points(max(most, 1))} per visit; orientation needs {MIN_POINTS} or more"
+        if info.get("tool_frame") is not None:
+            why = (f"the tracker read no orientation of the target frame and saw {_points(max(most, 1))} per visit; "
+                   f"orientation needs a full-pose reading or {MIN_POINTS} or more points")
     reg_var, reg_rot = np.zeros(5), np.zeros((3, 3))
     if check is not None:
         fitted = np.array(info["register"]["predicted"], dtype=float)
@@ -256,7 +300,7 @@ def analyse(info: dict[str, Any], records: list[Any]) -> Outcome:
             f"by {check.heldout.rms * 1e3:.3f} mm RMS (held out), {check.ratio:.1f}x the {check.expected * 1e3:.3f} "
             "mm it predicts: another arm or another tool than the calibration's, or an error its model does not "
             "hold (play in the joints, a warm arm); do not use this model here")
-    return Outcome(runs, status, message, missing, check, duration, why)
+    return Outcome(runs, status, message, missing, check, duration, why, source)
 
 
 def _with_registration(u: dict[str, float], var: Array, rot: Array) -> dict[str, float]:

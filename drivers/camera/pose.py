@@ -16,7 +16,7 @@ rotation vector and translation, from ``cv2.projectPoints``; s: the corner noise
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -29,6 +29,8 @@ Array = NDArray[np.float64]
 AMBIGUITY_RATIO = 1.5  # second-best RMS below this multiple of the best: the frame is ambiguous ...
 AMBIGUITY_FLOOR_PX = 0.05  # ... or both RMS within this many pixels of each other
 SIGMA_PX_FLOOR = 0.01  # pixels: corner noise assumed at least this (clean renders reach 0.005-0.01 px)
+VIEW_BIAS_PX = 0.0  # pixels per corner coordinate: the detection's error fixed for a view, for the TP (not stated yet)
+VIEW_TURN_BIAS_PX = 0.015  # ... for the orientation (bench/camera_honesty.py at a session plan's views)
 _LM = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-12)
 
 
@@ -86,6 +88,16 @@ class Pose:
         else:
             left = np.eye(3) + (1 - np.cos(angle)) / angle**2 * k + (angle - np.sin(angle)) / angle**3 * (k @ k)
         return left @ self.pose_covariance(sigma_px)[:3, :3] @ left.T
+
+    def view_bias(self, tp: Array, bias_px: float, turn_px: float | None = None) -> tuple[float, float]:
+        """Per-axis RMS (m, rad) of the TP's and the orientation's error that a corner error of ``bias_px``
+        (``turn_px`` for the orientation; default the same) pixels per coordinate, independent from corner to corner
+        but fixed for this view, gives: the pose's sensitivity to its corners (``bias_px² N⁻¹``) whatever the
+        detection's noise covariance."""
+        plain = replace(self, image_covariance=None)
+        turn = bias_px if turn_px is None else turn_px
+        return (math.sqrt(float(np.trace(plain.point_covariance(tp, bias_px))) / 3),
+                math.sqrt(float(np.trace(plain.orientation_covariance(turn))) / 3))
 
     def point_covariance(self, tp: Array, sigma_px: float) -> Array:
         """Covariance (3, 3) m² of :meth:`point`: from :attr:`image_covariance` when there is one (the

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from drivers.base import TrackerStreamBatch
-from drivers.camera.pose import CornerNoise
+from drivers.camera.pose import VIEW_BIAS_PX, CornerNoise
 from drivers.camera.sources import Frame, FrameQueue
 from drivers.errors import ConnectionFailed, MeasurementError, TargetLost
 from drivers.stream_buffer import BufferedStreaming
@@ -149,6 +149,8 @@ class FrameStreaming(BufferedStreaming):
         tp = self.settings.tp
         self._noise.add(pose)
         sigma = math.sqrt(max(float(np.trace(self._noise.covariance(pose, tp))), 0.0) / 3)
+        if VIEW_BIAS_PX > 0:  # the view's own error, as a polled reading states it
+            sigma = math.hypot(sigma, pose.view_bias(tp, VIEW_BIAS_PX)[0])
         if state.first_bad is not None:
             self._add_gap(state.last_good if state.last_good is not None else state.first_bad, frame.stamp)
         state.good(frame.stamp)

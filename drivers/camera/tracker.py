@@ -62,7 +62,17 @@ pose covariance propagated to the TP, divided by the frames kept. With ``refine=
 covariance comes from the edge-line fits (drivers/camera/refinement.py: corners of one side are correlated),
 scaled up when the reprojection residuals are larger than it predicts; otherwise the corners are taken as
 independent with the noise of the pooled reprojection residuals (never below ``drivers.camera.pose.SIGMA_PX_FLOOR``). If
-the frames scatter significantly more than C says (F-test), their spread is used instead. A camera's
+the frames scatter significantly more than C says (F-test), their spread is used instead. Beyond that noise, the
+detection errs by a fixed amount for each view of the target (the corners' localisation bias at that angle and
+scale: the same in every frame and every reading of a still view, so averaging does not reduce it). Each reading
+states it as ``shared`` (m) and ``shared_r`` (rad): the pose's sensitivity to a corner error of
+``drivers.camera.pose.VIEW_BIAS_PX`` (``VIEW_TURN_BIAS_PX`` for the orientation) pixels per coordinate, independent
+from corner to corner, and adds it in quadrature to sigma and sigma_r; the orchestrator divides only the rest by the
+number of readings of a step. Measured on rendered images at a calibration plan's views (``bench/camera_honesty.py``,
+docs/benchmarks.md section 23): without it a step's orientation errors were 2.7x, its positions' 2.4x their stated
+sigmas; VIEW_TURN_BIAS_PX = 0.015 px brings the orientations to 1.1-1.2x; VIEW_BIAS_PX stays 0 (a value that made
+the plan's positions honest over-stated milder views), so a camera's positions are still under-stated there. A
+camera's
 error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
 the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights
 (1 / sigma² per sample): the sum of squared weighted residuals has the expectation it would have for
@@ -91,6 +101,7 @@ from scipy.stats import f as f_dist
 
 from drivers.averaging import mean_orientation
 from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
+from drivers.camera import pose as pose_math
 from drivers.camera.flange_camera import MOUNTS
 from drivers.camera.flange_camera import scale_sigma as flange_scale_sigma
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
@@ -398,8 +409,13 @@ class ArucoTracker(FrameStreaming):
         model_r = math.sqrt(float(np.mean([np.trace(noise.orientation_covariance(p)) for (p, _), k
                                            in zip(poses, kept, strict=True) if k])) / 3)
         sigma_r = _frame_sigma(model_r, turns, dof) / math.sqrt(n)
-        return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=sigma, status=status, rotvec=rotvec,
-                              sigma_r=sigma_r)
+        # the detection's bias for this view: the same in every frame and every reading of it (not averaged)
+        bias = np.array([p.view_bias(tp, pose_math.VIEW_BIAS_PX, pose_math.VIEW_TURN_BIAS_PX)
+                         for (p, _), k in zip(poses, kept, strict=True) if k])
+        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0))
+        return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=math.hypot(sigma, shared), status=status,
+                              rotvec=rotvec, sigma_r=math.hypot(sigma_r, shared_r), shared=float(shared),
+                              shared_r=float(shared_r))
 
 
 def _frame_sigma(model: float, pts: Array, dof: int) -> float:

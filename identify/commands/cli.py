@@ -63,6 +63,8 @@ def _write_exports(args: argparse.Namespace, ident: Identification, meas: Measur
         return "\n".join([f"identified from {args.input} by dh-calib {__version__}", carries, *export_notes(ident)])
 
     exact = export_figure(ident, meas, "exact")
+    if ident.lines.orientations is not None:  # full-pose data: the tool link is the measured target frame
+        exact += "; tool: the measured target frame (tool_frame)"
     plain = export_figure(ident, meas, "plain")
     if args.urdf or args.ur_calibration:
         flange = frames_from_joints(ident.model, ident.lines.home[None, :])[0, -1]

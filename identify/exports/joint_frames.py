@@ -6,7 +6,8 @@ home_i``, after every joint beyond it has moved (``identify.estimator.poe.points
 ``F_i`` at home (tracker frame) whose z axis is its line; then the chain
 ``base · O_1 · J_1(q_1) · O_2 · J_2(q_2) · … · O_n · J_n(q_n)`` with ``J_i`` = ``Rz(q_i)`` (revolute) or
 ``Tz(q_i)`` (prismatic) and the fixed origins ``O_i = F_{i-1}⁻¹ · F_i · J_i(-home_i)`` (``F_0 = base``) is that
-model exactly, with its zero at reading 0; a tracked point sits at ``F_n⁻¹ · tp`` in the last link's frame.
+model exactly, with its zero at reading 0; a tracked point sits at ``F_n⁻¹ · tp`` in the last link's frame, and a
+measured target frame (full-pose data: ``lines.orientations``, its rotation at home) at ``F_n⁻¹ · R_home``.
 
 Frames are placed so that no origin is far from the arm, whatever the axes' geometry (no common normal is ever
 taken, so nearly parallel axes give no huge offsets): ``F_i``'s origin is the foot of the perpendicular from
@@ -36,11 +37,23 @@ PARALLEL = 1e-6  # a previous x closer than this (sine) to the new axis is repla
 @dataclass(frozen=True)
 class JointFrames:
     """``origins`` (n, 4, 4): each joint's fixed origin in its parent's frame (the first in ``base``);
-    ``tps`` (k, 3): the tracked points in the last link's frame, m; ``base`` (4, 4): tracker <- root frame."""
+    ``tps`` (k, 3): the tracked points in the last link's frame, m; ``base`` (4, 4): tracker <- root frame;
+    ``tp_rotations`` (k, 3, 3): each tracked point's target frame in the last link's frame (NaN where its
+    orientation was not measured), None for positions-only lines."""
 
     origins: Array
     tps: Array
     base: Array
+    tp_rotations: Array | None = None
+
+    def tool_frame(self, k: int = 0) -> Array:
+        """Tracked point ``k``'s frame in the last link's frame (4, 4), m: the measured target frame where
+        ``tp_rotations`` has it, else the last link's axes at the point."""
+        out = np.eye(4)
+        out[:3, 3] = self.tps[k]
+        if self.tp_rotations is not None and np.all(np.isfinite(self.tp_rotations[k])):
+            out[:3, :3] = self.tp_rotations[k]
+        return out
 
     def chain(self, joint_types: str, q: Array) -> Array:
         """The last link's frame (m, 4, 4) in the tracker frame at joint values ``q`` (m, n)."""
@@ -82,7 +95,8 @@ def joint_frames(lines: AxisLines, base: Array | None = None, flange: Array | No
         origins[i] = _inverse(frames[i]) @ frames[i + 1] @ back
     last = _inverse(frames[-1])
     tps = lines.tps @ last[:3, :3].T + last[:3, 3]
-    return JointFrames(origins, tps, base)
+    turns = None if lines.orientations is None else last[:3, :3] @ lines.orientations
+    return JointFrames(origins, tps, base, turns)
 
 
 def _inverse(transform: Array) -> Array:

@@ -12,7 +12,11 @@ exactly the numbers of the stock files (e.g. ``forearm: x = a_2``), and ``wrist_
 requires ``a_6 = alpha_6 = 0`` (the UR convention, which the identification keeps for the last link).
 
 Frames: the identified model's DH frame 0 stands for the robot's base frame; the base transform
-(tracker <- frame 0) and the tool are not part of this file.
+(tracker <- frame 0) is not part of this file. The tool is not either, except where the calibration measured the
+target frame (full-pose data: a 6-DoF probe, a camera's board; the result's ``tool_frame``): the document then has a
+``tcp`` key beside ``kinematics`` (which the driver ignores) with the target frame in ``wrist_3_link`` (the frame
+``tool0`` follows), ``{x, y, z, rx, ry, rz}``: m and a rotation vector in rad, the pose the controller's TCP setting
+takes (it shows the position in mm).
 
 :func:`calibration_from_lines` writes an axis-lines model instead: each joint's origin is then a full frame on its
 exact axis (``identify/exports/joint_frames.py``), with no DH singularity for nearly parallel axes.
@@ -31,6 +35,7 @@ from typing import Any
 import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
 
 from identify.estimator.poe import AxisLines
 from identify.exports.joint_frames import joint_frames
@@ -85,13 +90,36 @@ def calibration_from_lines(lines: AxisLines, base: ArrayLike, flange: ArrayLike 
     ``base`` (4, 4): tracker <- the robot's base frame (``base_link_inertia``; e.g. the identified DH model's
     ``base``); ``flange`` (4, 4): tracker <- flange frame at the home readings, which ``wrist_3_link`` then follows
     (default: the frames' own rule, an x axis carried along from the base). The tracked points are not part of the
-    file: ``joint_frames(...).tps`` gives them in ``wrist_3_link``. Raises ValueError unless the lines are 6R.
+    file: ``joint_frames(...).tps`` gives them in ``wrist_3_link``; with full-pose data (``lines.orientations`` of
+    the first tracked point measured) the document's ``tcp`` is that point's target frame in ``wrist_3_link``
+    (module docstring). Raises ValueError unless the lines are 6R.
     """
     if lines.joint_types != "RRRRRR":
         raise ValueError(f"the UR calibration file describes six revolute joints; the model has {lines.joint_types}")
     frames = joint_frames(lines, np.asarray(base, dtype=float), None if flange is None else np.asarray(flange,
                                                                                                           dtype=float))
-    return _document(frames.origins, hash_value)
+    doc = _document(frames.origins, hash_value)
+    if frames.tp_rotations is not None and np.all(np.isfinite(frames.tp_rotations[0])):
+        doc["tcp"] = tcp_entry(frames.tool_frame(0))
+    return doc
+
+
+def tcp_entry(pose: ArrayLike) -> dict[str, float]:
+    """``{x, y, z, rx, ry, rz}`` of a tool pose (4, 4) in ``wrist_3_link``: m, and its rotation vector in rad."""
+    pose = np.asarray(pose, dtype=float)
+    values = [*pose[:3, 3], *Rotation.from_matrix(pose[:3, :3]).as_rotvec()]
+    return {key: float(v) + 0.0 for key, v in zip(("x", "y", "z", "rx", "ry", "rz"), values, strict=True)}
+
+
+def tcp_from_calibration(doc: dict[str, Any]) -> Array | None:
+    """The ``tcp`` pose (4, 4) of a calibration document, or None when it has none."""
+    tcp = doc.get("tcp") if isinstance(doc, dict) else None
+    if not isinstance(tcp, dict):
+        return None
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.from_rotvec([float(tcp[k]) for k in ("rx", "ry", "rz")]).as_matrix()
+    pose[:3, 3] = [float(tcp[k]) for k in ("x", "y", "z")]
+    return pose
 
 
 def _document(origins: Array, hash_value: str | None) -> dict[str, Any]:

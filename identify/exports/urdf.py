@@ -13,6 +13,9 @@ Tree (names with an optional ``prefix``)::
       --joint_2 (origin D_1, axis z)--> link_2 ... --joint_n--> link_n
       --fixed (D_n)--> flange (DH frame n) --fixed (tool)--> tp (the tracked point, flange orientation)
 
+With full-pose data (6-DoF probe, camera board: the result's ``tool_frame``) ``tp`` is the measured target frame
+itself, its origin the tracked point and its axes the target's, so a planner's tool link is the full tool frame.
+
 Units: metres, radians. Numbers are written with 17 significant digits, so the URDF reproduces the model to
 floating-point precision.
 """
@@ -94,6 +97,7 @@ def urdf_from_model(
     velocities: ArrayLike | None = None,
     prefix: str = "",
     comment: str | None = None,
+    tool_frame: ArrayLike | None = None,
 ) -> str:
     """The URDF text (a string) of ``model``.
 
@@ -101,11 +105,15 @@ def urdf_from_model(
     ``continuous`` and a prismatic one gets a placeholder stroke of ±PRISMATIC_PLACEHOLDER m (marked in a
     comment). ``velocities`` (n,): rad/s / m/s for the ``<limit>`` elements (0 when not given; URDF requires a
     value). ``prefix`` is put before every link and joint name. ``comment`` is written at the top.
+    ``tool_frame`` (4, 4; a result's ``tool_frame``): the measured target frame in DH frame n, whose axes ``tp``
+    then takes (its origin is ``model.tool``); without it ``tp`` has the flange's axes.
     """
     n = model.n_joints
     parts = fixed_parts(model)
     origins = np.concatenate([np.eye(4)[None], parts[:-1]])
     tool = np.eye(4)
+    if tool_frame is not None:
+        tool[:3, :3] = np.asarray(tool_frame, dtype=float)[:3, :3]
     tool[:3, 3] = model.tool
     tail = [(f"link_{n}_to_flange", f"link_{n}", "flange", parts[-1]), ("flange_to_tp", "flange", "tp", tool)]
     text = comment or "identified DH model (dh-calib); frames and units: see identify/exports/urdf.py"
@@ -129,18 +137,19 @@ def urdf_from_lines(
     ``base`` (4, 4): tracker <- ``base_link`` (e.g. the DH model's ``base``; default: the tracker frame);
     ``flange`` (4, 4): tracker <- flange frame at the home readings, which ``link_n`` then follows. Tracked points
     are fixed links on ``link_n``: ``tp`` (the first) and ``tp_<id>`` for the others (``tp_ids``: the ids of
-    ``lines.tps``' rows, default 1, 2, ...). Other arguments as :func:`urdf_from_model`.
+    ``lines.tps``' rows, default 1, 2, ...), each with its measured target frame's axes where ``lines.orientations``
+    has one (full-pose data), else ``link_n``'s. Other arguments as :func:`urdf_from_model`.
     """
     frames = joint_frames(lines, None if base is None else np.asarray(base, dtype=float),
                           None if flange is None else np.asarray(flange, dtype=float))
     n = len(lines.joint_types)
     ids = list(range(1, len(frames.tps) + 1)) if tp_ids is None else [int(i) for i in tp_ids]
+    if len(ids) != len(frames.tps):
+        raise ValueError(f"{len(ids)} tracked point ids for {len(frames.tps)} tracked points")
     tail = []
-    for k, (point, tp_id) in enumerate(zip(frames.tps, ids, strict=True)):
+    for k, tp_id in enumerate(ids):
         child = "tp" if k == 0 else f"tp_{tp_id}"
-        offset = np.eye(4)
-        offset[:3, 3] = point
-        tail.append((f"link_{n}_to_{child}", f"link_{n}", child, offset))
+        tail.append((f"link_{n}_to_{child}", f"link_{n}", child, frames.tool_frame(k)))
     text = comment or "identified axis lines (dh-calib); frames and units: see identify/exports/joint_frames.py"
     return _chain_urdf(lines.joint_types, frames.base, frames.origins, tail, name, limits, velocities, prefix, text)
 

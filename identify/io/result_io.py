@@ -79,6 +79,11 @@ def result_to_dict(ident: Identification, nominal: DHModel | None = None, nomina
         "base_rotation": _floats(std[0:3]),
         "base_translation": _floats(std[3:6]),
         "tool": _floats(std[6:9]),
+        **({} if ident.plain.frame_std is None else {
+            "tool_frame_rotation": _floats(ident.plain.frame_std),
+            "tool_frame_note": "tool_frame_rotation: standard uncertainty (rad) of tool_frame's rotation, a small "
+                               "turn about the last DH frame's x, y, z axes (tool_frame -> exp(w) tool_frame); its "
+                               "origin's is tool's"}),
     }
     doc["fixed"] = [{"parameter": f.name, "value": f.value, "reason": f.reason}
                     | ({"sigma": f.sigma} if f.sigma else {}) for f in ident.fixed]

@@ -33,6 +33,7 @@ from identify.estimator.extensions import UNITS
 from identify.estimator.measurements import Measurements
 from identify.report.figures import figure_frames, figure_joint
 from identify.report.figures import focus_on_inliers as _focus_on_inliers
+from identify.report.full_pose import full_pose_section
 from identify.report.headline import accuracy_summary, headline_html
 from identify.report.terminal import format_clock
 from identify.results.pipeline import Identification
@@ -379,6 +380,7 @@ def report_html(
     mounting surface and the plan's swept envelope for the 3D view (see :func:`figure_frames`).
     """
     fit = meas.subset(_fit_rows(meas))
+    full = ident
     ident = positions_view(ident, len(fit))
     if len(fit) != len(ident.refinement.residuals):
         raise ValueError(f"meas has {len(fit)} fitted rows, the identification {len(ident.refinement.residuals)}: "
@@ -437,7 +439,7 @@ def report_html(
                 + _table(["sweep", "joint", "samples", "rejected", "RMS [mm]"], rows)
                 + ("" if ident.orientation is None else f"<p>{_e(orientation_line(ident.orientation))}</p>")
                 + _figure_html(figure_sweeps(ident, fit), "Residual norm of every fitted sample, per sweep")
-                + "</section>")
+                + "</section>" + full_pose_section(full, fit, _e, _table, _figure_html))
     if session is not None:
         text, fig = _acquisition_section(session)
         body.append('<section id="acquisition"><h2>Acquisition record</h2>' + text

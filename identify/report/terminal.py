@@ -72,6 +72,11 @@ def format_report(ident: Identification, nominal: DHModel | None = None, nominal
         count, rejected, rms = ident.orientation
         lines.append(f"orientations (full-pose readings): {count} fitted, {rejected} rejected as outliers, residual "
                      f"RMS {rms * 1e3:.4f} mrad (3D); positions {int(ref.inliers.sum()) - count + rejected} samples")
+        held = ident.validations.get(ident.use)
+        if held is not None and held.orientation is not None:
+            t = held.orientation
+            lines.append(f"held-out orientations: {t.samples}, RMS {t.rms * 1e3:.4f} mrad (3D), expected "
+                         f"{t.expected * 1e3:.4f} mrad")
     worst = max(ident.sweeps, key=lambda s: s.rms if np.isfinite(s.rms) else -1.0)
     lines.append("per sweep RMS [mm]: " + ", ".join(
         f"{_sweep_name(s)} " + (f"{s.rms * 1e3:.4f}" if np.isfinite(s.rms) else "none kept") for s in ident.sweeps

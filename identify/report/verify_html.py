@@ -12,6 +12,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from common import __version__
+from identify.applications.iso9283 import FROM_FRAMES
 from identify.report.headline import headline_html
 from identify.report.html import _CSS, _acquisition_section, _e, _figure_html, _table, _when
 from identify.report.verify_rows import iso_rows, orientation_rows, pose_cells
@@ -94,10 +95,14 @@ def _iso_extras(summary: dict[str, Any]) -> str:
     turns = orientation_rows(runs, per_pose=True)
     reason = (summary.get("orientation") or {}).get("reason")
     if turns:
+        attained = ("the measured target frame (6-DoF readings) taken into the base frame, the commanded one the "
+                    "commanded flange orientation times the result's tool_frame"
+                    if (summary.get("orientation") or {}).get("source") == FROM_FRAMES else
+                    "the rigid fit of the points the commanded pose puts the result's tracked points at to the "
+                    "measured ones")
         out += ("<p>Orientation accuracy AP and repeatability RP (7.2.1, 7.2.2): a, b, c are the rotations about the "
                 "base's x, y and z axes that take the commanded orientation to the attained one; each visit's "
-                "attained orientation is the rigid fit of the points the commanded pose puts the result's tracked "
-                "points at to the measured ones. AP = the mean of a (b, c), RP = 3 S.</p>"
+                f"attained orientation is {attained}. AP = the mean of a (b, c), RP = 3 S.</p>"
                 + _table(["figure [mrad]", "before", "after"], turns))
     elif reason:
         out += f"<p>Orientation was not measured: {_e(reason)}.</p>"

@@ -8,7 +8,7 @@ frame.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
@@ -26,12 +26,12 @@ from identify.estimator.measurements import Measurements, in_dh_joints, orientat
 from identify.estimator.orientation import matrices_from_rotvecs
 from identify.estimator.outliers import sweep_neighbours
 from identify.estimator.poe import LineProblem, points_from_lines
-from identify.estimator.refine import Refinement
+from identify.estimator.refine import Refinement, orientation_blocks
 from identify.estimator.starts import starts
 from identify.estimator.sync import retiming
 from identify.results import verdict as checks
 from identify.results.clock_split import ClockSplit, split_clock
-from identify.results.validation import Validation
+from identify.results.validation import TurnValidation, Validation, validate_turns
 from identify.results.validation import validate as validate_model
 from identify.results.written import UNDETERMINED, WrittenModel, robot_size
 from kinematics.dh import DHModel, points_from_joints
@@ -193,10 +193,27 @@ def held_out(models: dict[str, WrittenModel], check_rows: Measurements, tp_ids: 
     the tracked points' ids in the models' order."""
     if not len(check_rows):
         return {}
-    return {name: validate_model(check_rows.q, check_rows.points, check_rows.tp, check_rows.sigma,
-                                 partial(_written_points, m, tp_ids), m.predictor, m.adequacy.noise,
-                                 m.adequacy.model_error)
+    return {name: replace(validate_model(check_rows.q, check_rows.points, check_rows.tp, check_rows.sigma,
+                                         partial(_written_points, m, tp_ids), m.predictor, m.adequacy.noise,
+                                         m.adequacy.model_error), orientation=_held_out_turns(m, check_rows, tp_ids))
             for name, m in models.items()}
+
+
+def _held_out_turns(model: WrittenModel, rows: Measurements, tp_ids: list[int]) -> TurnValidation | None:
+    """The held-out orientations of the first tracked point (the one ``tool_frame`` describes) against the
+    written model (None without any); the bound through the DH table's and the frame turn's covariance."""
+    turned = rows.oriented & (rows.tp == tp_ids[0]) & np.all(np.isfinite(rows.q), axis=1)
+    if model.frames is None or not np.any(turned) or not np.all(np.isfinite(model.frames[0])):
+        return None
+    check = rows.subset(turned)
+    measured = matrices_from_rotvecs(check.rotvec)
+    jacobian = None
+    if model.turn_covariance is not None:
+        q = model.dh_joints(check.q)
+        jacobian = orientation_blocks(model.model, model.refinement.free, q, measured, model.frames[0],
+                                      np.ones(len(q)))
+    return validate_turns(model.dh_rotations(check.q, np.zeros(len(check), dtype=np.int64)), measured,
+                          check.sigma_r, jacobian, model.turn_covariance)
 
 
 def sweep_fits(rows: FitRows, ref: Refinement, warnings: list[str]) -> list[SweepFit]:

@@ -82,6 +82,21 @@ class WrittenModel:
     jacobian_blocks: Array
     frames: Array | None = None  # each tracked point's target frame in frame n (k, 3, 3), NaN where not measured
     held: Hold | None = None  # what the data alone left undetermined, held at the nominal
+    turn_covariance: Array | None = None  # the free DH values, then the first point's target-frame turn (rad, frame n)
+
+    @property
+    def frame_std(self) -> Array | None:
+        """Standard uncertainty (3,) rad of the first tracked point's target frame, a turn about frame n's axes."""
+        if self.turn_covariance is None:
+            return None
+        return np.sqrt(np.clip(np.diag(self.turn_covariance)[-3:], 0.0, None))
+
+    def dh_rotations(self, q: Array, tp_index: NDArray[np.int64]) -> Array:
+        """The target frames' rotations (m, 3, 3), tracker frame, the written numbers predict at DH joint values
+        ``q`` (m, n) for tracked points ``tp_index`` (0-based; NaN where no orientation was measured)."""
+        rotation, _ = flange_frames(self.model, self.dh_joints(q))
+        assert self.frames is not None
+        return rotation @ self.frames[tp_index]
 
     @property
     def lines(self) -> AxisLines:
@@ -132,12 +147,13 @@ def robot_size(lines: AxisLines, points: Array) -> float:
 
 def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
                   unknown: NDArray[np.int64], rotations: Array | None = None, frames: Array | None = None,
-                  prior: Array | None = None) -> Array:
+                  prior: Array | None = None, turn: bool = False) -> Array:
     """Unit-variance covariance of the ``free`` DH values (weighted units), rows of unread joints (``unknown``,
     0-based, -1 for none) projected on the complement of their nuisance joint value; orientation rows
     (``rotations`` finite, of the first tracked point, whose target frame in frame n is ``frames[0]``) with the
     frame's turn as a parameter fitted with them; ``prior`` (k, free count): rows of a further measurement of the
-    DH values, in the same units, stacked with the data's."""
+    DH values, in the same units, stacked with the data's. ``turn`` (with orientation rows): the covariance of the
+    free values and then the frame's turn ω (``exp(ω) frames[0]``, rad about frame n's axes), (free + 3) square."""
     count = int(free.sum())
     if rotations is not None and np.any(_finite(rotations)):
         t = _finite(rotations)
@@ -149,7 +165,8 @@ def dh_covariance(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Ar
         flat = _position_blocks(model, free, q, weights, unknown).reshape(-1, count)
     if prior is not None:
         flat = np.vstack([flat, np.hstack([prior, np.zeros((len(prior), flat.shape[1] - count))])])
-    return scaled_inverse(flat)[0][:count, :count]
+    size = count + 3 if turn and flat.shape[1] > count else count
+    return scaled_inverse(flat)[0][:size, :size]
 
 
 def _position_blocks(model: DHModel, free: NDArray[np.bool_], q: Array, weights: Array,
@@ -227,15 +244,24 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
         out, dh_fit, tools, gap, tolerance = _written_dh(lines, conventional, nominal, beyond, rows, adequacy.noise,
                                                          held_table, scale, max_offset)
     first = tp_index == 0
+    turned = rows.rotations_of(first)
+    turning = turned is not None and bool(np.any(_finite(turned)))
+    cov_turn = None  # the table's free values, then the target frame's turn (rad about frame n's axes)
     if dh_fit is None:  # exact DH: the lines' covariance carried over
         model, frames = out.model, target_frames_of(out.model, lines)
         free = np.any(out.jacobian != 0.0, axis=1)
         cov_free = (out.jacobian @ lines_cov @ out.jacobian.T)[np.ix_(free, free)]
+        if turning and frames is not None:  # its turn fitted with the exact table's free values, through the same rows
+            cov_turn = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first], turned,
+                                     frames, None, turn=True) * variance
     else:  # DH refitted under the convention: its own covariance, on the noise scale of the lines' fit
         model, free, frames = dh_fit.model, dh_fit.free, dh_fit.frames
+        turning = turning and frames is not None
         prior = None if tolerance is None else prior_rows(free, tolerance / np.sqrt(variance))
-        cov_free = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first],
-                                 rows.rotations_of(first), frames, prior) * variance
+        cov_turn = dh_covariance(model, free, q_fit[first], weights[first], data.unknown[inl][first], turned,
+                                 frames, prior, turn=turning) * variance
+        count = int(free.sum())
+        cov_free, cov_turn = cov_turn[:count, :count], cov_turn if turning else None
     std = np.zeros(len(free))
     std[free] = np.sqrt(np.clip(np.diag(cov_free), 0.0, None))
     n = model.n_joints
@@ -255,7 +281,8 @@ def written_model(name: str, fit: LinesFit, data: FitData, adequacy: Adequacy, t
     ref = Refinement(model, free, cov_free, adequacy.noise, inl, fit.residuals, condition,
                      float(np.sum(res_w**2)), fit.q, data.points, [], tools)
     return WrittenModel(name, fit, adequacy, model, tools, std, fixed, ref, dict(out.capped), dh_check, terms,
-                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks, frames, held)
+                        predictor, lines_cov, covariance, condition, expected, problem, jac_blocks, frames, held,
+                        cov_turn)
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from common.errors import InputError
@@ -193,3 +194,103 @@ def test_the_report_shows_the_orientation_rows_and_draws_the_positions_in_metres
     assert 0.5 < rms / (np.sqrt(3) * NOISE_R) < 1.5  # the 3D RMS against its expectation
     with pytest.raises(ValueError, match="fitted rows"):  # still refuses measurements it was not made from
         report_html(ident, six.subset(np.arange(len(six)) > 3))
+
+
+def test_exports_carry_the_measured_tool_frame(tmp_path):
+    """``identify --urdf --ur-calibration`` on 6-DoF data: the URDF's tp link and the UR file's tcp predict the
+    target's measured orientation at the held-out poses within the noise (5 sigma_r RMS; the flange's axes, what
+    positions-only exports give, miss by the target's mounting turn, radians)."""
+    yourdfpy = pytest.importorskip("yourdfpy")
+    import io
+
+    import yaml
+
+    from identify.commands.cli import main
+    from identify.exports.ur_calibration import frames_from_origins, read_calibration, tcp_from_calibration
+
+    _, frame, _, six = _data(check=8)
+    source = tmp_path / "six.csv"
+    source.write_text(format_measurements(six), encoding="utf-8")
+    urdf_path, ur_path = tmp_path / "robot.urdf", tmp_path / "cal.yaml"
+    assert main([str(source), "--robot", "ur5e", "--urdf", str(urdf_path), "--ur-calibration", str(ur_path),
+                 "--out", str(tmp_path / "r.yaml")]) in (0, 3)
+    check = six.subset(six.check)
+    measured = matrices_from_rotvecs(check.rotvec)
+    urdf = yourdfpy.URDF.load(io.StringIO(urdf_path.read_text()), load_meshes=False,
+                              build_collision_scene_graph=False)
+    predicted = []
+    for q in check.q:
+        urdf.update_cfg(q)
+        predicted.append(urdf.get_transform("tp", "tracker")[:3, :3])
+    error = rotation_residuals(np.array(predicted), measured)
+    assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < 5 * NOISE_R
+    doc = yaml.safe_load(ur_path.read_text())
+    origins, _ = read_calibration(yaml.safe_dump(doc))
+    base = np.array(yaml.safe_load((tmp_path / "r.yaml").read_text())["base"])
+    tcp = base @ frames_from_origins(origins, check.q) @ tcp_from_calibration(doc)
+    error = rotation_residuals(tcp[:, :3, :3], measured)
+    assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < 5 * NOISE_R
+    assert np.abs(Rotation.from_matrix(frame).magnitude()) > 0.1  # the mounting turn is large: the test can fail
+
+
+def test_the_report_shows_orientation_residuals_and_the_wrists_determined_parameters():
+    """The report's full-pose section: each sweep's orientation residuals against sigma_r (reduced chi-square near
+    1 at the simulated noise), and the wrist's parameters with the fit's uncertainties, which match the 6-DoF bound
+    at the same poses; from the same poses' positions alone alpha5 and theta5 are bounded several times worse."""
+    pytest.importorskip("matplotlib")
+    from identify.estimator.dh_vector import dh_index
+    from identify.report.full_pose import turning_rows, wrist_bounds
+    from identify.report.html import report_html
+
+    _, _, _, six = _data()
+    ident = identify(six, nominal=ROBOT.nominal)
+    text = report_html(ident, six, ROBOT.nominal, "ur5e")
+    assert '<section id="full-pose">' in text and "bound, positions only" in text
+    chi = float(text.split("against their sigma_r: ")[1].split(" ")[0])
+    assert 0.6 < chi < 1.3, chi  # 72 orientations, 3 each: the mean of 216 squares / sigma_r², minus the fit's share
+    fit = six.subset(~six.check)
+    q = ident.refinement.q[-int(turning_rows(fit).sum()):]
+    with_turns, positions = wrist_bounds(ident, q, NOISE, NOISE_R)
+    for joint in (4, 5):
+        for name in ("theta", "d", "a", "alpha"):
+            i = dh_index(joint, name)
+            assert f"<td class=\"l\">{name}{joint}</td>" in text
+            assert abs(ident.std[i] / with_turns[i] - 1) < 0.15, (name, joint, ident.std[i], with_turns[i])
+    assert positions[dh_index(5, "alpha")] > 5 * with_turns[dh_index(5, "alpha")]
+    assert positions[dh_index(5, "theta")] > 5 * with_turns[dh_index(5, "theta")]
+
+
+def test_the_tool_frames_rotation_uncertainty_is_written_at_its_bound():
+    """The result writes tool_frame's rotation uncertainty (uncertainty.tool_frame_rotation, rad about the last DH
+    frame's axes): at the Cramér-Rao bound of the same poses and noise with the target frame's turn as 3 more
+    parameters (within 15 %: the fit's noise estimate), a fraction of a milliradian on ±20° arcs at 0.2 mrad."""
+    from identify.estimator.bounds import full_pose_jacobian
+
+    _, _, _, six = _data()
+    ident = identify(six, nominal=ROBOT.nominal)
+    written = np.array(result_to_dict(ident, ROBOT.nominal, "ur5e")["uncertainty"]["tool_frame_rotation"])
+    q = ident.refinement.q[: int(np.sum(~six.check))]
+    keep = np.concatenate([ident.refinement.free, [True] * 3])
+    jac = full_pose_jacobian(ident.model, q, NOISE, NOISE_R)[:, keep]
+    bound = np.sqrt(np.diag(np.linalg.inv(jac.T @ jac))[-3:])
+    assert np.all(np.abs(written / bound - 1) < 0.15), (written, bound)
+    assert np.all(written < 5e-4)
+
+
+def test_held_out_orientations_are_validated_against_their_expectation():
+    """The held-out rows' orientations are predicted from the written numbers (DH table, tool_frame): their 3D RMS
+    is near what sigma_r and the model's own uncertainty imply (0.6-1.5x over 8 poses), and it is written under
+    validation.plain.orientation; a written tool_frame turned by 5 mrad misses far beyond it."""
+    from identify.results.stages import _held_out_turns
+
+    _, _, _, six = _data(check=8)
+    ident = identify(six, nominal=ROBOT.nominal)
+    turns = ident.validations["plain"].orientation
+    assert turns is not None and turns.samples == 8
+    assert 0.6 < turns.rms / turns.expected < 1.5, (turns.rms, turns.expected)
+    assert 0 < turns.bound < turns.expected
+    doc = result_to_dict(ident, ROBOT.nominal, "ur5e")
+    assert doc["validation"]["plain"]["orientation"]["samples"] == 8
+    turned = replace(ident.plain, frames=matrices_from_rotvecs(np.array([[5e-3, 0.0, 0.0]])) @ ident.plain.frames)
+    worse = _held_out_turns(turned, six.subset(six.check), [1])
+    assert worse is not None and worse.rms > 3 * turns.expected

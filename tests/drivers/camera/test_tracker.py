@@ -247,3 +247,23 @@ def test_readings_carry_the_board_orientation_with_the_covariance_propagated():
     z = np.sqrt(np.mean(np.sum(turns**2, axis=1) / 3 / sigma_r**2))
     assert 0.5 < z < 2.0, (z, turns, sigma_r)
     assert np.all(sigma_r < np.radians(1.0))  # a 10 cm marker at 0.7 m: well under a degree per reading
+
+
+# a calibration plan's views of the board (acquire's default plan for mock:ur5e and this camera): joint 6 turned, joint
+# 5 swept; the board seen obliquely
+PLAN_VIEWS = np.array([[0.0, -1.5708, 1.5708, -1.5708, -1.5708, q6] for q6 in (-2.0944, -1.0472, 0.0, 1.0472, 2.0944)]
+                      + [[0.0, -1.5708, 1.5708, -1.5708, q5, 0.0] for q5 in (-2.4166, -1.7868, -1.157)])
+
+
+@pytest.mark.slow
+def test_a_steps_stated_orientation_uncertainty_holds_at_a_plans_views():
+    """Issue 35, item 6: at a calibration plan's oblique views the detection's error for a view is the same in every
+    frame and reading of it (bench/camera_honesty.py), so a step's average of readings is not better than that. Each
+    reading states that part (shared_r) and a step's sigma_r keeps it undivided: the step's orientation errors
+    against the rendered truth over its stated sigma_r have an RMS near 1 (8 views x 3 axes, 5 readings of 5 frames
+    as a session step: within 0.5-1.35; without the view's part this draw gave 3.0)."""
+    from bench.camera_honesty import SPEC, draw, z
+
+    d = draw(3, 8, 5, SPEC, PLAN_VIEWS)
+    assert len(d["rot"]) == 8
+    assert 0.5 < z(d["rot"]) < 1.35, z(d["rot"])

@@ -130,3 +130,36 @@ def test_ur_calibration_from_lines_refuses_other_arms():
         calibration_from_lines(lines, np.eye(4))
     assert yaml.safe_load(format_calibration(calibration_from_lines(_lines("ur5e", 1)[1], np.eye(4))))[
         "kinematics"]["hash"].startswith("calib_")
+
+
+def test_full_pose_lines_export_the_target_frame_as_the_tool():
+    """Lines with measured target frames (full-pose data): the URDF's tp links and the UR calibration's ``tcp`` are
+    the target frames, so both files reproduce the predicted target pose (rotation and origin) at random readings
+    to 1e-9; positions-only lines write no ``tcp``, as before."""
+    yourdfpy = pytest.importorskip("yourdfpy")
+    from scipy.spatial.transform import Rotation
+
+    from identify.estimator.poe import target_rotations
+    from identify.exports.ur_calibration import tcp_from_calibration
+
+    robot, lines, q = _lines("ur5e", 7, tps=2)
+    turns = Rotation.random(2, random_state=8).as_matrix()
+    turns[1] = np.nan  # the second point's orientation not measured: its link keeps the last link's axes
+    six = replace(lines, orientations=turns)
+    base = _base(six)
+    frames = joint_frames(six, base)
+    urdf = yourdfpy.URDF.load(io.StringIO(urdf_from_lines(six, base, limits=robot.limits, tp_ids=[1, 2])),
+                              load_meshes=False, build_collision_scene_graph=False)
+    expected = target_rotations(six, q, np.zeros(len(q), dtype=np.int64))
+    points = points_from_lines(six, q, np.zeros(len(q), dtype=np.int64))
+    chain = frames.chain(six.joint_types, q)
+    for row, qk in enumerate(q):
+        urdf.update_cfg(qk)
+        pose = urdf.get_transform("tp", "tracker")
+        assert np.abs(pose[:3, :3] - expected[row]).max() < TOL and np.abs(pose[:3, 3] - points[row]).max() < TOL
+        assert np.abs(urdf.get_transform("tp_2", "tracker")[:3, :3] - chain[row, :3, :3]).max() < TOL
+    doc = yaml.safe_load(format_calibration(calibration_from_lines(six, base)))
+    origins, _ = read_calibration(yaml.safe_dump(doc))
+    tcp = base @ frames_from_origins(origins, q) @ tcp_from_calibration(doc)
+    assert np.abs(tcp[:, :3, :3] - expected).max() < TOL and np.abs(tcp[:, :3, 3] - points).max() < TOL
+    assert tcp_from_calibration(calibration_from_lines(lines, base)) is None
