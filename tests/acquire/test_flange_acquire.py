@@ -4,6 +4,7 @@ board, and a session run end to end on the mock rig (rendered images, real OpenC
 
 from __future__ import annotations
 
+import json
 import math
 import re
 
@@ -57,6 +58,10 @@ def test_the_dry_run_plans_views_that_see_the_board(site_file, capsys: pytest.Ca
     q = np.array([s.q for s in plan.steps])
     seen, reasons = board_in_view(robot.nominal, q, setup.mount, setup.board, setup.camera)
     assert seen.all(), reasons
+    assert acquire_main(["--robot", ROBOT, "--tracker", SPEC, "--config", str(site_file), "--free-poses",
+                         str(FIT), "--dry-run", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["flange_camera"]["views"] == views and doc["flange_camera"]["images"] == 2 * (views + 2)
     minutes, seconds = re.search(r"estimated duration: 0:(\d\d):(\d\d)", out).groups()
     assert int(minutes) * 60 + int(seconds) == pytest.approx(estimate_duration(plan, robot, 2 / 30), abs=1)
 
