@@ -305,6 +305,9 @@ def verdict_of(models: dict[str, WrittenModel], use: str, decisions: list[Decisi
         others = {k: (w.rms, w.expected) for k, w in validations.items() if k != use}
         found.append(checks.holdout(v.samples, v.rms, v.expected, use, others, _moved(models, tp_ids, check_rows),
                                     why_plain))
+        if v.orientation is not None and v.orientation.samples:
+            t = v.orientation
+            found.append(checks.holdout_orientation(t.samples, t.rms, t.expected, use))
     else:
         found.append(checks.not_validated("extended" in models))
     known = rows.data.unknown < 0

@@ -213,6 +213,17 @@ def holdout(samples: int, rms: float, expected: float, model: str = "plain",
                  f"{mm(expected)} ({ratio:.2f}x){also}")
 
 
+def holdout_orientation(samples: int, rms: float, expected: float, model: str = "plain") -> Check:
+    """Held-out orientations of full-pose rows (rad): their 3D RMS rotation residual against the RMS the model's
+    uncertainty and the rows' sigma_r predict, on the same chi-square test as the positions (:func:`holdout`)."""
+    limit = _holdout_limit(expected, samples)
+    ratio = rms / expected if expected > 0 else float("inf")
+    status = "fail" if rms > limit and ratio > HOLDOUT_FAIL else "warn" if rms > limit else "pass"
+    return Check("holdout_orientation", status, rms, limit,
+                 f"{MODEL_NAMES.get(model, model)}: held-out orientations {rms * 1e3:.3g} mrad RMS over {samples} "
+                 f"poses vs expected {expected * 1e3:.3g} mrad ({ratio:.2f}x)")
+
+
 def recommended(plain: tuple[float, float], extended: tuple[float, float] | None, samples: int,
                 differ: float | None) -> tuple[str, str]:
     """The model the held-out evidence supports, and why the joint errors are not it ('' when they are, or when the

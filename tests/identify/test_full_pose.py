@@ -23,6 +23,7 @@ from identify.estimator.rotation_axes import lines_from_rotations
 from identify.estimator.starts import starts
 from identify.io.csvio import format_measurements, parse_measurements
 from identify.io.result_io import result_to_dict
+from identify.results import verdict as checks
 from identify.results.pipeline import identify
 from identify.simulators.simulate import observe_frames, simulate, with_orientations
 from identify.simulators.simulate_joints import RealArm, measure, sweeps_and_poses
@@ -294,3 +295,6 @@ def test_held_out_orientations_are_validated_against_their_expectation():
     turned = replace(ident.plain, frames=matrices_from_rotvecs(np.array([[5e-3, 0.0, 0.0]])) @ ident.plain.frames)
     worse = _held_out_turns(turned, six.subset(six.check), [1])
     assert worse is not None and worse.rms > 3 * turns.expected
+    # the verdict tests them: this result passes; the 5 mrad turn would fail
+    assert ident.verdict_check("holdout_orientation").status == "pass"
+    assert checks.holdout_orientation(worse.samples, worse.rms, worse.expected).status == "fail"
