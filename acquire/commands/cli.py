@@ -27,6 +27,7 @@ from acquire.commands.prepare import (
 )
 from acquire.planning.plan import check_plan, estimate_duration, plan_clearance
 from acquire.planning.plan_continuous import estimate_continuous_duration
+from acquire.planning.plan_flange import flange_json, flange_lines, is_flange_camera
 from acquire.planning.plan_modes import build_mode_plan, format_modes, mode_site, plan_mode
 from acquire.planning.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.planning.plan_target import TargetError, candidates, choose, format_tradeoff, replan_for_rate
@@ -128,10 +129,11 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         path, plan, robot_model = None, None, None
     if args.json and not args.dry_run:
         raise UsageError("--json goes with --dry-run (the plan) or --probe (the readings)")
-    if tracker_spec is not None and tracker_spec.backend == "aruco" and tracker_spec.options.get("mount") == "flange":
-        raise UsageError("a camera on the flange (mount=flange) needs views that keep its board in sight, which "
-                         "acquire does not plan yet (its sweeps would lose the board): --probe reads it; identify "
-                         "takes a '# sensor: flange' CSV (README, 'A camera on the flange')")
+    flange = is_flange_camera(tracker_spec)
+    if flange and (args.mode in ("continuous", "both") or args.target_accuracy is not None
+                   or args.max_robot_time is not None):
+        raise UsageError("a camera on the flange (mount=flange) plans stop-and-go views of its board: --mode "
+                         "continuous/both, --target-accuracy and --max-robot-time are not for it")
     rehearsal = tracker_spec is None
     if tracker_spec is not None and tracker_spec.backend == "emscon":  # durations with the tracker's own time
         from drivers.trackers.emscon_options import parse_settings
@@ -144,6 +146,15 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         check_pairing(robot_spec, tracker_spec)  # before the plan is shown: one simulated world or none
     if robot_model is None:
         robot_model = load_robot(robot_spec.model)
+    setup = None
+    if flange:  # the camera's body in the cell model, its views planned around the board (a resume keeps its plan)
+        assert tracker_spec is not None
+        from acquire.planning.plan_flange import build_flange_plan, camera_site, flange_setup
+
+        setup = flange_setup(robot_model, tracker_spec, site)
+        site = camera_site(site, setup)
+        if plan is None:
+            plan = build_flange_plan(robot_model, site, setup)
     planned = args.target_accuracy is not None or args.max_robot_time is not None
     tradeoff = None
     if planned:
@@ -162,7 +173,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
             print(f"acquire: plan refused: {line}", file=sys.stderr)
         return 2
     camera = None
-    if tracker_spec is not None and tracker_spec.backend == "aruco" and not plan.continuous:
+    if tracker_spec is not None and tracker_spec.backend == "aruco" and not plan.continuous and not flange:
         from acquire.planning.camera_rehearsal import camera_assumptions  # OpenCV: only for a camera
 
         camera = camera_assumptions(plan, robot_model, site, tracker_spec, args.noise)
@@ -170,14 +181,17 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         duration = estimate_continuous_duration(plan, site.measure_time)
         accuracy = None
     else:
-        duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else site.measure_time)
-        accuracy = None if rehearsal else predicted_accuracy(
+        measure_time = setup.frames / setup.fps if setup is not None else site.measure_time
+        duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else measure_time)
+        accuracy = None if rehearsal or flange else predicted_accuracy(
             plan if camera is None else camera.seen_plan(plan), robot_model, site.tp_guess,
             site.tracker_noise if camera is None else camera.noise)
     if args.json:
         doc = plan_json(plan, clearance, duration, accuracy)
         if camera is not None:
             doc["camera"] = camera.as_dict(plan)
+        if setup is not None:
+            doc["flange_camera"] = flange_json(plan, setup)
         print(json.dumps(doc, allow_nan=False))
         return 0
     if session is not None:
@@ -187,6 +201,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     say(format_plan(plan, robot_model, duration, accuracy, "camera" if camera is not None else "tracker"))
     if camera is not None:
         say("\n".join(["", *camera.lines(plan)]))
+    if setup is not None:
+        say("\n".join(["", *flange_lines(plan, setup)]))
     if tracker_spec is not None and tracker_spec.backend == "emscon":  # what the tracker will be asked to do
         from drivers.trackers.emscon_options import describe
 
@@ -197,7 +213,8 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if tradeoff is not None:
         say(tradeoff)
     elif args.dry_run and not rehearsal and session is None:
-        say("modes: not compared for a camera (which streamed frames it would see is not modelled)" if camera
+        say("modes: stop-and-go only for a camera on the flange (its views keep the board in sight)" if flange
+            else "modes: not compared for a camera (which streamed frames it would see is not modelled)" if camera
             else format_modes(robot_model, base_site, plan, args.free_poses, no_stream))
     if args.dry_run:
         print("dry run: nothing was connected or moved")

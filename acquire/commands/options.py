@@ -65,7 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "continuous measurement by time stamped with the tracker's clock; ?probe=6dof: a 6-DoF probe's "
                    "full poses; emscon:sim with a mock robot), "
                    "aruco:... (a camera in the cell; aruco:...&mount=flange: a camera on the flange seeing a fixed "
-                   "board, --probe only for now, &square_sigma=M: the board measured), mock, or none (motion "
+                   "board: aruco:sim plans "
+                   "stop-and-go views that keep it in sight, a real one --probe only; &square_sigma=M: the board "
+                   "measured), mock, or none (motion "
                    "rehearsal) (mock; on --resume: the session's, whose port or "
                    "host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")

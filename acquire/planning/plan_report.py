@@ -97,12 +97,13 @@ def format_plan(plan: Plan, robot: RobotModel, duration_s: float, accuracy: dict
     """The dry-run summary an operator reads: one line per sweep, counts, duration, accuracy (for the noise of
     ``device``: "tracker" or "camera"), notes."""
     types = plan.joint_types
-    lines = [f"Plan for {plan.robot} ({types}), {len(plan.steps)} steps", "",
-             f"{'sweep':>5}  {'joint':>5}  {'from':>10}  {'to':>10}  {'steps':>5}"]
+    lines = [f"Plan for {plan.robot} ({types}), {len(plan.steps)} steps"]
     sweeps: dict[int, list[Step]] = {}
     for s in plan.steps:
         if s.kind in ("sweep", "stream"):
             sweeps.setdefault(s.sweep, []).append(s)
+    if sweeps:  # a plan of views alone (a camera on the flange) has no sweep table
+        lines += ["", f"{'sweep':>5}  {'joint':>5}  {'from':>10}  {'to':>10}  {'steps':>5}"]
     for sweep, steps in enumerate(sweeps.values(), 1):  # numbered as the operator sees them, 1, 2, 3...
         j = steps[0].joint
         values = [s.q[j - 1] for s in steps] + [s.start[j - 1] for s in steps if s.start is not None]

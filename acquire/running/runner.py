@@ -30,6 +30,7 @@ from identify.report.terminal import format_reference, format_report
 from identify.results.pipeline import identify
 from identify.results.verdict import missing_steps as missing_steps_check
 from identify.results.verdict import with_session_check
+from identify.sensors.evidence import checked, documented, for_estimator
 from session.rows import factory_calibration
 
 log = logging.getLogger("acquire")
@@ -105,8 +106,9 @@ def cell_view(session: Session, robot: RobotModel) -> dict[str, Any] | None:
 
 
 def identify_session(session: Session, session_path: Path, robot: RobotModel) -> dict[str, Any]:
-    meas = session.to_measurements()
-    ident = identify(meas, robot.nominal, links=robot.links)
+    rows = for_estimator(session.to_measurements())  # a flange camera's rows turned round (identify/sensors/)
+    meas = rows.meas
+    ident, scale = checked(identify(meas, robot.nominal, links=robot.links), rows, robot.nominal)
     # how much of the plan was recorded is part of the verdict (and so of the report's first screen)
     ident = replace(ident, verdict=with_session_check(ident.verdict, missing_steps_check(*missing_steps(session))))
     print(format_report(ident, robot.nominal, robot.name))
@@ -115,6 +117,10 @@ def identify_session(session: Session, session_path: Path, robot: RobotModel) ->
     if reference is not None or note:
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
     doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path), nominal_model=robot.document)
+    doc = documented(doc, rows, scale, ident)  # a flange camera's mount, board and flange_accuracy_rms; the scale
+    if doc.get("flange_accuracy_rms") is not None:
+        say(f"flange camera: the flange's position stated to {doc['flange_accuracy_rms'] * 1e3:.3f} mm RMS over the "
+            "fit poses (flange_accuracy_rms)")
     if section := controller_section(calibration, robot.joint_types):  # what the arm runs today ("before")
         doc["controller"] = section
     out = session_path.with_suffix(".result.yaml")

@@ -1,5 +1,5 @@
 """The camera on the flange (``aruco:...&mount=flange``): its options, the simulated flange camera (rendered images,
-real detection), what a session records and what identify reads from it, and acquire's refusal to plan for it."""
+real detection), what a session records and what identify reads from it, and the plans acquire refuses for it."""
 
 from __future__ import annotations
 
@@ -74,7 +74,16 @@ def test_a_session_of_the_flange_camera_reads_as_sensor_flange() -> None:
     assert sensor_of({}) == {"sensor": "fixed", "scale_sigma": None}  # a laser tracker's session
 
 
-def test_acquire_refuses_to_plan_sweeps_for_a_flange_camera(capsys: pytest.CaptureFixture[str]) -> None:
-    assert acquire_main(["--robot", "mock:ur5e", "--tracker", SIM, "--dry-run"]) == 2
+def test_acquire_plans_only_stop_and_go_views_for_a_simulated_flange_camera(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    # its views keep the board in sight (tests/acquire/test_flange_acquire.py); sweeps, streams and a real camera
+    # whose mount and board nothing places before the run are refused, one line each
+    for extra, why in ((["--mode", "continuous"], "plans stop-and-go views of its board"),
+                       (["--target-accuracy", "0.1mm"], "plans stop-and-go views of its board")):
+        assert acquire_main(["--robot", "mock:ur5e", "--tracker", SIM, "--dry-run", *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and why in err[0], err
+    real = f"aruco:0?camera=c.yaml&mount=flange&{BOARD}"
+    assert acquire_main(["--robot", "mock:ur5e", "--tracker", real, "--dry-run"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "acquire does not plan yet" in err[0]
+    assert len(err) == 1 and "for aruco:sim only" in err[0], err

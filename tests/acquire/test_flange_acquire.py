@@ -1,0 +1,92 @@
+"""``acquire`` with a camera on the flange (``aruco:sim?...&mount=flange``): the dry run's plan of views around the
+board, and a session run end to end on the mock rig (rendered images, real OpenCV detection), recorded as
+``sensor: flange`` and identified, its flange error against the rig's truth within what the result states."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+
+import numpy as np
+import pytest
+import yaml
+
+from acquire.commands.cli import main as acquire_main
+from acquire.planning.flange_views import board_in_view
+from acquire.planning.plan import estimate_duration
+from acquire.planning.plan_flange import build_flange_plan, camera_site, flange_setup
+from acquire.running.session import Session
+from config.robots import load_robot
+from config.site import SiteConfig
+from drivers.camera.flange_camera import CAMERA_MOUNT
+from drivers.sim.rig import SimulatedRig
+from drivers.spec import TrackerSpec
+from identify.applications.calibrated import CalibratedModel
+from kinematics.dh import frames_from_joints
+
+# the README's spelling, an A4-size ChArUco board measured with a caliper, few views and frames to stay quick
+SPEC = ("aruco:sim?mount=flange&board=charuco&cols=11&rows=8&square=0.025&size=0.018&square_sigma=0.000002"
+        "&width=1280&height=720&distance=0.45&tilt=8&roll=5&frames=2")
+ROBOT = "mock:ur5e?seed=3"
+FIT, CHECK = 10, 3
+
+
+@pytest.fixture
+def site_file(tmp_path):
+    path = tmp_path / "site.yaml"
+    path.write_text(f"schema: 1\nplan:\n  check_poses: {CHECK}\n", encoding="utf-8")
+    return path
+
+
+def test_the_dry_run_plans_views_that_see_the_board(site_file, capsys: pytest.CaptureFixture[str]) -> None:
+    assert acquire_main(["--robot", ROBOT, "--tracker", SPEC, "--config", str(site_file), "--free-poses",
+                         str(FIT), "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    views = FIT + CHECK
+    assert f"views: {views} ({FIT} fitted, {CHECK} held out) + 2 at home" in out
+    assert f"images: {2 * (views + 2)} ({views + 2} readings x 2 frames at 30 Hz)" in out
+    assert "the DH parameters, the camera's pose on the flange and the board's pose in the base frame" in out
+    assert "scale: measured: relative uncertainty 8e-05" in out
+    assert "the camera's body: a capsule of radius 40 mm" in out and "clearance: closest approach" in out
+    # the plan the dry run showed: every view sees the whole board, at a good angle and distance, with the nominal;
+    # its estimated time is the moves, settling and the frames at the camera's rate
+    robot = load_robot("ur5e")
+    site = SiteConfig().with_overrides(free_poses=FIT, check_poses=CHECK)
+    setup = flange_setup(robot, TrackerSpec.parse(SPEC), site)
+    plan = build_flange_plan(robot, camera_site(site, setup), setup)
+    q = np.array([s.q for s in plan.steps])
+    seen, reasons = board_in_view(robot.nominal, q, setup.mount, setup.board, setup.camera)
+    assert seen.all(), reasons
+    assert acquire_main(["--robot", ROBOT, "--tracker", SPEC, "--config", str(site_file), "--free-poses",
+                         str(FIT), "--dry-run", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["flange_camera"]["views"] == views and doc["flange_camera"]["images"] == 2 * (views + 2)
+    minutes, seconds = re.search(r"estimated duration: 0:(\d\d):(\d\d)", out).groups()
+    assert int(minutes) * 60 + int(seconds) == pytest.approx(estimate_duration(plan, robot, 2 / 30), abs=1)
+
+
+@pytest.mark.slow
+def test_a_flange_camera_session_identifies_the_flange_within_its_stated_accuracy(tmp_path, site_file) -> None:
+    session = tmp_path / "flange.session"
+    assert acquire_main(["--robot", ROBOT, "--tracker", SPEC, "--config", str(site_file), "--free-poses", str(FIT),
+                         "--session", str(session), "--yes", "--quiet"]) == 0
+    doc = yaml.safe_load(session.with_suffix(".result.yaml").read_text(encoding="utf-8"))
+    assert doc["sensor"] == "flange"
+    checks = {c["name"]: c for c in doc["verdict"]["checks"]}
+    assert checks["missing_steps"]["status"] == "pass"  # every planned view saw the board (real detection)
+    assert checks["scale"]["status"] == "pass" and doc["scale"]["reference"] == "measured"
+    stated = doc["flange_accuracy_rms"]
+    with Session.open(session) as s:
+        assert s.header["tracker"]["details"]["mount"] == "flange"
+        q = np.array([step.q for step in s.plan.steps if step.role == "fit"])
+    # the physical flange origin in the board frame: through the identified arm and camera mount, and the truth
+    truth_rig = SimulatedRig.from_spec(ROBOT, SPEC)
+    truth = frames_from_joints(truth_rig.truth, q)[:, -1, :3, 3]
+    model = CalibratedModel.from_document(doc).model
+    camera = frames_from_joints(model, q)[:, -1] @ np.array(doc["sensor_frame"])  # board <- camera
+    ours = np.einsum("mij,j->mi", camera, np.linalg.inv(CAMERA_MOUNT)[:, 3])[:, :3]
+    rms = math.sqrt(np.mean(np.sum((ours - truth) ** 2, axis=1)))
+    # the statement's own scatter over one small session (13 views): within a factor 3 either way
+    assert 0.3 < rms / stated < 3, (rms, stated)
+    assert stated < 3e-4  # m: the issue's target, from these few views
