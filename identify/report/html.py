@@ -282,8 +282,9 @@ def _beyond_dh_section(ident: Identification, fit: Measurements) -> str:
     return "".join(parts) + "</section>"
 
 
-def _domain_section(ident: Identification, meas: Measurements) -> str:
-    """The joint ranges the recommended model was fitted on (its domain), and where the held-out poses lie."""
+def _domain_section(ident: Identification, check: Measurements) -> str:
+    """The joint ranges the recommended model was fitted on (its domain), and where the held-out poses ``check``
+    (every joint read) lie."""
     if ident.domain is None:
         return ""
     types = ident.model.joint_types
@@ -294,7 +295,6 @@ def _domain_section(ident: Identification, meas: Measurements) -> str:
             "The accuracies it states hold inside them; outside, it extrapolates, and every command that applies "
             "it (<code>identify check</code>, <code>compensate</code>, <code>acquire verify</code>, "
             "<code>compare</code>) says how many of its poses lie outside and by how much.</p>")
-    check = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
     if len(check):
         q = check.q if ident.coupling is None else ident.coupling.dh_from_readings(check.q)
         text += f"<p>Held-out poses: {_e(outside(ident.domain, q, types).text())}.</p>"
@@ -433,16 +433,16 @@ def report_html(
                                    "(blue dots)" if cell is not None else "")) + "</section>")
     body.append('<section id="validation"><h2>Held-out validation</h2>')
     v = ident.validation
+    check = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))  # held out, every joint read
     if v is None:
         body.append("<p>No held-out poses (add free poses, or rows with role=check).</p>")
     else:
-        check = meas.subset(meas.check & np.all(np.isfinite(meas.q), axis=1))
         errors = np.linalg.norm(check.points - ident.predict(check.q), axis=1)
         body.append(f"<p>{v.samples} held-out poses: RMS {v.rms * MM:.4f} mm, max {v.max * MM:.4f} mm; expected "
                     f"RMS {v.expected * MM:.4f} mm (model bound {v.bound * MM:.4f} mm + tracker noise).</p>")
         body.append(_figure_html(figure_validation(errors, v.expected), "Errors at held-out poses"))
     body.append("</section>")
-    body.append(_domain_section(ident, meas))
+    body.append(_domain_section(ident, check))
     rows = [[str(s.sweep), "free" if s.joint == 0 else str(s.joint), str(s.samples), str(s.rejected),
              f"{s.rms * MM:.4f}"] for s in ident.sweeps]
     body.append('<section id="sweeps"><h2>Residuals per sweep</h2>'
