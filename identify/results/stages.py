@@ -291,7 +291,8 @@ def verdict_of(models: dict[str, WrittenModel], use: str, decisions: list[Decisi
     found = [
         checks.model_fit(used.fit_rms, used.adequacy, _cause(models, decisions), noise_typed,
                          rows.meas.sigma is not None),
-        checks.conditioning(used.condition, _identifiability(used, size), () if used.held is None else used.held.names,
+        checks.conditioning(used.condition, identifiability_of(used, size),
+                            () if used.held is None else used.held.names,
                             used.held is not None and used.held.model_error),
         checks.outliers(int(np.sum(~inl)), len(inl), _lost(sweeps)),
         plain.dh_check,
@@ -356,7 +357,7 @@ def _moved(models: dict[str, WrittenModel], tp_ids: NDArray[np.int64], rows: Mea
     return float(np.sqrt(np.mean(np.sum(gap**2, axis=1))))
 
 
-def _identifiability(model: WrittenModel, size: float) -> Identifiability:
+def identifiability_of(model: WrittenModel, size: float) -> Identifiability:
     """What the data determine of ``model``'s free parameters, for the robot's ``size`` (m)."""
     ref, a = model.refinement, model.adequacy
     names = [name for name, free in zip(parameter_names(model.model.n_joints), ref.free, strict=False) if free]
