@@ -60,6 +60,8 @@ bench: $(STAMP)
 	$(BIN)/python -m bench.flange_hold || status=1; \
 	$(BIN)/python -m bench.thin_data || status=1; \
 	$(BIN)/python -m bench.thin_data --noise 0.05 || status=1; \
+	$(BIN)/python -m bench.thin_data --orientation 0.2 || status=1; \
+	$(BIN)/python -m bench.thin_data --orientation 0.2 --noise 0.05 || status=1; \
 	$(BIN)/python -m bench.startup || status=1; \
 	exit $$status
 
