@@ -12,12 +12,16 @@ R_measured R_trueᵀ) over its ``sigma_r``, per axis. ``z`` = RMS of those ratio
 honest); ``z 1`` the same for single readings; ``spread``: the readings' RMS per-axis scatter about their step's
 mean over their stated sigma (what frame-to-frame noise alone gives). Where ``z`` exceeds what ``z 1`` and
 ``spread`` imply, the excess is an error that stays with the view (the detection's bias for it): averaging frames
-and readings does not shrink it, and ``--bias PX`` (drivers.camera.pose.VIEW_BIAS_PX) states it.
+and readings does not shrink it, and the driver states it (drivers.camera.pose.Pose.view_bias): ``--bias PX``
+(VIEW_BIAS_PX: the corners' image scaled by PX at its RMS radius, over cos² of the obliquity, for the TP) and
+``--turn-bias PX`` (VIEW_TURN_BIAS_PX: independent corner errors, for the orientation). Last, ``z pos`` of all the
+steps by the view's obliquity (the angle between the board's normal and the line of sight to it).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 
 import numpy as np
@@ -34,7 +38,8 @@ from drivers.spec import RobotSpec, TrackerSpec
 
 SPEC = "aruco:sim?board=grid&cols=2&rows=2&size=0.05&tilt=0&distance=0.8"  # docs/benchmarks.md section 23's camera
 SPREAD = np.radians([15.0, 15.0, 15.0, 40.0, 40.0, 60.0])
-KINDS = ("pos", "rot", "pos1", "rot1", "pos_spread", "rot_spread", "sigma", "sigma_r", "q")
+KINDS = ("pos", "rot", "pos1", "rot1", "pos_spread", "rot_spread", "sigma", "sigma_r", "q", "obliquity")
+OBLIQUITY_BINS = (0.0, 20.0, 40.0, 55.0, 90.0)  # deg
 
 
 def draw(seed: int, poses: int, readings: int, spec: str, plan: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -68,6 +73,8 @@ def draw(seed: int, poses: int, readings: int, spec: str, plan: np.ndarray | Non
         out["rot"].append((Rotation.from_rotvec(frame.rotvec) * true_r.inv()).as_rotvec() / frame.sigma_r)
         out["sigma"].append(sigma)
         out["q"].append(q)
+        sight = truth[:3, 3] / np.linalg.norm(truth[:3, 3])
+        out["obliquity"].append(np.degrees(np.arccos(min(abs(float(truth[:3, 2] @ sight)), 1.0))))
         out["sigma_r"].append(frame.sigma_r)
         turns = np.array([(Rotation.from_rotvec(r.rotvec) * true_r.inv()).as_rotvec() for r in taken])
         points = np.array([r.position for r in taken]) - true_p
@@ -121,7 +128,13 @@ def main(argv: list[str] | None = None) -> int:
         for k, v in d.items():
             pooled.setdefault(k, []).append(v)
         print(_row(str(seed), d))
-    print(_row("all", {k: np.concatenate(v) for k, v in pooled.items()}))
+    every = {k: np.concatenate(v) for k, v in pooled.items()}
+    print(_row("all", every))
+    cells = []
+    for lo, hi in itertools.pairwise(OBLIQUITY_BINS):
+        k = (every["obliquity"] >= lo) & (every["obliquity"] < hi)
+        cells.append(f"{lo:g}-{hi:g}°: {z(every['pos'][k]):.2f} ({int(k.sum())})" if k.any() else f"{lo:g}-{hi:g}°: -")
+    print("z pos by obliquity (steps): " + ", ".join(cells))
     print(f"total {time.perf_counter() - start:.1f} s")
     return 0
 

@@ -29,8 +29,10 @@ Array = NDArray[np.float64]
 AMBIGUITY_RATIO = 1.5  # second-best RMS below this multiple of the best: the frame is ambiguous ...
 AMBIGUITY_FLOOR_PX = 0.05  # ... or both RMS within this many pixels of each other
 SIGMA_PX_FLOOR = 0.01  # pixels: corner noise assumed at least this (clean renders reach 0.005-0.01 px)
-VIEW_BIAS_PX = 0.0  # pixels per corner coordinate: the detection's error fixed for a view, for the TP (not stated yet)
-VIEW_TURN_BIAS_PX = 0.015  # ... for the orientation (bench/camera_honesty.py at a session plan's views)
+# the detection's error fixed for a view (bench/camera_honesty.py, docs/benchmarks.md section 23):
+VIEW_BIAS_PX = 0.00088  # for the TP: px, a scale error of the corners' image at their RMS radius, times 1/cos² of the
+# obliquity (the depth error of an oblique view)
+VIEW_TURN_BIAS_PX = 0.015  # for the orientation: px per corner coordinate, independent from corner to corner
 _LM = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-12)
 
 
@@ -40,7 +42,8 @@ class Pose:
     ``rms`` reprojection RMS (pixels, per coordinate) over ``points`` points; ``jacobian`` (2N, 6) of the
     projections by (rotation vector, translation); ``ambiguous`` True when the IPPE alternative was close
     and a reference chose; ``image_covariance`` (2N, 2N) pixels² of the points, when the detection gave
-    one (else the points are taken as independent with a common noise)."""
+    one (else the points are taken as independent with a common noise); ``image_points`` (N, 2) pixels, the
+    detected points the pose was solved from (for :meth:`view_bias`)."""
 
     rotation: Array
     translation: Array
@@ -49,6 +52,7 @@ class Pose:
     jacobian: Array
     ambiguous: bool = False
     image_covariance: Array | None = None
+    image_points: Array | None = None
 
     @property
     def expected_rss(self) -> float | None:
@@ -90,26 +94,45 @@ class Pose:
         return left @ self.pose_covariance(sigma_px)[:3, :3] @ left.T
 
     def view_bias(self, tp: Array, bias_px: float, turn_px: float | None = None) -> tuple[float, float]:
-        """Per-axis RMS (m, rad) of the TP's and the orientation's error that a corner error of ``bias_px``
-        (``turn_px`` for the orientation; default the same) pixels per coordinate, independent from corner to corner
-        but fixed for this view, gives: the pose's sensitivity to its corners (``bias_px² N⁻¹``) whatever the
-        detection's noise covariance."""
+        """Per-axis RMS (m, rad) of the TP's and the orientation's error that the detection makes for this view,
+        the same in every frame of it.
+
+        The TP's: the corners' image scaled about its centre by ``bias_px`` pixels at its RMS radius, times
+        ``1 / cos²`` of the obliquity (the angle between the target's normal and the line of sight to it): a
+        coherent error of the target's apparent size, which the pose turns into a depth error along the line of
+        sight (measured on rendered views: the error is along the line of sight, and it grows with the obliquity
+        faster than the pose's sensitivity to independent corner errors). Needs :attr:`image_points` (0 without a
+        ``bias_px``). The orientation's: a corner error of ``turn_px`` (default ``bias_px``) pixels per coordinate,
+        independent from corner to corner (the pose's sensitivity ``turn_px² N⁻¹``)."""
         plain = replace(self, image_covariance=None)
         turn = bias_px if turn_px is None else turn_px
-        return (math.sqrt(float(np.trace(plain.point_covariance(tp, bias_px))) / 3),
-                math.sqrt(float(np.trace(plain.orientation_covariance(turn))) / 3))
+        turning = math.sqrt(float(np.trace(plain.orientation_covariance(turn))) / 3)
+        if bias_px == 0.0:
+            return 0.0, turning
+        if self.image_points is None:
+            raise ValueError("the view's error of the TP needs the pose's image points")
+        centred = self.image_points - self.image_points.mean(axis=0)
+        radius = math.sqrt(float(np.mean(np.sum(centred**2, axis=1))))
+        sight = self.translation / np.linalg.norm(self.translation)
+        cos = max(abs(float(self.rotation[:, 2] @ sight)), 0.1)  # beyond 84 deg no target is detected anyway
+        shift = np.linalg.pinv(self.jacobian.T @ self.jacobian) @ self.jacobian.T @ (centred.ravel() / radius)
+        moved = self._point_jacobian(tp) @ shift * bias_px / cos**2
+        return float(np.linalg.norm(moved)) / math.sqrt(3), turning
+
+    def _point_jacobian(self, tp: Array) -> Array:
+        """(3, 6): the TP's change (m, camera frame) by the pose's (rotation vector, translation)."""
+        rvec = cv2.Rodrigues(self.rotation)[0]
+        _, d_r = cv2.Rodrigues(rvec)  # (3, 9): d vec(R) (row-major) / d rvec
+        tp = np.asarray(tp, dtype=float)
+        d_rot = np.stack([d_r[k].reshape(3, 3) @ tp for k in range(3)], axis=1)  # (3, 3): dp / d rvec
+        return np.hstack([d_rot, np.eye(3)])
 
     def point_covariance(self, tp: Array, sigma_px: float) -> Array:
         """Covariance (3, 3) m² of :meth:`point`: from :attr:`image_covariance` when there is one (the
         least-squares pose's sandwich ``N⁻¹ Jᵀ Σ J N⁻¹``, N = JᵀJ), else for independent corner noise
         ``sigma_px`` pixels per coordinate (``sigma_px² N⁻¹``)."""
-        pose_cov = self.pose_covariance(sigma_px)
-        rvec = cv2.Rodrigues(self.rotation)[0]
-        _, d_r = cv2.Rodrigues(rvec)  # (3, 9): d vec(R) (row-major) / d rvec
-        tp = np.asarray(tp, dtype=float)
-        d_rot = np.stack([d_r[k].reshape(3, 3) @ tp for k in range(3)], axis=1)  # (3, 3): dp / d rvec
-        jp = np.hstack([d_rot, np.eye(3)])
-        return jp @ pose_cov @ jp.T
+        jp = self._point_jacobian(tp)
+        return jp @ self.pose_covariance(sigma_px) @ jp.T
 
 
 @dataclass
@@ -188,7 +211,7 @@ def estimate_pose(obs: Observation, matrix: Array, distortion: Array, square: bo
                 best = min(candidates[:2], key=lambda c: _angle(cv2.Rodrigues(c[1])[0], reference))
     rms, rvec, tvec, jac = best
     return Pose(cv2.Rodrigues(rvec)[0], tvec.reshape(3), rms, n, np.asarray(jac, dtype=float), ambiguous,
-                obs.covariance)
+                obs.covariance, np.asarray(obs.image_points, dtype=float).reshape(-1, 2))
 
 
 def _angle(a: Array, b: Array) -> float:

@@ -148,8 +148,8 @@ plan:
 
 @pytest.mark.slow
 def test_mock_session_with_the_rendered_camera_is_identified(tmp_path, capsys):
-    """mock:ur5e measured by aruco:sim (a 2x2 grid board at 0.8 m, 640x480): the readings' sigma is honest
-    (reduced chi-square near 1), hardly any sample is rejected, and the identified model predicts the true
+    """mock:ur5e measured by aruco:sim (a 2x2 grid board at 0.8 m, 640x480): the steps' sigma is honest (their
+    errors against the rendered truth), hardly any sample is rejected, and the identified model predicts the true
     TP within a small factor of the bound that the readings' own sigma implies."""
     robot = "mock:ur5e?seed=3"
     tracker = "aruco:sim?board=grid&cols=2&rows=2&size=0.05&gap=0.01&frames=3&tilt=0&distance=0.8"
@@ -176,9 +176,16 @@ def test_mock_session_with_the_rendered_camera_is_identified(tmp_path, capsys):
     # measured: none (the first pass lost 13 of 37: sigma 2x too large, and an outlier test that took the
     # 7-9x larger depth errors for outliers); one is tolerated, a 1 % false alarm by design
     assert len(result["residuals"]["rejected_rows"]) <= 1
+    # the steps' errors against the rendered truth over their stated sigma (RMS per axis): 0.83 (0.93 without the
+    # view's own error, drivers.camera.pose.VIEW_BIAS_PX; robot seeds 4 and 5: 1.16 and 0.88, 1.28 and 0.97 without)
+    seen = np.all(np.isfinite(meas.q), axis=1)
+    z = (meas.points[seen] - points_from_joints(truth, meas.q[seen])) / meas.sigma[seen, None]
+    assert 0.7 < np.sqrt(np.mean(z**2)) < 1.4, np.sqrt(np.mean(z**2))
     (chi2,) = [float(re.search(r"reduced chi-square ([0-9.]+)", w).group(1)) for w in result["warnings"]
                if "reduced chi-square" in w]
-    assert 0.5 < chi2 < 2.0, chi2  # measured 0.88
+    # the fit's residuals are smaller than those errors: 30 fitted steps take up part of the views' depth errors, which
+    # vary smoothly with the pose (measured 0.49; 0.57 without the view's error, and 0.41 at robot seed 5)
+    assert 0.3 < chi2 < 2.0, chi2
     rng = np.random.default_rng(0)
     lo, hi = np.array(yaml.safe_load(SITE)["plan"]["sweep_ranges"]).T
     q_check = rng.uniform(lo, hi, (100, 6))
