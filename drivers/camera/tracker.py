@@ -65,14 +65,14 @@ independent with the noise of the pooled reprojection residuals (never below ``d
 the frames scatter significantly more than C says (F-test), their spread is used instead. Beyond that noise, the
 detection errs by a fixed amount for each view of the target (the corners' localisation bias at that angle and
 scale: the same in every frame and every reading of a still view, so averaging does not reduce it). Each reading
-states it as ``shared`` (m) and ``shared_r`` (rad): the pose's sensitivity to a corner error of
-``drivers.camera.pose.VIEW_BIAS_PX`` (``VIEW_TURN_BIAS_PX`` for the orientation) pixels per coordinate, independent
-from corner to corner, and adds it in quadrature to sigma and sigma_r; the orchestrator divides only the rest by the
-number of readings of a step. Measured on rendered images at a calibration plan's views (``bench/camera_honesty.py``,
-docs/benchmarks.md section 23): without it a step's orientation errors were 2.7x, its positions' 2.4x their stated
-sigmas; VIEW_TURN_BIAS_PX = 0.015 px brings the orientations to 1.1-1.2x; VIEW_BIAS_PX stays 0 (a value that made
-the plan's positions honest over-stated milder views), so a camera's positions are still under-stated there. A
-camera's
+states it as ``shared`` (m) and ``shared_r`` (rad) (drivers.camera.pose.Pose.view_bias) and adds it in quadrature to
+sigma and sigma_r; the orchestrator divides only the rest by the number of readings of a step. For the orientation:
+the pose's sensitivity to a corner error of ``VIEW_TURN_BIAS_PX`` per coordinate, independent from corner to
+corner. For the TP: a coherent error of the target's apparent size (the corners' image scaled by ``VIEW_BIAS_PX`` at
+its RMS radius, over cos² of the obliquity), a depth error along the line of sight that grows with the obliquity.
+Measured on rendered images (``bench/camera_honesty.py``, docs/benchmarks.md section 23): without them a step's
+orientation errors were 2.7x, its positions' 2.4x their stated sigmas at a calibration plan's views (1.9x at random
+views about home); with them 1.2x at fresh plan views for both, positions 1.06-1.08x at random views. A camera's
 error is mostly along its line of sight (depth: typically 5-10x a lateral one), so sigma, the RMS over
 the axes, is ~1.7x too large across and ~0.6x of the depth error. Consequence for the weights
 (1 / sigma² per sample): the sum of squared weighted residuals has the expectation it would have for
