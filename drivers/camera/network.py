@@ -12,7 +12,8 @@ Frame times (s):
 - MJPEG: a part's ``X-Timestamp: SECONDS.MICROSECONDS`` header, as mjpg-streamer, camera-streamer and the ESP32
   camera web server send it, is the frame's capture time on the **camera's clock** (its epoch is the device's: often
   its boot, the epoch where its clock is set). It is used when the first :data:`~drivers.camera.sources.PROBE_FRAMES`
-  frames carry it and it advances at the host clock's rate (:func:`~drivers.camera.sources.device_stamps_usable`);
+  frames carry it and it advances at the host clock's rate within :data:`STAMP_RATE_TOLERANCE`
+  (:func:`~drivers.camera.sources.device_stamps_usable`);
   otherwise a frame's time is the host time when its part began to arrive. A ``Date`` header (whole seconds) is
   not a frame time; Axis and go2rtc send no frame time.
 - Snapshot: the middle of the request (host time between sending the GET and holding the whole image), uncertain
@@ -60,6 +61,10 @@ RETRY_WAIT = 0.5  # s between reconnection attempts of a broken stream
 LINE_LIMIT = 65536  # bytes: longest header line (a part's body without Content-Length is read in lines this long)
 MAX_PART = 64 << 20  # bytes: a part larger than this is not a camera frame
 STAMP_HEADERS = ("x-timestamp",)  # a part's header holding its frame time (s on the camera's clock)
+# X-Timestamp must advance at the host clock's rate within this share over the probe frames: arrivals jitter by the
+# network and the host (tens of ms over the 8 frames' quarter second on WiFi or a loaded host); the check is there to
+# refuse a frame counter or the wrong unit (ms), which are off by far more
+STAMP_RATE_TOLERANCE = 0.5
 
 
 class StreamBroken(Exception):
@@ -191,6 +196,7 @@ class NetworkCamera:
         self._thread: threading.Thread | None = None
         self._connection: http.client.HTTPConnection | None = None
         self._socket: socket.socket | None = None
+        self._response: http.client.HTTPResponse | None = None
         self._frame: tuple[Image, float] | None = None  # newest frame and its host time
         self._sink: FrameQueue | None = None
         self._seq, self._device_stamps, self._last_arrival, self._bad_parts = 0, False, 0.0, 0
@@ -218,14 +224,15 @@ class NetworkCamera:
             connection.request("GET", self.path, headers={"Accept": "multipart/x-mixed-replace, image/*"})
             response = connection.getresponse()
         except (OSError, http.client.HTTPException) as exc:
-            connection.close()
+            self._connection = connection
+            self._close_connection()
             raise self._network_error(exc, timeout) from None
+        self._connection, self._response = connection, response
         if response.status != 200:
             hint = {401: " (authentication is not supported)", 403: " (forbidden)",
                     404: " (wrong path? the server has no such page)"}.get(response.status, "")
-            connection.close()
+            self._close_connection()
             raise ConnectionFailed(self._fail(f"HTTP {response.status} {response.reason}{hint}"))
-        self._connection = connection
         return response
 
     def _snapshot(self, timeout: float) -> tuple[Image, float, float]:
@@ -251,9 +258,11 @@ class NetworkCamera:
             with contextlib.suppress(OSError):  # the response may still hold it: end the TCP connection itself
                 self._socket.shutdown(socket.SHUT_RDWR)
             self._socket.close()
-        if self._connection is not None:
-            self._connection.close()
-        self._connection = self._socket = None
+        for part in (self._response, self._connection):
+            if part is not None:
+                with contextlib.suppress(OSError, http.client.HTTPException):
+                    part.close()
+        self._connection = self._socket = self._response = None
 
     # --- the source interface (drivers/camera/sources.py) ---------------------------------------------------
 
@@ -319,7 +328,7 @@ class NetworkCamera:
                                                    f"{timeout:g} s ({why})"))
                 self._lock.wait(left)
             host, device = (np.array(v) for v in zip(*self._probe, strict=True))
-        usable, why = device_stamps_usable(host, device * 1e3)
+        usable, why = device_stamps_usable(host, device * 1e3, STAMP_RATE_TOLERANCE)
         self._device_stamps = usable
         self.rate = 1.0 / max(float(np.median(np.diff(device if usable else host))), 1e-6)
         if usable:
@@ -351,6 +360,7 @@ class NetworkCamera:
                     with self._lock:
                         self._error = str(exc).removeprefix(self._fail(""))
                     time.sleep(RETRY_WAIT)
+        self._close_connection()  # closed while reconnecting
 
     def _snapshot_loop(self) -> None:
         """The poller thread of a streamed snapshot camera: snapshots back to back while streaming."""
