@@ -83,8 +83,8 @@ class HttpCamera:
                 handler.send_header("Content-Type", "image/jpeg")
                 handler.send_header("Content-Length", str(len(jpeg)))
                 handler.end_headers()
+                self.sent.append((exposed, time.time()))  # before the client can hold the image
                 handler.wfile.write(jpeg)
-                self.sent.append((exposed, time.time()))
             elif path in ("/stream", "/nolength", "/stall", "/garbage"):
                 self._stream(handler, path)
             elif path == "/page":
@@ -118,9 +118,9 @@ class HttpCamera:
                 head.append(f"Content-Length: {len(jpeg)}")
             if self.stamps:
                 head.append(f"X-Timestamp: {now - self.latency + self.clock_offset:.6f}")
+            self.sent.append((now - self.latency, now))  # before the client can hold the frame
             handler.wfile.write(("\r\n".join(head) + "\r\n\r\n").encode() + jpeg + b"\r\n")
             handler.wfile.flush()
-            self.sent.append((now - self.latency, now))
             k, self.streamed = k + 1, self.streamed + 1
 
     def stop(self) -> None:

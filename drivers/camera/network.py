@@ -190,6 +190,7 @@ class NetworkCamera:
         self.kind = ""
         self.rate, self.stamps = math.nan, "host time (not open)"
         self.measured_latency = self.latency_spread = math.nan
+        self.last_round_trip = math.nan  # s: the last snapshot's (its stamp is uncertain by half of it)
         self.timeout = 2.0
         self._lock = threading.Condition()
         self._running = False
@@ -247,6 +248,7 @@ class NetworkCamera:
         finally:
             self._close_connection()
         received = time.time()
+        self.last_round_trip = received - sent
         image = decode_jpeg(body)
         if image is None:
             kind = response.getheader("Content-Type", "no Content-Type")
