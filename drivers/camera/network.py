@@ -60,6 +60,7 @@ from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout
 RETRY_WAIT = 0.5  # s between reconnection attempts of a broken stream
 LINE_LIMIT = 65536  # bytes: longest header line (a part's body without Content-Length is read in lines this long)
 MAX_PART = 64 << 20  # bytes: a part larger than this is not a camera frame
+MAX_QUEUE = 60  # frames waiting for detection at most (a snapshot URL on a fast link answers hundreds a second)
 STAMP_HEADERS = ("x-timestamp",)  # a part's header holding its frame time (s on the camera's clock)
 # X-Timestamp must advance at the host clock's rate within this share over the probe frames: arrivals jitter by the
 # network and the host (tens of ms over the 8 frames' quarter second on WiFi or a loaded host); the check is there to
@@ -164,6 +165,15 @@ class MultipartReader:
                 body = b"".join(chunks)
                 return headers, body[:-2] if body.endswith(b"\r\n") else body, arrived
             chunks.append(line)
+
+
+def boundary_of(content_type: str) -> str:
+    """The ``boundary`` parameter of a ``multipart/...`` Content-Type ("" when it has none)."""
+    for param in content_type.split(";")[1:]:
+        key, _, value = param.partition("=")
+        if key.strip().lower() == "boundary":
+            return value.strip()
+    return ""
 
 
 def part_stamp(headers: dict[str, str]) -> float:
@@ -273,12 +283,10 @@ class NetworkCamera:
         self.timeout = timeout
         response = self._request(timeout)
         kind = (response.getheader("Content-Type") or "").strip()
-        media, _, params = kind.partition(";")
-        media = media.strip().lower()
+        media = kind.partition(";")[0].strip().lower()
         self._running, self._probe, self._error, self._bad_parts = True, [], "", 0
         if media.startswith("multipart/"):
-            boundary = next((v.strip() for k, _, v in (p.partition("=") for p in params.split(";"))
-                             if k.strip().lower() == "boundary"), "")
+            boundary = boundary_of(kind)
             if not boundary:
                 self.close()
                 raise ConnectionFailed(self._fail(f"a multipart answer without a boundary ({kind})"))
@@ -345,7 +353,8 @@ class NetworkCamera:
     def _mjpeg_loop(self, response: http.client.HTTPResponse, boundary: str) -> None:
         """The reader thread: every part of the stream, reconnecting when it breaks (module docstring)."""
         while self._running:
-            reader = MultipartReader(response, boundary)
+            # a server may draw a new boundary for each connection
+            reader = MultipartReader(response, boundary_of(response.getheader("Content-Type") or "") or boundary)
             try:
                 while self._running:
                     headers, body, arrived = reader.next_part()
@@ -420,7 +429,7 @@ class NetworkCamera:
         frame rate (Hz). A snapshot camera is polled back to back by a thread meanwhile."""
         if not self._running:
             raise ConnectionFailed(self._fail("not open (connect first)"))
-        queue = FrameQueue(math.ceil(self.rate * QUEUE_SECONDS))
+        queue = FrameQueue(min(math.ceil(self.rate * QUEUE_SECONDS), MAX_QUEUE))
         with self._lock:
             self._sink, self._seq, self._last_arrival = queue, 0, time.monotonic()
         if self.kind == "snapshot":
