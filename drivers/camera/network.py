@@ -306,7 +306,7 @@ class NetworkCamera:
         except BadReading as exc:
             self.close()
             raise ConnectionFailed(str(exc)) from None
-        except DeviceTimeout:
+        except (DeviceTimeout, ConnectionFailed):
             self.close()
             raise
 
