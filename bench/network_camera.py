@@ -94,21 +94,25 @@ def timing(frames: list[np.ndarray]) -> None:
 
 
 def throughput(frames: list[np.ndarray], folder: Path, seconds: float, fps: float) -> None:
-    """Rows per second that a streamed MJPEG camera delivers to the tracker (decoding and detection included)."""
-    server = HttpCamera(frames, fps=fps, latency=0.03)
-    tracker = open_tracker(f"aruco:{server.url('/stream')}#camera={folder / 'cam.yaml'}&{BOARD}")
-    tracker.connect(2.0)
-    try:
-        tracker.start_stream(fps, 2.0)
-        time.sleep(seconds)
-        batch = tracker.stop_stream(5.0)
-        counts, detect = tracker.stream_counts, tracker.detect_seconds
-    finally:
-        tracker.close()
-        server.stop()
-    per_frame = 1e3 * detect / max(counts["frames"], 1)
-    print(f"\nStreaming at {fps:g} Hz for {seconds:g} s: {len(batch.t)} rows ({len(batch.t) / seconds:.1f} /s), "
-          f"gaps {len(batch.gaps)}, missing {counts['missing']}, detection {per_frame:.1f} ms/frame")
+    """Rows per second that a streamed camera delivers to the tracker (decoding and detection included): an MJPEG
+    stream at ``fps``, and snapshot URLs (polled at their own pace) answering at once and after 30 ms."""
+    print()
+    for path, delay in (("/stream", 0.0), ("/snapshot", 0.0), ("/snapshot", 0.03)):
+        server = HttpCamera(frames, fps=fps, latency=0.03, delay=delay)
+        tracker = open_tracker(f"aruco:{server.url(path)}#camera={folder / 'cam.yaml'}&{BOARD}")
+        tracker.connect(2.0)
+        try:
+            rate = tracker.start_stream(fps, 2.0)
+            time.sleep(seconds)
+            batch = tracker.stop_stream(5.0)
+            counts, detect = tracker.stream_counts, tracker.detect_seconds
+        finally:
+            tracker.close()
+            server.stop()
+        per_frame = 1e3 * detect / max(counts["frames"], 1)
+        print(f"streaming {path} (delay {delay * 1e3:g} ms) at {rate:.1f} Hz for {seconds:g} s: {len(batch.t)} rows "
+              f"({len(batch.t) / seconds:.1f} /s), gaps {len(batch.gaps)}, missing {counts['missing']}, detection "
+              f"{per_frame:.1f} ms/frame")
 
 
 def accuracy(camera_model: CameraIntrinsics, views: list[np.ndarray], renders: list[list[np.ndarray]],

@@ -17,7 +17,8 @@ Frame times (s):
   otherwise a frame's time is the host time when its part began to arrive. A ``Date`` header (whole seconds) is
   not a frame time; Axis and go2rtc send no frame time.
 - Snapshot: the middle of the request (host time between sending the GET and holding the whole image), uncertain
-  by half the round trip.
+  by half the round trip. A stream polls it at ``rate``: :data:`MAX_SNAPSHOT_RATE` at most, and no faster than
+  every :data:`PACE_TRIPS` median round trips (measured at ``open``).
 
 Latency, measured on the frames right after ``open`` (``measured_latency`` and ``latency_spread``, s, in the tracker's
 identity as ``latency_measured`` and ``latency_spread``; ``acquire --probe`` prints them):
@@ -60,6 +61,11 @@ from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout
 RETRY_WAIT = 0.5  # s between reconnection attempts of a broken stream
 LINE_LIMIT = 65536  # bytes: longest header line (a part's body without Content-Length is read in lines this long)
 MAX_PART = 64 << 20  # bytes: a part larger than this is not a camera frame
+# a snapshot URL has no frame rate of its own: a stream polls it at most this often (faster than its sensor it would
+# answer the same image twice, under two times) and every PACE_TRIPS median round trips at the fastest (so that a
+# request of ordinary length never delays the next beyond the stream's gap limit, 1.5 periods)
+MAX_SNAPSHOT_RATE = 30.0
+PACE_TRIPS = 1.5
 MAX_QUEUE = 60  # frames waiting for detection at most (a snapshot URL on a fast link answers hundreds a second)
 STAMP_HEADERS = ("x-timestamp",)  # a part's header holding its frame time (s on the camera's clock)
 # X-Timestamp must advance at the host clock's rate within this share over the probe frames: arrivals jitter by the
@@ -190,8 +196,8 @@ def part_stamp(headers: dict[str, str]) -> float:
 
 class NetworkCamera:
     """An HTTP camera (module docstring): ``url`` as given. After ``open``: ``kind`` (``mjpeg`` or ``snapshot``),
-    ``rate`` (Hz, measured), ``stamps`` (what a streamed frame's time is), ``measured_latency`` and
-    ``latency_spread`` (s; NaN when not measurable)."""
+    ``rate`` (Hz: an MJPEG stream's measured; the pace a snapshot URL is polled at), ``stamps`` (what a streamed
+    frame's time is), ``measured_latency`` and ``latency_spread`` (s; NaN when not measurable)."""
 
     def __init__(self, url: str, width: int = 0, height: int = 0) -> None:
         self.url, self.width, self.height = url, width, height
@@ -319,8 +325,8 @@ class NetworkCamera:
                 self._probe.append((middle, trip))
                 if time.monotonic() - started > timeout and len(self._probe) >= 3:
                     break
-            host, trips = (np.array(v) for v in zip(*self._probe, strict=True))
-            self.rate = 1.0 / max(float(np.median(np.diff(host))), 1e-6)
+            trips = np.array([trip for _, trip in self._probe])
+            self.rate = min(MAX_SNAPSHOT_RATE, 1.0 / max(PACE_TRIPS * float(np.median(trips)), 1e-6))
             self.measured_latency, self.latency_spread = float(np.median(trips)) / 2, float(np.std(trips)) / 2
             self.stamps = "host time at the middle of each request (uncertain by half its round trip)"
             return
@@ -374,15 +380,20 @@ class NetworkCamera:
         self._close_connection()  # closed while reconnecting
 
     def _snapshot_loop(self) -> None:
-        """The poller thread of a streamed snapshot camera: snapshots back to back while streaming."""
+        """The poller thread of a streamed snapshot camera: a snapshot every ``1 / rate`` s while streaming (at once
+        after one that took longer)."""
+        period, due = 1.0 / self.rate, time.monotonic()
         while self._running and self._sink is not None:
+            wait = due - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+            due = max(due + period, time.monotonic())
             try:
                 image, middle, _ = self._snapshot(self.timeout)
             except (ConnectionFailed, DeviceTimeout, BadReading) as exc:
                 with self._lock:
                     self._error = str(exc).removeprefix(self._fail(""))
                     self._seq += 1  # a lost frame: its number is skipped
-                time.sleep(min(RETRY_WAIT, 1.0 / self.rate))
                 continue
             self._deliver(image, middle, math.nan)
 

@@ -247,6 +247,9 @@ def test_a_snapshot_url_streams_by_polling_and_stamps_each_frame_within_its_requ
     finally:
         tracker.close()
     assert len(batch.t) >= 5
+    # polled every 1.5 median round trips: no gap unless a request takes 2.5x the median (a real hiccup on a loaded
+    # host; back to back, as first written, the stamps' jitter made 7 gaps in 44 rows)
+    assert len(batch.gaps) <= 1
     # each row's stamp is the middle of its request: within half a round trip (the 10 ms delay and loopback, tens
     # of ms on a loaded host) of the time a snapshot was taken
     taken = np.array(server.sent)[:, 0]
