@@ -41,14 +41,16 @@ Camera and measurement:
               ``frames`` (default 5), then the reading fails with one line
 Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), ``fov`` horizontal degrees
 (60), ``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of
-motion streak (0), ``fps`` frame rate, Hz (30), ``latency`` s from a frame's exposure to its timestamp (0),
+motion streak (0), ``fps`` frame rate, Hz (30), ``latency`` s from a frame's exposure to its delivery and timestamp (0),
 ``distance`` m from the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home
 (20, 10; with ``mount=flange``: of the board seen from the flange camera at home), ``printed`` (``mount=flange``:
-the true board's size over the declared one, 1), ``seed`` (the robot's), ``fault`` as the mock tracker's
-(``target_lost`` hides the target,
-``bad_reading`` shows a second copy, ``slow`` stops the frames, ``disconnect`` loses the camera); for streams
-``drop`` (probability that the camera loses a frame, 0) and ``lost=D[@S]`` (the target hidden for D s from S s,
-default 2, into every stream). Any other option is rejected with one line.
+the true board's size over the declared one, 1), a real camera's errors (drivers/camera/imperfections.py: ``dk1``,
+``dk2`` distortion left after calibration, ``shutter`` s rolling-shutter readout, ``exposure`` s motion blur,
+``gain``, ``gradient``, ``glare`` lighting, ``bow`` m a board not flat), ``seed`` (the robot's), ``fault`` as the
+mock tracker's (``target_lost`` hides the target, ``bad_reading`` shows a second copy, ``slow`` stops the
+frames, ``disconnect`` loses the camera); for streams ``drop`` (probability that the camera loses a frame, 0) and
+``lost=D[@S]`` (the target hidden for D s from S s, default 2, into every stream). Any other option is rejected
+with one line.
 
 Streaming (continuous motion, drivers/camera/stream.py): every frame at the camera's frame rate, stamped with its
 capture time (the identity's ``stream_timestamps`` says which clock), measured in a worker thread like a polled
@@ -104,6 +106,8 @@ from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_re
 from drivers.camera import pose as pose_math
 from drivers.camera.flange_camera import MOUNTS
 from drivers.camera.flange_camera import scale_sigma as flange_scale_sigma
+from drivers.camera.imperfections import OPTIONS as IMPERFECTIONS
+from drivers.camera.imperfections import parse as parse_imperfections
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
 from drivers.camera.pose import CornerNoise, Pose, estimate_pose
 from drivers.camera.stream import FrameStreaming
@@ -125,7 +129,7 @@ FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
            "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
-               "tilt", "roll", "seed", "fault", "printed")
+               "tilt", "roll", "seed", "fault", "printed", *IMPERFECTIONS)
 SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
 OUTLIER_SIGMAS = 5.0
 CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
@@ -271,6 +275,7 @@ def _sim_settings(spec: TrackerSpec, raw: dict[str, Any]) -> dict[str, Any]:
         out["k1"] = float(raw.get("k1", 0.0))
         out["fault"] = parse_faults(str(raw["fault"]), "tracker") if "fault" in raw else ()
         out["lost"] = parse_interval("lost", str(raw["lost"])) if "lost" in raw else (0.0, 0.0)
+        out["imperfections"] = parse_imperfections(raw)
     except ValueError as exc:
         raise _fail(spec, str(exc).replace("could not convert string to float", "option k1 must be a number")) from None
     if not out["fov"] < 170:
@@ -476,8 +481,8 @@ def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) 
         from drivers.camera.flange_camera import CAMERA_MOUNT, SimulatedFlangeCamera
 
         flange = SimulatedFlangeCamera(rig, settings.target, camera, CAMERA_MOUNT, optics, sim["fps"], sim["latency"],
-                                       sim["drop"], sim["lost"], printed=sim["printed"])
+                                       sim["drop"], sim["lost"], sim["imperfections"], printed=sim["printed"])
         return ArucoTracker(spec, settings, flange, camera)
     source = SimulatedCamera(rig, settings.target, camera, mount, optics, sim["fps"], sim["latency"], sim["drop"],
-                             sim["lost"])
+                             sim["lost"], sim["imperfections"])
     return ArucoTracker(spec, settings, source, camera)
