@@ -25,6 +25,8 @@ Where the camera is (drivers/camera/flange_camera.py):
   ``mount``   ``cell`` (default): the camera stands in the cell and the target rides on the flange; ``flange``: the
               camera rides on the flange (eye-in-hand) and sees a board fixed in the cell; the readings are the
               board's pose in the camera frame and the session is a ``sensor: flange`` one
+  ``flatness`` m: the print may be this far out of flat (default 0: flat): its shape is estimated from every frame
+              so far and each reading corrected, the shape's uncertainty in its ``shared`` (drivers/camera/flatness.py)
   ``square_sigma`` (ChArUco) / ``size_sigma`` (grid, marker): the board was measured (``square=`` / ``size=`` is
               the caliper's value) with this standard uncertainty, m: the scale reference (without it the print is
               unverified and identify checks the scale against the robot's nominal lengths)
@@ -106,6 +108,7 @@ from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_re
 from drivers.camera import pose as pose_math
 from drivers.camera.flange_camera import MOUNTS
 from drivers.camera.flange_camera import scale_sigma as flange_scale_sigma
+from drivers.camera.flatness import BoardShape
 from drivers.camera.imperfections import OPTIONS as IMPERFECTIONS
 from drivers.camera.imperfections import parse as parse_imperfections
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
@@ -127,7 +130,7 @@ from drivers.spec import TrackerSpec, parse_faults, parse_interval
 FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
         "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
-           "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma")
+           "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma", "flatness")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
                "tilt", "roll", "seed", "fault", "printed", *IMPERFECTIONS)
 SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
@@ -150,6 +153,7 @@ class Settings:
     sim: dict[str, Any]
     mount: str = "cell"  # where the camera is: "cell" or "flange" (drivers/camera/flange_camera.py)
     scale_sigma: float | None = None  # relative uncertainty of the measured board's scale (None: not measured)
+    flatness: float = 0.0  # m: the print's shape modes' standard uncertainty (drivers/camera/flatness.py)
 
 
 def _fail(spec: TrackerSpec, why: str) -> SpecError:
@@ -204,7 +208,8 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
     return Settings(target, tp, refine, _number(spec, raw, "frames", 5, int, 1, strict=False),
                     _number(spec, raw, "max_rms", 1.0), _number(spec, raw, "timeout", 2.0),
                     _number(spec, raw, "retries", 5, int, 0, strict=False),
-                    None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target))
+                    None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target),
+                    _number(spec, raw, "flatness", 0.0, low=0, strict=False))
 
 
 def _scale_sigma(spec: TrackerSpec, raw: dict[str, Any], target: Target) -> float | None:
@@ -303,6 +308,8 @@ class ArucoTracker(FrameStreaming):
         self.spec, self.settings, self.source, self.camera = spec, settings, source, camera
         self.detector = Detector(settings.target, settings.refine, camera)
         self.reference: Array | None = None  # rotation of the last pose: keeps IPPE solutions on one branch
+        self._observation: Any = None  # the last frame's detected points
+        self.shape = BoardShape(settings.flatness, settings.target.extent) if settings.flatness else None
         self.frames_used = self.frames_failed = 0
         self._init_stream()
 
@@ -345,18 +352,23 @@ class ArucoTracker(FrameStreaming):
     def _reading(self) -> TrackerReading:
         s = self.settings
         poses: list[tuple[Pose, float]] = []
+        flat: list[tuple[float, float]] = []  # each frame's error from the board's shape (m, rad)
         failures: list[MeasurementError] = []
         while len(poses) < s.frames:
             image, stamp = self._grab()
             try:
-                poses.append((self._pose(image), stamp))
+                pose, bias = self._pose(image), (0.0, 0.0)
+                if self.shape is not None:  # corrected for the board's shape seen so far (this frame included)
+                    pose, bias = self.shape.take(pose, self._observation, self.camera, s.tp)
+                poses.append((pose, stamp))
+                flat.append(bias)
             except MeasurementError as exc:
                 failures.append(exc)
                 self.frames_failed += 1
                 if len(failures) > s.retries:
                     raise _summary(failures, len(poses) + len(failures)) from None
         self.frames_used += len(poses)
-        return self._average(poses)
+        return self._average(poses, flat)
 
     def _grab(self) -> tuple[Any, float]:
         timeout = self.settings.timeout
@@ -377,7 +389,7 @@ class ArucoTracker(FrameStreaming):
         return image, stamp
 
     def _pose(self, image: Any) -> Pose:
-        obs = self.detector.detect(image)
+        obs = self._observation = self.detector.detect(image)
         if not obs.ids:
             raise TargetLost("the target is not visible")
         square = self.settings.target.kind == "marker"
@@ -390,7 +402,7 @@ class ArucoTracker(FrameStreaming):
         self.reference = pose.rotation
         return pose
 
-    def _average(self, poses: list[tuple[Pose, float]]) -> TrackerReading:
+    def _average(self, poses: list[tuple[Pose, float]], flat: list[tuple[float, float]]) -> TrackerReading:
         tp = self.settings.tp
         pts = np.array([p.point(tp) for p, _ in poses])
         noise = CornerNoise()
@@ -417,7 +429,7 @@ class ArucoTracker(FrameStreaming):
         # the detection's bias for this view: the same in every frame and every reading of it (not averaged)
         bias = np.array([p.view_bias(tp, pose_math.VIEW_BIAS_PX, pose_math.VIEW_TURN_BIAS_PX)
                          for (p, _), k in zip(poses, kept, strict=True) if k])
-        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0))
+        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0) + np.mean(np.array(flat)[kept] ** 2, axis=0))
         return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=math.hypot(sigma, shared), status=status,
                               rotvec=rotvec, sigma_r=math.hypot(sigma_r, shared_r), shared=float(shared),
                               shared_r=float(shared_r))
