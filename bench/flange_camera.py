@@ -76,13 +76,16 @@ TARGET_RMS = 3e-4  # m
 TARGET_RATIO = (0.7, 1.3)
 MISPRINTS = (1.003, 1.005)  # the true board's size over its nominal one (a print 0.3 % and 0.5 % large)
 #: a real camera's errors (drivers/camera/imperfections.py), one at a time and all together (--realistic)
-REAL_ERRORS = {"distortion": "dk1=0.0015",  # left after calibration: 0.48 px at the image's corners
+REAL_ERRORS = {"distortion": "dk1=0.0015&lens_sigma=0.005",  # left after calibration: 0.48 px at the corners
                "shutter": "shutter=0.03",  # rolling shutter: 30 ms to read the 720 rows
                "blur": "exposure=0.01",  # 10 ms exposure, the arm's motion meanwhile blurs
                "lighting": "gain=0.6&gradient=0.3&glare=120",  # dim, uneven (±30 %), a lamp's reflection
                "bow": "bow=0.0005&flatness=0.0005",  # the board 0.5 mm out of flat, flatness= says it may be
                "latency": "latency=0.1"}  # 100 ms from exposure to delivery
 REAL_ERRORS["all"] = "&".join(REAL_ERRORS.values())
+#: the same errors with the user declaring neither the board's flatness nor the lens's uncertainty (nothing estimated)
+REAL_ERRORS["undeclared"] = "&".join(o for o in REAL_ERRORS["all"].split("&") if o.split("=")[0] not in
+                                     ("flatness", "lens_sigma"))
 SPEED, ACCELERATION = 1.0, 2.0  # rad/s, rad/s² of the calibration moves
 
 

@@ -25,8 +25,9 @@ Where the camera is (drivers/camera/flange_camera.py):
   ``mount``   ``cell`` (default): the camera stands in the cell and the target rides on the flange; ``flange``: the
               camera rides on the flange (eye-in-hand) and sees a board fixed in the cell; the readings are the
               board's pose in the camera frame and the session is a ``sensor: flange`` one
-  ``flatness`` m: the print may be this far out of flat (default 0: flat): its shape is estimated from every frame
-              so far and each reading corrected, the shape's uncertainty in its ``shared`` (drivers/camera/flatness.py)
+  ``flatness`` m: the print may be this far out of flat (default 0: flat); ``lens_sigma``: the calibration's k1 and
+              k2 may be this far off (default 0): the board's shape and the lens's error are estimated from every frame
+              so far and each reading corrected, their uncertainty in its ``shared`` (drivers/camera/board_and_lens.py)
   ``square_sigma`` (ChArUco) / ``size_sigma`` (grid, marker): the board was measured (``square=`` / ``size=`` is
               the caliper's value) with this standard uncertainty, m: the scale reference (without it the print is
               unverified and identify checks the scale against the robot's nominal lengths)
@@ -41,23 +42,20 @@ Camera and measurement:
               RMS exceeds it is rejected (motion blur, a bent print; default 1.0)
   ``timeout`` s to wait for one frame (default 2); ``retries`` failed frames tolerated per reading beyond
               ``frames`` (default 5), then the reading fails with one line
-Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), ``fov`` horizontal degrees
-(60), ``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of
-motion streak (0), ``fps`` frame rate, Hz (30), ``latency`` s from a frame's exposure to its delivery and timestamp (0),
-``distance`` m from the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home
-(20, 10; with ``mount=flange``: of the board seen from the flange camera at home), ``printed`` (``mount=flange``:
-the true board's size over the declared one, 1), a real camera's errors (drivers/camera/imperfections.py: ``dk1``,
-``dk2`` distortion left after calibration, ``shutter`` s rolling-shutter readout, ``exposure`` s motion blur,
-``gain``, ``gradient``, ``glare`` lighting, ``bow`` m a board not flat), ``seed`` (the robot's), ``fault`` as the
-mock tracker's (``target_lost`` hides the target, ``bad_reading`` shows a second copy, ``slow`` stops the
-frames, ``disconnect`` loses the camera); for streams ``drop`` (probability that the camera loses a frame, 0) and
-``lost=D[@S]`` (the target hidden for D s from S s, default 2, into every stream). Any other option is rejected
-with one line.
+Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), ``fov`` horizontal degrees (60),
+``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of motion streak
+(0), ``fps`` Hz (30), ``latency`` s from a frame's exposure to its delivery and timestamp (0), ``distance`` m from
+the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home (20, 10; ``mount=flange``:
+of the board seen from the camera at home), ``printed`` (``mount=flange``: the true board's size over the declared
+one, 1), a real camera's errors (drivers/camera/imperfections.py: ``dk1``, ``dk2`` distortion left after
+calibration, ``shutter`` s rolling shutter, ``exposure`` s motion blur, ``gain``, ``gradient``, ``glare`` light,
+``bow`` m a board not flat), ``seed`` (the robot's), ``fault`` as the mock tracker's (``target_lost``,
+``bad_reading``: a second copy, ``slow``, ``disconnect``); for streams ``drop`` (probability of a lost frame, 0)
+and ``lost=D[@S]`` (the target hidden for D s from S s, default 2, into every stream). Other options: one line.
 
 Streaming (continuous motion, drivers/camera/stream.py): every frame at the camera's frame rate, stamped with its
 capture time (the identity's ``stream_timestamps`` says which clock), measured in a worker thread like a polled
-frame, one row each; frames where the target is not seen or fails a check, and frames the camera lost, are
-recorded gaps.
+frame, one row each; frames where the target is not seen or fails a check, and frames the camera lost, are gaps.
 
 A reading: the TP of every frame (pose by drivers/camera/pose.py), frames farther than 5 robust sigmas
 from the median rejected, the rest averaged. Its ``sigma`` is the standard uncertainty per axis (m), one
@@ -106,9 +104,9 @@ from scipy.stats import f as f_dist
 from drivers.averaging import mean_orientation
 from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
 from drivers.camera import pose as pose_math
+from drivers.camera.board_and_lens import BoardAndLens
 from drivers.camera.flange_camera import MOUNTS
 from drivers.camera.flange_camera import scale_sigma as flange_scale_sigma
-from drivers.camera.flatness import BoardShape
 from drivers.camera.imperfections import OPTIONS as IMPERFECTIONS
 from drivers.camera.imperfections import parse as parse_imperfections
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
@@ -130,7 +128,8 @@ from drivers.spec import TrackerSpec, parse_faults, parse_interval
 FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
         "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
-           "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma", "flatness")
+           "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma", "flatness",
+           "lens_sigma")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
                "tilt", "roll", "seed", "fault", "printed", *IMPERFECTIONS)
 SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
@@ -153,7 +152,8 @@ class Settings:
     sim: dict[str, Any]
     mount: str = "cell"  # where the camera is: "cell" or "flange" (drivers/camera/flange_camera.py)
     scale_sigma: float | None = None  # relative uncertainty of the measured board's scale (None: not measured)
-    flatness: float = 0.0  # m: the print's shape modes' standard uncertainty (drivers/camera/flatness.py)
+    flatness: float = 0.0  # m: the print's shape modes' prior (drivers/camera/board_and_lens.py)
+    lens_sigma: float = 0.0  # the calibrated k1's and k2's prior uncertainty
 
 
 def _fail(spec: TrackerSpec, why: str) -> SpecError:
@@ -209,7 +209,7 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
                     _number(spec, raw, "max_rms", 1.0), _number(spec, raw, "timeout", 2.0),
                     _number(spec, raw, "retries", 5, int, 0, strict=False),
                     None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target),
-                    _number(spec, raw, "flatness", 0.0, low=0, strict=False))
+                    *(_number(spec, raw, key, 0.0, low=0, strict=False) for key in ("flatness", "lens_sigma")))
 
 
 def _scale_sigma(spec: TrackerSpec, raw: dict[str, Any], target: Target) -> float | None:
@@ -308,8 +308,8 @@ class ArucoTracker(FrameStreaming):
         self.spec, self.settings, self.source, self.camera = spec, settings, source, camera
         self.detector = Detector(settings.target, settings.refine, camera)
         self.reference: Array | None = None  # rotation of the last pose: keeps IPPE solutions on one branch
-        self._observation: Any = None  # the last frame's detected points
-        self.shape = BoardShape(settings.flatness, settings.target.extent) if settings.flatness else None
+        self._observation: Any = None  # the last frame's detected points (BoardAndLens reads them)
+        self.shape = BoardAndLens.of(settings.flatness, settings.lens_sigma, settings.target.extent)
         self.frames_used = self.frames_failed = 0
         self._init_stream()
 
