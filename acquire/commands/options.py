@@ -67,7 +67,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "aruco:... (a camera in the cell; aruco:...&mount=flange: a camera on the flange seeing a fixed "
                    "board: aruco:sim plans "
                    "stop-and-go views that keep it in sight, a real one --probe only; &square_sigma=M: the board "
-                   "measured), mock, or none (motion "
+                   "measured; &flatness=M&lens_sigma=K: the board's shape and the lens's residual k1, k2 estimated "
+                   "from the views; aruco:sim's dk1, shutter, exposure, gain, gradient, glare, bow: a real camera's "
+                   "errors, drivers/camera/imperfections.py), mock, or none (motion "
                    "rehearsal) (mock; on --resume: the session's, whose port or "
                    "host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
