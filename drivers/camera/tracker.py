@@ -7,9 +7,11 @@ URL form (``--tracker``)::
                  [&tp=X,Y,Z][&refine=edges|apriltag|subpix|contour|none][&frames=N][&max_rms=PX]
                  [&timeout=S][&retries=N][&mount=cell|flange][&square_sigma=M | &size_sigma=M]
 
-``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a video file, an image folder or a
-glob (``run/*.png``; replay of a recorded run, ``frames`` images per reading), or ``sim`` (images rendered
-from the simulated robot, mock mode only: ``--robot mock:MODEL``).
+``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a network camera's URL (an MJPEG stream or a
+snapshot URL, ``aruco:http://HOST[:PORT]/PATH[?QUERY]#OPTIONS``: the options follow ``#`` since the ``?`` belongs
+to the URL; drivers/camera/network.py), a video file, an image folder or a glob (``run/*.png``; replay of a recorded
+run, ``frames`` images per reading), or ``sim`` (images rendered from the simulated robot, mock mode only:
+``--robot mock:MODEL``).
 
 Target (units: metres):
   ``marker``  id of a single marker (default 0 when no board or layout is given); ``size`` its side (the
@@ -99,9 +101,8 @@ from typing import Any
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
-from scipy.stats import f as f_dist
 
-from drivers.averaging import mean_orientation
+from drivers.averaging import CHI3_MEDIAN, frame_sigma, mean_orientation
 from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
 from drivers.camera import pose as pose_math
 from drivers.camera.board_and_lens import BoardAndLens
@@ -132,9 +133,7 @@ OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square",
            "lens_sigma")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
                "tilt", "roll", "seed", "fault", "printed", *IMPERFECTIONS)
-SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
 OUTLIER_SIGMAS = 5.0
-CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
 
 
 @dataclass(frozen=True)
@@ -200,7 +199,9 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
         raise _fail(spec, f"option refine={refine} must be one of {', '.join(REFINEMENTS)}")
     camera = raw.get("camera")
     if camera is None and not simulated:
-        raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera")
+        url = spec.target.startswith(("http://", "https://")) and "camera=" in spec.target
+        raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera" +
+                    (" (a network camera's options follow '#': the '?' belongs to its URL)" if url else ""))
     sim = _sim_settings(spec, raw) if simulated else {}
     mount = str(raw.get("mount", "cell"))
     if mount not in MOUNTS:
@@ -338,6 +339,9 @@ class ArucoTracker(FrameStreaming):
                    "mount": s.mount, "scale_sigma": "" if s.scale_sigma is None else repr(s.scale_sigma)}
         if math.isfinite(getattr(self.source, "rate", math.nan)):
             details["frame_rate"] = f"{self.source.rate:g}"
+        for key, name in (("latency_measured", "measured_latency"), ("latency_spread", "latency_spread")):
+            if math.isfinite(getattr(self.source, name, math.nan)):  # a network camera's (s)
+                details[key] = f"{getattr(self.source, name):.6g}"
         return DeviceIdentity("tracker", "ArUco camera (OpenCV)", serial=str(self.spec.target),
                               firmware=f"opencv {cv2.__version__}", details=details)
 
@@ -416,7 +420,7 @@ class ArucoTracker(FrameStreaming):
         robust = max(float(np.median(dist)) / CHI3_MEDIAN, model)
         kept = dist <= OUTLIER_SIGMAS * robust if len(pts) >= 3 else np.ones(len(pts), dtype=bool)
         n = int(kept.sum())
-        sigma = _frame_sigma(model, pts[kept], dof) / math.sqrt(n)
+        sigma = frame_sigma(model, pts[kept], dof) / math.sqrt(n)
         stamp = float(np.mean([t for (_, t), k in zip(poses, kept, strict=True) if k]))
         status = "ok" if n == len(pts) else f"ok ({len(pts) - n} of {len(pts)} frames rejected)"
         # the target frame (the board's axes at the TP): the kept frames' mean orientation, its sigma as the TP's
@@ -425,7 +429,7 @@ class ArucoTracker(FrameStreaming):
         turns = (Rotation.from_rotvec(rotvecs) * Rotation.from_rotvec(rotvec).inv()).as_rotvec()
         model_r = math.sqrt(float(np.mean([np.trace(noise.orientation_covariance(p)) for (p, _), k
                                            in zip(poses, kept, strict=True) if k])) / 3)
-        sigma_r = _frame_sigma(model_r, turns, dof) / math.sqrt(n)
+        sigma_r = frame_sigma(model_r, turns, dof) / math.sqrt(n)
         # the detection's bias for this view: the same in every frame and every reading of it (not averaged)
         bias = np.array([p.view_bias(tp, pose_math.VIEW_BIAS_PX, pose_math.VIEW_TURN_BIAS_PX)
                          for (p, _), k in zip(poses, kept, strict=True) if k])
@@ -433,20 +437,6 @@ class ArucoTracker(FrameStreaming):
         return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=math.hypot(sigma, shared), status=status,
                               rotvec=rotvec, sigma_r=math.hypot(sigma_r, shared_r), shared=float(shared),
                               shared_r=float(shared_r))
-
-
-def _frame_sigma(model: float, pts: Array, dof: int) -> float:
-    """One frame's per-axis standard uncertainty (m): the propagated ``model`` (``dof`` residual degrees of
-    freedom behind it), unless the kept frames ``pts`` (n, 3) scatter significantly more than it (an
-    F-test at SPREAD_SIGNIFICANCE: vibration, flicker, a target still moving), then their spread."""
-    n = len(pts)
-    if n < 2 or dof < 1 or model <= 0:
-        return model
-    spread2 = float(np.mean(np.var(pts, axis=0, ddof=1)))
-    # one axis (depth) dominates the spread: n - 1 degrees of freedom, not 3 (n - 1)
-    if spread2 > model**2 * f_dist.isf(SPREAD_SIGNIFICANCE, n - 1, dof):
-        return math.sqrt(spread2)
-    return model
 
 
 def _summary(failures: list[MeasurementError], tried: int) -> MeasurementError:
@@ -474,10 +464,17 @@ def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) 
     if spec.target != "sim":
         if rig is not None:
             raise ValueError("a real camera cannot see a simulated robot: use aruco:sim with a mock robot")
+        from drivers.camera.network import NetworkCamera
         from drivers.camera.sources import source_for
 
         assert camera is not None
-        return ArucoTracker(spec, settings, source_for(spec.target, camera.width, camera.height), camera)
+        try:
+            source = (NetworkCamera(spec.target, camera.width, camera.height)
+                      if spec.target.startswith(("http://", "https://"))
+                      else source_for(spec.target, camera.width, camera.height))
+        except ValueError as exc:  # a network camera's URL that does not parse
+            raise SpecError(f"tracker spec {str(spec)!r}: {exc}") from None
+        return ArucoTracker(spec, settings, source, camera)
     if rig is None or getattr(rig, "tracker_spec", None) != spec:
         raise ValueError("aruco:sim renders the simulated robot: pass rig=SimulatedRig.from_spec(robot_spec, "
                          "tracker_spec, clock) made from this spec")
