@@ -27,7 +27,7 @@ from acquire.commands.prepare import (
 )
 from acquire.planning.plan import check_plan, estimate_duration, plan_clearance
 from acquire.planning.plan_continuous import estimate_continuous_duration
-from acquire.planning.plan_flange import flange_json, flange_lines, is_flange_camera
+from acquire.planning.plan_flange import flange_json, flange_lines, is_flange_camera, located_record
 from acquire.planning.plan_modes import build_mode_plan, format_modes, mode_site, plan_mode
 from acquire.planning.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.planning.plan_target import TargetError, candidates, choose, format_tradeoff, replan_for_rate
@@ -147,11 +147,21 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if robot_model is None:
         robot_model = load_robot(robot_spec.model)
     setup = None
-    if flange:  # the camera's body in the cell model, its views planned around the board (a resume keeps its plan)
+    if flange:  # located (a new run), the camera's body and cable in the cell model, its views around the board
         assert tracker_spec is not None
-        from acquire.planning.plan_flange import build_flange_plan, camera_site, flange_setup
+        from acquire.commands.flange_locate import LocateEnded, locate
+        from acquire.planning.flange_locate import rough_mount
+        from acquire.planning.plan_flange import build_flange_plan, camera_site, flange_setup, recorded_setup
 
-        setup = flange_setup(robot_model, tracker_spec, site)
+        setup = flange_setup(robot_model, tracker_spec, site, rough_mount(args.camera_mount,
+                                                                          args.camera_mount_tolerance))
+        if session is not None:  # a resume keeps its plan; the mount and board as the locate found them
+            setup = recorded_setup(setup, session.header.get("config") or {}, plan)
+        elif not args.dry_run:
+            try:
+                setup = locate(args, robot_spec, tracker_spec, site, robot_model, setup)
+            except LocateEnded as exc:
+                return exc.code
         site = camera_site(site, setup)
         if plan is None:
             plan = build_flange_plan(robot_model, site, setup)
@@ -186,12 +196,17 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         accuracy = None if rehearsal or flange else predicted_accuracy(
             plan if camera is None else camera.seen_plan(plan), robot_model, site.tp_guess,
             site.tracker_noise if camera is None else camera.noise)
+    flange_accuracy = None
+    if setup is not None and (setup.located is not None or session is None):
+        from acquire.planning.plan_flange import flange_accuracy as bound
+
+        flange_accuracy = bound(robot_model, plan, setup)
     if args.json:
         doc = plan_json(plan, clearance, duration, accuracy)
         if camera is not None:
             doc["camera"] = camera.as_dict(plan)
         if setup is not None:
-            doc["flange_camera"] = flange_json(plan, setup)
+            doc["flange_camera"] = flange_json(plan, setup, flange_accuracy)
         print(json.dumps(doc, allow_nan=False))
         return 0
     if session is not None:
@@ -202,7 +217,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if camera is not None:
         say("\n".join(["", *camera.lines(plan)]))
     if setup is not None:
-        say("\n".join(["", *flange_lines(plan, setup)]))
+        say("\n".join(["", *flange_lines(plan, setup, flange_accuracy)]))
     if tracker_spec is not None and tracker_spec.backend == "emscon":  # what the tracker will be asked to do
         from drivers.trackers.emscon_options import describe
 
@@ -244,6 +259,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv),
+                      **({"flange_locate": located_record(setup)} if setup and setup.located else {}),
                       **({"robot_model": robot_model.document} if robot_model.document is not None else {})}
             session = Session.create(path, plan, config, robot.identity(), tracker.identity(), robot_model.coupling)
         elif changes:
