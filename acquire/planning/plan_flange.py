@@ -178,6 +178,9 @@ def build_flange_plan(robot: RobotModel, site: SiteConfig, setup: FlangeSetup, r
     else:
         notes.append(f"the camera's body: a capsule of radius {site.tool_radius * 1e3:.0f} mm from the flange to "
                      f"{[round(x, 3) for x in (site.tool_b or site.tp_guess)]} m (flange frame) in the cell model")
+        notes.append(f"the camera's cable: {len(site.cable)} capsule(s) of radius up to "
+                     f"{max(c['radius'] for c in site.cable) * 1e3:.0f} mm along the links (cell.cable)" if site.cable
+                     else "the camera's cable is not in the cell model (cell.cable in the site file)")
     views: list[Array] = []
     drawn = 0
     for _ in range(BATCHES):
