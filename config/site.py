@@ -114,7 +114,8 @@ class SiteConfig:
     ``{name, a, b, radius}`` (axis ends); ``cable`` a camera's cable as capsules ``{frame, a, b, radius}`` fixed
     to DH frame ``frame`` (0 the base, n the flange; ends in that frame). A camera cell: ``camera_pose`` (base
     frame ← camera frame, 4x4; None: no camera view check), ``camera_half_fov`` and ``camera_max_tilt`` (rad)
-    and ``target_normal`` (flange frame): see :mod:`acquire.planning.camera_view`. Timeouts in s; ``retries`` per failed measurement.
+    and ``target_normal`` (flange frame): see :mod:`acquire.planning.camera_view`. Timeouts in s; ``retries`` per
+    failed measurement.
     Verification (``acquire verify``, :mod:`identify.applications.iso9283`): the test cube's ``verify_centre`` (base
     frame, m; None: the TP at home) and ``verify_edge`` (m; None: from the robot's reach), ``verify_cycles`` per pose.
     ``source`` names where it came from.
