@@ -7,8 +7,10 @@ locate phase then measures the board from the start pose and from small turns of
 (:func:`locate_poses`), and :func:`solve_mount` solves ``F_i X C_i = B`` for the mount X and the board B from the
 nominal flange poses F_i (base <- flange) and the board's measured poses C_i (camera <- board): Park and Martin's
 closed form (the rotation from the turns' axes, then the translation by least squares), refined by least squares
-over every view with the camera's stated sigmas. Its uncertainties are scaled by the residuals (the nominal
-kinematics' errors show there), so a poor locate says so; :func:`refusal` says when it is too poor to plan from.
+over every view with the camera's stated sigmas. Its uncertainties are scaled by the residuals (a moving board or
+a loose camera shows there), and the nominal kinematics' own error (:data:`KINEMATIC`: it moves the mount and the
+board together and hardly shows in the residuals of small turns) is added in quadrature, so a poor locate says so;
+:func:`refusal` says when it is too poor to plan from.
 Frames: metres, radians; OpenCV's camera frame (z along the line of sight).
 """
 
@@ -29,6 +31,7 @@ LAST_TURN = math.radians(15.0)  # ... the last joint (about the flange's axis, t
 MIN_VIEWS = 4  # views of the board the solve needs (the start and three turns about different axes)
 MAX_POSITION = 0.02  # m: 3 sigma of the mount's or the board's position beyond this: too poor to plan the views
 MAX_ANGLE = math.radians(2.0)  # rad: ... of their orientation
+KINEMATIC = (1e-3, 2e-3)  # m, rad per axis: the nominal kinematics' error carried into the located mount and board
 DEFAULT_MOUNT = (0.0, 0.0, 0.05, 0.0, 0.0, 0.0)  # the camera 50 mm out along the flange's axis, looking along it
 DEFAULT_TOLERANCE = (0.10, math.pi)  # m, rad: ... known to 100 mm and in no particular turn
 
@@ -131,7 +134,8 @@ class Located:
                 f" mm, {math.degrees(self.rms_angle):.3f}° RMS (the nominal kinematics' errors and the camera's)",
                 f"  camera mount (flange frame): [{mount[0]:.4f}, {mount[1]:.4f}, {mount[2]:.4f}] m, turned "
                 f"[{turn[0]:.2f}, {turn[1]:.2f}, {turn[2]:.2f}]°, known to {self.mount_position * 1e3:.2f} mm, "
-                f"{math.degrees(self.mount_angle):.3f}° (1 sigma)",
+                f"{math.degrees(self.mount_angle):.3f}° (1 sigma, with the nominal kinematics' "
+                f"{KINEMATIC[0] * 1e3:g} mm, {KINEMATIC[1] * 1e3:g} mrad)",
                 f"  board: {self.distance:.3f} m from the camera at the start pose, placed to "
                 f"{self.board_position * 1e3:.2f} mm, {math.degrees(self.board_angle):.3f}° (1 sigma)"]
 
@@ -178,12 +182,14 @@ def park_martin(flanges: Array, views: Array) -> Array:
     return out
 
 
-def solve_mount(flanges: Array, views: Array, sigma: Array, sigma_r: Array, tried: int) -> Located:
+def solve_mount(flanges: Array, views: Array, sigma: Array, sigma_r: Array, tried: int,
+                kinematic: tuple[float, float] = KINEMATIC) -> Located:
     """The mount and the board (:class:`Located`) from the views of the board: ``flanges`` (k, 4, 4) base <-
     flange by the nominal model at the joints read, ``views`` (k, 4, 4) camera <- board measured, ``sigma`` (k,) m
     and ``sigma_r`` (k,) rad their stated uncertainties. The closed form (:func:`park_martin`) refined by least
     squares (positions over ``sigma``, turns over ``sigma_r``); the covariance scaled up by the reduced
-    chi-square when it exceeds 1. ValueError with fewer than :data:`MIN_VIEWS` views or too few axes."""
+    chi-square when it exceeds 1, ``kinematic`` (m, rad per axis) added in quadrature. ValueError with fewer
+    than :data:`MIN_VIEWS` views or too few axes."""
     flanges, views = np.asarray(flanges, dtype=float), np.asarray(views, dtype=float)
     if len(views) < MIN_VIEWS:
         raise ValueError(f"the board was seen in {len(views)} of {tried} views (at least {MIN_VIEWS} needed)")
@@ -213,7 +219,8 @@ def solve_mount(flanges: Array, views: Array, sigma: Array, sigma_r: Array, trie
     cov = np.linalg.pinv(fit.jac.T @ fit.jac) * scale
 
     def largest(block: slice) -> float:
-        return math.sqrt(max(float(np.max(np.linalg.eigvalsh(cov[block, block]))), 0.0))
+        extra = kinematic[0] if block.start in (3, 9) else kinematic[1]
+        return math.sqrt(max(float(np.max(np.linalg.eigvalsh(cov[block, block]))), 0.0) + extra**2)
 
     k = len(views)
     raw = fit.fun.reshape(2, k, 3)
