@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from acquire.planning.flange_bound import DRY_SIGMA_PX, flange_bound
-from acquire.planning.flange_locate import Located, RoughMount
+from acquire.planning.flange_locate import LAST_TURN, WRIST_TURN, Located, RoughMount
 from acquire.planning.flange_views import FlangeCamera, flange_view_poses
 from acquire.planning.plan import HOME_SWEEP, PlanError, _nearest_order, _per_joint
 from config.cell import cell_from_config, contact_at
@@ -247,7 +247,10 @@ def flange_lines(plan: Plan, setup: FlangeSetup, accuracy: dict[str, float] | No
                      "joint ranges; the arm's departures from its DH model and the board's own errors add to it")
     if setup.located is None:
         lines.append("  the views shown are indicative: the run first locates the camera's mount and the board "
-                     "(small wrist turns about the start pose, shown and confirmed), then plans and shows the views")
+                     f"(readings at the start pose and with each wrist joint turned ±{math.degrees(WRIST_TURN):.0f}°, "
+                     f"the last ±{math.degrees(LAST_TURN):.0f}°, shown and confirmed; the mount given to "
+                     f"{setup.rough.position * 1e3:.0f} mm, {math.degrees(setup.rough.angle):.0f}°), then plans and "
+                     "shows the views")
     return lines
 
 
