@@ -20,6 +20,7 @@ from acquire.commands.prepare import (
     check_start,
     check_units,
     confirm,
+    motion_problems,
     open_devices,
     site_from_args,
     tracker_site,
@@ -40,7 +41,6 @@ from common import stop_signals
 from common.errors import InputError
 from common.fit_width import say
 from common.outputs import OutputError, check_outputs, check_target, same_file
-from config.cell import Clearance
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig
 from drivers.clock import VirtualClock, WallClock
@@ -177,7 +177,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         raise UsageError("--tracker none rehearses stop-and-go plans; use --mode step")
     problems = check_plan(plan, robot_model)
     clearance = plan_clearance(plan, robot_model, site)
-    problems += _motion_problems(plan, robot_model, robot_spec, clearance, site)
+    problems += motion_problems(plan, robot_model, robot_spec, clearance, site)
     if problems:
         for line in problems:
             print(f"acquire: plan refused: {line}", file=sys.stderr)
@@ -358,24 +358,6 @@ def _nothing_to_do(session: Session, remeasure: bool) -> bool:
               f"{', '.join(map(str, missing))}); nothing moved. --remeasure-missing measures them again")
         return True
     return False
-
-
-def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clearance: Clearance | None,
-                     site: SiteConfig) -> list[str]:
-    """Why the plan's motion may not run: a step or move that comes too close to the cell, or no geometry to
-    check it with on a real robot."""
-    if clearance is None:
-        if robot_spec.backend == "mock":
-            return []
-        return [f"{robot.name} has no collision geometry ('collision:' in {robot.path.name}): the plan cannot be "
-                "checked against the cell and the arm itself"]
-    if clearance.slack >= clearance.guard:
-        return []
-    step = plan.steps[clearance.slack_move]
-    needs = clearance.slack_distance - clearance.slack + clearance.guard
-    return [f"the move to step {step.index} ({step.kind}) comes too close: {clearance.slack_what} "
-            f"{clearance.slack_distance * 1e3:.1f} mm apart at a checked sample (needs {needs * 1e3:.0f} mm with "
-            f"{clearance.guard * 1e3:g} mm for the motion between samples)"]
 
 
 def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site: SiteConfig) -> int:

@@ -16,7 +16,7 @@ import sys
 
 import numpy as np
 
-from acquire.commands.prepare import UsageError, confirm, open_devices
+from acquire.commands.prepare import UsageError, confirm, motion_problems, open_devices
 from acquire.planning.flange_bound import corner_noise
 from acquire.planning.flange_locate import locate_poses, refusal, solve_mount
 from acquire.planning.plan import HOME_SWEEP, _per_joint, check_plan, estimate_duration, plan_clearance
@@ -56,8 +56,6 @@ def locate(args: argparse.Namespace, robot_spec: RobotSpec, tracker_spec: Tracke
     """Run the locate phase (module docstring) and return ``setup`` with the located mount and board about the
     start pose. UsageError (one line) when the plan is refused, the board is not seen or the solve is too poor;
     :class:`LocateEnded` when the motion was stopped."""
-    from acquire.commands.cli import _motion_problems
-
     checked = camera_site(site, setup, setup.rough.position)
     robot_dev, tracker, clock = open_devices(robot_spec, tracker_spec, args.realtime, site, args.trace_io, robot)
     opened = clock.now()
@@ -67,7 +65,7 @@ def locate(args: argparse.Namespace, robot_spec: RobotSpec, tracker_spec: Tracke
             start = robot.coupling.dh_from_readings(start[None, :])[0]
         plan = locate_plan(robot, site, start)
         clearance = plan_clearance(plan, robot, checked)
-        problems = check_plan(plan, robot) + _motion_problems(plan, robot, robot_spec, clearance, checked)
+        problems = check_plan(plan, robot) + motion_problems(plan, robot, robot_spec, clearance, checked)
         if problems:
             hint = "" if setup.rough.given else (
                 f" (the camera's body grown by the default mount's {setup.rough.position * 1e3:.0f} mm tolerance: "
