@@ -8,9 +8,9 @@ locate phase then measures the board from the start pose and from small turns of
 nominal flange poses F_i (base <- flange) and the board's measured poses C_i (camera <- board): Park and Martin's
 closed form (the rotation from the turns' axes, then the translation by least squares), refined by least squares
 over every view with the camera's stated sigmas. Its uncertainties are scaled by the residuals (a moving board or
-a loose camera shows there), and the nominal kinematics' own error (:data:`KINEMATIC`: it moves the mount and the
-board together and hardly shows in the residuals of small turns) is added in quadrature, so a poor locate says so;
-:func:`refusal` says when it is too poor to plan from.
+a loose camera shows there), and the nominal kinematics' own error (:data:`KINEMATIC` for the mount,
+:data:`BOARD_KINEMATIC` for the board: it hardly shows in the residuals of small turns) is added in quadrature,
+so a poor locate says so; :func:`refusal` says when it is too poor to plan from.
 Frames: metres, radians; OpenCV's camera frame (z along the line of sight).
 """
 
@@ -31,7 +31,8 @@ LAST_TURN = math.radians(15.0)  # ... the last joint (about the flange's axis, t
 MIN_VIEWS = 4  # views of the board the solve needs (the start and three turns about different axes)
 MAX_POSITION = 0.02  # m: 3 sigma of the mount's or the board's position beyond this: too poor to plan the views
 MAX_ANGLE = math.radians(2.0)  # rad: ... of their orientation
-KINEMATIC = (1e-3, 2e-3)  # m, rad per axis: the nominal kinematics' error carried into the located mount and board
+KINEMATIC = (1e-3, 2e-3)  # m, rad per axis: the nominal kinematics' error carried into the located mount (the
+BOARD_KINEMATIC = (3e-3, 5e-3)  # wrist's links) and into the board's place (the whole arm's absolute error there)
 DEFAULT_MOUNT = (0.0, 0.0, 0.05, 0.0, 0.0, 0.0)  # the camera 50 mm out along the flange's axis, looking along it
 DEFAULT_TOLERANCE = (0.10, math.pi)  # m, rad: ... known to 100 mm and in no particular turn
 
@@ -137,7 +138,8 @@ class Located:
                 f"{math.degrees(self.mount_angle):.3f}° (1 sigma, with the nominal kinematics' "
                 f"{KINEMATIC[0] * 1e3:g} mm, {KINEMATIC[1] * 1e3:g} mrad)",
                 f"  board: {self.distance:.3f} m from the camera at the start pose, placed to "
-                f"{self.board_position * 1e3:.2f} mm, {math.degrees(self.board_angle):.3f}° (1 sigma)"]
+                f"{self.board_position * 1e3:.2f} mm, {math.degrees(self.board_angle):.3f}° (1 sigma, with the "
+                f"nominal kinematics' {BOARD_KINEMATIC[0] * 1e3:g} mm, {BOARD_KINEMATIC[1] * 1e3:g} mrad)"]
 
     def as_dict(self) -> dict[str, object]:
         """The session's record of the locate (plain lists; m, rad)."""
@@ -183,12 +185,14 @@ def park_martin(flanges: Array, views: Array) -> Array:
 
 
 def solve_mount(flanges: Array, views: Array, sigma: Array, sigma_r: Array, tried: int,
-                kinematic: tuple[float, float] = KINEMATIC) -> Located:
+                kinematic: tuple[float, float] = KINEMATIC,
+                board_kinematic: tuple[float, float] = BOARD_KINEMATIC) -> Located:
     """The mount and the board (:class:`Located`) from the views of the board: ``flanges`` (k, 4, 4) base <-
     flange by the nominal model at the joints read, ``views`` (k, 4, 4) camera <- board measured, ``sigma`` (k,) m
     and ``sigma_r`` (k,) rad their stated uncertainties. The closed form (:func:`park_martin`) refined by least
     squares (positions over ``sigma``, turns over ``sigma_r``); the covariance scaled up by the reduced
-    chi-square when it exceeds 1, ``kinematic`` (m, rad per axis) added in quadrature. ValueError with fewer
+    chi-square when it exceeds 1, ``kinematic`` (the mount's) and ``board_kinematic`` (the board's; m, rad per
+    axis) added in quadrature. ValueError with fewer
     than :data:`MIN_VIEWS` views or too few axes."""
     flanges, views = np.asarray(flanges, dtype=float), np.asarray(views, dtype=float)
     if len(views) < MIN_VIEWS:
@@ -219,7 +223,7 @@ def solve_mount(flanges: Array, views: Array, sigma: Array, sigma_r: Array, trie
     cov = np.linalg.pinv(fit.jac.T @ fit.jac) * scale
 
     def largest(block: slice) -> float:
-        extra = kinematic[0] if block.start in (3, 9) else kinematic[1]
+        extra = (kinematic if block.start < 6 else board_kinematic)[0 if block.start in (3, 9) else 1]
         return math.sqrt(max(float(np.max(np.linalg.eigvalsh(cov[block, block]))), 0.0) + extra**2)
 
     k = len(views)

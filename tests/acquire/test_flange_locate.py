@@ -54,7 +54,8 @@ def test_the_solve_finds_the_mount_and_the_board_within_what_it_states(seed: int
     mount, board = _truth(seed)
     rng = np.random.default_rng([seed, 5])
     flanges, views = _views(mount, board, rng, SIGMA, SIGMA_R)
-    found = solve_mount(flanges, views, np.full(len(views), SIGMA), np.full(len(views), SIGMA_R), len(views), (0, 0))
+    found = solve_mount(flanges, views, np.full(len(views), SIGMA), np.full(len(views), SIGMA_R), len(views), (0, 0),
+                        (0, 0))
     off = np.linalg.norm(found.mount[:3, 3] - mount[:3, 3])
     turn = np.linalg.norm(Rotation.from_matrix(found.mount[:3, :3] @ mount[:3, :3].T).as_rotvec())
     board_off = np.linalg.norm(found.board[:3, 3] - board[:3, 3])
