@@ -217,7 +217,10 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if camera is not None:
         say("\n".join(["", *camera.lines(plan)]))
     if setup is not None:
-        say("\n".join(["", *flange_lines(plan, setup, flange_accuracy)]))
+        from acquire.planning.plan_flange import locate_seconds
+
+        locate = locate_seconds(robot_model, site, setup) if setup.located is None and session is None else None
+        say("\n".join(["", *flange_lines(plan, setup, flange_accuracy, locate)]))
     if tracker_spec is not None and tracker_spec.backend == "emscon":  # what the tracker will be asked to do
         from drivers.trackers.emscon_options import describe
 

@@ -18,8 +18,8 @@ import numpy as np
 
 from acquire.commands.prepare import UsageError, confirm, motion_problems, open_devices
 from acquire.planning.flange_bound import corner_noise
-from acquire.planning.flange_locate import locate_poses, refusal, solve_mount
-from acquire.planning.plan import HOME_SWEEP, _per_joint, check_plan, estimate_duration, plan_clearance
+from acquire.planning.flange_locate import locate_plan, refusal, solve_mount
+from acquire.planning.plan import check_plan, estimate_duration, plan_clearance
 from acquire.planning.plan_flange import FlangeSetup, camera_site, located_setup
 from acquire.planning.plan_report import format_clearance
 from acquire.running.locate import run_locate
@@ -29,7 +29,6 @@ from config.robots import RobotModel
 from config.site import SiteConfig
 from drivers.spec import RobotSpec, TrackerSpec
 from kinematics.dh import frames_from_joints
-from session.plan import Plan, Step
 
 
 class LocateEnded(Exception):
@@ -38,17 +37,6 @@ class LocateEnded(Exception):
     def __init__(self, code: int) -> None:
         super().__init__(code)
         self.code = code
-
-
-def locate_plan(robot: RobotModel, site: SiteConfig, start: np.ndarray) -> Plan:
-    """The locate views about ``start`` (DH values) as a plan (the start's reading first, one reading each)."""
-    poses = locate_poses(start, robot.limits, robot.joint_types)
-    steps = tuple(Step(i, "home" if i == 0 else "free", HOME_SWEEP if i == 0 else i, 0,
-                       tuple(float(v) for v in q)) for i, q in enumerate(poses))
-    return Plan(robot.name, robot.joint_types, tuple(float(v) for v in start), steps, 1, site.settle_time,
-                tuple(float(v) for v in _per_joint(robot, site, "speed")),
-                tuple(float(v) for v in _per_joint(robot, site, "acceleration")),
-                ("locate: the start pose, then small turns of the wrist joints about it",))
 
 
 def locate(args: argparse.Namespace, robot_spec: RobotSpec, tracker_spec: TrackerSpec, site: SiteConfig,

@@ -24,6 +24,11 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
+from acquire.planning.plan import HOME_SWEEP, _per_joint
+from config.robots import RobotModel
+from config.site import SiteConfig
+from session.plan import Plan, Step
+
 Array = NDArray[np.float64]
 
 WRIST_TURN = math.radians(8.0)  # rad: each locate move turns one wrist joint this far from the start pose ...
@@ -102,6 +107,17 @@ def locate_poses(start: Array, limits: Array, joint_types: str) -> Array:
         if np.all(q >= lo) and np.all(q <= hi) and not any(np.allclose(q, p) for p in out):
             out.append(q)
     return np.array(out)
+
+
+def locate_plan(robot: RobotModel, site: SiteConfig, start: Array) -> Plan:
+    """The locate views about ``start`` (DH values) as a plan (the start's reading first, one reading each)."""
+    poses = locate_poses(start, robot.limits, robot.joint_types)
+    steps = tuple(Step(i, "home" if i == 0 else "free", HOME_SWEEP if i == 0 else i, 0,
+                       tuple(float(v) for v in q)) for i, q in enumerate(poses))
+    return Plan(robot.name, robot.joint_types, tuple(float(v) for v in start), steps, 1, site.settle_time,
+                tuple(float(v) for v in _per_joint(robot, site, "speed")),
+                tuple(float(v) for v in _per_joint(robot, site, "acceleration")),
+                ("locate: the start pose, then small turns of the wrist joints about it",))
 
 
 @dataclass(frozen=True)

@@ -217,9 +217,21 @@ def flange_accuracy(robot: RobotModel, plan: Plan, setup: FlangeSetup) -> dict[s
                         setup.sigma_px, setup.frames, robot.limits)
 
 
-def flange_lines(plan: Plan, setup: FlangeSetup, accuracy: dict[str, float] | None = None) -> list[str]:
-    """The dry run's flange-camera section: views, images, what the run determines, how the scale is fixed and the
-    predicted accuracy (``accuracy``: :func:`flange_accuracy`)."""
+def locate_seconds(robot: RobotModel, site: SiteConfig, setup: FlangeSetup) -> float:
+    """The locate phase's robot time (s) about home: its moves, settling and frames (the run's is about the start)."""
+    from acquire.planning.flange_locate import locate_plan
+    from acquire.planning.plan import estimate_duration
+
+    plan = locate_plan(robot, site, np.asarray(robot.home, dtype=float))
+    return estimate_duration(plan, robot, setup.frames / setup.fps) + estimate_duration(
+        replace(plan, steps=plan.steps[:1], home=plan.steps[-1].q), robot, 0.0)  # and back to the start
+
+
+def flange_lines(plan: Plan, setup: FlangeSetup, accuracy: dict[str, float] | None = None,
+                 locate: float | None = None) -> list[str]:
+    """The dry run's flange-camera section: views, images, what the run determines, how the scale is fixed, the
+    predicted accuracy (``accuracy``: :func:`flange_accuracy`) and the locate phase's robot time (``locate`` s:
+    :func:`locate_seconds`; None once located)."""
     views = sum(s.kind == "free" for s in plan.steps)
     held = sum(s.kind == "free" and s.role == "check" for s in plan.steps)
     readings = len(plan.steps) * plan.samples_per_step
@@ -250,7 +262,8 @@ def flange_lines(plan: Plan, setup: FlangeSetup, accuracy: dict[str, float] | No
                      f"(readings at the start pose and with each wrist joint turned ±{math.degrees(WRIST_TURN):.0f}°, "
                      f"the last ±{math.degrees(LAST_TURN):.0f}°, shown and confirmed; the mount given to "
                      f"{setup.rough.position * 1e3:.0f} mm, {math.degrees(setup.rough.angle):.0f}°), then plans and "
-                     "shows the views")
+                     "shows the views"
+                     + ("" if locate is None else f"; the locate adds about {locate:.0f} s of robot time"))
     return lines
 
 
