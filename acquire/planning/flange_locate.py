@@ -140,8 +140,9 @@ class Located:
     distance: float
 
     def pointing(self) -> float:
-        """rad: the standard error of the direction the located mount and board give to the board's centre."""
-        return math.hypot(self.mount_angle, (self.mount_position + self.board_position) / self.distance)
+        """rad: the standard error of the camera's line of sight at the board's distance from the located mount (the
+        board's own place errs with the nominal kinematics the views are solved with, so it does not add)."""
+        return math.hypot(self.mount_angle, self.mount_position / self.distance)
 
     def lines(self) -> list[str]:
         """What the operator reads: how well the mount and the board are known, from how many views."""
