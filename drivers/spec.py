@@ -46,8 +46,8 @@ ROBOT_BACKENDS = ("ur", "mock")
 TRACKER_BACKENDS = ("serial", "ipp", "emscon", "aruco", "mock")
 ROBOT_FORMS = "MODEL, MODEL@HOST[:PORT] or mock:MODEL (e.g. ur5e, ur5e@192.168.1.10, mock:ur5e, mock:my_arm.yaml; " \
               "MODEL: a bundled name or a path to a robot YAML file), each with optional ?key=value&..."
-TRACKER_FORMS = ("serial:PORT[?opts], ipp://HOST[:PORT], emscon:HOST[:PORT][?opts], aruco:SOURCE[?opts] or "
-                 "mock[?opts]")
+TRACKER_FORMS = ("serial:PORT[?opts], ipp://HOST[:PORT], emscon:HOST[:PORT][?opts], aruco:SOURCE[?opts], "
+                 "aruco:http://HOST[:PORT]/PATH[?QUERY][#opts] or mock[?opts]")
 
 #: Faults of the simulated robot: at move N (see drivers/sim/rig.py for what each does).
 ROBOT_FAULTS = ("protective_stop", "emergency_stop", "disconnect", "slow", "unsettled")
@@ -135,14 +135,15 @@ def _suggest(word: str, choices: tuple[str, ...] | list[str]) -> str:
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
-def _split_options(text: str, forms: str) -> tuple[str, dict[str, str]]:
-    """``head?k=v&k=v`` -> (head, {k: v}) with syntax checks; order kept."""
-    head, sep, query = text.partition("?")
+def _split_options(text: str, forms: str, separator: str = "?") -> tuple[str, dict[str, str]]:
+    """``head?k=v&k=v`` -> (head, {k: v}) with syntax checks; order kept. A network camera's URL keeps its own
+    ``?``: its options follow ``separator`` ``#``."""
+    head, sep, query = text.partition(separator)
     options: dict[str, str] = {}
     if not sep:
         return head, options
     if not query:
-        raise _fail("empty option list after '?'", text, forms)
+        raise _fail(f"empty option list after {separator!r}", text, forms)
     for item in query.split("&"):
         key, eq, value = item.partition("=")
         if not eq or not _KEY.match(key) or not _VALUE.match(value):
@@ -153,8 +154,13 @@ def _split_options(text: str, forms: str) -> tuple[str, dict[str, str]]:
     return head, options
 
 
-def _query(options: dict[str, str]) -> str:
-    return "?" + "&".join(f"{k}={v}" for k, v in options.items()) if options else ""
+def _query(options: dict[str, str], separator: str = "?") -> str:
+    return separator + "&".join(f"{k}={v}" for k, v in options.items()) if options else ""
+
+
+def _is_url_source(text: str) -> bool:
+    """An ``aruco:http://...`` (or https) camera: its options follow ``#``, its URL may hold a ``?``."""
+    return text.startswith(("aruco:http://", "aruco:https://"))
 
 
 def parse_faults(value: str, device: str) -> tuple[FaultSpec, ...]:
@@ -385,7 +391,7 @@ class TrackerSpec:
         text = text.strip()
         if not text:
             raise _fail("empty tracker spec", text, TRACKER_FORMS)
-        head, options = _split_options(text, TRACKER_FORMS)
+        head, options = _split_options(text, TRACKER_FORMS, "#" if _is_url_source(text) else "?")
         backend, colon, target = head.partition(":")
         if backend not in TRACKER_BACKENDS:
             raise _fail(f"unknown tracker backend {backend!r}{_suggest(backend, TRACKER_BACKENDS)}", text,
@@ -405,7 +411,8 @@ class TrackerSpec:
     def _check(self, text: str) -> None:
         if self.backend not in TRACKER_BACKENDS:
             raise _fail(f"unknown tracker backend {self.backend!r}", text, TRACKER_FORMS)
-        if not isinstance(self.target, str) or any(c.isspace() or c in "?#" for c in self.target):
+        url = isinstance(self.target, str) and _is_url_source(f"{self.backend}:{self.target}")
+        if not isinstance(self.target, str) or any(c.isspace() or c in ("#" if url else "?#") for c in self.target):
             raise _fail(f"bad target {self.target!r}", text, TRACKER_FORMS)
         if self.backend == "mock":
             if self.target:
@@ -435,7 +442,7 @@ class TrackerSpec:
 
     def __str__(self) -> str:
         head = {"mock": "mock", "ipp": f"ipp://{self.target}"}.get(self.backend, f"{self.backend}:{self.target}")
-        return head + _query(self.options)
+        return head + _query(self.options, "#" if _is_url_source(head) else "?")
 
     def __hash__(self) -> int:
         return hash((self.backend, self.target, tuple(self.options.items())))

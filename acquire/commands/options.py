@@ -64,10 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "laser tracker's emScon server, port 700: stationary points, and for continuous sweeps its "
                    "continuous measurement by time stamped with the tracker's clock; ?probe=6dof: a 6-DoF probe's "
                    "full poses; emscon:sim with a mock robot), "
-                   "aruco:... (a camera in the cell; aruco:...&mount=flange: a camera on the flange seeing a fixed "
-                   "board: jog the arm where it sees the whole board; a checked, confirmed locate phase of small "
-                   "wrist turns measures its mount and the board, then stop-and-go views that keep it in sight are "
-                   "planned and shown; &square_sigma=M: the board measured), mock, or none (motion "
+                   "aruco:... (a camera in the cell: aruco:0?..., aruco:/dev/video0?..., a network camera "
+                   "aruco:http://HOST:PORT/PATH#... (an MJPEG stream or a snapshot URL; its options after '#'); "
+                   "aruco:...&mount=flange: a camera on the flange seeing a fixed board: jog the arm where it sees "
+                   "the whole board; a checked, confirmed locate phase of small wrist turns measures its mount and "
+                   "the board, then stop-and-go views that keep it in sight are planned and shown; &square_sigma=M: "
+                   "the board measured), mock, or none (motion "
                    "rehearsal) (mock; on --resume: the session's, whose port or "
                    "host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")

@@ -39,6 +39,8 @@ def probe(args: argparse.Namespace) -> int:
         identity = tracker.identity()
         if not args.json:
             print(f"tracker: {identity.model}" + (f", serial {identity.serial}" if identity.serial else ""))
+            if timing := camera_timing(identity.details):
+                print(timing)
         for k in range(1, args.count + 1):
             try:
                 readings = tracker.measure(1, site.timeouts.measure)
@@ -70,3 +72,18 @@ def probe(args: argparse.Namespace) -> int:
               f"y {spread[1] * 1e3:.4f}, z {spread[2] * 1e3:.4f} mm; largest distance from the mean "
               f"{worst * 1e3:.4f} mm")
     return 1 if failed else 0
+
+
+def camera_timing(details: dict[str, str]) -> str:
+    """A camera's frame rate, what its frames' times are, and its measured latency (s in ``details``, printed in
+    ms), in one line; "" for a tracker without a frame rate."""
+    if "frame_rate" not in details:
+        return ""
+    line = f"frames: {float(details['frame_rate']):.1f} Hz; frame times: {details.get('stream_timestamps', '?')}"
+    if "latency_measured" in details:
+        return line + (f"; latency {float(details['latency_measured']) * 1e3:.1f} ms measured "
+                       f"(spread {float(details.get('latency_spread', 'nan')) * 1e3:.2f} ms)")
+    if "latency_spread" in details:
+        return line + (f"; latency not measurable (no frame times; arrival jitter "
+                       f"{float(details['latency_spread']) * 1e3:.2f} ms)")
+    return line

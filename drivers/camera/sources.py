@@ -126,10 +126,11 @@ class FrameQueue:
             return items
 
 
-def device_stamps_usable(host: NDArray[np.float64], device_ms: NDArray[np.float64]) -> tuple[bool, str]:
+def device_stamps_usable(host: NDArray[np.float64], device_ms: NDArray[np.float64],
+                         tolerance: float = RATE_TOLERANCE) -> tuple[bool, str]:
     """Whether ``CAP_PROP_POS_MSEC`` values ``device_ms`` (ms) read after grabbing consecutive frames at host times
     ``host`` (s) are usable capture times: finite, positive, increasing, and advancing at the host clock's rate
-    within :data:`RATE_TOLERANCE` (a backend that gives 0, -1, a frame count or a file position fails). Returns
+    within ``tolerance`` (a backend that gives 0, -1, a frame count or a file position fails). Returns
     the answer and, when it is no, why."""
     host, device = np.asarray(host, dtype=float), np.asarray(device_ms, dtype=float) / 1e3
     if len(host) < 3:
@@ -139,7 +140,7 @@ def device_stamps_usable(host: NDArray[np.float64], device_ms: NDArray[np.float6
     if np.any(np.diff(device) <= 0):
         return False, "its values do not increase from frame to frame"
     ratio = (device[-1] - device[0]) / max(host[-1] - host[0], 1e-9)
-    if abs(ratio - 1.0) > RATE_TOLERANCE:
+    if abs(ratio - 1.0) > tolerance:
         return False, f"it advances {ratio:.3g} x as fast as the host clock"
     return True, ""
 

@@ -7,9 +7,11 @@ URL form (``--tracker``)::
                  [&tp=X,Y,Z][&refine=edges|apriltag|subpix|contour|none][&frames=N][&max_rms=PX]
                  [&timeout=S][&retries=N][&mount=cell|flange][&square_sigma=M | &size_sigma=M]
 
-``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a video file, an image folder or a
-glob (``run/*.png``; replay of a recorded run, ``frames`` images per reading), or ``sim`` (images rendered
-from the simulated robot, mock mode only: ``--robot mock:MODEL``).
+``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a network camera's URL (an MJPEG stream or a
+snapshot URL, ``aruco:http://HOST[:PORT]/PATH[?QUERY]#OPTIONS``: the options follow ``#`` since the ``?`` belongs
+to the URL; drivers/camera/network.py), a video file, an image folder or a glob (``run/*.png``; replay of a recorded
+run, ``frames`` images per reading), or ``sim`` (images rendered from the simulated robot, mock mode only:
+``--robot mock:MODEL``).
 
 Target (units: metres):
   ``marker``  id of a single marker (default 0 when no board or layout is given); ``size`` its side (the
@@ -192,7 +194,9 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
         raise _fail(spec, f"option refine={refine} must be one of {', '.join(REFINEMENTS)}")
     camera = raw.get("camera")
     if camera is None and not simulated:
-        raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera")
+        url = spec.target.startswith(("http://", "https://")) and "camera=" in spec.target
+        raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera" +
+                    (" (a network camera's options follow '#': the '?' belongs to its URL)" if url else ""))
     sim = _sim_settings(spec, raw) if simulated else {}
     mount = str(raw.get("mount", "cell"))
     if mount not in MOUNTS:
@@ -326,6 +330,9 @@ class ArucoTracker(FrameStreaming):
                    "mount": s.mount, "scale_sigma": "" if s.scale_sigma is None else repr(s.scale_sigma)}
         if math.isfinite(getattr(self.source, "rate", math.nan)):
             details["frame_rate"] = f"{self.source.rate:g}"
+        for key, name in (("latency_measured", "measured_latency"), ("latency_spread", "latency_spread")):
+            if math.isfinite(getattr(self.source, name, math.nan)):  # a network camera's (s)
+                details[key] = f"{getattr(self.source, name):.6g}"
         return DeviceIdentity("tracker", "ArUco camera (OpenCV)", serial=str(self.spec.target),
                               firmware=f"opencv {cv2.__version__}", details=details)
 
@@ -457,10 +464,17 @@ def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) 
     if spec.target != "sim":
         if rig is not None:
             raise ValueError("a real camera cannot see a simulated robot: use aruco:sim with a mock robot")
+        from drivers.camera.network import NetworkCamera
         from drivers.camera.sources import source_for
 
         assert camera is not None
-        return ArucoTracker(spec, settings, source_for(spec.target, camera.width, camera.height), camera)
+        try:
+            source = (NetworkCamera(spec.target, camera.width, camera.height)
+                      if spec.target.startswith(("http://", "https://"))
+                      else source_for(spec.target, camera.width, camera.height))
+        except ValueError as exc:  # a network camera's URL that does not parse
+            raise SpecError(f"tracker spec {str(spec)!r}: {exc}") from None
+        return ArucoTracker(spec, settings, source, camera)
     if rig is None or getattr(rig, "tracker_spec", None) != spec:
         raise ValueError("aruco:sim renders the simulated robot: pass rig=SimulatedRig.from_spec(robot_spec, "
                          "tracker_spec, clock) made from this spec")

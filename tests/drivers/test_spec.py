@@ -128,7 +128,7 @@ def test_unknown_backend_messages() -> None:
         TrackerSpec.parse("seriall:/dev/ttyUSB0")
     assert str(info.value) == ("unknown tracker backend 'seriall' (did you mean 'serial'?) in 'seriall:/dev/ttyUSB0'; "
                                "expected serial:PORT[?opts], ipp://HOST[:PORT], emscon:HOST[:PORT][?opts], "
-                               "aruco:SOURCE[?opts] or mock[?opts]")
+                               "aruco:SOURCE[?opts], aruco:http://HOST[:PORT]/PATH[?QUERY][#opts] or mock[?opts]")
     with pytest.raises(SpecError, match=r"^unknown robot backend 'sim' in 'sim:ur5e'; expected MODEL"):
         RobotSpec.parse("sim:ur5e")
 
