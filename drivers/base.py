@@ -140,13 +140,18 @@ class JointStreamBatch:
 class TrackerStreamBatch:
     """Tracker samples: ``t`` (k,) s on the tracker's own clock, ``points`` (k, 3) m in the tracker frame,
     ``tp`` (k,) tracked-point ids, ``sigma`` (k,) m per axis (NaN when the device reports none), ``gaps``:
-    (start, end) tracker times between which the target was lost or samples were dropped."""
+    (start, end) tracker times between which the target was lost or samples were dropped. A full-pose device (6-DoF
+    probe, camera target) also gives each sample's target-frame orientation: ``rotvec`` (k, 3) a rotation vector in
+    the tracker frame (rad; NaN rows: a position only) and ``sigma_r`` (k,) its standard uncertainty per axis (rad,
+    NaN when none); None: positions only."""
 
     t: Array
     points: Array
     tp: NDArray[np.int64]
     sigma: Array
     gaps: tuple[tuple[float, float], ...] = ()
+    rotvec: Array | None = None
+    sigma_r: Array | None = None
 
 
 @runtime_checkable

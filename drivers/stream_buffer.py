@@ -1,19 +1,22 @@
 """The buffer a tracker's stream reader thread fills, shared by the streaming trackers (serial, I++).
 
-The reader thread appends rows ``(t, x, y, z, sigma)`` (device time s, metres in the tracker frame, sigma m or
-NaN) and gaps ``(start, end)`` under ``_stream_lock``, or stores the exception that ended it in ``_failure``;
-``read_stream`` hands them over as a :class:`TrackerStreamBatch`.
+The reader thread appends rows ``(t, x, y, z, sigma)`` (device time s, metres in the tracker frame, sigma m or NaN), or
+from a full-pose device ``(t, x, y, z, sigma, rx, ry, rz, sigma_r)`` (the target frame's rotation vector in the tracker
+frame, rad, and its per-axis sigma, rad), and gaps ``(start, end)`` under ``_stream_lock``, or stores the exception that
+ended it in ``_failure``; ``read_stream`` hands them over as a :class:`TrackerStreamBatch`.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 
 import numpy as np
 
 from drivers.base import TrackerStreamBatch
 
-Row = tuple[float, float, float, float, float]
+Row = tuple[float, ...]  # (t, x, y, z, sigma) or (t, x, y, z, sigma, rx, ry, rz, sigma_r)
+POSE_ROW = 9  # the length of a full-pose row
 
 
 class BufferedStreaming:
@@ -60,7 +63,11 @@ class BufferedStreaming:
 
 
 def batch(rows: list[Row], gaps: list[tuple[float, float]]) -> TrackerStreamBatch:
-    """The stream batch of ``rows`` (t, x, y, z, sigma) and ``gaps`` (one tracked point, id 1)."""
-    data = np.asarray(rows, dtype=float).reshape(len(rows), 5)
+    """The stream batch of ``rows`` (module doc: with an orientation when any row has one, NaN for those without)
+    and ``gaps`` (one tracked point, id 1)."""
+    posed = any(len(r) == POSE_ROW for r in rows)
+    width = POSE_ROW if posed else 5
+    data = np.array([tuple(r) + (math.nan,) * (width - len(r)) for r in rows], dtype=float).reshape(len(rows), width)
     return TrackerStreamBatch(data[:, 0].copy(), data[:, 1:4].copy(), np.ones(len(rows), dtype=np.int64),
-                              data[:, 4].copy(), tuple(gaps))
+                              data[:, 4].copy(), tuple(gaps), data[:, 5:8].copy() if posed else None,
+                              data[:, 8].copy() if posed else None)

@@ -34,10 +34,12 @@ Continuous motion (session/streams.py): ``streams(id, plan_index, sweep, attempt
 superseded, joint_rate, tracker_rate, started, ended, reason)``: one row per attempt of a stream step (status
 ``recording`` until it ends ``complete`` or ``interrupted``; a new attempt supersedes the earlier ones, whose
 samples stay); ``joint_samples(stream, t, q)`` (robot clock, s; q a JSON list), ``tracker_samples(stream, t, x, y,
-z, tp, sigma)`` (tracker clock, s; m), ``stream_gaps(stream, device, t_start, t_end)`` (robot / tracker clock) and
-``stream_batches(stream, t, joint_samples, tracker_samples)`` (each commit: the host clock's time, s, and the
-samples it held). **Schema 3** (:data:`STREAMS_SCHEMA`) marks a session whose plan has stream steps (set at
-creation); older versions refuse it.
+z, tp, sigma, rx, ry, rz, sigma_r)`` (tracker clock, s; m; a full-pose device's target-frame rotation vector in the
+tracker frame and its per-axis sigma, rad, NULL for a position only: added by :func:`migrate` as the readings' are, so
+older readers read the positions and older files open), ``stream_gaps(stream, device, t_start, t_end)`` (robot / tracker
+clock) and ``stream_batches(stream, t, joint_samples, tracker_samples)`` (each commit: the host clock's time, s, and the
+samples it held). **Schema 3** (:data:`STREAMS_SCHEMA`) marks a session whose plan has stream steps (set at creation);
+older versions refuse it.
 
 Tables and columns are added, never changed, so that every reader of schema 1 reads every file of schema 1.
 **Schema 2** (:data:`NEWEST_SCHEMA`) has the same tables; it marks a file that a reader of schema 1 would
@@ -161,7 +163,8 @@ def migrate(conn: sqlite3.Connection) -> None:
     for table in ("readings", "retired_readings"):
         if "tp" not in columns(conn, table):
             conn.execute(f"ALTER TABLE {table} ADD COLUMN tp INTEGER NOT NULL DEFAULT 1")
-        for name in ORIENTATION_COLUMNS:  # full-pose readings (NULL: a position only)
+    for table in ("readings", "retired_readings", "tracker_samples"):
+        for name in ORIENTATION_COLUMNS:  # full-pose readings and streamed samples (NULL: a position only)
             if name not in columns(conn, table):
                 conn.execute(f"ALTER TABLE {table} ADD COLUMN {name} REAL")
 

@@ -51,15 +51,15 @@ class StreamRecorder:
         """Store the batches' samples and gaps in one transaction (durable when this returns); ``now`` the host
         clock's time (s), recorded with the batch counts."""
         rows_j = [(self.id, float(t), dump_q(q.tolist())) for b in joints for t, q in zip(b.t, b.q, strict=True)]
-        rows_t = [(self.id, float(t), *map(float, p), int(tp), None if np.isnan(s) else float(s))
-                  for b in trackers for t, p, tp, s in zip(b.t, b.points, b.tp, b.sigma, strict=True)]
+        rows_t = [(self.id, float(t), *map(float, p), int(tp), _value(s), *map(_value, r))
+                  for b in trackers for t, p, tp, s, r in zip(b.t, b.points, b.tp, b.sigma, _turns(b), strict=True)]
         gaps = [(self.id, "robot", float(a), float(b)) for batch in joints for a, b in batch.gaps]
         gaps += [(self.id, "tracker", float(a), float(b)) for batch in trackers for a, b in batch.gaps]
         with self.session._transaction(f"record stream samples of step {self.plan_index}"):
             db = self.session._db
             db.executemany("INSERT INTO joint_samples (stream, t, q) VALUES (?, ?, ?)", rows_j)
-            db.executemany("INSERT INTO tracker_samples (stream, t, x, y, z, tp, sigma) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                           rows_t)
+            db.executemany("INSERT INTO tracker_samples (stream, t, x, y, z, tp, sigma, rx, ry, rz, sigma_r) "
+                           "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", rows_t)
             db.executemany("INSERT INTO stream_gaps (stream, device, t_start, t_end) VALUES (?, ?, ?, ?)", gaps)
             db.execute("INSERT INTO stream_batches (stream, t, joint_samples, tracker_samples) VALUES (?, ?, ?, ?)",
                        (self.id, now, len(rows_j), len(rows_t)))
@@ -80,3 +80,18 @@ class StreamRecorder:
         if row is None:
             return None
         return (float(row[0]), float(row[1]), float(row[2])), None if row[3] is None else float(row[3])
+
+
+def _value(v: float) -> float | None:
+    """A sample's number as stored: NaN as NULL."""
+    return None if np.isnan(v) else float(v)
+
+
+def _turns(batch: TrackerStreamBatch) -> np.ndarray:
+    """The batch's orientations per sample (k, 4): rx, ry, rz (rad), sigma_r (rad); NaN without them."""
+    out = np.full((len(batch.t), 4), np.nan)
+    if batch.rotvec is not None:
+        out[:, :3] = batch.rotvec
+        if batch.sigma_r is not None:
+            out[:, 3] = batch.sigma_r
+    return out

@@ -6,9 +6,10 @@ The frame source (drivers/camera/sources.py: a live camera; drivers/camera/rende
 each frame, numbered and stamped with its capture time, to a bounded queue; a worker thread takes them in order
 and measures each one with the polled path's own code (``ArucoTracker._pose``: detection, corner refinement,
 pose, the ``max_rms`` check; the TP covariance from :class:`drivers.camera.pose.CornerNoise`, pooled over the
-stream's frames so far). A frame becomes a row ``(t, x, y, z, sigma)``: t the frame's stamp (s, the source's
-clock; its ``stamps`` is in the tracker's identity), the TP in metres in the camera frame, sigma the per-axis
-standard uncertainty of that one frame (m, ``sqrt(trace(C) / 3)``).
+stream's frames so far). A frame becomes a row ``(t, x, y, z, sigma, rx, ry, rz, sigma_r)``: t the frame's stamp
+(s, the source's clock; its ``stamps`` is in the tracker's identity), the TP in metres in the camera frame, sigma the
+per-axis standard uncertainty of that one frame (m, ``sqrt(trace(C) / 3)``), the target frame's orientation (rotation
+vector, rad, camera frame) and its per-axis sigma (rad, with the view's error as a polled reading states it).
 
 Gaps ``(start, end)`` (stamps, s) are recorded from the last good frame before to the first good one after:
 
@@ -32,10 +33,11 @@ import threading
 import time
 from typing import Any
 
+import cv2
 import numpy as np
 
 from drivers.base import TrackerStreamBatch
-from drivers.camera.pose import VIEW_BIAS_PX, CornerNoise
+from drivers.camera.pose import VIEW_BIAS_PX, VIEW_TURN_BIAS_PX, CornerNoise
 from drivers.camera.sources import Frame, FrameQueue
 from drivers.errors import ConnectionFailed, MeasurementError, TargetLost
 from drivers.stream_buffer import BufferedStreaming
@@ -151,11 +153,16 @@ class FrameStreaming(BufferedStreaming):
         sigma = math.sqrt(max(float(np.trace(self._noise.covariance(pose, tp))), 0.0) / 3)
         if VIEW_BIAS_PX > 0:  # the view's own error, as a polled reading states it
             sigma = math.hypot(sigma, pose.view_bias(tp, VIEW_BIAS_PX)[0])
+        # the board's orientation (camera frame <- board frame) and its per-axis sigma (rad), as a polled reading's
+        rotvec = cv2.Rodrigues(pose.rotation)[0].ravel()
+        sigma_r = math.sqrt(max(float(np.trace(self._noise.orientation_covariance(pose))), 0.0) / 3)
+        if VIEW_TURN_BIAS_PX > 0:
+            sigma_r = math.hypot(sigma_r, pose.view_bias(tp, VIEW_BIAS_PX, VIEW_TURN_BIAS_PX)[1])
         if state.first_bad is not None:
             self._add_gap(state.last_good if state.last_good is not None else state.first_bad, frame.stamp)
         state.good(frame.stamp)
         with self._stream_lock:
-            self._rows.append((frame.stamp, *map(float, pose.point(tp)), sigma))
+            self._rows.append((frame.stamp, *map(float, pose.point(tp)), sigma, *map(float, rotvec), sigma_r))
             self.stream_counts["rows"] += 1
 
     def _add_gap(self, start: float, end: float) -> None:

@@ -11,7 +11,9 @@ Streams (spec options, drivers/spec.py): ``mock:MODEL?rate=500&drop=P`` (joint s
 robot clock; each packet lost with probability P, the lost stretch reported as a gap between the kept samples
 around it); ``mock?rate=250&latency=0.02&clock_offset=0.1&drift=1e-3&stamp_jitter=1e-4&lost=0.5@2`` (tracker samples
 every 1/rate s of physical time, each reflector with the rig's noise; ``lost=D@S``: the target is out of sight
-for D s from S s into every stream, reported as a gap). Reads return every sample delivered between the last
+for D s from S s into every stream, reported as a gap); in 6-DoF mode (``orientation=SIGMA_R``) each sample also
+carries its target frame's orientation, turned by the orientation noise as a polled reading's (drivers/sim/tracker.py).
+Reads return every sample delivered between the last
 read and ``clock.now()``; nothing blocks.
 
 A streamed move (:meth:`JointStreaming.start_move`) follows the synchronised trapezoidal profile of a blocking
@@ -29,6 +31,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from drivers.base import Array, JointStreamBatch, RobotState, TrackerStreamBatch
 from drivers.errors import ConnectionFailed, DeviceTimeout, EmergencyStop, ProtectiveStop
@@ -192,8 +195,15 @@ class TrackerStreaming:
         if rig.stream.jitter > 0:
             stamps = stamps + rig._stream_rng.normal(0.0, rig.stream.jitter, len(stamps))
         k, p = points.shape[:2]
+        rotvec = sigma_r = None
+        if rig.orientation > 0:  # 6-DoF mode: each target frame turned by the orientation noise (own generator)
+            frames = rig.true_frames(tau)  # (k, points, 3, 3)
+            turns = Rotation.from_rotvec(rig._orientation_rng.normal(0.0, rig.orientation, (k * p, 3))).as_matrix()
+            rotvec = Rotation.from_matrix(turns @ frames.reshape(k * p, 3, 3)).as_rotvec()
+            sigma_r = np.full(k * p, rig.orientation)
         return TrackerStreamBatch(np.repeat(stamps, p), points.reshape(k * p, 3),
-                                  np.tile(np.arange(1, p + 1, dtype=np.int64), k), np.full(k * p, rig.noise), gaps)
+                                  np.tile(np.arange(1, p + 1, dtype=np.int64), k), np.full(k * p, rig.noise), gaps,
+                                  rotvec, sigma_r)
 
     def stop_stream(self, timeout: float) -> TrackerStreamBatch:
         """Stop streaming; the samples since the last read."""

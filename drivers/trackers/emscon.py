@@ -47,7 +47,8 @@ with the tracker's own time (drivers/trackers/emscon_stream.py: the exchange, th
 (drivers/trackers/emscon_probe.py): ``position`` the probe's tip, ``rotvec`` the probe frame's orientation in the
 tracker frame, ``sigma`` and ``sigma_r`` the server's deviations; sessions record both (their orientation rows), and
 identification uses them. Continuous sweeps measure by continuous 6-DoF measurement by time; their stream carries
-the tip's positions (a session's streamed rows have no orientation columns; drivers/trackers/emscon_stream.py).
+the tip's positions and the probe frame's orientations, each point with its deviations (sessions record both in their
+streamed rows; drivers/trackers/emscon_stream.py).
 :meth:`~drivers.trackers.emscon_probe.ProbeMeasurement.measure_pose` gives one measurement as a 4x4 pose.
 """
 

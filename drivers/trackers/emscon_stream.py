@@ -9,8 +9,10 @@ the link while the stream runs (``measure`` is refused); ``stop_stream`` has it 
 up to its answer, so the last points are kept. The next stationary measurement sets the stationary mode again.
 With a 6-DoF probe (``probe=6dof``) the mode is continuous 6-DoF measurement by time
 (``ES_DT_ContinuousProbeMeasResult`` packets): the stream carries the tip's positions with each point's stated
-deviation as ``sigma``, and leaves out the points whose rotation status is not valid (as flagged points); the
-orientation is not streamed (a session's streamed rows have no orientation columns: its stop-and-go poses carry it).
+deviation as ``sigma`` and the probe frame's orientation, as a stationary reading does
+(drivers/trackers/emscon_probe.py): ``rotvec`` from the point's quaternion (rad, tracker frame <- probe frame),
+``sigma_r`` the RMS of its rotation angles' deviations (rad; NaN when none is stated). Points whose rotation status
+is not valid, or whose quaternion is not of unit length, are left out (as flagged points).
 
 Timestamps: each point carries the tracker's time of the point (``lTime1`` s + ``lTime2`` µs of the tracker's own
 clock, read as the public ROS driver ``beckjac/emscon_ros`` reads them); the stream's ``t`` is that time, so the
@@ -43,6 +45,7 @@ import time
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from drivers.base import TrackerStreamBatch
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout, DriverError
@@ -50,6 +53,7 @@ from drivers.stream_buffer import BufferedStreaming
 from drivers.trace import one_line
 from drivers.trackers import emscon_protocol as es
 from drivers.trackers.emscon_options import continuous_separation
+from drivers.trackers.emscon_probe import UNIT
 
 GAP_FACTOR = 1.5  # a step above this many time separations between kept points is a gap
 STEP_TOLERANCE = 0.5  # a packet's median step between points off the separation by more than this: misread stamps
@@ -233,8 +237,10 @@ class ContinuousMeasurement(BufferedStreaming):
                              "time stamps cannot be read (use --mode step)")
         values = packet.values
         good = (packet.point_status == 0) & np.all(np.isfinite(values) & (np.abs(values) < 1e4), axis=1)
+        turns = None
         if isinstance(packet, es.ProbeMultiResult):
-            good &= es.rotation_ok(packet.rotation_status)
+            good &= es.rotation_ok(packet.rotation_status) & _unit(packet.quaternion)
+            turns = _orientations(packet, good)
         sigma = (np.sqrt(np.mean(packet.std**2, axis=1)) if packet.std is not None
                  else np.full(len(t), math.nan))
         rows, gaps = [], []
@@ -245,7 +251,8 @@ class ContinuousMeasurement(BufferedStreaming):
                 continue
             if last is not None and (broken or not 0 < t[i] - last <= GAP_FACTOR * separation):
                 gaps.append((last, float(t[i])))
-            rows.append((float(t[i]), *values[i].tolist(), float(sigma[i])))
+            rows.append((float(t[i]), *values[i].tolist(), float(sigma[i]))
+                        + (() if turns is None else tuple(turns[i].tolist())))
             last, broken = float(t[i]), False
         self._last_t, self._broken = last, broken
         flagged = int((~good).sum())
@@ -292,3 +299,22 @@ class ContinuousMeasurement(BufferedStreaming):
         self._trace.event(f"stream stopped: {exc}")
         self._finish()
 
+
+
+def _unit(quaternion: np.ndarray) -> np.ndarray:
+    """Per point (k,): its quaternion (k, 4) is of unit length (within emscon_probe.UNIT): a rotation."""
+    return np.abs(np.linalg.norm(quaternion, axis=1) - 1.0) <= UNIT
+
+
+def _orientations(packet: es.ProbeMultiResult, good: np.ndarray) -> np.ndarray:
+    """Per point (k, 4): the probe frame's rotation vector (rad, tracker frame <- probe frame, from the quaternion
+    read as q0 scalar first: drivers/trackers/emscon_6dof.py) and ``sigma_r`` (rad, the RMS of the rotation angles'
+    stated deviations; NaN when none is stated); NaN rows where ``good`` is False."""
+    out = np.full((len(good), 4), math.nan)
+    if np.any(good):
+        q = packet.quaternion[good]
+        out[good, :3] = Rotation.from_quat(np.column_stack([q[:, 1:], q[:, 0]])).as_rotvec()
+        spread = packet.angles_std[good]
+        stated = np.all(np.isfinite(spread), axis=1) & (np.max(spread, axis=1) > 0)
+        out[np.flatnonzero(good)[stated], 3] = np.sqrt(np.mean(spread[stated] ** 2, axis=1))
+    return out

@@ -51,19 +51,26 @@ def prediction_rms_bound(model: DHModel, q_fit: Array, q_check: Array, sigma: fl
     return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2))))
 
 
-def full_pose_jacobian(model: DHModel, q: Array, sigma: float, sigma_r: float | None = None) -> Array:
+def full_pose_jacobian(model: DHModel, q: Array, sigma: float, sigma_r: float | None = None,
+                       weights: tuple[Array, Array] | None = None) -> Array:
     """Whitened Jacobian (m·3 or m·6, 9 + 4n + 3) of the samples at ``q`` (m, n) over the full DH vector and the turn
     of the target frame in frame n: positions divided by ``sigma`` (m), then, with ``sigma_r`` (rad), the target
-    frame's orientations by ``sigma_r`` (the frame's turn moves the orientation alone)."""
+    frame's orientations by ``sigma_r`` (the frame's turn moves the orientation alone). ``weights``: per sample (m,)
+    each, the position's and the orientation's ``sigma / sigma_k`` and ``sigma_r / sigma_r_k`` for samples of unequal
+    uncertainty (0: that sample has no such measurement)."""
     _, jac = full_jacobian(model, q)
     out = np.zeros((len(q), 3, jac.shape[2] + 3))
     out[:, :, : jac.shape[2]] = jac / sigma
+    if weights is not None:
+        out *= np.asarray(weights[0], dtype=float)[:, None, None]
     if sigma_r is None:
         return out.reshape(-1, out.shape[2])
     rotation, turns = orientation_jacobian(model, q)
     rows = np.zeros_like(out)
     rows[:, :, : jac.shape[2]] = turns / sigma_r
     rows[:, :, jac.shape[2]:] = rotation / sigma_r  # a turn of the target frame, expressed in frame n
+    if weights is not None:
+        rows *= np.asarray(weights[1], dtype=float)[:, None, None]
     return np.vstack([out, rows]).reshape(-1, out.shape[2])
 
 
@@ -82,13 +89,14 @@ def full_pose_covariance(model: DHModel, q_fit: Array, sigma: float, sigma_r: fl
 
 
 def full_pose_rms_bound(model: DHModel, q_fit: Array, q_check: Array, sigma: float, sigma_r: float | None,
-                        offset: Array | None = None) -> float:
+                        offset: Array | None = None, weights: tuple[Array, Array] | None = None) -> float:
     """Cramér-Rao bound on the RMS 3D error (m) of a predicted point at ``q_check``: the tracked point, or with
     ``offset`` (3,) the point fixed to the target at that offset from the tracked point (m, axes of the last DH
     frame: the target frame's rotation times the offset in its own axes), whose prediction needs the target frame's
     orientation: the bound counts the uncertainty of its turn. Samples at ``q_fit`` (positions, and orientations
-    with ``sigma_r``; without them the turn is undetermined and an ``offset`` bound means nothing)."""
-    jac = full_pose_jacobian(model, q_fit, sigma, sigma_r)
+    with ``sigma_r``; without them the turn is undetermined and an ``offset`` bound means nothing); ``weights`` as in
+    :func:`full_pose_jacobian`."""
+    jac = full_pose_jacobian(model, q_fit, sigma, sigma_r, weights)
     scale = np.maximum(np.linalg.norm(jac, axis=0), 1e-300)
     _, s, vt = np.linalg.svd(jac / scale, full_matrices=False)
     keep = s > RCOND * s[0]

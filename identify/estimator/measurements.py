@@ -212,15 +212,18 @@ def _validate_orientation(meas: Measurements) -> None:
 def orientation_rows(meas: Measurements) -> tuple[Measurements, list[str]]:
     """The fit's rows: every row as a position row (``rotvec`` NaN), then each orientation as a row of its own
     (the same readings, ``rotvec`` set, ``sigma`` = its ``sigma_r``, rad), so that an orientation and its position
-    are tested for outliers and weighed each on its own; and notes. Orientations of rows with an unread joint or
-    recorded in continuous motion are not used (their joint values are estimated from the position alone)."""
+    are tested for outliers and weighed each on its own; and notes. A streamed orientation row keeps its position
+    row's time ``t``: the fit's clock correction moves both (the joints' speed turns the frame as it moves the point).
+    Orientations of rows with an unread joint are not used: the unread angle is estimated from the position alone
+    (sharing it between a row's position and orientation is not implemented; see
+    :class:`identify.estimator.poe.LineProblem`)."""
     oriented = meas.oriented
     if not np.any(oriented):
         return replace(meas, rotvec=None, sigma_r=None), []
     notes = []
-    unusable = oriented & (np.any(np.isnan(meas.q), axis=1) | meas.streamed)
+    unusable = oriented & np.any(np.isnan(meas.q), axis=1)
     if np.any(unusable):
-        notes.append(f"{int(unusable.sum())} orientation(s) of rows with an unread joint or streamed not used")
+        notes.append(f"{int(unusable.sum())} orientation(s) of rows with an unread joint not used")
     extra = meas.subset(oriented & ~unusable)
     positions = replace(meas, rotvec=np.full((len(meas), 3), np.nan), sigma_r=None)
     extra = replace(extra, sigma=extra.sigma_r, sigma_r=None)

@@ -207,11 +207,16 @@ class LineProblem:
     ``tp_index`` (m,): each row's tracked point (0-based row of ``start.tps``); ``terms``: joint errors
     fitted with the lines; ``timing``: the clock correction of streamed rows (:mod:`identify.estimator.sync`).
     ``rotations`` (m, 3, 3): the measured target-frame rotation of orientation rows (NaN rows: position rows); an
-    orientation row's residual is its rotation's (rad, weighted by its ``weights`` entry, 1/sigma_r), and it has no
-    unread joint. Parameters are increments on ``start`` (and on ``terms.coefs``, ``timing.tau``), zero at the start:
-    lines, then 3 per tracked point, then 3 per tracked point with orientation rows (a turn of its frame at home, a
-    rotation vector in the tracker frame applied on the left), then one per joint-error coefficient, then the
-    timing's (when free).
+    orientation row's residual is its rotation's (rad, weighted by its ``weights`` entry, 1/sigma_r). A streamed
+    orientation row moves with the clock correction as a position row does: a joint turning at speed dq_i/dt turns
+    the frame by ``L_i u_i · dq_i/dt`` per second of shift (``L_i`` the joints before i, ``u_i`` its axis; a prismatic
+    joint does not turn it), so its timing columns are those turns through ``J_l⁻¹`` of its residual. An orientation
+    row has no unread joint: the right model would share the unread angle between a reading's position and orientation
+    rows (one nuisance per reading, the orientation constraining the angle too); not implemented, so
+    :func:`identify.estimator.measurements.orientation_rows` leaves such orientations out. Parameters are increments on
+    ``start`` (and on ``terms.coefs``, ``timing.tau``), zero at the start: lines, then 3 per tracked point, then 3 per
+    tracked point with orientation rows (a turn of its frame at home, a rotation vector in the tracker frame applied on
+    the left), then one per joint-error coefficient, then the timing's (when free).
     """
 
     def __init__(self, start: AxisLines, q: Array, points: Array, weights: Array,

@@ -12,7 +12,8 @@ spread instead (:func:`pooled_spread`): the per-reading noise pooled over every 
 square root of the step's kept readings.
 Streams (continuous motion, :func:`with_streams`): every complete, current attempt whose stream step is recorded
 ok becomes rows: one per tracker sample (each tracked point), ``t`` its tracker time, ``q`` the joint stream
-interpolated (linearly) at robot time ``t + clock_offset``; ``clock_offset`` is the coarse estimate of
+interpolated (linearly) at robot time ``t + clock_offset``, a full-pose device's orientation (``rotvec``,
+``sigma_r``) where the sample has one; ``clock_offset`` is the coarse estimate of
 :func:`identify.estimator.timing.coarse_clock_offset` over all the session's sweeps. Rows whose robot time lies outside
 the recorded joint stream or within one sample of a joint-stream gap are dropped (counted).
 
@@ -209,7 +210,8 @@ def with_streams(streams: list[StreamData], steps: Measurements) -> tuple[Measur
     estimate = coarse_clock_offset([SweepStreams(s.t[k], s.points[k], s.t_joint, s.q_joint)
                                     for s, k in zip(streams, first, strict=True)])
     offset = estimate.offset
-    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("q", "points", "sweep", "joint", "sigma", "tp", "t")}
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in ("q", "points", "sweep", "joint", "sigma", "tp", "t",
+                                                          "rotvec", "sigma_r")}
     dropped = 0
     for s in streams:
         q, ok = interpolate_joints(s.t_joint, s.q_joint, s.t + offset, s.joint_gaps)
@@ -221,6 +223,8 @@ def with_streams(streams: list[StreamData], steps: Measurements) -> tuple[Measur
         parts["sigma"].append(s.sigma[ok])
         parts["tp"].append(s.tp[ok])
         parts["t"].append(s.t[ok])
+        parts["rotvec"].append(np.full((int(ok.sum()), 3), np.nan) if s.rotvec is None else s.rotvec[ok])
+        parts["sigma_r"].append(np.full(int(ok.sum()), np.nan) if s.sigma_r is None else s.sigma_r[ok])
     cat = {k: np.concatenate(v) for k, v in parts.items()}
     m0, m1 = len(steps), len(cat["t"])
     sigma = None
@@ -234,11 +238,20 @@ def with_streams(streams: list[StreamData], steps: Measurements) -> tuple[Measur
                    row=np.arange(1, m0 + m1 + 1), tp=np.concatenate([steps.tp, cat["tp"]]),
                    t=np.concatenate([t_steps, cat["t"]]),
                    streamed=np.concatenate([np.zeros(m0, bool), np.ones(m1, bool)]),
-                   rotvec=None if steps.rotvec is None else np.vstack([steps.rotvec, np.full((m1, 3), np.nan)]),
-                   sigma_r=None if steps.sigma_r is None else np.concatenate([steps.sigma_r, np.full(m1, np.nan)]),
-                   clock_offset=offset)
+                   clock_offset=offset, **_orientations(steps, cat["rotvec"], cat["sigma_r"]))
     gaps = sum(len(s.joint_gaps) + len(s.tracker_gaps) for s in streams)
     return meas, StreamSummary(offset, estimate.per_sweep, m1, dropped, gaps)
+
+
+def _orientations(steps: Measurements, rotvec: np.ndarray, sigma_r: np.ndarray) -> dict[str, np.ndarray | None]:
+    """``rotvec`` and ``sigma_r`` of the stop-and-go ``steps`` followed by the streamed rows' (NaN: a position only);
+    None for both when no row has an orientation (positions-only data stay exactly as they were)."""
+    if steps.rotvec is None and not np.any(np.isfinite(rotvec)):
+        return {"rotvec": None, "sigma_r": None}
+    m0 = len(steps)
+    given = steps.rotvec if steps.rotvec is not None else np.full((m0, 3), np.nan)
+    given_r = steps.sigma_r if steps.sigma_r is not None else np.full(m0, np.nan)
+    return {"rotvec": np.vstack([given, rotvec]), "sigma_r": np.concatenate([given_r, sigma_r])}
 
 
 def _identity_line(identity: dict[str, Any]) -> str:

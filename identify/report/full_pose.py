@@ -33,8 +33,8 @@ LOADING = 1e-3  # a parameter whose share of an undetermined direction exceeds t
 
 
 def turning_rows(fit: Measurements) -> NDArray[np.bool_]:
-    """The fitted rows whose orientation the fit used (measured, every joint read, not streamed), in fit order."""
-    return fit.oriented & ~fit.streamed & np.all(np.isfinite(fit.q), axis=1)
+    """The fitted rows whose orientation the fit used (measured, every joint read), in fit order."""
+    return fit.oriented & np.all(np.isfinite(fit.q), axis=1)
 
 
 def full_pose_section(ident: Identification, fit: Measurements, escape: Callable[[Any], str],

@@ -254,7 +254,8 @@ def clock_fit(model: WrittenModel, offset: float, test: ClockSplit | None) -> Cl
     std = np.sqrt(np.clip(np.diag(model.covariance[n:, n:]), 0.0, None))
     k = timing.offsets
     drift, drift_std = (float(timing.tau[k]), float(std[k])) if timing.drift else (None, None)
-    rows = int(np.sum(timing.rows))
+    oriented = model.fit.oriented if model.fit.oriented is not None else np.zeros(len(timing.t), dtype=bool)
+    rows = int(np.sum(timing.rows & ~oriented))  # the streamed samples (not their orientation rows)
     if k == 1:
         return ClockFit(offset + float(timing.tau[0]), float(std[0]), drift, drift_std, timing.t_ref, rows, test)
     offsets, stds = offset + timing.tau[:k], np.maximum(std[:k], 1e-300)
@@ -384,8 +385,9 @@ def _cause(models: dict[str, WrittenModel], decisions: list[Decision]) -> str | 
 
 
 def _tp_speed(jac_blocks: Array, problem: LineProblem, weights: Array) -> float:
-    """RMS speed (m/s) of the tracked point over the streamed rows: the Jacobian column of the clock offset."""
-    rows = problem.timing.rows
+    """RMS speed (m/s) of the tracked point over the streamed position rows: the Jacobian column of the clock
+    offset (an orientation row's is the frame's turning rate, rad/s: not counted)."""
+    rows = problem.timing.rows & ~problem.oriented
     velocity = jac_blocks[rows, :, problem.n_terms] / weights[rows, None]
     return float(np.sqrt(np.mean(np.sum(velocity**2, axis=1))))
 

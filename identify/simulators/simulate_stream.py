@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from identify.estimator.measurements import Measurements
+from identify.simulators.simulate import observe_frames
 from kinematics.dh import DHModel, points_from_joints
 
 Array = NDArray[np.float64]
@@ -65,12 +66,15 @@ class StreamSettings:
 
 
 def streamed_sweeps(truth: DHModel, home: Array, ranges: list[tuple[int, float, float]], settings: StreamSettings,
-                    rng: np.random.Generator, first_sweep: int = 1) -> Measurements:
+                    rng: np.random.Generator, first_sweep: int = 1, frame: Array | None = None,
+                    noise_r: float = 0.0) -> Measurements:
     """Streamed rows of sweeps ``ranges`` = [(joint 1-based, from, to), ...] of ``truth`` about ``home``
-    (n,) joint values, in that order, one sweep id each from ``first_sweep``."""
+    (n,) joint values, in that order, one sweep id each from ``first_sweep``. With a target ``frame`` (3, 3, its
+    rotation in the last DH frame) every row is a full-pose device's: the frame's orientation at the sample's true
+    time, turned by ``noise_r`` rad per axis (drawn after the positions' noise), with both sigmas declared."""
     s = settings
     n = len(home)
-    rows_q, rows_p, rows_t, sweep, joint = [], [], [], [], []
+    rows_q, rows_p, rows_t, sweep, joint, true_q = [], [], [], [], [], []
     clock = 0.0  # robot time at the next sweep's start
     t_ref = 0.0
     for k, (j, lo, hi) in enumerate(ranges):
@@ -89,14 +93,19 @@ def streamed_sweeps(truth: DHModel, home: Array, ranges: list[tuple[int, float, 
         q_rows = np.column_stack([np.interp(at, robot_t, q_stream[:, i]) for i in range(n)])
         rows_q.append(q_rows)
         rows_p.append(points)
+        true_q.append(q_true)
         rows_t.append(stamped)
         sweep.append(np.full(len(at), first_sweep + k))
         joint.append(np.full(len(at), j))
         clock += duration + 0.5 + s.pause
     m = sum(len(t) for t in rows_t)
+    posed = {}
+    if frame is not None:
+        posed = {"rotvec": observe_frames(truth, frame, np.vstack(true_q), rng, noise_r),
+                 "sigma_r": np.full(m, noise_r), "sigma": np.full(m, s.noise)}
     return Measurements(truth.joint_types, np.vstack(rows_q), np.vstack(rows_p), np.concatenate(sweep),
                         np.concatenate(joint), t=np.concatenate(rows_t), streamed=np.ones(m, dtype=bool),
-                        clock_offset=s.recorded_offset)
+                        clock_offset=s.recorded_offset, **posed)
 
 
 def joined(*parts: Measurements) -> Measurements:

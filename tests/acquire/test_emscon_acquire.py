@@ -159,3 +159,26 @@ def test_a_tracker_error_mid_sweep_ends_the_run_resumable_in_one_line(tmp_path, 
         statuses = [s for (s,) in db.execute("SELECT status FROM streams WHERE plan_index = ? ORDER BY id",
                                              (attempts[0][0],))]
     assert statuses == ["interrupted", "complete"]  # the resume redid the sweep
+
+
+@pytest.mark.slow
+def test_emscon_sim_6dof_probe_streams_orientations_that_the_fit_uses(tmp_path, capsys):
+    """``probe=6dof --mode continuous``: continuous 6-DoF measurement by time; every streamed sample carries the
+    probe's orientation (the session's ``tracker_samples.rx, ry, rz, sigma_r``) and the identification fits them with
+    the clock: every orientation row kept, their residuals at the probe's stated noise."""
+    angle = 2e-5  # emscon:sim's default angle_noise, rad per axis
+    site = tmp_path / "site.yaml"
+    site.write_text("schema: 1\nplan:\n  check_poses: 4\n  stream_rate: 50\n")
+    path = tmp_path / "c.session"
+    assert main(["--robot", ROBOT, "--tracker", "emscon:sim?probe=6dof", "--mode", "continuous", "--config",
+                 str(site), "--session", str(path), "--quiet"]) == 0
+    capsys.readouterr()
+    with Session.open(path) as session:
+        meas = session.to_measurements()
+    streamed = meas.streamed
+    assert streamed.sum() > 1000 and np.all(meas.oriented) and np.allclose(meas.sigma_r[streamed], angle)
+    doc = yaml.safe_load(path.with_suffix(".result.yaml").read_text())
+    orientation = doc["residuals"]["orientation"]
+    assert orientation["samples"] == int(np.sum(~meas.check)) and orientation["rejected"] == 0, orientation
+    # 3D RMS of the streamed rows' sqrt(3) x 2e-5 rad (the few averaged steps' are smaller): within 10 %
+    assert 0.9 * np.sqrt(3) * angle < orientation["rms_rad"] < 1.1 * np.sqrt(3) * angle, orientation

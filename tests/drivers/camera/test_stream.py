@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 import yaml
+from scipy.spatial.transform import Rotation
 
 cv2 = pytest.importorskip("cv2")
 
@@ -55,6 +56,8 @@ class Streamed:
         self.t = np.concatenate([b.t for b in batches])
         self.points = np.vstack([b.points for b in batches])
         self.sigma = np.concatenate([b.sigma for b in batches])
+        self.rotvec = np.vstack([b.rotvec for b in batches if len(b.t)])  # the board's orientation, camera frame
+        self.sigma_r = np.concatenate([b.sigma_r for b in batches if len(b.t)])
         self.gaps = [g for b in batches for g in b.gaps]
         self.frames = int(np.floor((self.rig.clock.now() - LATENCY - self.t0) * FPS + 1e-6)) + 1
         self.grid = self.t0 + LATENCY + np.arange(self.frames) / FPS  # every frame's stamp
@@ -84,6 +87,11 @@ def test_a_still_target_streams_every_frame_at_the_frame_rate(still: Streamed):
     print(f"per-frame error {noise * 1e3:.4f} mm 3D, median sigma {np.median(still.sigma) * 1e3:.4f} mm per axis")
     assert 1e-6 < noise < 2e-4
     assert 0.5 < noise / (np.sqrt(3) * np.median(still.sigma)) < 2.0
+    # each frame's orientation (full pose, issue 35): the board's true axes within 5 of its own sigma_r per axis
+    true = Rotation.from_matrix((still.rig.flange_pose() @ still.tracker.source.mount)[:3, :3])
+    turns = np.linalg.norm((Rotation.from_rotvec(still.rotvec) * true.inv()).as_rotvec(), axis=1)
+    assert len(still.rotvec) == len(still.t) and np.all(still.sigma_r > 0)
+    assert np.all(turns < 5 * np.sqrt(3) * still.sigma_r) and np.all(still.sigma_r < np.radians(0.5)), turns
 
 
 def test_a_moving_target_is_where_the_arm_was_at_each_frames_capture_time(still: Streamed):

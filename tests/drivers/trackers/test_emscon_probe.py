@@ -1,7 +1,7 @@
 """6-DoF probes (T-Mac class) through the emScon client with ``probe=6dof`` (drivers/trackers/emscon_probe.py,
 emscon_stream.py) against the loopback emulator (tests/emscon_device.py): readings are full poses whose tip and
 orientation are the emulator's truth within its stated noise, a result that says its pose is not valid is retried
-on the same link, and a continuous 6-DoF measurement streams the tip's positions."""
+on the same link, and a continuous 6-DoF measurement streams the tip's positions and the probe's orientations."""
 
 from __future__ import annotations
 
@@ -82,7 +82,8 @@ def test_probe_readings_are_full_poses_of_the_truth(rig: SimulatedRig) -> None:
     assert np.linalg.norm(Rotation.from_matrix(frame).as_rotvec()) > 0.1
 
 
-def test_a_continuous_6dof_measurement_streams_the_tips_positions(rig: SimulatedRig) -> None:
+def test_a_continuous_6dof_measurement_streams_the_tips_positions_and_the_probes_orientations(
+        rig: SimulatedRig) -> None:
     with EmsconServer(rig, noise=NOISE, seed=7, angle_noise=ANGLE) as server:
         tracker = open_emscon(server, probe="6dof")
         tracker.start_stream(200.0, 2.0)
@@ -92,6 +93,7 @@ def test_a_continuous_6dof_measurement_streams_the_tips_positions(rig: Simulated
             batches.append(tracker.read_stream())
         batches.append(tracker.stop_stream(2.0))
         sent, mode = list(server.streamed), server.mode
+        true_turns = Rotation.from_matrix([server.probe_pose(tau)[:3, :3] for tau, _ in sent])
         tracker.close()
     assert mode == es.MM_6D_CONTINUOUS_TIME
     points = np.concatenate([b.points for b in batches])
@@ -99,3 +101,10 @@ def test_a_continuous_6dof_measurement_streams_the_tips_positions(rig: Simulated
     assert len(points) == len(sent) >= 40 and not any(b.gaps for b in batches)
     error = points - np.array([p for _, p in sent])
     assert 0 < np.abs(error).max() < TOL and np.allclose(sigma, NOISE)  # each point's stated deviation
+    # each point's orientation: the probe frame in the tracker frame (the quaternion read as the stationary result's)
+    rotvec = np.concatenate([b.rotvec for b in batches if len(b.t)])  # (an empty batch has none)
+    sigma_r = np.concatenate([b.sigma_r for b in batches if len(b.t)])
+    turn = np.linalg.norm((Rotation.from_rotvec(rotvec) * true_turns.inv()).as_rotvec(), axis=1)
+    assert 0 < turn.max() < TOL_R and np.allclose(sigma_r, ANGLE)
+    # the turns are the stated noise, not a copy of the truth or a smoothed one: RMS within 20 % (about 40 x 3 axes)
+    assert 0.8 * np.sqrt(3) * ANGLE < np.sqrt(np.mean(turn**2)) < 1.2 * np.sqrt(3) * ANGLE
