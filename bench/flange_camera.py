@@ -1,6 +1,6 @@
 """A camera on the flange and a printed board: the arm's kinematics without a tracker (docs/benchmarks.md, section 24).
 
-    PYTHONPATH=. .venv/bin/python -m bench.flange_camera [--seeds 3] [--views 40] [--jobs 1] [--quick]
+    PYTHONPATH=. .venv/bin/python -m bench.flange_camera [--seeds 3] [--views 40] [--jobs 1] [--quick] [--realistic all]
 
 Each case is one rendered session of a simulated UR5e (``mock:ur5e?seed=S``: its true DH table perturbed 0.5 mm and
 1 mrad per value) with a 1280x720 camera (60° horizontal field of view, noise 2 grey levels, blur 0.5 px) on the
@@ -26,6 +26,12 @@ squares of 25 mm, ArUco 4X4_50) or A3 (15x11 of 26 mm, 4X4_100). Real OpenCV det
    (must meet the targets), and with boards printed 0.3 % and 0.5 % large declared at their nominal size: the
    ``scale`` check must not pass, and where it only warns (a misprint within the arm's own length tolerance) the
    stated accuracy must cover the error (RMS <= 1.3 x stated): reported, not absorbed.
+
+5. ``--realistic ERRORS``: instead, sessions with a real camera's errors (:data:`REAL_ERRORS`, docs/benchmarks.md
+   section 24a): residual distortion, rolling shutter, exposure blur, lighting, a board bowed 0.5 mm, latency, each
+   alone or ``all`` together (with ``flatness=`` and ``lens_sigma=`` declared: the tracker estimates the board's
+   shape and the lens's error), or ``undeclared`` (all, neither declared); the truth's board frame is the bowed
+   print's mean plane.
 
 Robot time (virtual clock of the rig: moves, settling, frames) and the number of images are reported per case.
 Exit status 1 when a case misses a target.
