@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from config.geometry import TOOL
-from config.robots import RobotModel
+from config.robots import ConfigError, RobotModel
 from config.site import SiteConfig
 from kinematics.collision import (
     STEP,
@@ -29,7 +29,9 @@ from kinematics.collision import (
     moves_samples,
     path_samples,
     reach_per_joint,
+    segment_distances,
 )
+from kinematics.dh import DHModel, frames_from_joints
 
 Array = NDArray[np.float64]
 
@@ -71,14 +73,23 @@ def cell_from_config(robot: RobotModel, site: SiteConfig) -> Cell | None:
         return None
     n = robot.n_joints
     tool_b = site.tp_guess if site.tool_b is None else site.tool_b
-    bodies = Bodies((*geo.names, TOOL), np.append(geo.frame, n).astype(np.int64),
-                    np.vstack([geo.a, site.tool_a]), np.vstack([geo.b, tool_b]),
-                    np.append(geo.radius, site.tool_radius))
+    cable = site.cable
+    if any(c["frame"] > n for c in cable):
+        raise ConfigError(site.source, "cell.cable", f"frames 0..{n} (the base to the flange of {robot.name})",
+                          [c["frame"] for c in cable])
+    bodies = Bodies((*geo.names, TOOL, *(f"cable {i + 1}" for i in range(len(cable)))),
+                    np.array([*geo.frame, n, *(c["frame"] for c in cable)], dtype=np.int64),
+                    np.vstack([geo.a, site.tool_a, *(c["a"] for c in cable)]),
+                    np.vstack([geo.b, tool_b, *(c["b"] for c in cable)]),
+                    np.array([*geo.radius, site.tool_radius, *(c["radius"] for c in cable)]))
     model = robot.nominal
     boxes = site.boxes
     cylinders = site.cylinders
+    pairs = checked_pairs(model, bodies, robot.home, set(geo.ignore))
+    if cable:  # a cable is strapped beside the links it follows: not checked against what it lies within the margin
+        pairs = _beside_dropped(model, bodies, pairs, robot.home, len(cable), site.cell_margin + STEP)  # of at home
     return Cell(
-        model=model, bodies=bodies, pairs=checked_pairs(model, bodies, robot.home, set(geo.ignore)),
+        model=model, bodies=bodies, pairs=pairs,
         normal=geo.normal, offset=geo.offset if site.mounting_offset is None else site.mounting_offset,
         clearance=site.mounting_clearance, margin=site.cell_margin,
         boxes_lo=np.array([b["min"] for b in boxes], dtype=float).reshape(-1, 3),
@@ -91,6 +102,18 @@ def cell_from_config(robot: RobotModel, site: SiteConfig) -> Cell | None:
         reach=reach_per_joint(model, bodies, robot.limits),
         floor_from=fixed_height_frames(model, robot.home, geo.normal) + 1,
     )
+
+
+def _beside_dropped(model: DHModel, bodies: Bodies, pairs: NDArray[np.int64], home: Array, count: int,
+                    near: float) -> NDArray[np.int64]:
+    """``pairs`` without those of the last ``count`` bodies (the cable's) closer than ``near`` m at ``home``."""
+    frames = frames_from_joints(model, np.asarray(home, dtype=float)[None])[0, bodies.frame]
+    a = np.einsum("kij,kj->ki", frames[:, :3, :3], bodies.a) + frames[:, :3, 3]
+    b = np.einsum("kij,kj->ki", frames[:, :3, :3], bodies.b) + frames[:, :3, 3]
+    i, j = pairs[:, 0], pairs[:, 1]
+    gap = segment_distances(a[i], b[i], a[j], b[j]) - bodies.radius[i] - bodies.radius[j]
+    cable = (i >= len(bodies.names) - count) | (j >= len(bodies.names) - count)
+    return pairs[~(cable & (gap < near))]
 
 
 def contact_at(cell: Cell, q: Array) -> Contact | None:

@@ -8,7 +8,7 @@ unknown key is rejected. Sections and keys (units: m, rad, s; per-joint values b
     tracker:  {spec, noise, settings, measure_time}
     plan:     {tp_guess, samples_per_step, settle_time, steps_per_sweep, joints, sweep_ranges,
                free_poses, check_poses, home_check_every, min_axis_distance, stream_speed, stream_rate}
-    cell:     {margin, mounting_offset, mounting_clearance, tool_a, tool_b, tool_radius, boxes, cylinders,
+    cell:     {margin, mounting_offset, mounting_clearance, tool_a, tool_b, tool_radius, boxes, cylinders, cable,
                camera_pose, camera_half_fov, camera_max_tilt, target_normal}
     timeouts: {connect, move, settle, measure}
     verify:   {cube_centre, cube_edge, cycles}
@@ -66,6 +66,7 @@ FIELDS: dict[str, tuple[str | None, str]] = {
     "tool_radius": ("cell", "tool_radius"),
     "boxes": ("cell", "boxes"),
     "cylinders": ("cell", "cylinders"),
+    "cable": ("cell", "cable"),
     "camera_pose": ("cell", "camera_pose"),
     "camera_half_fov": ("cell", "camera_half_fov"),
     "camera_max_tilt": ("cell", "camera_max_tilt"),
@@ -110,9 +111,11 @@ class SiteConfig:
     (z = 0 for an arm on a table), moved to ``mounting_offset`` when given, kept ``mounting_clearance``
     away; the tool is a capsule ``tool_a``-``tool_b`` (flange frame; ``tool_b`` None: the TP guess) of
     ``tool_radius``; ``boxes`` ``{name, min, max}`` (axis-aligned corners) and ``cylinders``
-    ``{name, a, b, radius}`` (axis ends). A camera cell: ``camera_pose`` (base frame ← camera frame, 4x4;
-    None: no camera view check), ``camera_half_fov`` and ``camera_max_tilt`` (rad) and ``target_normal``
-    (flange frame): see :mod:`acquire.planning.camera_view`. Timeouts in s; ``retries`` per failed measurement.
+    ``{name, a, b, radius}`` (axis ends); ``cable`` a camera's cable as capsules ``{frame, a, b, radius}`` fixed
+    to DH frame ``frame`` (0 the base, n the flange; ends in that frame). A camera cell: ``camera_pose`` (base
+    frame ← camera frame, 4x4; None: no camera view check), ``camera_half_fov`` and ``camera_max_tilt`` (rad)
+    and ``target_normal`` (flange frame): see :mod:`acquire.planning.camera_view`. Timeouts in s; ``retries`` per
+    failed measurement.
     Verification (``acquire verify``, :mod:`identify.applications.iso9283`): the test cube's ``verify_centre`` (base
     frame, m; None: the TP at home) and ``verify_edge`` (m; None: from the robot's reach), ``verify_cycles`` per pose.
     ``source`` names where it came from.
@@ -149,6 +152,7 @@ class SiteConfig:
     tool_radius: float = 0.03
     boxes: tuple[dict[str, Any], ...] = ()
     cylinders: tuple[dict[str, Any], ...] = ()
+    cable: tuple[dict[str, Any], ...] = ()
     camera_pose: tuple[tuple[float, ...], ...] | None = None
     camera_half_fov: float = 0.5
     camera_max_tilt: float = 1.05

@@ -160,6 +160,26 @@ def obstacles(keys: tuple[str, ...], example: str) -> Any:
     return check
 
 
+def cable(v: Validator, key: str, value: Any) -> tuple[dict[str, Any], ...]:
+    """A camera's cable as capsules fixed to the arm's links: ``{frame, a, b, radius}`` each, ``frame`` the DH frame
+    (0 the base, n the flange) the capsule ``a``-``b`` (m, in that frame) rides with."""
+    example = "{frame: 6, a: [0, -0.06, 0.04], b: [0, -0.09, -0.05], radius: 0.006}"
+    if value is None:
+        return ()
+    if not isinstance(value, list):
+        raise v.fail(key, f"a list of mappings {example}", value)
+    out = []
+    for i, item in enumerate(value):
+        where = f"{key}[{i}]"
+        if not isinstance(item, dict) or set(item) != {"frame", "a", "b", "radius"}:
+            raise v.fail(where, f"a mapping with exactly the keys frame, a, b, radius, e.g. {example}", item)
+        out.append({"frame": v.integer(f"{where}.frame", item["frame"], 0),
+                    "a": list(v.numbers(f"{where}.a", item["a"], "[x, y, z] in that DH frame (m)", 3)),
+                    "b": list(v.numbers(f"{where}.b", item["b"], "[x, y, z] in that DH frame (m)", 3)),
+                    "radius": v.number(f"{where}.radius", item["radius"], "a number > 0 (m)", 0.0, strict=True)})
+    return tuple(out)
+
+
 def optional_point(v: Validator, key: str, value: Any) -> tuple[float, ...] | None:
     if value is None:
         return None
@@ -240,6 +260,7 @@ CHECKS: dict[str, Any] = {
     "boxes": obstacles(("name", "min", "max"), "{name: fixture, min: [0.4, -0.2, 0], max: [0.6, 0.2, 0.3]}"),
     "cylinders": obstacles(("name", "a", "b", "radius"),
                            "{name: tracker stand, a: [1.5, 0, 0], b: [1.5, 0, 1.2], radius: 0.15}"),
+    "cable": cable,
     "camera_pose": camera_pose,
     "camera_half_fov": lambda v, key, x: v.number(key, x, "an angle > 0 (rad)", 0.0, strict=True),
     "camera_max_tilt": lambda v, key, x: v.number(key, x, "an angle > 0 (rad)", 0.0, strict=True),

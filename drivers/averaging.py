@@ -6,14 +6,18 @@ property): the driver takes N raw samples of a still target and reports their ro
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
+from scipy.stats import f as f_dist
 
 Array = NDArray[np.float64]
 
 REJECT_SIGMAS = 5.0  # a sample farther than this many robust sigmas from the median is an outlier
 CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise (chi, 3 degrees of freedom)
+SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
 SPREAD_FLOOR = 1e-7  # m: below this a spread is the reply's resolution (0.1 µm), not noise
 
 
@@ -53,3 +57,17 @@ def robust_mean(points: Array, reject_sigmas: float = REJECT_SIGMAS) -> tuple[Ar
         return kept.mean(axis=0), None, used
     per_axis = float(np.sqrt(np.mean(np.var(kept, axis=0, ddof=1))))
     return kept.mean(axis=0), max(per_axis, SPREAD_FLOOR) / np.sqrt(len(kept)), used
+
+
+def frame_sigma(model: float, pts: Array, dof: int) -> float:
+    """One frame's per-axis standard uncertainty (m): the propagated ``model`` (``dof`` residual degrees of
+    freedom behind it), unless the kept frames ``pts`` (n, 3) scatter significantly more than it (an
+    F-test at SPREAD_SIGNIFICANCE: vibration, flicker, a target still moving), then their spread."""
+    n = len(pts)
+    if n < 2 or dof < 1 or model <= 0:
+        return model
+    spread2 = float(np.mean(np.var(pts, axis=0, ddof=1)))
+    # one axis (depth) dominates the spread: n - 1 degrees of freedom, not 3 (n - 1)
+    if spread2 > model**2 * f_dist.isf(SPREAD_SIGNIFICANCE, n - 1, dof):
+        return math.sqrt(spread2)
+    return model

@@ -123,10 +123,12 @@ def lock_for_writing(path: Path, shown: Path) -> int:
 
 
 def remove_dead_creations(path: Path) -> None:
-    """Remove the hidden files (``.NAME.creating-PID``) that a process killed while creating session ``path`` left
-    behind: never committed, so never a session; a live process's file is left alone."""
-    for stale in path.parent.glob(f".{path.name}.creating-*"):
-        pid = stale.name.rsplit("-", 1)[-1]
+    """Remove the hidden files (``.NAME.creating-PID`` and its SQLite journal ``-journal``) that a process killed
+    while creating session ``path`` left behind: never committed, so never a session; a live process's files are
+    left alone."""
+    prefix = f".{path.name}.creating-"
+    for stale in path.parent.glob(f"{prefix}*"):
+        pid = stale.name[len(prefix):].removesuffix("-journal")
         if not pid.isdigit():
             continue
         try:

@@ -20,6 +20,7 @@ from acquire.commands.prepare import (
     check_start,
     check_units,
     confirm,
+    motion_problems,
     open_devices,
     site_from_args,
     tracker_site,
@@ -27,7 +28,7 @@ from acquire.commands.prepare import (
 )
 from acquire.planning.plan import check_plan, estimate_duration, plan_clearance
 from acquire.planning.plan_continuous import estimate_continuous_duration
-from acquire.planning.plan_flange import flange_json, flange_lines, is_flange_camera
+from acquire.planning.plan_flange import flange_json, flange_lines, is_flange_camera, located_record
 from acquire.planning.plan_modes import build_mode_plan, format_modes, mode_site, plan_mode
 from acquire.planning.plan_report import format_clearance, format_plan, plan_json, predicted_accuracy
 from acquire.planning.plan_target import TargetError, candidates, choose, format_tradeoff, replan_for_rate
@@ -40,7 +41,6 @@ from common import stop_signals
 from common.errors import InputError
 from common.fit_width import say
 from common.outputs import OutputError, check_outputs, check_target, same_file
-from config.cell import Clearance
 from config.robots import ConfigError, RobotModel, load_robot
 from config.site import SiteConfig
 from drivers.clock import VirtualClock, WallClock
@@ -147,11 +147,21 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if robot_model is None:
         robot_model = load_robot(robot_spec.model)
     setup = None
-    if flange:  # the camera's body in the cell model, its views planned around the board (a resume keeps its plan)
+    if flange:  # located (a new run), the camera's body and cable in the cell model, its views around the board
         assert tracker_spec is not None
-        from acquire.planning.plan_flange import build_flange_plan, camera_site, flange_setup
+        from acquire.commands.flange_locate import LocateEnded, locate
+        from acquire.planning.flange_locate import rough_mount
+        from acquire.planning.plan_flange import build_flange_plan, camera_site, flange_setup, recorded_setup
 
-        setup = flange_setup(robot_model, tracker_spec, site)
+        setup = flange_setup(robot_model, tracker_spec, site, rough_mount(args.camera_mount,
+                                                                          args.camera_mount_tolerance))
+        if session is not None:  # a resume keeps its plan; the mount and board as the locate found them
+            setup = recorded_setup(setup, session.header.get("config") or {}, plan)
+        elif not args.dry_run:
+            try:
+                setup = locate(args, robot_spec, tracker_spec, site, robot_model, setup)
+            except LocateEnded as exc:
+                return exc.code
         site = camera_site(site, setup)
         if plan is None:
             plan = build_flange_plan(robot_model, site, setup)
@@ -167,7 +177,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         raise UsageError("--tracker none rehearses stop-and-go plans; use --mode step")
     problems = check_plan(plan, robot_model)
     clearance = plan_clearance(plan, robot_model, site)
-    problems += _motion_problems(plan, robot_model, robot_spec, clearance, site)
+    problems += motion_problems(plan, robot_model, robot_spec, clearance, site)
     if problems:
         for line in problems:
             print(f"acquire: plan refused: {line}", file=sys.stderr)
@@ -186,12 +196,17 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         accuracy = None if rehearsal or flange else predicted_accuracy(
             plan if camera is None else camera.seen_plan(plan), robot_model, site.tp_guess,
             site.tracker_noise if camera is None else camera.noise)
+    flange_accuracy = None
+    if setup is not None and (setup.located is not None or session is None):
+        from acquire.planning.plan_flange import flange_accuracy as bound
+
+        flange_accuracy = bound(robot_model, plan, setup)
     if args.json:
         doc = plan_json(plan, clearance, duration, accuracy)
         if camera is not None:
             doc["camera"] = camera.as_dict(plan)
         if setup is not None:
-            doc["flange_camera"] = flange_json(plan, setup)
+            doc["flange_camera"] = flange_json(plan, setup, flange_accuracy)
         print(json.dumps(doc, allow_nan=False))
         return 0
     if session is not None:
@@ -202,7 +217,10 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
     if camera is not None:
         say("\n".join(["", *camera.lines(plan)]))
     if setup is not None:
-        say("\n".join(["", *flange_lines(plan, setup)]))
+        from acquire.planning.plan_flange import locate_seconds
+
+        locate = locate_seconds(robot_model, site, setup) if setup.located is None and session is None else None
+        say("\n".join(["", *flange_lines(plan, setup, flange_accuracy, locate)]))
     if tracker_spec is not None and tracker_spec.backend == "emscon":  # what the tracker will be asked to do
         from drivers.trackers.emscon_options import describe
 
@@ -244,6 +262,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         if session is None:
             config = {"robot_spec": str(robot_spec), "tracker_spec": str(tracker_spec), "site": site.as_dict(),
                       "command": " ".join(sys.argv),
+                      **({"flange_locate": located_record(setup)} if setup and setup.located else {}),
                       **({"robot_model": robot_model.document} if robot_model.document is not None else {})}
             session = Session.create(path, plan, config, robot.identity(), tracker.identity(), robot_model.coupling)
         elif changes:
@@ -342,24 +361,6 @@ def _nothing_to_do(session: Session, remeasure: bool) -> bool:
               f"{', '.join(map(str, missing))}); nothing moved. --remeasure-missing measures them again")
         return True
     return False
-
-
-def _motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clearance: Clearance | None,
-                     site: SiteConfig) -> list[str]:
-    """Why the plan's motion may not run: a step or move that comes too close to the cell, or no geometry to
-    check it with on a real robot."""
-    if clearance is None:
-        if robot_spec.backend == "mock":
-            return []
-        return [f"{robot.name} has no collision geometry ('collision:' in {robot.path.name}): the plan cannot be "
-                "checked against the cell and the arm itself"]
-    if clearance.slack >= clearance.guard:
-        return []
-    step = plan.steps[clearance.slack_move]
-    needs = clearance.slack_distance - clearance.slack + clearance.guard
-    return [f"the move to step {step.index} ({step.kind}) comes too close: {clearance.slack_what} "
-            f"{clearance.slack_distance * 1e3:.1f} mm apart at a checked sample (needs {needs * 1e3:.0f} mm with "
-            f"{clearance.guard * 1e3:g} mm for the motion between samples)"]
 
 
 def _rehearse(robot_spec: RobotSpec, args: argparse.Namespace, plan: Plan, site: SiteConfig) -> int:

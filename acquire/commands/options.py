@@ -66,10 +66,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "full poses; emscon:sim with a mock robot), "
                    "aruco:... (a camera in the cell: aruco:0?..., aruco:/dev/video0?..., a network camera "
                    "aruco:http://HOST:PORT/PATH#... (an MJPEG stream or a snapshot URL; its options after '#'); "
-                   "aruco:...&mount=flange: a camera on the flange seeing a fixed "
-                   "board: aruco:sim plans "
-                   "stop-and-go views that keep it in sight, a real one --probe only; &square_sigma=M: the board "
-                   "measured), mock, or none (motion "
+                   "aruco:...&mount=flange: a camera on the flange seeing a fixed board: jog the arm where it sees "
+                   "the whole board; a checked, confirmed locate phase of small wrist turns measures its mount and "
+                   "the board, then stop-and-go views that keep it in sight are planned and shown; &square_sigma=M: "
+                   "the board measured; &flatness=M&lens_sigma=K: the board's shape and the lens's residual k1, k2 "
+                   "estimated from the views; aruco:sim's dk1, shutter, exposure, gain, gradient, glare, bow: a real "
+                   "camera's errors, drivers/camera/imperfections.py), mock, or none (motion "
                    "rehearsal) (mock; on --resume: the session's, whose port or "
                    "host may change)")
     p.add_argument("--config", type=Path, help="site YAML (hosts, tracker, sweep ranges, timeouts)")
@@ -112,5 +114,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "check it; --steps sets their size); the dry run compares the three")
     p.add_argument("--trace-io", type=Path, metavar="FILE",
                    help="log every byte to and from the tracker (serial, I++ and emScon trackers)")
+    p.add_argument("--camera-mount", metavar="X,Y,Z,RX,RY,RZ",
+                   help="a flange camera's rough pose on the flange (flange <- camera, OpenCV's camera frame: z along "
+                   "the line of sight; m, and a rotation vector in degrees), e.g. from the bracket's drawing; the "
+                   "locate phase measures it (default 0,0,0.05,0,0,0 known to 100 mm and any turn)")
+    p.add_argument("--camera-mount-tolerance", metavar="MM,DEG",
+                   help="how far --camera-mount may be off (20,10): a located mount farther off is refused; the "
+                   "camera's body is grown by it in the locate moves' collision check")
     p.add_argument("--version", action=VersionAction)
     return p

@@ -17,6 +17,7 @@ from drivers.spec import RobotSpec, TrackerSpec
 
 if TYPE_CHECKING:
     from acquire.running.session import Session
+    from config.cell import Clearance
     from config.robots import RobotModel
     from drivers.base import Robot, Tracker
     from drivers.sim.rig import SimulatedRig
@@ -220,3 +221,21 @@ def check_start(robot: Robot, plan: Plan, robot_model: RobotModel, site: SiteCon
         raise UsageError(f"the move from the arm's current pose to step {index} would come too close: {contact.what} "
                          f"{contact.distance * 1e3:.1f} mm apart (needs {contact.required * 1e3:.0f} mm); jog the "
                          f"arm to home ({home}; deg / m) first")
+
+
+def motion_problems(plan: Plan, robot: RobotModel, robot_spec: RobotSpec, clearance: Clearance | None,
+                    site: SiteConfig) -> list[str]:
+    """Why the plan's motion may not run: a step or move that comes too close to the cell, or no geometry to
+    check it with on a real robot."""
+    if clearance is None:
+        if robot_spec.backend == "mock":
+            return []
+        return [f"{robot.name} has no collision geometry ('collision:' in {robot.path.name}): the plan cannot be "
+                "checked against the cell and the arm itself"]
+    if clearance.slack >= clearance.guard:
+        return []
+    step = plan.steps[clearance.slack_move]
+    needs = clearance.slack_distance - clearance.slack + clearance.guard
+    return [f"the move to step {step.index} ({step.kind}) comes too close: {clearance.slack_what} "
+            f"{clearance.slack_distance * 1e3:.1f} mm apart at a checked sample (needs {needs * 1e3:.0f} mm with "
+            f"{clearance.guard * 1e3:g} mm for the motion between samples)"]

@@ -16,6 +16,7 @@ import yaml
 from acquire.commands.prepare import UsageError, check_start, confirm, open_devices, site_from_args, without_faults
 from acquire.commands.verify_options import build_parser
 from acquire.planning.plan import estimate_duration, plan_clearance
+from acquire.planning.plan_flange import is_flange_camera
 from acquire.planning.plan_report import format_clearance
 from acquire.running.resume import resume_settings, session_model
 from acquire.running.runner import run_session
@@ -167,6 +168,10 @@ def run(args: argparse.Namespace) -> int:
             return _resume(args, session)
     if args.result is None:
         raise UsageError("give --result RESULT (the calibration to verify) or --resume SESSION")
+    if is_flange_camera(TrackerSpec.parse(args.tracker or "mock")):
+        raise UsageError("acquire verify measures the tool's point from the cell (a tracker, or a camera in the cell "
+                         "seeing a target on the flange); a camera on the flange (mount=flange) is not supported: its "
+                         "calibration's held-out views are its check (the result's holdout checks)")
     model, doc, sha = _load(args.result)
     robot_spec, robot = _robot_for(args, doc, model)
     tracker_spec = TrackerSpec.parse(args.tracker or "mock")

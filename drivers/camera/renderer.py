@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.camera.imperfections import STILL_PX, Imperfections, image_motion
 from drivers.camera.intrinsics import CameraIntrinsics
 from drivers.camera.sources import Frame, FrameQueue
 from drivers.camera.targets import Target
@@ -99,12 +100,15 @@ def texture_scale(target: Target, approximate: float) -> float:
 
 
 class Renderer:
-    """Renders one target through one camera (the rays and the texture are prepared once)."""
+    """Renders one target through one camera (the rays and the texture are prepared once). ``imperfections``
+    (drivers/camera/imperfections.py): the lens renders with its residual distortion (``camera`` is the calibrated
+    one), the print is bowed, the light uneven."""
 
     def __init__(self, target: Target, camera: CameraIntrinsics, optics: Optics | None = None,
-                 pixels_per_metre: float | None = None) -> None:
-        self.target, self.camera, self.optics = target, camera, optics or Optics()
-        self._rays = _Rays(camera, self.optics.supersample)
+                 pixels_per_metre: float | None = None, imperfections: Imperfections | None = None) -> None:
+        self.imperfections = imperfections or Imperfections()
+        self.target, self.camera, self.optics = target, self.imperfections.lens(camera), optics or Optics()
+        self._rays = _Rays(self.camera, self.optics.supersample)
         ppm = texture_scale(target, pixels_per_metre or 40.0 / (min(target.extent) / 10))
         margin = max(int(0.15 * min(target.extent) * ppm), 2)  # the white quiet zone around the print
         texture, self._affine = target.texture(ppm, margin)
@@ -120,19 +124,37 @@ class Renderer:
         """An 8-bit grey image with the target at each pose in ``poses`` (4x4, camera frame <- target frame,
         metres; several poses draw several copies); ``rng`` draws the sensor noise. Only the window of whole
         pixels that holds the targets is traced (``crop=False``: every pixel; the image is the same)."""
+        return self.finish(self.scene([poses], crop), rng)
+
+    def scene(self, bands: list[list[Array]], crop: bool = True) -> NDArray[np.float32]:
+        """The scene's grey levels (float, before light, blur and noise) with the rows cut into ``len(bands)``
+        equal bands, band j showing the targets at the poses ``bands[j]`` (a rolling shutter; one band: one
+        time)."""
         s = self._rays.supersample
         height, width = self._rays.shape[0] // s, self._rays.shape[1] // s
-        poses = [np.asarray(pose, dtype=float) for pose in poses]
-        boxes = [self._window(pose) if crop else (0, height, 0, width) for pose in poses]
+        bands = [[np.asarray(pose, dtype=float) for pose in poses] for poses in bands]
+        every = [pose for poses in bands for pose in poses]
+        boxes = [self._window(pose) if crop else (0, height, 0, width) for pose in every]
         image = np.full((height, width), BACKGROUND, dtype=np.float32)
         if boxes:
             r0, r1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
             c0, c1 = min(b[2] for b in boxes), max(b[3] for b in boxes)
             acc = np.full(((r1 - r0) * s, (c1 - c0) * s), BACKGROUND, dtype=np.float32)
             depth = np.full(acc.shape, np.inf, dtype=np.float32)
-            for pose in poses:
-                self._draw(pose, acc, depth, (r0 * s, c0 * s))
+            edges = np.linspace(0, height, len(bands) + 1).round().astype(int)
+            for j, poses in enumerate(bands):
+                lo, hi = max(int(edges[j]), r0), min(int(edges[j + 1]), r1)
+                if hi <= lo:
+                    continue
+                rows = slice((lo - r0) * s, (hi - r0) * s)  # a view: drawing into it draws into acc
+                for pose in poses:
+                    self._draw(pose, acc[rows], depth[rows], (lo * s, c0 * s))
             image[r0:r1, c0:c1] = cv2.resize(acc, (c1 - c0, r1 - r0), interpolation=cv2.INTER_AREA) if s > 1 else acc
+        return image
+
+    def finish(self, scene: NDArray[np.float32], rng: np.random.Generator | None = None) -> NDArray[np.uint8]:
+        """The 8-bit image of a ``scene``: lit, blurred (defocus, motion streak), with sensor noise drawn by ``rng``."""
+        image = self.imperfections.light(scene)
         o = self.optics
         if o.blur > 0:
             image = cv2.GaussianBlur(image, (0, 0), o.blur)
@@ -182,12 +204,16 @@ class Renderer:
         rows = slice(origin[0], origin[0] + acc.shape[0])
         cols = slice(origin[1], origin[1] + acc.shape[1])
         x, y = self._rays.x[rows, cols], self._rays.y[rows, cols]
-        q2 = to_plane[2, 0] * x + to_plane[2, 1] * y + to_plane[2, 2]  # 1 / depth along the ray
-        with np.errstate(divide="ignore", invalid="ignore"):
-            wz = m[2, 0] * x + m[2, 1] * y + m[2, 2]
-            map_x = (m[0, 0] * x + m[0, 1] * y + m[0, 2]) / wz
-            map_y = (m[1, 0] * x + m[1, 1] * y + m[1, 2]) / wz
-            z = 1.0 / q2
+        if self.imperfections.bow:
+            map_x, map_y, z = self._bowed(pose, (scale @ self._affine).astype(np.float32), x, y)
+            q2 = 1.0 / z
+        else:
+            q2 = to_plane[2, 0] * x + to_plane[2, 1] * y + to_plane[2, 2]  # 1 / depth along the ray
+            with np.errstate(divide="ignore", invalid="ignore"):
+                wz = m[2, 0] * x + m[2, 1] * y + m[2, 2]
+                map_x = (m[0, 0] * x + m[0, 1] * y + m[0, 2]) / wz
+                map_y = (m[1, 0] * x + m[1, 1] * y + m[1, 2]) / wz
+                z = 1.0 / q2
         texture = self._pyramid[level]
         th, tw = texture.shape
         inside = (q2 > 0) & (map_x > -0.5) & (map_x < tw - 0.5) & (map_y > -0.5) & (map_y < th - 0.5) & (z < depth)
@@ -198,6 +224,28 @@ class Renderer:
                             borderMode=cv2.BORDER_REPLICATE)
         acc[inside] = sampled[inside]
         depth[inside] = z[inside]
+
+    def _bowed(self, pose: Array, affine: NDArray[np.float32], x: NDArray[np.float32], y: NDArray[np.float32]
+               ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+        """Where the rays (x/z, y/z) meet the bowed print (drivers/camera/imperfections.py: its height h(u) along
+        its z axis at u along its x axis): texel coordinates through ``affine`` (target (u, v, 1) -> texel) and
+        depth. Each ray meets the plane lifted by h at the last point's u; three rounds (a 0.5 mm bow's slope is
+        below 0.01, so each round shrinks the error a hundredfold)."""
+        r, t = pose[:3, :3].astype(np.float32), pose[:3, 3].astype(np.float32)
+        n, a, b = r[:, 2], r[:, 0], r[:, 1]
+        bow, half = np.float32(self.imperfections.bow), np.float32(self.target.extent[0] / 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            facing = n[0] * x + n[1] * y + n[2]  # n · ray
+            height = np.zeros_like(x)
+            for _ in range(3):
+                depth = (float(n @ t) + height) / facing
+                px, py, pz = depth * x - t[0], depth * y - t[1], depth - t[2]
+                u = a[0] * px + a[1] * py + a[2] * pz
+                height = bow * (1.0 - (u / half) ** 2)
+            v = b[0] * px + b[1] * py + b[2] * pz
+            map_x = affine[0, 0] * u + affine[0, 1] * v + affine[0, 2]
+            map_y = affine[1, 0] * u + affine[1, 1] * v + affine[1, 2]
+        return map_x, map_y, depth
 
     def _level(self, pose: Array) -> int:
         """Pyramid level whose texels are at least one supersample wide at the target's distance."""
@@ -211,18 +259,20 @@ class SimulatedCamera:
     """A frame source rendering ``target`` mounted on the simulated robot's flange.
 
     ``mount``: 4x4, flange frame <- target frame (m). One frame every ``1/fps`` s on the rig's clock, drawn
-    at the arm's actual pose at that time and stamped ``latency`` s later. The rig's tracker faults act per
-    measurement (:meth:`start_measurement`): ``target_lost`` hides the target, ``bad_reading`` puts a second copy
-    of it in view (duplicate ids), ``slow`` delivers no frames, ``disconnect`` loses the camera until ``open()``.
+    at the arm's actual pose at that time and delivered and stamped ``latency`` s later; ``imperfections``: a real
+    camera's errors (drivers/camera/imperfections.py: rows and the exposure at their own times). The rig's
+    tracker faults act per measurement (:meth:`start_measurement`): ``target_lost`` hides the target,
+    ``bad_reading`` puts a second copy of it in view (duplicate ids), ``slow`` delivers no frames, ``disconnect``
+    loses the camera until ``open()``.
     Streams: the module docstring (``drop`` a probability, ``lost`` (duration, start) s).
     """
 
     def __init__(self, rig: object, target: Target, camera: CameraIntrinsics, mount: Array,
                  optics: Optics | None = None, fps: float = 30.0, latency: float = 0.0, drop: float = 0.0,
-                 lost: tuple[float, float] = (0.0, 0.0)) -> None:
+                 lost: tuple[float, float] = (0.0, 0.0), imperfections: Imperfections | None = None) -> None:
         self.rig, self.camera, self.mount, self.fps = rig, camera, np.asarray(mount, dtype=float), fps
         self.latency, self.drop, self.lost = latency, drop, lost
-        self.renderer = Renderer(target, camera, optics)
+        self.renderer = Renderer(target, camera, optics, imperfections=imperfections)
         self._rng = np.random.default_rng([getattr(rig, "tracker_seed", 0), 7])
         self._drop_rng = np.random.default_rng([getattr(rig, "tracker_seed", 0), 8])
         self._fault: str | None = None
@@ -252,8 +302,8 @@ class SimulatedCamera:
             rig.tracker_connected = False  # type: ignore[attr-defined]
 
     def grab(self, timeout: float) -> tuple[NDArray[np.uint8], float]:
-        """The next frame and its timestamp (s, rig clock + latency); DeviceTimeout / ConnectionFailed for the
-        faults."""
+        """The next frame and its timestamp (s, rig clock: when it is delivered, ``latency`` s after its exposure);
+        DeviceTimeout / ConnectionFailed for the faults."""
         rig = self.rig
         self._require_link()
         if self._fault == "slow":
@@ -261,13 +311,34 @@ class SimulatedCamera:
             raise DeviceTimeout(f"the simulated camera delivered no frame within {timeout:g} s")
         rig.clock.sleep(1.0 / self.fps)  # type: ignore[attr-defined]
         t = rig.clock.now()  # type: ignore[attr-defined]
+        return self._image(t - self.latency, self._fault == "target_lost", self._fault == "bad_reading"), t
+
+    def _poses(self, t: float, hidden: bool, twin: bool) -> list[Array]:
+        """The targets in view at rig time ``t``: none when ``hidden``, with a second copy beside it if ``twin``."""
+        if hidden:
+            return []
         pose = self.target_pose(t)
-        poses = [] if self._fault == "target_lost" else [pose]
-        if self._fault == "bad_reading":
-            twin = pose.copy()
-            twin[:3, 3] += pose[:3, 0] * 1.6 * max(self.renderer.target.extent)  # beside the real one
-            poses.append(twin)
-        return self.renderer.render(poses, self._rng), t + self.latency
+        if not twin:
+            return [pose]
+        twin = pose.copy()
+        twin[:3, 3] += pose[:3, 0] * 1.6 * max(self.renderer.target.extent)  # beside the real one
+        return [pose, twin]
+
+    def _image(self, t: float, hidden: bool = False, twin: bool = False) -> NDArray[np.uint8]:
+        """The frame whose exposure starts at rig time ``t`` (row 0's; the rolling shutter's rows and the exposure's
+        parts each at their own time, rendered once when the arm stands still meanwhile)."""
+        renderer = self.renderer
+        imperfections = renderer.imperfections
+        if not imperfections.timed:
+            return renderer.render(self._poses(t, hidden, twin), self._rng)
+        exposure, rows = imperfections.times(self.camera.height)
+        scenes = [[self._poses(t + e + r, hidden, twin) for r in rows] for e in exposure]
+        outline = np.array([[x, y, 0.0] for x in (-0.5, 0.5) for y in (-0.5, 0.5)]) * [*renderer.target.extent, 0]
+        motion = image_motion([poses for scene in scenes for poses in scene], outline, float(self.camera.matrix[0, 0]))
+        if motion < STILL_PX:
+            return renderer.render(scenes[0][0], self._rng)
+        mean = np.mean([renderer.scene(scene) for scene in scenes], axis=0).astype(np.float32)
+        return renderer.finish(mean, self._rng)
 
     # --- the stream -------------------------------------------------------------------------------------------
 
@@ -296,8 +367,7 @@ class SimulatedCamera:
                 continue  # lost by the camera: its number is skipped
             tau = self._tau0 + k / self.fps
             hidden = self.lost[0] > 0 and lo - _EPS <= tau - self._tau0 <= hi + _EPS
-            poses = [] if hidden else [self.target_pose(tau)]
-            queue.put(Frame(k, tau + self.latency, self.renderer.render(poses, self._rng)), timeout)
+            queue.put(Frame(k, tau + self.latency, self._image(tau, hidden)), timeout)
 
     def stop_frames(self) -> None:
         """End the stream (frames not yet delivered are never made)."""

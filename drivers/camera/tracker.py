@@ -27,6 +27,9 @@ Where the camera is (drivers/camera/flange_camera.py):
   ``mount``   ``cell`` (default): the camera stands in the cell and the target rides on the flange; ``flange``: the
               camera rides on the flange (eye-in-hand) and sees a board fixed in the cell; the readings are the
               board's pose in the camera frame and the session is a ``sensor: flange`` one
+  ``flatness`` m: the print may be this far out of flat (default 0: flat); ``lens_sigma``: the calibration's k1 and
+              k2 may be this far off (default 0): the board's shape and the lens's error are estimated from every frame
+              so far and each reading corrected, their uncertainty in its ``shared`` (drivers/camera/board_and_lens.py)
   ``square_sigma`` (ChArUco) / ``size_sigma`` (grid, marker): the board was measured (``square=`` / ``size=`` is
               the caliper's value) with this standard uncertainty, m: the scale reference (without it the print is
               unverified and identify checks the scale against the robot's nominal lengths)
@@ -41,21 +44,20 @@ Camera and measurement:
               RMS exceeds it is rejected (motion blur, a bent print; default 1.0)
   ``timeout`` s to wait for one frame (default 2); ``retries`` failed frames tolerated per reading beyond
               ``frames`` (default 5), then the reading fails with one line
-Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), ``fov`` horizontal degrees
-(60), ``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of
-motion streak (0), ``fps`` frame rate, Hz (30), ``latency`` s from a frame's exposure to its timestamp (0),
-``distance`` m from the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home
-(20, 10; with ``mount=flange``: of the board seen from the flange camera at home), ``printed`` (``mount=flange``:
-the true board's size over the declared one, 1), ``seed`` (the robot's), ``fault`` as the mock tracker's
-(``target_lost`` hides the target,
-``bad_reading`` shows a second copy, ``slow`` stops the frames, ``disconnect`` loses the camera); for streams
-``drop`` (probability that the camera loses a frame, 0) and ``lost=D[@S]`` (the target hidden for D s from S s,
-default 2, into every stream). Any other option is rejected with one line.
+Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), ``fov`` horizontal degrees (60),
+``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of motion streak
+(0), ``fps`` Hz (30), ``latency`` s from a frame's exposure to its delivery and timestamp (0), ``distance`` m from
+the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home (20, 10; ``mount=flange``:
+of the board seen from the camera at home), ``printed`` (``mount=flange``: the true board's size over the declared
+one, 1), a real camera's errors (drivers/camera/imperfections.py: ``dk1``, ``dk2`` distortion left after
+calibration, ``shutter`` s rolling shutter, ``exposure`` s motion blur, ``gain``, ``gradient``, ``glare`` light,
+``bow`` m a board not flat), ``seed`` (the robot's), ``fault`` as the mock tracker's (``target_lost``,
+``bad_reading``: a second copy, ``slow``, ``disconnect``); for streams ``drop`` (probability of a lost frame, 0)
+and ``lost=D[@S]`` (the target hidden for D s from S s, default 2, into every stream). Other options: one line.
 
 Streaming (continuous motion, drivers/camera/stream.py): every frame at the camera's frame rate, stamped with its
 capture time (the identity's ``stream_timestamps`` says which clock), measured in a worker thread like a polled
-frame, one row each; frames where the target is not seen or fails a check, and frames the camera lost, are
-recorded gaps.
+frame, one row each; frames where the target is not seen or fails a check, and frames the camera lost, are gaps.
 
 A reading: the TP of every frame (pose by drivers/camera/pose.py), frames farther than 5 robust sigmas
 from the median rejected, the rest averaged. Its ``sigma`` is the standard uncertainty per axis (m), one
@@ -99,13 +101,15 @@ from typing import Any
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
-from scipy.stats import f as f_dist
 
-from drivers.averaging import mean_orientation
+from drivers.averaging import CHI3_MEDIAN, frame_sigma, mean_orientation
 from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
 from drivers.camera import pose as pose_math
+from drivers.camera.board_and_lens import BoardAndLens
 from drivers.camera.flange_camera import MOUNTS
 from drivers.camera.flange_camera import scale_sigma as flange_scale_sigma
+from drivers.camera.imperfections import OPTIONS as IMPERFECTIONS
+from drivers.camera.imperfections import parse as parse_imperfections
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
 from drivers.camera.pose import CornerNoise, Pose, estimate_pose
 from drivers.camera.stream import FrameStreaming
@@ -125,12 +129,11 @@ from drivers.spec import TrackerSpec, parse_faults, parse_interval
 FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
         "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
-           "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma")
+           "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma", "flatness",
+           "lens_sigma")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
-               "tilt", "roll", "seed", "fault", "printed")
-SPREAD_SIGNIFICANCE = 0.01  # false-alarm rate of the test "frames scatter more than the model says"
+               "tilt", "roll", "seed", "fault", "printed", *IMPERFECTIONS)
 OUTLIER_SIGMAS = 5.0
-CHI3_MEDIAN = 1.5382  # median of the 3D distance of isotropic unit-sigma noise
 
 
 @dataclass(frozen=True)
@@ -148,6 +151,8 @@ class Settings:
     sim: dict[str, Any]
     mount: str = "cell"  # where the camera is: "cell" or "flange" (drivers/camera/flange_camera.py)
     scale_sigma: float | None = None  # relative uncertainty of the measured board's scale (None: not measured)
+    flatness: float = 0.0  # m: the print's shape modes' prior (drivers/camera/board_and_lens.py)
+    lens_sigma: float = 0.0  # the calibrated k1's and k2's prior uncertainty
 
 
 def _fail(spec: TrackerSpec, why: str) -> SpecError:
@@ -204,7 +209,8 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
     return Settings(target, tp, refine, _number(spec, raw, "frames", 5, int, 1, strict=False),
                     _number(spec, raw, "max_rms", 1.0), _number(spec, raw, "timeout", 2.0),
                     _number(spec, raw, "retries", 5, int, 0, strict=False),
-                    None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target))
+                    None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target),
+                    *(_number(spec, raw, key, 0.0, low=0, strict=False) for key in ("flatness", "lens_sigma")))
 
 
 def _scale_sigma(spec: TrackerSpec, raw: dict[str, Any], target: Target) -> float | None:
@@ -275,6 +281,7 @@ def _sim_settings(spec: TrackerSpec, raw: dict[str, Any]) -> dict[str, Any]:
         out["k1"] = float(raw.get("k1", 0.0))
         out["fault"] = parse_faults(str(raw["fault"]), "tracker") if "fault" in raw else ()
         out["lost"] = parse_interval("lost", str(raw["lost"])) if "lost" in raw else (0.0, 0.0)
+        out["imperfections"] = parse_imperfections(raw)
     except ValueError as exc:
         raise _fail(spec, str(exc).replace("could not convert string to float", "option k1 must be a number")) from None
     if not out["fov"] < 170:
@@ -302,6 +309,8 @@ class ArucoTracker(FrameStreaming):
         self.spec, self.settings, self.source, self.camera = spec, settings, source, camera
         self.detector = Detector(settings.target, settings.refine, camera)
         self.reference: Array | None = None  # rotation of the last pose: keeps IPPE solutions on one branch
+        self._observation: Any = None  # the last frame's detected points (BoardAndLens reads them)
+        self.shape = BoardAndLens.of(settings.flatness, settings.lens_sigma, settings.target.extent)
         self.frames_used = self.frames_failed = 0
         self._init_stream()
 
@@ -347,18 +356,23 @@ class ArucoTracker(FrameStreaming):
     def _reading(self) -> TrackerReading:
         s = self.settings
         poses: list[tuple[Pose, float]] = []
+        flat: list[tuple[float, float]] = []  # each frame's error from the board's shape (m, rad)
         failures: list[MeasurementError] = []
         while len(poses) < s.frames:
             image, stamp = self._grab()
             try:
-                poses.append((self._pose(image), stamp))
+                pose, bias = self._pose(image), (0.0, 0.0)
+                if self.shape is not None:  # corrected for the board's shape seen so far (this frame included)
+                    pose, bias = self.shape.take(pose, self._observation, self.camera, s.tp)
+                poses.append((pose, stamp))
+                flat.append(bias)
             except MeasurementError as exc:
                 failures.append(exc)
                 self.frames_failed += 1
                 if len(failures) > s.retries:
                     raise _summary(failures, len(poses) + len(failures)) from None
         self.frames_used += len(poses)
-        return self._average(poses)
+        return self._average(poses, flat)
 
     def _grab(self) -> tuple[Any, float]:
         timeout = self.settings.timeout
@@ -379,7 +393,7 @@ class ArucoTracker(FrameStreaming):
         return image, stamp
 
     def _pose(self, image: Any) -> Pose:
-        obs = self.detector.detect(image)
+        obs = self._observation = self.detector.detect(image)
         if not obs.ids:
             raise TargetLost("the target is not visible")
         square = self.settings.target.kind == "marker"
@@ -392,7 +406,7 @@ class ArucoTracker(FrameStreaming):
         self.reference = pose.rotation
         return pose
 
-    def _average(self, poses: list[tuple[Pose, float]]) -> TrackerReading:
+    def _average(self, poses: list[tuple[Pose, float]], flat: list[tuple[float, float]]) -> TrackerReading:
         tp = self.settings.tp
         pts = np.array([p.point(tp) for p, _ in poses])
         noise = CornerNoise()
@@ -406,7 +420,7 @@ class ArucoTracker(FrameStreaming):
         robust = max(float(np.median(dist)) / CHI3_MEDIAN, model)
         kept = dist <= OUTLIER_SIGMAS * robust if len(pts) >= 3 else np.ones(len(pts), dtype=bool)
         n = int(kept.sum())
-        sigma = _frame_sigma(model, pts[kept], dof) / math.sqrt(n)
+        sigma = frame_sigma(model, pts[kept], dof) / math.sqrt(n)
         stamp = float(np.mean([t for (_, t), k in zip(poses, kept, strict=True) if k]))
         status = "ok" if n == len(pts) else f"ok ({len(pts) - n} of {len(pts)} frames rejected)"
         # the target frame (the board's axes at the TP): the kept frames' mean orientation, its sigma as the TP's
@@ -415,28 +429,14 @@ class ArucoTracker(FrameStreaming):
         turns = (Rotation.from_rotvec(rotvecs) * Rotation.from_rotvec(rotvec).inv()).as_rotvec()
         model_r = math.sqrt(float(np.mean([np.trace(noise.orientation_covariance(p)) for (p, _), k
                                            in zip(poses, kept, strict=True) if k])) / 3)
-        sigma_r = _frame_sigma(model_r, turns, dof) / math.sqrt(n)
+        sigma_r = frame_sigma(model_r, turns, dof) / math.sqrt(n)
         # the detection's bias for this view: the same in every frame and every reading of it (not averaged)
         bias = np.array([p.view_bias(tp, pose_math.VIEW_BIAS_PX, pose_math.VIEW_TURN_BIAS_PX)
                          for (p, _), k in zip(poses, kept, strict=True) if k])
-        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0))
+        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0) + np.mean(np.array(flat)[kept] ** 2, axis=0))
         return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=math.hypot(sigma, shared), status=status,
                               rotvec=rotvec, sigma_r=math.hypot(sigma_r, shared_r), shared=float(shared),
                               shared_r=float(shared_r))
-
-
-def _frame_sigma(model: float, pts: Array, dof: int) -> float:
-    """One frame's per-axis standard uncertainty (m): the propagated ``model`` (``dof`` residual degrees of
-    freedom behind it), unless the kept frames ``pts`` (n, 3) scatter significantly more than it (an
-    F-test at SPREAD_SIGNIFICANCE: vibration, flicker, a target still moving), then their spread."""
-    n = len(pts)
-    if n < 2 or dof < 1 or model <= 0:
-        return model
-    spread2 = float(np.mean(np.var(pts, axis=0, ddof=1)))
-    # one axis (depth) dominates the spread: n - 1 degrees of freedom, not 3 (n - 1)
-    if spread2 > model**2 * f_dist.isf(SPREAD_SIGNIFICANCE, n - 1, dof):
-        return math.sqrt(spread2)
-    return model
 
 
 def _summary(failures: list[MeasurementError], tried: int) -> MeasurementError:
@@ -490,8 +490,8 @@ def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) 
         from drivers.camera.flange_camera import CAMERA_MOUNT, SimulatedFlangeCamera
 
         flange = SimulatedFlangeCamera(rig, settings.target, camera, CAMERA_MOUNT, optics, sim["fps"], sim["latency"],
-                                       sim["drop"], sim["lost"], printed=sim["printed"])
+                                       sim["drop"], sim["lost"], sim["imperfections"], printed=sim["printed"])
         return ArucoTracker(spec, settings, flange, camera)
     source = SimulatedCamera(rig, settings.target, camera, mount, optics, sim["fps"], sim["latency"], sim["drop"],
-                             sim["lost"])
+                             sim["lost"], sim["imperfections"])
     return ArucoTracker(spec, settings, source, camera)

@@ -29,7 +29,8 @@ The world (:class:`SimulatedRig`):
 - a move is synchronised: every joint follows the trapezoidal profile of the slowest one
   (:func:`move_duration`); the arm comes to rest at the target plus a repeatability error
   N(0, ``repeatability``) per joint, then rings: ``q(t) = rest + A·exp(-Δt/ring_tau)·cos(2π·f·Δt)`` with
-  ``|A_i|`` in [0.5, 1]·``ring`` and f = :data:`RING_FREQUENCY`; the joint readings are the actual values;
+  ``|A_i|`` in [0.5, 1]·``ring`` and f = :data:`RING_FREQUENCY`; the joint readings are the actual values; a time
+  during the last move (a camera frame exposed before its delivery) sees the arm on that move's profile;
 - with ``aruco:sim?...`` as the tracker (drivers/camera/tracker.py) the rig takes that spec's faults and seed, and
   :meth:`SimulatedRig.face_tracker` re-places the true base in front of the camera; the camera renders the
   target at :meth:`SimulatedRig.flange_pose` and OpenCV detects it (only the pixels are simulated);
@@ -178,6 +179,7 @@ class SimulatedRig:
         self.stream, self.stream_epoch = stream or StreamSettings(), self.clock.now()  # drivers/sim/stream.py
         self._stream_rng = np.random.default_rng([self.tracker_seed, 16])
         self._path: Any = None  # a streamed move (drivers/sim/stream.py), overlaid on the rest-and-ring model
+        self._past: Any = None  # the last finished stop-and-go move: where the arm was during it (a late camera frame)
         for fault in robot_faults:
             self.inject(fault.name, at_move=fault.at, count=fault.count, device="robot")
         for fault in tracker_faults:
@@ -251,6 +253,8 @@ class SimulatedRig:
             envelope = np.zeros_like(dt)
         wave = envelope * np.cos(2 * np.pi * RING_FREQUENCY * dt)
         out = self._rest + np.multiply.outer(wave, self._ring_amp)
+        if path is None and self._past is not None and t is not None:
+            return self._past.overlay(t, out)  # a time during the last move (a camera's latency looks back)
         return out if path is None else path.overlay(self.clock.now() if t is None else t, out)
 
     def readings_of(self, q: Array) -> Array:
@@ -354,6 +358,7 @@ class SimulatedRig:
                 self._ring_start = self.clock.now()
                 self._ring_decays = True
                 self._lash = backlash_play(self._lash, reached - start, self.backlash)
+            path.finished, self._past = True, path  # times before the move's end still see it
             self._path = None  # last: until now the move's profile holds the arm (no glitch for a reader)
         return self._stop_requested
 

@@ -81,3 +81,27 @@ def test_a_stop_during_start_up_is_one_line_without_a_traceback(tmp_path, signum
     assert "Traceback" not in err, err
     assert proc.returncode == 130, err
     assert len(err.splitlines()) == 1 and err.startswith("acquire: "), err
+
+
+@pytest.mark.slow
+def test_sigterm_in_a_flange_cameras_locate_phase_stops_the_arm_and_records_nothing(tmp_path):
+    """The locate moves (a real-time mock run, about 15 s) stop at SIGTERM: exit 130, one line, no session."""
+    import os
+
+    spec = ("aruco:sim?mount=flange&board=charuco&cols=11&rows=8&square=0.025&size=0.018&width=640&height=360"
+            "&distance=0.45&frames=1")
+    path = tmp_path / "s.session"
+    proc = subprocess.Popen([*COMMAND, "--robot", ROBOT, "--tracker", spec, "--camera-mount", "0,-0.06,0.04,0,0,90",
+                             "--realtime", "--quiet", "--yes", "--session", str(path)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    assert proc.stdout is not None
+    for line in proc.stdout:  # the locate phase is shown before it moves
+        if line.startswith("locate phase:"):
+            break
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("acquire: locate aborted: stopped by SIGTERM"), err
+    assert not path.exists()

@@ -411,3 +411,19 @@ def test_sigkill_at_random_moments_then_resume(tmp_path: Path) -> None:
     counts = _readings_per_step(path)
     assert counts == {s.plan_index: s.samples + s.rejected for s in steps}
     assert counts == {s.plan_index: len(s.readings) for s in expected}
+
+
+def test_a_dead_creators_hidden_file_and_its_journal_are_removed_a_live_ones_kept(tmp_path: Path) -> None:
+    from session.lock import remove_dead_creations
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()  # a pid that no longer runs (reaped)
+    path = tmp_path / "run.session"
+    dead = [tmp_path / f".run.session.creating-{child.pid}{end}" for end in ("", "-journal")]
+    live = [tmp_path / f".run.session.creating-{os.getpid()}{end}" for end in ("", "-journal")]
+    other = tmp_path / ".other.session.creating-1"
+    for p in (*dead, *live, other):
+        p.write_bytes(b"x")
+    remove_dead_creations(path)
+    assert [p.exists() for p in dead] == [False, False]
+    assert all(p.exists() for p in (*live, other))

@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from acquire.commands.cli import main as acquire_main
 from drivers.camera.flange_camera import CAMERA_MOUNT
+from drivers.camera.intrinsics import CameraIntrinsics, write_intrinsics
 from drivers.camera.tracker import open_tracker, parse_settings
 from drivers.errors import SpecError
 from drivers.sim.rig import SimulatedRig
@@ -74,16 +75,23 @@ def test_a_session_of_the_flange_camera_reads_as_sensor_flange() -> None:
     assert sensor_of({}) == {"sensor": "fixed", "scale_sigma": None}  # a laser tracker's session
 
 
-def test_acquire_plans_only_stop_and_go_views_for_a_simulated_flange_camera(
-        capsys: pytest.CaptureFixture[str]) -> None:
-    # its views keep the board in sight (tests/acquire/test_flange_acquire.py); sweeps, streams and a real camera
-    # whose mount and board nothing places before the run are refused, one line each
+def test_acquire_plans_only_stop_and_go_views_for_a_flange_camera(tmp_path, capsys: pytest.CaptureFixture[str]
+                                                                   ) -> None:
+    # its views keep the board in sight (tests/acquire/test_flange_acquire.py); sweeps and streams are refused, one
+    # line each; a real camera's dry run shows the indicative plan from its intrinsics file (or says it is missing)
     for extra, why in ((["--mode", "continuous"], "plans stop-and-go views of its board"),
                        (["--target-accuracy", "0.1mm"], "plans stop-and-go views of its board")):
         assert acquire_main(["--robot", "mock:ur5e", "--tracker", SIM, "--dry-run", *extra]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and why in err[0], err
-    real = f"aruco:0?camera=c.yaml&mount=flange&{BOARD}"
-    assert acquire_main(["--robot", "mock:ur5e", "--tracker", real, "--dry-run"]) == 2
+    missing = f"aruco:0?camera={tmp_path / 'none.yaml'}&mount=flange&{BOARD}"
+    assert acquire_main(["--robot", "mock:ur5e", "--tracker", missing, "--dry-run"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "for aruco:sim only" in err[0], err
+    assert len(err) == 1 and "none.yaml" in err[0], err
+    write_intrinsics(tmp_path / "cam.yaml", CameraIntrinsics.from_fov(1280, 720, 60.0))
+    real = f"aruco:0?camera={tmp_path / 'cam.yaml'}&mount=flange&{BOARD}"
+    assert acquire_main(["--robot", "mock:ur5e", "--tracker", real, "--dry-run", "--camera-mount",
+                         "0,-0.06,0.04,0,0,90"]) == 0
+    out = capsys.readouterr().out
+    assert "0.45 m down the line of sight at home" in out and "frames at 30 Hz" in out
+    assert "the views shown are indicative" in out and "the mount given to 20 mm, 10°" in out
