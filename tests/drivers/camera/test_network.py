@@ -62,6 +62,7 @@ def _close_to_truth(reading) -> None:
     assert np.linalg.norm(reading.position - POSE[:3, 3]) < max(6 * reading.sigma, 5e-4), reading
 
 
+@pytest.mark.realtime  # latencies and gaps measured on the host's clock: run alone
 def test_mjpeg_stream_with_frame_times_measures_the_board_and_its_latency(tmp_path, serve):
     server = serve(fps=30, latency=0.05)
     tracker = _tracker(tmp_path, server.url("/stream?action=stream"))
@@ -80,6 +81,7 @@ def test_mjpeg_stream_with_frame_times_measures_the_board_and_its_latency(tmp_pa
     assert "X-Timestamp" in camera_timing(details)
 
 
+@pytest.mark.realtime  # latencies and gaps measured on the host's clock: run alone
 def test_probe_prints_the_frame_rate_the_frame_times_and_the_measured_latency(tmp_path, serve, capsys):
     from acquire.commands.cli import main
 
@@ -95,6 +97,7 @@ def test_probe_prints_the_frame_rate_the_frame_times_and_the_measured_latency(tm
     assert out[2].startswith("reading 1: x ") and out[-1].startswith("2 of 2 readings")
 
 
+@pytest.mark.realtime  # latencies and gaps measured on the host's clock: run alone
 def test_a_stream_without_frame_times_is_stamped_on_arrival_and_says_latency_cannot_be_measured(tmp_path, serve):
     server = serve(fps=30, stamps=False)
     tracker = _tracker(tmp_path, server.url("/nolength"))  # parts without Content-Length, too
@@ -111,6 +114,7 @@ def test_a_stream_without_frame_times_is_stamped_on_arrival_and_says_latency_can
     assert "latency not measurable" in camera_timing(details)
 
 
+@pytest.mark.realtime  # latencies and gaps measured on the host's clock: run alone
 def test_snapshots_are_stamped_at_the_middle_of_the_request_within_half_the_round_trip(tmp_path, serve):
     server = serve(delay=0.04)  # the camera sends each image 40 ms after taking it
     camera = NetworkCamera(server.url("/snapshot"), CAMERA.width, CAMERA.height)
@@ -236,6 +240,7 @@ def test_multipart_parts_are_read_whatever_the_boundarys_spelling_and_with_or_wi
             reader.next_part()
 
 
+@pytest.mark.realtime  # latencies and gaps measured on the host's clock: run alone
 def test_a_snapshot_url_streams_by_polling_and_stamps_each_frame_within_its_request(tmp_path, serve):
     server = serve(delay=0.01)
     tracker = _tracker(tmp_path, server.url("/snapshot"))
