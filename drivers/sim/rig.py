@@ -358,6 +358,8 @@ class SimulatedRig:
                 self._ring_start = self.clock.now()
                 self._ring_decays = True
                 self._lash = backlash_play(self._lash, reached - start, self.backlash)
+            if self._stop_requested:  # cut short: the profile ends where the arm stopped
+                path.t_stop = min(path.t_stop, t0 + elapsed)
             path.finished, self._past = True, path  # times before the move's end still see it
             self._path = None  # last: until now the move's profile holds the arm (no glitch for a reader)
         return self._stop_requested

@@ -374,6 +374,9 @@ def test_stop_and_ctrl_c_leave_the_arm_where_it_is() -> None:
         robot.move_joints(pose(j1=1.0), SPEED, ACC, timeout=30)
     assert robot.state() is RobotState.READY
     assert 0 < rig.rest_joints[0] < 0.01  # 50 ms into the move
+    clock.robot = None
+    for later in (clock.now(), clock.now() + 1.0):  # a time given, as the UR emulator's reader gives it: not the
+        assert 0 < rig.actual_joints(later)[0] < 0.01  # planned profile's (it stopped there)
 
     class InterruptedClock(VirtualClock):
         armed = False
