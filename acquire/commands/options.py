@@ -70,7 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "the whole board; a checked, confirmed locate phase of small wrist turns measures its mount and "
                    "the board, then stop-and-go views that keep it in sight are planned and shown; &square_sigma=M: "
                    "the board measured; &flatness=M&lens_sigma=K: the board's shape and the lens's residual k1, k2 "
-                   "estimated from the views; aruco:sim's dk1, shutter, exposure, gain, gradient, glare, bow: a real "
+                   "estimated from the views; &latency=S: s from a frame's exposure to its delivery, a reading skips "
+                   "the frames delivered within it of its request (default 0, a network camera's measured one); "
+                   "aruco:sim's dk1, shutter, exposure, gain, gradient, glare, bow: a real "
                    "camera's errors, drivers/camera/imperfections.py), mock, or none (motion "
                    "rehearsal) (mock; on --resume: the session's, whose port or "
                    "host may change)")

@@ -75,15 +75,18 @@ def probe(args: argparse.Namespace) -> int:
 
 
 def camera_timing(details: dict[str, str]) -> str:
-    """A camera's frame rate, what its frames' times are, and its measured latency (s in ``details``, printed in
-    ms), in one line; "" for a tracker without a frame rate."""
+    """A camera's frame rate, what its frames' times are, its measured latency and the latency its stop-and-go readings
+    allow for (s in ``details``, printed in ms), in one line; "" for a tracker without a frame rate."""
     if "frame_rate" not in details:
         return ""
     line = f"frames: {float(details['frame_rate']):.1f} Hz; frame times: {details.get('stream_timestamps', '?')}"
     if "latency_measured" in details:
-        return line + (f"; latency {float(details['latency_measured']) * 1e3:.1f} ms measured "
-                       f"(spread {float(details.get('latency_spread', 'nan')) * 1e3:.2f} ms)")
-    if "latency_spread" in details:
-        return line + (f"; latency not measurable (no frame times; arrival jitter "
-                       f"{float(details['latency_spread']) * 1e3:.2f} ms)")
+        line += (f"; latency {float(details['latency_measured']) * 1e3:.1f} ms measured "
+                 f"(spread {float(details.get('latency_spread', 'nan')) * 1e3:.2f} ms)")
+    elif "latency_spread" in details:
+        line += (f"; latency not measurable (no frame times; arrival jitter "
+                 f"{float(details['latency_spread']) * 1e3:.2f} ms)")
+    if "latency" in details:  # drivers/camera/latency.py
+        line += (f"; readings skip frames delivered within {float(details['latency']) * 1e3:.1f} ms of the request "
+                 f"(latency: {details.get('latency_basis', '?')})")
     return line

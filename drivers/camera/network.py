@@ -34,6 +34,13 @@ How a stream uses them: a continuous session's rows carry these stamps; the cons
 clock's offset) is the clock offset that identify fits with the kinematics (identify/estimator/sync.py), and the
 spread is timing noise, as for every streaming tracker.
 
+How a stop-and-go reading uses them (drivers/camera/latency.py): it skips the frames that arrived before its request
+plus ``latency`` (s), the tracker's ``latency=`` when given, else: an MJPEG stream's measured latency when it lies in
+0 to :data:`MAX_MEASURED_LATENCY` (taken as a latency: the clocks agree, or the camera's runs behind by less than a
+second, which only makes the wait longer), 0 otherwise (a camera clock counting from its boot, or set by hand and
+ahead: an offset, not a latency); 0 for a stream without frame times (not measurable) and for a snapshot URL (the
+image is taken while the request is answered). Where 0 is not right, give ``latency=`` (``--probe`` says which).
+
 Failures, each one line naming the URL: connection refused, a host that does not resolve, an HTTP status other
 than 200, a server that serves neither a multipart stream nor an image, a body that is not a JPEG -> ConnectionFailed
 at ``open`` (BadReading for one bad frame later); every read has a timeout. A stream that stalls (no byte for the
@@ -72,6 +79,9 @@ STAMP_HEADERS = ("x-timestamp",)  # a part's header holding its frame time (s on
 # network and the host (tens of ms over the 8 frames' quarter second on WiFi or a loaded host); the check is there to
 # refuse a frame counter or the wrong unit (ms), which are off by far more
 STAMP_RATE_TOLERANCE = 0.5
+# s: a measured delay (host receive time - X-Timestamp) up to this is taken as the latency (the clocks agree, as NTP
+# sets them, and cameras deliver within a few frames); beyond it, or below 0, it is the camera clock's offset
+MAX_MEASURED_LATENCY = 1.0
 
 
 class StreamBroken(Exception):
@@ -206,6 +216,7 @@ class NetworkCamera:
         self.kind = ""
         self.rate, self.stamps = math.nan, "host time (not open)"
         self.measured_latency = self.latency_spread = math.nan
+        self.latency, self.latency_basis = 0.0, "not open"  # what stop-and-go readings take (drivers/camera/latency.py)
         self.last_round_trip = math.nan  # s: the last snapshot's (its stamp is uncertain by half of it)
         self.timeout = 2.0
         self._lock = threading.Condition()
@@ -329,6 +340,7 @@ class NetworkCamera:
             self.rate = min(MAX_SNAPSHOT_RATE, 1.0 / max(PACE_TRIPS * float(np.median(trips)), 1e-6))
             self.measured_latency, self.latency_spread = float(np.median(trips)) / 2, float(np.std(trips)) / 2
             self.stamps = "host time at the middle of each request (uncertain by half its round trip)"
+            self.latency, self.latency_basis = 0.0, "a snapshot is taken while it is asked for"
             return
         deadline = time.monotonic() + timeout
         with self._lock:
@@ -351,8 +363,13 @@ class NetworkCamera:
             delay = host - device
             self.measured_latency, self.latency_spread = float(np.median(delay)), float(np.std(delay))
             self.stamps = "camera clock (the parts' X-Timestamp header)"
+            latency = 0 <= self.measured_latency < MAX_MEASURED_LATENCY
+            self.latency = self.measured_latency if latency else 0.0
+            self.latency_basis = ("measured" if latency else f"measured {self.measured_latency:.6g} s: the camera "
+                                  "clock's offset, not a latency")
         else:
             self.latency_spread = float(np.std(np.diff(host)))
+            self.latency, self.latency_basis = 0.0, "not measurable without frame times"
             self.stamps = ("host time at each part's arrival (" + ("no X-Timestamp header" if np.all(np.isnan(device))
                                                                    else f"X-Timestamp not usable: {why}") + ")")
 

@@ -281,6 +281,11 @@ class SimulatedCamera:
         self.description = f"simulated camera {camera.width}x{camera.height}"
         self.rate = fps
         self.stamps = f"simulated: the rig's clock at exposure + latency {latency:g} s"
+        self.latency_basis = "the simulated camera's"
+
+    def now(self) -> float:
+        """The rig's clock (s), on which ``grab`` stamps its frames (drivers/camera/latency.py)."""
+        return float(self.rig.clock.now())  # type: ignore[attr-defined]
 
     def target_pose(self, t: float) -> Array:
         """The target's pose at rig time ``t``: 4x4, camera frame <- target frame (m): on the flange, at ``mount``."""

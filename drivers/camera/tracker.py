@@ -5,7 +5,7 @@ URL form (``--tracker``)::
     aruco:SOURCE?camera=FILE[&marker=ID&size=M | &board=grid&cols=N&rows=N&size=M&gap=M
                  | &board=charuco&cols=N&rows=N&square=M&size=M | &layout=FILE][&dict=NAME][&first=ID]
                  [&tp=X,Y,Z][&refine=edges|apriltag|subpix|contour|none][&frames=N][&max_rms=PX]
-                 [&timeout=S][&retries=N][&mount=cell|flange][&square_sigma=M | &size_sigma=M]
+                 [&timeout=S][&retries=N][&latency=S][&mount=cell|flange][&square_sigma=M | &size_sigma=M]
 
 ``SOURCE``: a camera index (``0``), a device path (``/dev/video0``), a network camera's URL (an MJPEG stream or a
 snapshot URL, ``aruco:http://HOST[:PORT]/PATH[?QUERY]#OPTIONS``: the options follow ``#`` since the ``?`` belongs
@@ -44,9 +44,13 @@ Camera and measurement:
               RMS exceeds it is rejected (motion blur, a bent print; default 1.0)
   ``timeout`` s to wait for one frame (default 2); ``retries`` failed frames tolerated per reading beyond
               ``frames`` (default 5), then the reading fails with one line
+  ``latency`` s from a frame's exposure to its delivery: a stop-and-go reading skips the frames delivered before its
+              request plus it, exposed while the arm may still have been arriving, and says so in its status
+              (drivers/camera/latency.py). Default: a network camera's measured latency where it is one
+              (drivers/camera/network.py), else 0; below ``timeout``; ``aruco:sim`` renders with it too
 Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), ``fov`` horizontal degrees (60),
 ``k1`` radial distortion (0), ``noise`` grey levels (2), ``blur`` pixels (0.5), ``motion`` pixels of motion streak
-(0), ``fps`` Hz (30), ``latency`` s from a frame's exposure to its delivery and timestamp (0), ``distance`` m from
+(0), ``fps`` Hz (30), ``latency`` as above (the frames are rendered that late), ``distance`` m from
 the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home (20, 10; ``mount=flange``:
 of the board seen from the camera at home), ``printed`` (``mount=flange``: the true board's size over the declared
 one, 1), a real camera's errors (drivers/camera/imperfections.py: ``dk1``, ``dk2`` distortion left after
@@ -109,8 +113,9 @@ from drivers.camera.board_and_lens import BoardAndLens
 from drivers.camera.flange_camera import MOUNTS
 from drivers.camera.flange_camera import scale_sigma as flange_scale_sigma
 from drivers.camera.imperfections import OPTIONS as IMPERFECTIONS
-from drivers.camera.imperfections import parse as parse_imperfections
 from drivers.camera.intrinsics import CameraIntrinsics, IntrinsicsError, read_intrinsics
+from drivers.camera.latency import FreshFrames, latency_in_use
+from drivers.camera.options import number, sim_settings, spec_error
 from drivers.camera.pose import CornerNoise, Pose, estimate_pose
 from drivers.camera.stream import FrameStreaming
 from drivers.camera.targets import (
@@ -124,14 +129,12 @@ from drivers.camera.targets import (
     single_marker,
 )
 from drivers.errors import BadReading, DeviceTimeout, MeasurementError, SpecError, TargetLost
-from drivers.spec import TrackerSpec, parse_faults, parse_interval
+from drivers.spec import TrackerSpec
 
-FORM = ("aruco:SOURCE?camera=FILE&marker=ID&size=M (or board=grid|charuco&cols=N&rows=N&size=M&gap=M&square=M, "
-        "or layout=FILE)&tp=X,Y,Z&refine=edges|apriltag|subpix|contour|none&frames=N")
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
            "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma", "flatness",
-           "lens_sigma")
-SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "latency", "drop", "lost", "distance",
+           "lens_sigma", "latency")
+SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "drop", "lost", "distance",
                "tilt", "roll", "seed", "fault", "printed", *IMPERFECTIONS)
 OUTLIER_SIGMAS = 5.0
 
@@ -153,23 +156,7 @@ class Settings:
     scale_sigma: float | None = None  # relative uncertainty of the measured board's scale (None: not measured)
     flatness: float = 0.0  # m: the print's shape modes' prior (drivers/camera/board_and_lens.py)
     lens_sigma: float = 0.0  # the calibrated k1's and k2's prior uncertainty
-
-
-def _fail(spec: TrackerSpec, why: str) -> SpecError:
-    return SpecError(f"tracker spec {str(spec)!r}: {why}; expected {FORM}")
-
-
-def _number(spec: TrackerSpec, raw: dict[str, Any], key: str, default: float, kind: type = float,
-            low: float = 0.0, strict: bool = True) -> Any:
-    if key not in raw:
-        return default
-    try:
-        value = kind(raw[key])
-    except (TypeError, ValueError):
-        raise _fail(spec, f"option {key}={raw[key]} must be {'an integer' if kind is int else 'a number'}") from None
-    if not math.isfinite(value) or value < low or (strict and value == low):
-        raise _fail(spec, f"option {key}={raw[key]} must be {'>' if strict else '>='} {low:g}")
-    return value
+    latency: float | None = None  # s from exposure to delivery (None: the source's; drivers/camera/latency.py)
 
 
 def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
@@ -182,35 +169,39 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
     for key in raw:
         if key not in known:
             extra = " (only for aruco:sim)" if key in SIM_OPTIONS else ""
-            raise _fail(spec, f"unknown option {key!r}{extra} (known: {', '.join(known)})")
+            raise spec_error(spec, f"unknown option {key!r}{extra} (known: {', '.join(known)})")
     try:
         dictionary = dictionary_id(str(raw.get("dict", "4X4_50")))
     except ValueError as exc:
-        raise _fail(spec, str(exc)) from None
+        raise spec_error(spec, str(exc)) from None
     target = _target(spec, raw, dictionary)
     try:
         tp = np.array([float(v) for v in str(raw.get("tp", "0,0,0")).split(",")])
     except ValueError:
         tp = np.zeros(0)
     if tp.shape != (3,) or not np.all(np.isfinite(tp)):
-        raise _fail(spec, f"option tp={raw.get('tp')} must be X,Y,Z in metres")
+        raise spec_error(spec, f"option tp={raw.get('tp')} must be X,Y,Z in metres")
     refine = str(raw.get("refine", "edges"))
     if refine not in REFINEMENTS:
-        raise _fail(spec, f"option refine={refine} must be one of {', '.join(REFINEMENTS)}")
+        raise spec_error(spec, f"option refine={refine} must be one of {', '.join(REFINEMENTS)}")
     camera = raw.get("camera")
     if camera is None and not simulated:
         url = spec.target.startswith(("http://", "https://")) and "camera=" in spec.target
-        raise _fail(spec, "option camera=FILE (the intrinsics) is required for a real camera" +
-                    (" (a network camera's options follow '#': the '?' belongs to its URL)" if url else ""))
-    sim = _sim_settings(spec, raw) if simulated else {}
+        raise spec_error(spec, "option camera=FILE (the intrinsics) is required for a real camera" +
+                         (" (a network camera's options follow '#': the '?' belongs to its URL)" if url else ""))
+    sim = sim_settings(spec, raw) if simulated else {}
     mount = str(raw.get("mount", "cell"))
     if mount not in MOUNTS:
-        raise _fail(spec, f"option mount={mount} must be cell or flange")
-    return Settings(target, tp, refine, _number(spec, raw, "frames", 5, int, 1, strict=False),
-                    _number(spec, raw, "max_rms", 1.0), _number(spec, raw, "timeout", 2.0),
-                    _number(spec, raw, "retries", 5, int, 0, strict=False),
+        raise spec_error(spec, f"option mount={mount} must be cell or flange")
+    timeout = number(spec, raw, "timeout", 2.0)
+    latency = number(spec, raw, "latency", None, low=0, strict=False)
+    if latency is not None and latency >= timeout:
+        raise spec_error(spec, f"option latency={raw['latency']} must be below timeout={timeout:g} s (a reading "
+                         "waits that long for its first frame exposed after the request)")
+    return Settings(target, tp, refine, number(spec, raw, "frames", 5, int, 1, strict=False),
+                    number(spec, raw, "max_rms", 1.0), timeout, number(spec, raw, "retries", 5, int, 0, strict=False),
                     None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target),
-                    *(_number(spec, raw, key, 0.0, low=0, strict=False) for key in ("flatness", "lens_sigma")))
+                    *(number(spec, raw, key, 0.0, low=0, strict=False) for key in ("flatness", "lens_sigma")), latency)
 
 
 def _scale_sigma(spec: TrackerSpec, raw: dict[str, Any], target: Target) -> float | None:
@@ -218,77 +209,52 @@ def _scale_sigma(spec: TrackerSpec, raw: dict[str, Any], target: Target) -> floa
     key = "square_sigma" if target.kind == "charuco" else "size_sigma"
     other = "size_sigma" if key == "square_sigma" else "square_sigma"
     if other in raw:
-        raise _fail(spec, f"option {other}= does not measure a {target.kind} target (give {key}=)")
+        raise spec_error(spec, f"option {other}= does not measure a {target.kind} target (give {key}=)")
     if key not in raw:
         return None
     if target.kind == "layout":
-        raise _fail(spec, "a layout's scale comes from its file; size_sigma= is for a marker or a board")
-    sigma = _number(spec, raw, key, 0.0, low=0, strict=False)
+        raise spec_error(spec, "a layout's scale comes from its file; size_sigma= is for a marker or a board")
+    sigma = number(spec, raw, key, 0.0, low=0, strict=False)
     size = float(raw["square" if key == "square_sigma" else "size"]) if key.split("_")[0] in raw else None
     if size is None:
-        raise _fail(spec, f"option {key}= needs {key.split('_')[0]}= (the measured length, m)")
+        raise spec_error(spec, f"option {key}= needs {key.split('_')[0]}= (the measured length, m)")
     return flange_scale_sigma(size, sigma)
 
 
 def _target(spec: TrackerSpec, raw: dict[str, Any], dictionary: int) -> Target:
     board, layout = raw.get("board"), raw.get("layout")
     if sum(x is not None for x in (board, layout, raw.get("marker"))) > 1:
-        raise _fail(spec, "give one of marker=, board= and layout=")
+        raise spec_error(spec, "give one of marker=, board= and layout=")
     given = [k for k in ("cols", "rows", "gap", "square") if k in raw]
     try:
         if layout is not None:
             if given or "size" in raw:
-                raise _fail(spec, f"layout= takes its geometry from the file, not {(given or ['size'])[0]}=")
+                raise spec_error(spec, f"layout= takes its geometry from the file, not {(given or ['size'])[0]}=")
             return load_layout(str(layout), dictionary if "dict" in raw else None)
         if board is None:
             if given:
-                raise _fail(spec, f"option {given[0]}= belongs to a board (board=grid or board=charuco)")
-            return single_marker(_number(spec, raw, "marker", 0, int, 0, strict=False),
-                                 _number(spec, raw, "size", 0.05), dictionary)
-        cols, rows = _number(spec, raw, "cols", 0, int), _number(spec, raw, "rows", 0, int)
+                raise spec_error(spec, f"option {given[0]}= belongs to a board (board=grid or board=charuco)")
+            return single_marker(number(spec, raw, "marker", 0, int, 0, strict=False),
+                                 number(spec, raw, "size", 0.05), dictionary)
+        cols, rows = number(spec, raw, "cols", 0, int), number(spec, raw, "rows", 0, int)
         if not cols or not rows:
-            raise _fail(spec, f"board={board} needs cols= and rows=")
-        size, first = _number(spec, raw, "size", 0.0), _number(spec, raw, "first", 0, int, 0, strict=False)
+            raise spec_error(spec, f"board={board} needs cols= and rows=")
+        size, first = number(spec, raw, "size", 0.0), number(spec, raw, "first", 0, int, 0, strict=False)
         if not size:
-            raise _fail(spec, f"board={board} needs size= (the marker side, m)")
+            raise spec_error(spec, f"board={board} needs size= (the marker side, m)")
         if board == "grid":
             if "square" in raw:
-                raise _fail(spec, "square= belongs to board=charuco")
-            return grid_board(cols, rows, size, _number(spec, raw, "gap", size / 5), dictionary, first)
+                raise spec_error(spec, "square= belongs to board=charuco")
+            return grid_board(cols, rows, size, number(spec, raw, "gap", size / 5), dictionary, first)
         if board == "charuco":
             if "gap" in raw or "square" not in raw:
-                raise _fail(spec, "board=charuco needs square= (the chessboard square, m) and takes no gap=")
-            return charuco_board(cols, rows, _number(spec, raw, "square", 0.0), size, dictionary, first)
-        raise _fail(spec, f"option board={board} must be grid or charuco")
+                raise spec_error(spec, "board=charuco needs square= (the chessboard square, m) and takes no gap=")
+            return charuco_board(cols, rows, number(spec, raw, "square", 0.0), size, dictionary, first)
+        raise spec_error(spec, f"option board={board} must be grid or charuco")
     except ValueError as exc:
         if isinstance(exc, SpecError):
             raise
-        raise _fail(spec, str(exc)) from None
-
-
-def _sim_settings(spec: TrackerSpec, raw: dict[str, Any]) -> dict[str, Any]:
-    out = {"width": _number(spec, raw, "width", 640, int), "height": _number(spec, raw, "height", 480, int),
-           "fov": _number(spec, raw, "fov", 60.0), "noise": _number(spec, raw, "noise", 2.0, low=0, strict=False),
-           "blur": _number(spec, raw, "blur", 0.5, low=0, strict=False),
-           "motion": _number(spec, raw, "motion", 0.0, low=0, strict=False), "fps": _number(spec, raw, "fps", 30.0),
-           "latency": _number(spec, raw, "latency", 0.0, low=0, strict=False),
-           "drop": _number(spec, raw, "drop", 0.0, low=0, strict=False),
-           "distance": _number(spec, raw, "distance", 1.0), "tilt": _number(spec, raw, "tilt", 20.0, low=-90),
-           "roll": _number(spec, raw, "roll", 10.0, low=-360),
-           "seed": None if "seed" not in raw else _number(spec, raw, "seed", 0, int, 0, strict=False),
-           "printed": _number(spec, raw, "printed", 1.0)}
-    try:
-        out["k1"] = float(raw.get("k1", 0.0))
-        out["fault"] = parse_faults(str(raw["fault"]), "tracker") if "fault" in raw else ()
-        out["lost"] = parse_interval("lost", str(raw["lost"])) if "lost" in raw else (0.0, 0.0)
-        out["imperfections"] = parse_imperfections(raw)
-    except ValueError as exc:
-        raise _fail(spec, str(exc).replace("could not convert string to float", "option k1 must be a number")) from None
-    if not out["fov"] < 170:
-        raise _fail(spec, "option fov must be below 170 degrees")
-    if not out["drop"] < 1:
-        raise _fail(spec, "option drop must be a probability below 1")
-    return out
+        raise spec_error(spec, str(exc)) from None
 
 
 def rig_settings(spec: TrackerSpec) -> tuple[tuple[Any, ...], int | None, tuple[float, float, float]]:
@@ -312,12 +278,19 @@ class ArucoTracker(FrameStreaming):
         self._observation: Any = None  # the last frame's detected points (BoardAndLens reads them)
         self.shape = BoardAndLens.of(settings.flatness, settings.lens_sigma, settings.target.extent)
         self.frames_used = self.frames_failed = 0
+        self.fresh, self.latency_basis = FreshFrames(source, settings.latency or 0.0), ""
         self._init_stream()
 
     def connect(self, timeout: float) -> None:
         if not timeout > 0:
             raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
         self.source.open(timeout)
+        latency, self.latency_basis = latency_in_use(self.settings.latency, self.source)
+        if latency >= self.settings.timeout:  # a network camera's measured one
+            self.source.close()
+            raise spec_error(self.spec, f"the camera's latency {latency:g} s ({self.latency_basis}) is not below "
+                             f"timeout={self.settings.timeout:g} s: give a longer timeout= or latency=")
+        self.fresh = FreshFrames(self.source, latency)
 
     def close(self) -> None:
         try:
@@ -342,6 +315,7 @@ class ArucoTracker(FrameStreaming):
         for key, name in (("latency_measured", "measured_latency"), ("latency_spread", "latency_spread")):
             if math.isfinite(getattr(self.source, name, math.nan)):  # a network camera's (s)
                 details[key] = f"{getattr(self.source, name):.6g}"
+        details["latency"], details["latency_basis"] = f"{self.fresh.latency:.6g}", self.latency_basis
         return DeviceIdentity("tracker", "ArUco camera (OpenCV)", serial=str(self.spec.target),
                               firmware=f"opencv {cv2.__version__}", details=details)
 
@@ -350,6 +324,7 @@ class ArucoTracker(FrameStreaming):
         own sigma. Raises TargetLost, BadReading, DeviceTimeout, ConnectionFailed (one line each)."""
         check_measure_request(count, timeout)
         self._refuse_while_streaming(self.source.description)
+        self.fresh.request()
         self.source.start_measurement()
         return [self._reading() for _ in range(count)]
 
@@ -359,7 +334,9 @@ class ArucoTracker(FrameStreaming):
         flat: list[tuple[float, float]] = []  # each frame's error from the board's shape (m, rad)
         failures: list[MeasurementError] = []
         while len(poses) < s.frames:
-            image, stamp = self._grab()
+            image, stamp = self._grab(s.timeout)
+            while not self.fresh.fresh(stamp):  # exposed before the request (drivers/camera/latency.py)
+                image, stamp = self._grab(self.fresh.time_left(stamp, s.timeout))
             try:
                 pose, bias = self._pose(image), (0.0, 0.0)
                 if self.shape is not None:  # corrected for the board's shape seen so far (this frame included)
@@ -374,8 +351,7 @@ class ArucoTracker(FrameStreaming):
         self.frames_used += len(poses)
         return self._average(poses, flat)
 
-    def _grab(self) -> tuple[Any, float]:
-        timeout = self.settings.timeout
+    def _grab(self, timeout: float) -> tuple[Any, float]:
         try:
             image, stamp = self.source.grab(timeout)
         except DeviceTimeout:
@@ -422,7 +398,9 @@ class ArucoTracker(FrameStreaming):
         n = int(kept.sum())
         sigma = frame_sigma(model, pts[kept], dof) / math.sqrt(n)
         stamp = float(np.mean([t for (_, t), k in zip(poses, kept, strict=True) if k]))
-        status = "ok" if n == len(pts) else f"ok ({len(pts) - n} of {len(pts)} frames rejected)"
+        rejected = f"{len(pts) - n} of {len(pts)} frames rejected" if n < len(pts) else ""
+        notes = "; ".join(filter(None, [self.fresh.note(), rejected]))
+        status = f"ok ({notes})" if notes else "ok"
         # the target frame (the board's axes at the TP): the kept frames' mean orientation, its sigma as the TP's
         rotvecs = np.array([cv2.Rodrigues(p.rotation)[0].ravel() for (p, _), k in zip(poses, kept, strict=True) if k])
         rotvec, _ = mean_orientation(rotvecs)
@@ -474,6 +452,8 @@ def open_tracker(spec: TrackerSpec | str, *, rig: Any = None, site: Any = None) 
                       else source_for(spec.target, camera.width, camera.height))
         except ValueError as exc:  # a network camera's URL that does not parse
             raise SpecError(f"tracker spec {str(spec)!r}: {exc}") from None
+        if settings.latency and not hasattr(source, "start_frames"):
+            raise spec_error(spec, f"option latency= is for a live camera ({source.description} replays frames)")
         return ArucoTracker(spec, settings, source, camera)
     if rig is None or getattr(rig, "tracker_spec", None) != spec:
         raise ValueError("aruco:sim renders the simulated robot: pass rig=SimulatedRig.from_spec(robot_spec, "

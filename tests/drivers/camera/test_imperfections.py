@@ -6,6 +6,7 @@ does to an identified arm is the bench's (bench/flange_camera.py --realistic, do
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -166,17 +167,31 @@ SIM = "aruco:sim?mount=flange&board=charuco&cols=7&rows=5&square=0.03&size=0.022
 
 def test_a_still_arm_is_measured_alike_through_shutter_blur_and_latency() -> None:
     """The stop-and-go plan reads the arm once it has been still for the settling time (acquire: 0.5 s): a rolling
-    shutter (30 ms), a 10 ms exposure and 100 ms of latency then leave the reading as the perfect camera's (the arm's
-    ringing moves the board by less than STILL_PX over a frame). Settled for 0.2 s only (0.42 s after the move: the
-    ringing restarts the wait), a 0.6 s latency shows the arm still arriving: the reading is 14 mm off, and its frames
-    disagree, so its sigma (their spread) says it is worth nothing (2 mm, 200x the still one's), yet not how far off it
-    is: the plan's settling must exceed the camera's latency."""
+    shutter (30 ms), a 10 ms exposure and 100 ms of latency then leave the reading as the perfect camera's within the
+    noise of other frames (the reading skips the 3 frames delivered within the latency of its request; the arm's
+    ringing moves the board by less than STILL_PX over a frame)."""
     perfect, truth = _settled_reading(SIM, 0.5)
     timed, _ = _settled_reading(SIM + "&shutter=0.03&exposure=0.01&latency=0.1", 0.5)
-    assert np.linalg.norm(timed.position - perfect.position) < 0.1 * perfect.sigma
+    assert np.linalg.norm(timed.position - perfect.position) < 3 * math.sqrt(2) * perfect.sigma
     assert np.linalg.norm(perfect.position - truth[:3, 3]) < 5 * math.sqrt(3) * perfect.sigma
-    late, truth = _settled_reading(SIM + "&latency=0.6", 0.2)
-    assert np.linalg.norm(late.position - truth[:3, 3]) > 1000 * perfect.sigma and late.sigma > 100 * perfect.sigma
+    assert perfect.status == "ok"
+    assert re.fullmatch(r"ok \([23] frames exposed before the request skipped: latency 0.1 s\)", timed.status)
+
+
+def test_a_latency_longer_than_the_settling_skips_the_frames_of_the_arm_still_arriving() -> None:
+    """Settled for 0.2 s only (0.42 s after the move: the ringing restarts the wait), a camera with 0.6 s of latency
+    delivers frames of the arm still arriving for 0.6 s after the reading is asked for: averaged in (before
+    drivers/camera/latency.py) they put the reading 14 mm off with a sigma of 2 mm. The reading skips them (18 frames
+    at 30 Hz) and measures the still arm: each axis within 2 sigma of the truth (measured: 1.35 sigma at most, 22.8 µm
+    in 3D, sigma 12.8 µm; the perfect camera's 13.9 µm), as its sigma says. Latency 0: the reading without the option,
+    bit for bit."""
+    perfect, truth = _settled_reading(SIM, 0.2)
+    late, _ = _settled_reading(SIM + "&latency=0.6", 0.2)
+    assert np.all(np.abs(late.position - truth[:3, 3]) < 2 * late.sigma) and late.sigma < 1.5 * perfect.sigma
+    assert np.linalg.norm(late.position - perfect.position) < 3 * math.sqrt(2) * perfect.sigma
+    assert re.fullmatch(r"ok \(1[78] frames exposed before the request skipped: latency 0.6 s\)", late.status)
+    zero, _ = _settled_reading(SIM + "&latency=0", 0.2)
+    assert np.array_equal(zero.position, perfect.position) and zero.sigma == perfect.sigma and zero.status == "ok"
 
 
 @pytest.mark.parametrize("light", ["gain=0.5&gradient=0.4", "glare=150"])

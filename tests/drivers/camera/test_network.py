@@ -68,10 +68,15 @@ def test_mjpeg_stream_with_frame_times_measures_the_board_and_its_latency(tmp_pa
     tracker = _tracker(tmp_path, server.url("/stream?action=stream"))
     tracker.connect(2.0)
     try:
-        _close_to_truth(tracker.measure(1, 5.0)[0])
+        reading = tracker.measure(1, 5.0)[0]
         details = tracker.identity().details
     finally:
         tracker.close()
+    _close_to_truth(reading)
+    # the frames that arrived within the measured latency of the request were exposed before it: skipped
+    assert re.fullmatch(r"ok \([12] frames exposed before the request skipped: latency 0\.0[5-7]\d* s\)",
+                        reading.status), reading.status
+    assert details["latency"] == details["latency_measured"] and details["latency_basis"] == "measured"
     assert server.paths[0] == "/stream?action=stream"  # the URL's own query reaches the camera
     assert details["stream_timestamps"] == "camera clock (the parts' X-Timestamp header)"
     assert float(details["frame_rate"]) == pytest.approx(30, rel=0.1)
@@ -91,7 +96,8 @@ def test_probe_prints_the_frame_rate_the_frame_times_and_the_measured_latency(tm
     assert main(["--tracker", spec, "--probe", "--count", "2"]) == 0
     out = capsys.readouterr().out.splitlines()
     timing = re.fullmatch(r"frames: ([\d.]+) Hz; frame times: camera clock \(the parts' X-Timestamp header\); "
-                          r"latency ([\d.]+) ms measured \(spread [\d.]+ ms\)", out[1])
+                          r"latency ([\d.]+) ms measured \(spread [\d.]+ ms\); readings skip frames delivered "
+                          r"within \2 ms of the request \(latency: measured\)", out[1])
     assert timing, out
     assert float(timing.group(1)) == pytest.approx(30, rel=0.2) and 50 <= float(timing.group(2)) < 80
     assert out[2].startswith("reading 1: x ") and out[-1].startswith("2 of 2 readings")
@@ -112,6 +118,8 @@ def test_a_stream_without_frame_times_is_stamped_on_arrival_and_says_latency_can
     assert details["stream_timestamps"] == "host time at each part's arrival (no X-Timestamp header)"
     assert "latency_measured" not in details and float(details["latency_spread"]) < 0.02
     assert "latency not measurable" in camera_timing(details)
+    assert details["latency"] == "0" and details["latency_basis"] == "not measurable without frame times"
+    assert reading.status == "ok"
 
 
 @pytest.mark.realtime  # latencies and gaps measured on the host's clock: run alone
@@ -217,6 +225,10 @@ def test_streaming_rows_carry_the_cameras_own_clock(tmp_path, serve):
         tracker.close()
     assert rate == pytest.approx(30, rel=0.2)
     assert len(batch.t) >= 10
+    # 1000 s "measured" is the camera clock's offset: stop-and-go readings take latency 0 (give latency= for more)
+    details = tracker.identity().details
+    assert details["latency"] == "0" and re.fullmatch(r"measured 1000\.0\d* s: the camera clock's offset, not a "
+                                                      r"latency", details["latency_basis"]), details
     # every row's time is its frame's X-Timestamp: the exposure (send time - 30 ms) on the camera's clock
     stamped = np.array([exposed for exposed, _ in server.sent]) - 1000.0
     assert np.all(np.min(np.abs(batch.t[:, None] - stamped[None, :]), axis=1) < 2e-6)

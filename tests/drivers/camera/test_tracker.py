@@ -165,6 +165,9 @@ def test_motion_blur_is_refused_in_one_line():
     ("aruco:sim?refine=magic", "refine=magic"),
     ("aruco:sim?dict=9X9_7", "unknown ArUco dictionary"),
     ("aruco:sim?marker=1&layout=x.yaml", "one of marker="),
+    ("aruco:sim?latency=x", "latency=x must be a number"),
+    ("aruco:sim?latency=-0.1", "latency=-0.1 must be >= 0"),
+    ("aruco:sim?latency=0.6&timeout=0.5", "latency=0.6 must be below timeout=0.5 s"),
 ])
 def test_bad_options_give_one_line(spec, words):
     with pytest.raises(SpecError) as info:
@@ -203,6 +206,8 @@ def test_image_folder_replay_measures_the_recorded_frames(tmp_path):
         assert np.linalg.norm(reading.position - pose[:3, 3]) < max(5 * reading.sigma, 3e-4)
     with pytest.raises(Exception, match="all 6 images were used"):
         tracker.measure(1, 5.0)
+    with pytest.raises(SpecError, match=r"latency= is for a live camera \(images .* replays frames\)"):
+        open_tracker(spec + "&latency=0.1")  # a replay's frames have no live timing to skip by
 
 
 def test_video_file_replay_measures_the_recorded_frames(tmp_path):
