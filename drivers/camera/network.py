@@ -62,7 +62,15 @@ from typing import Any
 import cv2
 import numpy as np
 
-from drivers.camera.sources import PROBE_FRAMES, QUEUE_SECONDS, Frame, FrameQueue, Image, device_stamps_usable
+from drivers.camera.sources import (
+    PROBE_FRAMES,
+    QUEUE_SECONDS,
+    Frame,
+    FrameQueue,
+    Image,
+    device_stamps_usable,
+    wait_for_frame,
+)
 from drivers.errors import BadReading, ConnectionFailed, DeviceTimeout
 
 RETRY_WAIT = 0.5  # s between reconnection attempts of a broken stream
@@ -441,16 +449,12 @@ class NetworkCamera:
         if self.kind == "snapshot":
             image, middle, _ = self._snapshot(timeout)
             return image, middle
-        asked = time.time()
-        deadline = time.monotonic() + timeout
-        with self._lock:
-            while self._frame is None or self._frame[1] < asked:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    last = f" (last failure: {self._error})" if self._error else ""
-                    raise DeviceTimeout(self._fail(f"no frame within {timeout:g} s{last}"))
-                self._lock.wait(left)
-            return self._frame
+
+        def why() -> str:
+            last = f" (last failure: {self._error})" if self._error else ""
+            return self._fail(f"no frame within {timeout:g} s{last}")
+
+        return wait_for_frame(self._lock, lambda: self._frame, timeout, why)
 
     def start_frames(self, timeout: float) -> tuple[FrameQueue, float]:
         """Hand every frame from now on to a new queue (room for QUEUE_SECONDS of frames); returns it and the

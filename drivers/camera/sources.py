@@ -126,6 +126,22 @@ class FrameQueue:
             return items
 
 
+def wait_for_frame(lock: threading.Condition, latest: Callable[[], tuple[Image, float] | None], timeout: float,
+                   why: Callable[[], str]) -> tuple[Image, float]:
+    """The latest frame and its host time (s) (``latest()``, guarded by ``lock``, notified on each arrival) once one
+    has arrived at or after this call; DeviceTimeout with the line ``why()`` (called under the lock) after
+    ``timeout`` s without one. A local camera's and a network stream's ``grab``."""
+    asked = time.time()
+    deadline = time.monotonic() + timeout
+    with lock:
+        while (frame := latest()) is None or frame[1] < asked:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise DeviceTimeout(why())
+            lock.wait(left)
+        return frame
+
+
 def device_stamps_usable(host: NDArray[np.float64], device_ms: NDArray[np.float64],
                          tolerance: float = RATE_TOLERANCE) -> tuple[bool, str]:
     """Whether ``CAP_PROP_POS_MSEC`` values ``device_ms`` (ms) read after grabbing consecutive frames at host times
@@ -227,15 +243,8 @@ class LiveCamera:
     def grab(self, timeout: float) -> tuple[Image, float]:
         if self._capture is None:
             raise ConnectionFailed(f"{self.description} is not open (connect first)")
-        asked = time.time()
-        deadline = time.monotonic() + timeout
-        with self._lock:
-            while self._frame is None or self._frame[1] < asked:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    raise DeviceTimeout(f"{self.description} delivered no frame within {timeout:g} s")
-                self._lock.wait(left)
-            return self._frame
+        return wait_for_frame(self._lock, lambda: self._frame, timeout,
+                              lambda: f"{self.description} delivered no frame within {timeout:g} s")
 
     def start_frames(self, timeout: float) -> tuple[FrameQueue, float]:
         """Hand every frame grabbed from now on to a new queue (room for :data:`QUEUE_SECONDS` of frames);
