@@ -15,10 +15,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -48,36 +51,35 @@ def _views(rng: np.random.Generator, count: int) -> list[np.ndarray]:
     return poses
 
 
+@contextlib.contextmanager
+def opened(frames: list[np.ndarray], path: str, **options: Any) -> Iterator[tuple[NetworkCamera, HttpCamera]]:
+    """A loopback camera serving ``frames`` (``options`` as :class:`HttpCamera`'s) and a network camera opened on
+    its ``path``; both closed after."""
+    server = HttpCamera(frames, **options)
+    camera = NetworkCamera(server.url(path))
+    try:
+        camera.open(2.0)
+        yield camera, server
+    finally:
+        camera.close()
+        server.stop()
+
+
 def timing(frames: list[np.ndarray]) -> None:
     """Frame rate and latency, measured against what the server injected."""
     print("\nMJPEG with X-Timestamp: latency measured (host receive - frame time) against injected")
     print(f"{'fps':>5} {'injected ms':>12} {'rate Hz':>8} {'measured ms':>12} {'spread ms':>10}")
     for fps, latency in ((30, 0.0), (30, 0.02), (30, 0.05), (30, 0.1), (60, 0.05)):
-        server = HttpCamera(frames, fps=fps, latency=latency)
-        camera = NetworkCamera(server.url("/stream"))
-        try:
-            camera.open(2.0)
+        with opened(frames, "/stream", fps=fps, latency=latency) as (camera, _):
             print(f"{fps:>5} {latency * 1e3:>12.1f} {camera.rate:>8.2f} {camera.measured_latency * 1e3:>12.2f} "
                   f"{camera.latency_spread * 1e3:>10.3f}")
-        finally:
-            camera.close()
-            server.stop()
-    server = HttpCamera(frames, fps=30, stamps=False)
-    camera = NetworkCamera(server.url("/stream"))
-    try:
-        camera.open(2.0)
+    with opened(frames, "/stream", fps=30, stamps=False) as (camera, _):
         print(f"MJPEG without frame times: rate {camera.rate:.2f} Hz, stamps '{camera.stamps}', arrival jitter "
               f"{camera.latency_spread * 1e3:.3f} ms")
-    finally:
-        camera.close()
-        server.stop()
     print("\nSnapshots: stamp = middle of the request; its true error against the half round trip it states")
     print(f"{'delay ms':>9} {'rate Hz':>8} {'half trip ms':>13} {'|error| max ms':>15} {'error / half trip max':>22}")
     for delay in (0.0, 0.02, 0.05):
-        server = HttpCamera(frames, delay=delay)
-        camera = NetworkCamera(server.url("/snapshot"))
-        try:
-            camera.open(2.0)
+        with opened(frames, "/snapshot", delay=delay) as (camera, server):
             ratios, errors, halves = [], [], []
             for _ in range(20):
                 _, stamp = camera.grab(2.0)
@@ -88,9 +90,6 @@ def timing(frames: list[np.ndarray]) -> None:
                 ratios.append(abs(stamp - exposed) / half)
             print(f"{delay * 1e3:>9.1f} {camera.rate:>8.1f} {np.median(halves) * 1e3:>13.2f} "
                   f"{max(errors) * 1e3:>15.2f} {max(ratios):>22.2f}")
-        finally:
-            camera.close()
-            server.stop()
 
 
 def throughput(frames: list[np.ndarray], folder: Path, seconds: float, fps: float) -> None:

@@ -57,6 +57,16 @@ def _tracker(tmp_path, url: str, extra: str = ""):
     return open_tracker(f"aruco:{url}#camera={tmp_path / 'cam.yaml'}&{BOARD}&frames=3&timeout=0.5{extra}")
 
 
+def _one_reading(tmp_path, url: str):
+    """One reading of the board through a tracker on ``url``, and the tracker's identity details."""
+    tracker = _tracker(tmp_path, url)
+    tracker.connect(2.0)
+    try:
+        return tracker.measure(1, 5.0)[0], tracker.identity().details
+    finally:
+        tracker.close()
+
+
 def _close_to_truth(reading) -> None:
     # JPEG blocks (quality 95) move the edges a little more than the sensor noise does
     assert np.linalg.norm(reading.position - POSE[:3, 3]) < max(6 * reading.sigma, 5e-4), reading
@@ -65,13 +75,7 @@ def _close_to_truth(reading) -> None:
 @pytest.mark.realtime  # latencies and gaps measured on the host's clock: run alone
 def test_mjpeg_stream_with_frame_times_measures_the_board_and_its_latency(tmp_path, serve):
     server = serve(fps=30, latency=0.05)
-    tracker = _tracker(tmp_path, server.url("/stream?action=stream"))
-    tracker.connect(2.0)
-    try:
-        reading = tracker.measure(1, 5.0)[0]
-        details = tracker.identity().details
-    finally:
-        tracker.close()
+    reading, details = _one_reading(tmp_path, server.url("/stream?action=stream"))
     _close_to_truth(reading)
     # the frames that arrived within the measured latency of the request were exposed before it: skipped
     assert re.fullmatch(r"ok \([12] frames exposed before the request skipped: latency 0\.0[5-7]\d* s\)",
@@ -106,13 +110,7 @@ def test_probe_prints_the_frame_rate_the_frame_times_and_the_measured_latency(tm
 @pytest.mark.realtime  # latencies and gaps measured on the host's clock: run alone
 def test_a_stream_without_frame_times_is_stamped_on_arrival_and_says_latency_cannot_be_measured(tmp_path, serve):
     server = serve(fps=30, stamps=False)
-    tracker = _tracker(tmp_path, server.url("/nolength"))  # parts without Content-Length, too
-    tracker.connect(2.0)
-    try:
-        reading = tracker.measure(1, 5.0)[0]
-        details = tracker.identity().details
-    finally:
-        tracker.close()
+    reading, details = _one_reading(tmp_path, server.url("/nolength"))  # parts without Content-Length, too
     _close_to_truth(reading)
     assert abs(reading.timestamp - time.time()) < 2.0  # host time
     assert details["stream_timestamps"] == "host time at each part's arrival (no X-Timestamp header)"
