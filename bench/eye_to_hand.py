@@ -27,8 +27,9 @@ ringing, and the camera measures the board's pose, position and orientation (a 6
 Cases (``--cases``): ``perfect``; each error of a real camera alone (bench/flange_camera.py ``REAL_ERRORS``:
 ``distortion`` with ``lens_sigma``, ``shutter``, ``blur``, ``lighting``, ``bow`` with ``flatness``, ``latency``);
 ``undeclared`` (every error, neither ``flatness=`` nor ``lens_sigma=``); ``all`` (every error, both declared);
-``perfect``, ``undeclared`` and ``all`` on seeds 1..``--seeds``, the others on seed 1. Exit status 1 when a case other than ``undeclared`` is more than
-0.3 mm off over the workspace, or the ``all`` sessions' pooled ratio leaves 0.7-1.3.
+``perfect``, ``undeclared`` and ``all`` on seeds 1..``--seeds``, the others on seed 1. Exit status 1 when a case
+other than ``undeclared`` is more than 0.3 mm off over the workspace, or the ``all`` sessions' pooled ratio (over the
+workspace or inside the domain) leaves 0.7-1.3.
 """
 
 from __future__ import annotations
@@ -203,7 +204,7 @@ def run_case(case: Case) -> Outcome:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.eye_to_hand", description=__doc__.split("\n")[0])
     parser.add_argument("--cases", default=",".join(CASES), help=f"of {', '.join(CASES)} (default: all of them)")
-    parser.add_argument("--seeds", type=int, default=3, help=f"simulated arms for the cases {', '.join(SEEDED)} (default 3)")
+    parser.add_argument("--seeds", type=int, default=3, help=f"simulated arms for {', '.join(SEEDED)} (default 3)")
     parser.add_argument("--views", type=int, default=40, help="views planned per session (default 40)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     parser.add_argument("--quick", action="store_true", help="one 'all' session of 24 views")
