@@ -207,6 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=3, help=f"simulated arms for {', '.join(SEEDED)} (default 3)")
     parser.add_argument("--views", type=int, default=40, help="views planned per session (default 40)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    parser.add_argument("--every-seed", action="store_true", help="every case on every seed")
     parser.add_argument("--quick", action="store_true", help="one 'all' session of 24 views")
     args = parser.parse_args(argv)
     start = time.perf_counter()
@@ -215,7 +216,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--cases: of {', '.join(CASES)}")
     views = 24 if args.quick else args.views
     seeds = range(1, (1 if args.quick else args.seeds) + 1)
-    cases = [Case(name, seed, views) for name in names for seed in (seeds if name in SEEDED else [1])]
+    every = set(names) if args.every_seed else set(SEEDED)
+    cases = [Case(name, seed, views) for name in names for seed in (seeds if name in every else [1])]
     for case in cases:  # every spec is valid before the rendering starts
         parse_settings(TrackerSpec.parse(spec(case)))
     if args.jobs > 1:
