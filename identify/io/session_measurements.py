@@ -127,12 +127,12 @@ def _step_measurements(session: SessionFile) -> Measurements:
 
 def sensor_of(header: dict[str, Any]) -> dict[str, Any]:
     """The device's ``sensor`` and ``scale_sigma`` as the session's tracker identity records them (a camera's
-    ``mount`` and ``scale_sigma`` details: drivers/camera/tracker.py): a flange camera's scale is unknown unless its
-    board was measured; a fixed device's own unless measured."""
+    ``mount`` and ``scale_sigma`` details: drivers/camera/tracker.py): a camera's scale, on the flange or in the
+    cell, is its printed target's, unknown unless the target was measured; another device's is its own."""
     details = (header.get("tracker") or {}).get("details") or {}
     sensor = "flange" if details.get("mount") == "flange" else "fixed"
     given = str(details.get("scale_sigma") or "")
-    scale = float(given) if given else (UNKNOWN if sensor == "flange" else None)
+    scale = float(given) if given else (UNKNOWN if "mount" in details else None)
     return {"sensor": sensor, "scale_sigma": scale}
 
 

@@ -71,7 +71,8 @@ def test_a_session_of_the_flange_camera_reads_as_sensor_flange() -> None:
     assert sensor_of(header({"mount": "flange", "scale_sigma": ""})) == {"sensor": "flange", "scale_sigma": UNKNOWN}
     assert sensor_of(header({"mount": "flange", "scale_sigma": "0.0001"})) == {"sensor": "flange",
                                                                               "scale_sigma": 1e-4}
-    assert sensor_of(header({"mount": "cell", "scale_sigma": ""})) == {"sensor": "fixed", "scale_sigma": None}
+    # a camera in the cell measures in units of its printed target too
+    assert sensor_of(header({"mount": "cell", "scale_sigma": ""})) == {"sensor": "fixed", "scale_sigma": UNKNOWN}
     assert sensor_of({}) == {"sensor": "fixed", "scale_sigma": None}  # a laser tracker's session
 
 
