@@ -15,8 +15,11 @@ Each frame's flat pose leaves the reprojection residuals ``r`` (2N px) that the 
 their image moves with the pose's span projected out). :class:`BoardAndLens` keeps the least-squares θ over every
 frame so far with its covariance ``s² (Σ GᵀG + s² P⁻²)⁻¹`` (``P`` the priors, ``s²`` the residuals' variance left
 after the fit, over their 2N - 6 degrees of freedom each minus θ's). A frame's pose is then corrected by its
-least-squares response to θ (:func:`pose_shifts`), and what θ's covariance leaves goes into the reading's ``shared``
-error. A reading made early in a session carries more of it (fewer frames behind θ). Units: metres, radians, pixels.
+least-squares response to θ (:func:`pose_shifts`), its reprojection RMS becomes that of ``r - G θ`` (the corner
+noise the reading's sigma is scaled by: the flat pose's RMS holds the shape's and the lens's pattern, which made the
+readings' sigmas 1.5x their errors with a board bowed 0.5 mm, docs/benchmarks.md section 24a), and what θ's
+covariance leaves goes into the reading's ``shared`` error. A reading made early in a session carries more of it
+(fewer frames behind θ). Units: metres, radians, pixels.
 """
 
 from __future__ import annotations
