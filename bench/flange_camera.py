@@ -32,8 +32,9 @@ squares of 25 mm, ArUco 4X4_50) or A3 (15x11 of 26 mm, 4X4_100). Real OpenCV det
 5. ``--realistic ERRORS``: instead, sessions with a real camera's errors (:data:`REAL_ERRORS`, docs/benchmarks.md
    section 24a): residual distortion, rolling shutter, exposure blur, lighting, a board bowed 0.5 mm, latency, each
    alone or ``all`` together (with ``flatness=`` and ``lens_sigma=`` declared: the tracker estimates the board's
-   shape and the lens's error), or ``undeclared`` (all, neither declared); the truth's board frame is the bowed
-   print's mean plane.
+   shape and the lens's error), or ``undeclared`` (all, neither declared), or ``declared`` (none, both declared); the
+   truth's board frame is the bowed print's mean plane. ``z pos``, ``z rot`` (every case): the plan readings' error
+   against the board's true pose in the camera frame over their ``sigma``, ``sigma_r`` (RMS per axis; 1: honest).
 
 Robot time (virtual clock of the rig: moves, settling, frames) and the number of images are reported per case.
 Exit status 1 when a case misses a target.
@@ -90,6 +91,8 @@ REAL_ERRORS = {"distortion": "dk1=0.0015&lens_sigma=0.005",  # left after calibr
                "bow": "bow=0.0005&flatness=0.0005",  # the board 0.5 mm out of flat, flatness= says it may be
                "latency": "latency=0.1"}  # 100 ms from exposure to delivery
 REAL_ERRORS["all"] = "&".join(REAL_ERRORS.values())
+#: the perfect camera and a flat board with both declared all the same (what the estimate costs when nothing is off)
+REAL_ERRORS["declared"] = "flatness=0.0005&lens_sigma=0.005"
 #: the same errors with the user declaring neither the board's flatness nor the lens's uncertainty (nothing estimated)
 REAL_ERRORS["undeclared"] = "&".join(o for o in REAL_ERRORS["all"].split("&") if o.split("=")[0] not in
                                      ("flatness", "lens_sigma"))
@@ -123,6 +126,7 @@ class Outcome:
     likely: tuple[float, float]  # m, the range (90 %) the result states one calibration's RMS lies in there
     hand_eye: float  # m, the same for the hand-eye calibration with nominal kinematics
     holdout: float  # m, the result's own held-out RMS (view point, board frame)
+    reading_z: tuple[float, float]  # RMS per axis of the plan readings' position and orientation error over sigma
     model_error: float  # m, the fit's model error (what the rows' scatter says beyond their sigmas)
     status: str
     scale: str
@@ -160,11 +164,17 @@ def run_case(case: Case) -> Outcome:
     camera.connect(5.0)
     t0 = rig.clock.now()
     speed, accel = [SPEED] * 6, [ACCELERATION] * 6
+    # a bowed board's frame is its mean plane: 2/3 of the bow out of its edges' plane (drivers/camera/imperfections.py)
+    mean_plane = np.eye(4)
+    mean_plane[2, 3] = 2.0 / 3.0 * parse_settings(TrackerSpec.parse(spec)).sim["imperfections"].bow
+    seen = []  # camera <- board (its mean plane) at each reading, the truth
 
     def visit(q: np.ndarray):
         arm.move_joints(q, speed, accel, 60.0)
         arm.wait_until_still(0.2, 10.0)
-        return arm.read_joints(), camera.measure(1, 10.0)[0]
+        reading = camera.measure(1, 10.0)[0]
+        seen.append(camera.source.target_pose(rig.clock.now()) @ mean_plane)
+        return arm.read_joints(), reading
 
     _, at_home = visit(home)
     board = frames_from_joints(nominal, home[None])[0, -1] @ CAMERA_MOUNT @ _pose(at_home)  # base <- board, a guess
@@ -175,6 +185,7 @@ def run_case(case: Case) -> Outcome:
     plan = flange_view_poses(nominal, home, limits, CAMERA_MOUNT, board, view, case.views,
                              np.random.default_rng([case.seed, 36]))
     q_read, readings = [], []
+    truths = []
     for q in plan:
         try:
             q_act, reading = visit(q)
@@ -183,6 +194,7 @@ def run_case(case: Case) -> Outcome:
             continue
         q_read.append(q_act)
         readings.append(reading)
+        truths.append(seen[-1])
     robot_seconds = rig.clock.now() - t0
     m = len(readings)
     q_read = np.array(q_read)
@@ -199,8 +211,7 @@ def run_case(case: Case) -> Outcome:
     rng = np.random.default_rng([case.seed, 38])
     q_check = random_poses(limits, CHECK_POSES, rng)
     truth = frames_from_joints(rig.truth, q_check)[:, -1, :3, 3]
-    # a bowed board's frame is its mean plane: 2/3 of the bow out of its edges' plane (drivers/camera/imperfections.py)
-    truth[:, 2] -= 2.0 / 3.0 * parse_settings(TrackerSpec.parse(spec)).sim["imperfections"].bow
+    truth[:, 2] -= mean_plane[2, 3]
     flange_in_camera = np.linalg.inv(CAMERA_MOUNT)[:, 3]
     sensor = np.array(doc["sensor_frame"])
     ours = np.einsum("mij,j->mi", frames_from_joints(ident.model, q_check)[:, -1] @ sensor, flange_in_camera)[:, :3]
@@ -213,8 +224,19 @@ def run_case(case: Case) -> Outcome:
     validation = ((doc.get("validation") or {}).get("plain") or {}).get("rms", math.nan)
     scale_check = next((c for c in doc["verdict"]["checks"] if c["name"] == "scale"), {"status": "-"})
     return Outcome(case.label, (m + 1) * FRAMES, robot_seconds, rms, stated, likely, hand_eye, validation,
-                   ident.plain.adequacy.model_error, doc["verdict"]["status"], scale_check["status"],
-                   time.perf_counter() - start)
+                   _reading_z(readings, truths), ident.plain.adequacy.model_error, doc["verdict"]["status"],
+                   scale_check["status"], time.perf_counter() - start)
+
+
+def _reading_z(readings: list, truths: list) -> tuple[float, float]:
+    """RMS over the plan readings and the three axes of their position's error over their ``sigma`` and their
+    orientation's (the turn from the true to the measured, rad) over their ``sigma_r``: 1 when each states its own
+    error (the truth: the board's true pose in the camera frame, ``truths`` 4x4 camera <- board)."""
+    position = [np.sum((r.position - t[:3, 3]) ** 2) / (3 * r.sigma**2) for r, t in zip(readings, truths, strict=True)]
+    turns = [Rotation.from_rotvec(r.rotvec) * Rotation.from_matrix(t[:3, :3]).inv() for r, t in
+             zip(readings, truths, strict=True)]
+    orientation = [turn.magnitude() ** 2 / (3 * r.sigma_r**2) for r, turn in zip(readings, turns, strict=True)]
+    return math.sqrt(float(np.mean(position))), math.sqrt(float(np.mean(orientation)))
 
 
 def hand_eye_park(flanges: np.ndarray, boards: np.ndarray) -> np.ndarray:
@@ -292,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"UR5e, camera {WIDTH}x{HEIGHT} on the flange ({FOV:g}° wide), ChArUco boards, {FRAMES} frames a view, "
           f"{views} views planned, {CHECK_POSES} random poses over the joints' ranges for the truth")
     header = (f"{'case':<40} {'images':>6} {'robot s':>7} {'flange RMS mm':>13} {'stated mm':>9} {'ratio':>6} "
-              f"{'90 % range mm':>13} {'in':>3} "
+              f"{'90 % range mm':>13} {'in':>3} {'z pos':>5} {'z rot':>5} "
               f"{'hand-eye mm':>11} {'held-out mm':>11} {'model err mm':>12} {'verdict':>7} {'scale':>5} {'s':>5}")
     print(header)
     print("-" * len(header))
@@ -301,7 +323,8 @@ def main(argv: list[str] | None = None) -> int:
         ratio = r.rms / r.stated if r.stated > 0 else math.inf
         print(f"{r.label:<40} {r.images:>6} {r.robot_seconds:>7.0f} {r.rms * 1e3:>13.4f} {r.stated * 1e3:>9.4f} "
               f"{ratio:>6.2f} {r.likely[0] * 1e3:>6.3f}-{r.likely[1] * 1e3:<6.3f} "
-              f"{'yes' if r.likely[0] <= r.rms <= r.likely[1] else 'no':>3} {r.hand_eye * 1e3:>11.3f} "
+              f"{'yes' if r.likely[0] <= r.rms <= r.likely[1] else 'no':>3} {r.reading_z[0]:>5.2f} "
+              f"{r.reading_z[1]:>5.2f} {r.hand_eye * 1e3:>11.3f} "
               f"{r.holdout * 1e3:>11.4f} {r.model_error * 1e3:>12.4f} {r.status:>7} {r.scale:>5} {r.seconds:>5.0f}")
         if case.caliper and (r.rms > TARGET_RMS or r.scale == "fail"):
             missed.append(r.label)

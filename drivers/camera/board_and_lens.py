@@ -15,8 +15,11 @@ Each frame's flat pose leaves the reprojection residuals ``r`` (2N px) that the 
 their image moves with the pose's span projected out). :class:`BoardAndLens` keeps the least-squares θ over every
 frame so far with its covariance ``s² (Σ GᵀG + s² P⁻²)⁻¹`` (``P`` the priors, ``s²`` the residuals' variance left
 after the fit, over their 2N - 6 degrees of freedom each minus θ's). A frame's pose is then corrected by its
-least-squares response to θ (:func:`pose_shifts`), and what θ's covariance leaves goes into the reading's ``shared``
-error. A reading made early in a session carries more of it (fewer frames behind θ). Units: metres, radians, pixels.
+least-squares response to θ (:func:`pose_shifts`), its reprojection RMS becomes that of ``r - G θ`` (the corner
+noise the reading's sigma is scaled by: the flat pose's RMS holds the shape's and the lens's pattern, which made the
+readings' sigmas 1.5x their errors with a board bowed 0.5 mm, docs/benchmarks.md section 24a), and what θ's
+covariance leaves goes into the reading's ``shared`` error. A reading made early in a session carries more of it
+(fewer frames behind θ). Units: metres, radians, pixels.
 """
 
 from __future__ import annotations
@@ -106,8 +109,10 @@ class BoardAndLens:
         """The estimator for a tracker's options, None when both are 0 (a flat board, a calibrated lens)."""
         return cls(flatness, lens_sigma, extent) if flatness > 0 or lens_sigma > 0 else None
 
-    def add(self, pose: Any, observation: Any, camera: Any) -> None:
-        """Take one frame's flat ``pose`` (drivers/camera/pose.py ``Pose``) of the detected ``observation``."""
+    def add(self, pose: Any, observation: Any, camera: Any) -> tuple[Array, Array]:
+        """Take one frame's flat ``pose`` (drivers/camera/pose.py ``Pose``) of the detected ``observation``; return
+        its residuals ``r`` (2N, px) and their moves per unit of each parameter ``G`` (2N, p), the pose's span
+        projected out of both."""
         points = np.asarray(observation.object_points, dtype=float).reshape(-1, 3)
         jacobian = pose_jacobian(points, pose.rotation, pose.translation, camera)
         span = jacobian @ np.linalg.pinv(jacobian)
@@ -120,6 +125,7 @@ class BoardAndLens:
         self._rhs += g.T @ residual
         self._square_sum += float(residual @ residual)
         self._dof += len(residual) - 6
+        return residual, g
 
     def estimate(self) -> tuple[Array, Array]:
         """The parameters' estimate and covariance (module docstring; the known ones 0 with no variance)."""
@@ -139,15 +145,18 @@ class BoardAndLens:
 
     def take(self, pose: Any, observation: Any, camera: Any, tp: Array) -> tuple[Any, tuple[float, float]]:
         """:meth:`add` the frame, then return its pose corrected by the estimate (the flat pose minus its response
-        to it) and the per-axis RMS (m, rad) of the TP's and the orientation's error the estimate's uncertainty
-        leaves (``tp``: m, board frame)."""
-        self.add(pose, observation, camera)
+        to it, its reprojection RMS the residuals the estimate leaves: the corner noise, no longer the pattern of
+        the shape and the lens) and the per-axis RMS (m, rad) of the TP's and the orientation's error the
+        estimate's uncertainty leaves (``tp``: m, board frame)."""
+        residual, g = self.add(pose, observation, camera)
         value, covariance = self.estimate()
         shifts = pose_shifts(pose.rotation, pose.translation, observation.object_points, self.half, camera,
                              self.lens).T  # (6, p)
         move = shifts @ value
         rotation = cv2.Rodrigues(-move[:3])[0] @ np.asarray(pose.rotation, dtype=float)
-        corrected = replace(pose, rotation=rotation, translation=np.asarray(pose.translation) - move[3:])
+        left = residual - g @ value
+        corrected = replace(pose, rotation=rotation, translation=np.asarray(pose.translation) - move[3:],
+                            rms=float(np.sqrt(np.mean(left**2))))
         arm = rotation @ np.asarray(tp, dtype=float)  # the TP's lever in the camera frame: a turn ω moves it ω × arm
         cross = np.array([[0.0, arm[2], -arm[1]], [-arm[2], 0.0, arm[0]], [arm[1], -arm[0], 0.0]])  # ω -> ω × arm
         position = (cross @ shifts[:3] + shifts[3:]) @ covariance @ (cross @ shifts[:3] + shifts[3:]).T
