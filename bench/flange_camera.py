@@ -92,6 +92,11 @@ REAL_ERRORS["all"] = "&".join(REAL_ERRORS.values())
 #: the same errors with the user declaring neither the board's flatness nor the lens's uncertainty (nothing estimated)
 REAL_ERRORS["undeclared"] = "&".join(o for o in REAL_ERRORS["all"].split("&") if o.split("=")[0] not in
                                      ("flatness", "lens_sigma"))
+#: the focal length 0.2 % and the principal point (3, -2) px off the calibration: undeclared, declared (the tracker
+#: estimates them: focal_sigma= relative, centre_sigma= px), and those options declared for a calibration that is right
+REAL_ERRORS["intrinsics-undeclared"] = "dfocal=0.002&dcx=3&dcy=-2"
+REAL_ERRORS["intrinsics"] = REAL_ERRORS["intrinsics-undeclared"] + "&focal_sigma=0.005&centre_sigma=5"
+REAL_ERRORS["intrinsics-right"] = "focal_sigma=0.005&centre_sigma=5"
 SPEED, ACCELERATION = 1.0, 2.0  # rad/s, rad/s² of the calibration moves
 
 
