@@ -34,7 +34,8 @@ squares of 25 mm, ArUco 4X4_50) or A3 (15x11 of 26 mm, 4X4_100). Real OpenCV det
    print's mean plane. The calibration's focal length 0.2 % and principal point (3, -2) px off: ``intrinsics``
    (``focal_sigma=`` and ``centre_sigma=`` declared: the tracker estimates them), ``intrinsics-undeclared``,
    ``focal-undeclared`` and ``centre-undeclared`` (each part alone), ``intrinsics-right`` (declared, the calibration
-   right: their cost), ``all-intrinsics`` (``all`` with them). The tracker's final estimate of the lens's parameters is printed below the table.
+   right: their cost), ``all-intrinsics`` (``all`` with them). The tracker's final estimate of the lens's
+   parameters is printed below the table.
 
 Robot time (virtual clock of the rig: moves, settling, frames) and the number of images are reported per case.
 Exit status 1 when a case misses a target.
