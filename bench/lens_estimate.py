@@ -1,7 +1,7 @@
-"""What the tracker's reading-by-reading correction for the lens leaves, against the session's final estimate
-(docs/benchmarks.md, section 24a).
+"""What a calibration's errors do to a flange camera's views, what a fitted mount takes up of them, and what the
+tracker's reading-by-reading correction leaves against the session's final estimate (docs/benchmarks.md, 24a).
 
-    PYTHONPATH=. .venv/bin/python -m bench.lens_sequential [--seeds 5] [--views 40]
+    PYTHONPATH=. .venv/bin/python -m bench.lens_estimate [--seeds 5] [--views 40]
 
 The tracker (drivers/camera/board_and_lens.py, ``BoardAndLens.take``) corrects each frame's pose by the estimate of
 the lens's errors from the frames so far; the first readings of a session are corrected by an estimate from one or
@@ -15,6 +15,12 @@ calibrated camera. Reported per case, over the seeds: the flat poses' error (the
 frames), the tracker's corrected poses' error and the ``shared`` error it states (RMS of ``sqrt(3)`` x the per-axis
 value), the error with every frame corrected by the final estimate instead, and the final estimate against the truth
 in its own standard deviations (the largest over the parameters and seeds).
+
+First, per lens parameter of a typical calibration's error (:data:`TYPICAL`), over the views of the first seed: how
+far it moves each view's least-squares pose (``pose_shifts``: the board centre, mm RMS, and its turn, mrad RMS), and
+what is left after the one change of the camera's mount (a turn and a translation, the same in every view) that
+takes up most of it (least squares, turns weighted by a 0.5 m lever): a fitted mount absorbs that much of it, the
+rest no rigid part of the fit can.
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ CORNERS = np.array([[(i - 4.5) * 0.025, (j - 3.0) * 0.025, 0.0] for i in range(1
 EXTENT = (0.275, 0.2)  # m: the A4 board's 11 x 8 squares
 NOISE_PX, FRAMES = 0.03, 3
 #: case: (the true camera's errors, the tracker's priors: flatness, lens_sigma, focal_sigma, centre_sigma)
+TYPICAL = {"dk1": 0.0015, "dfocal": 0.002, "dcx": 3.0, "dcy": -2.0}
 CASES = {"focal 0.2 %, centre (3, -2) px": (Imperfections(dfocal=0.002, dcx=3.0, dcy=-2.0), (0.0, 0.0, 0.005, 5.0)),
          "k1 +0.0015": (Imperfections(dk1=0.0015), (0.0, 0.005, 0.0, 0.0)),
          "both": (Imperfections(dk1=0.0015, dfocal=0.002, dcx=3.0, dcy=-2.0), (0.0, 0.005, 0.005, 5.0))}
@@ -66,6 +73,27 @@ def views(count: int, rng: np.random.Generator) -> list[tuple[np.ndarray, np.nda
                     * Rotation.from_rotvec([0.0, 0.0, roll])).as_matrix() @ np.diag([1.0, -1.0, -1.0])
         out.append((rotation, np.array([rng.uniform(-0.05, 0.05), rng.uniform(-0.03, 0.03), distance])))
     return out
+
+
+def mount_part(name: str, amount: float, seen: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, ...]:
+    """Lens parameter ``name`` off by ``amount``: the views' pose shifts (m, rad RMS) and what is left of them (m,
+    rad RMS) after the best common change of the camera's mount (a turn w and translation tau: a view at translation
+    t moves by w and ``w x t + tau``)."""
+    shifts = np.array([pose_shifts(r, t, CORNERS, (EXTENT[0] / 2, EXTENT[1] / 2), CAMERA, (name,))[-1] * amount
+                       for r, t in seen])
+    lever = 0.5
+    rows, rhs = [], []
+    for (_, t), shift in zip(seen, shifts, strict=True):
+        cross = np.array([[0.0, t[2], -t[1]], [-t[2], 0.0, t[0]], [t[1], -t[0], 0.0]])  # w -> w x t
+        rows += [np.hstack([lever * np.eye(3), np.zeros((3, 3))]), np.hstack([cross, np.eye(3)])]
+        rhs += [lever * shift[:3], shift[3:]]
+    design, target = np.vstack(rows), np.concatenate(rhs)
+    left = (target - design @ np.linalg.lstsq(design, target, rcond=None)[0]).reshape(len(seen), 2, 3)
+
+    def rms(values: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(np.sum(values**2, axis=1))))
+
+    return rms(shifts[:, 3:]), rms(shifts[:, :3]), rms(left[:, 1]), rms(left[:, 0] / lever)
 
 
 def session(truth: Imperfections, priors: tuple[float, ...], count: int, seed: int) -> dict[str, float]:
@@ -103,10 +131,17 @@ def session(truth: Imperfections, priors: tuple[float, ...], count: int, seed: i
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.lens_sequential", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m bench.lens_estimate", description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=5, help="sessions per case (default 5)")
     parser.add_argument("--views", type=int, default=40, help="views after the first (default 40)")
     args = parser.parse_args(argv)
+    seen = views(args.views, np.random.default_rng([1, 36]))
+    print(f"{'parameter off by':<20} {'pose shift mm':>13} {'mrad':>6} {'left after a mount mm':>21} {'mrad':>6}")
+    for name, amount in TYPICAL.items():
+        moved, turned, left, left_turn = mount_part(name, amount, seen)
+        print(f"{name + ' ' + format(amount, 'g'):<20} {moved * 1e3:>13.3f} {turned * 1e3:>6.3f} {left * 1e3:>21.3f} "
+              f"{left_turn * 1e3:>6.3f}")
+    print()
     print(f"A4 board (70 corners), 1280x720 camera, {args.views + 1} views of {FRAMES} frames, noise {NOISE_PX} px a "
           f"frame, a view's bias {VIEW_TURN_BIAS_PX} px; the board centre's error, mm RMS over the frames and "
           f"{args.seeds} seeds")
