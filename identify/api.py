@@ -91,7 +91,8 @@ def calibrate(meas: Measurements, robot: str | None = None, noise: float | None 
     rows = for_estimator(split_holdout(meas, holdout, seed))  # a flange camera's rows turned round
     ident, scale = checked(identify(rows.meas, nominal, noise=noise), rows, nominal)
     doc = documented(result_to_dict(ident, nominal, None if model is None else model.name,
-                                    nominal_model=None if model is None else model.document), rows, scale, ident)
+                                    nominal_model=None if model is None else model.document), rows, scale, ident,
+                   None if model is None else model.limits)
     return Result(doc, CalibratedModel.from_identification(ident), ident, model)
 
 

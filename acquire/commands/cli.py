@@ -191,7 +191,7 @@ def _run(args: argparse.Namespace, session: Session | None) -> int:
         duration = estimate_continuous_duration(plan, site.measure_time)
         accuracy = None
     else:
-        measure_time = setup.frames / setup.fps if setup is not None else site.measure_time
+        measure_time = setup.reading_seconds if setup is not None else site.measure_time
         duration = estimate_duration(plan, robot_model, 0.0 if rehearsal else measure_time)
         accuracy = None if rehearsal or flange else predicted_accuracy(
             plan if camera is None else camera.seen_plan(plan), robot_model, site.tp_guess,

@@ -59,7 +59,7 @@ def locate(args: argparse.Namespace, robot_spec: RobotSpec, tracker_spec: Tracke
                 f" (the camera's body grown by the default mount's {setup.rough.position * 1e3:.0f} mm tolerance: "
                 "give --camera-mount and --camera-mount-tolerance from the bracket's drawing)")
             raise UsageError(f"locate refused at the start pose: {problems[0]}{hint}")
-        duration = estimate_duration(plan, robot, setup.frames / setup.fps)
+        duration = estimate_duration(plan, robot, setup.reading_seconds)
         turns = np.degrees(np.abs(np.array([s.q for s in plan.steps]) - start).max(axis=0))
         say("\n".join([f"locate phase: {len(plan.steps)} readings of the board about the start pose "
                        f"[{', '.join(f'{np.degrees(v):.1f}' for v in start)}]° (the wrist turned up to "

@@ -62,7 +62,9 @@ class FlangeSetup:
     ``rough`` the operator's rough mount, ``start`` (n,) the start pose (DH values; None: the robot's home) and
     ``located`` the locate phase's result (None: the dry run's indicative setup from the rough mount), ``points``
     (M, 3) the board's corners (board frame, m) and ``sigma_px`` the corner noise (pixels) the accuracy is predicted
-    with (acquire/planning/flange_bound.py: the locate's readings give it; before them it is assumed)."""
+    with (acquire/planning/flange_bound.py: the locate's readings give it; before them it is assumed), ``latency``
+    s the camera's ``latency=`` (a stop-and-go reading waits it out before its first frame; 0 when not given: a
+    network camera's measured one is only known once connected)."""
 
     mount: Array
     board: Array
@@ -77,6 +79,12 @@ class FlangeSetup:
     start: Array | None = None
     located: Located | None = None
     sigma_px: float = DRY_SIGMA_PX
+    latency: float = 0.0
+
+    @property
+    def reading_seconds(self) -> float:
+        """A reading's time at the stopped arm (s): the latency waited out, then its frames at the frame rate."""
+        return self.latency + self.frames / self.fps
 
 
 def flange_setup(robot: RobotModel, spec: TrackerSpec, site: SiteConfig, rough: RoughMount) -> FlangeSetup:
@@ -102,7 +110,7 @@ def flange_setup(robot: RobotModel, spec: TrackerSpec, site: SiteConfig, rough: 
     return FlangeSetup(rough.mount, at_home @ rough.mount @ facing, _view_test(intrinsics.matrix, intrinsics.size,
                        settings.target.extent, distance, MARGIN), distance, settings.frames, fps,
                        settings.scale_sigma, f"{settings.target.kind} {w * 1e3:.0f} x {h * 1e3:.0f} mm", rough,
-                       _corner_points(settings.target))
+                       _corner_points(settings.target), latency=settings.latency or 0.0)
 
 
 def _corner_points(target: Any) -> Array:
@@ -223,7 +231,7 @@ def locate_seconds(robot: RobotModel, site: SiteConfig, setup: FlangeSetup) -> f
     from acquire.planning.plan import estimate_duration
 
     plan = locate_plan(robot, site, np.asarray(robot.home, dtype=float))
-    return estimate_duration(plan, robot, setup.frames / setup.fps) + estimate_duration(
+    return estimate_duration(plan, robot, setup.reading_seconds) + estimate_duration(
         replace(plan, steps=plan.steps[:1], home=plan.steps[-1].q), robot, 0.0)  # and back to the start
 
 
@@ -244,7 +252,8 @@ def flange_lines(plan: Plan, setup: FlangeSetup, accuracy: dict[str, float] | No
     lines = ["flange camera (aruco, mount=flange):",
              f"  board: {setup.board_text}, {setup.distance:.3g} m down the line of sight at {where}",
              f"  views: {views} ({views - held} fitted, {held} held out) + {len(plan.steps) - views} at {where}",
-             f"  images: {readings * setup.frames} ({readings} readings x {setup.frames} frames at {setup.fps:g} Hz)",
+             f"  images: {readings * setup.frames} ({readings} readings x {setup.frames} frames at {setup.fps:g} Hz"
+             + (f", each after a {setup.latency:g} s latency" if setup.latency > 0 else "") + ")",
              "  determines: the DH parameters, the camera's pose on the flange and the board's pose in the base "
              "frame, in one fit",
              f"  scale: {scale}"]

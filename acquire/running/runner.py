@@ -30,7 +30,7 @@ from identify.report.terminal import format_reference, format_report
 from identify.results.pipeline import identify
 from identify.results.verdict import missing_steps as missing_steps_check
 from identify.results.verdict import with_session_check
-from identify.sensors.evidence import checked, documented, for_estimator
+from identify.sensors.evidence import checked, documented, flange_text, for_estimator
 from session.rows import factory_calibration
 
 log = logging.getLogger("acquire")
@@ -117,10 +117,9 @@ def identify_session(session: Session, session_path: Path, robot: RobotModel) ->
     if reference is not None or note:
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
     doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path), nominal_model=robot.document)
-    doc = documented(doc, rows, scale, ident)  # a flange camera's mount, board and flange_accuracy_rms; the scale
-    if doc.get("flange_accuracy_rms") is not None:
-        say(f"flange camera: the flange's position stated to {doc['flange_accuracy_rms'] * 1e3:.3f} mm RMS over the "
-            "fit poses (flange_accuracy_rms)")
+    doc = documented(doc, rows, scale, ident, robot.limits)  # a flange camera's mount, board, flange accuracy
+    for line in flange_text(doc):
+        say(line)
     if section := controller_section(calibration, robot.joint_types):  # what the arm runs today ("before")
         doc["controller"] = section
     out = session_path.with_suffix(".result.yaml")

@@ -31,7 +31,7 @@ from identify.io.session_measurements import open_session, read_session
 from identify.io.verification_io import load_verification
 from identify.report.terminal import format_reference, format_report
 from identify.results.pipeline import Identification, identify, split_holdout
-from identify.sensors.evidence import checked, documented, for_estimator
+from identify.sensors.evidence import checked, documented, flange_text, for_estimator
 from kinematics.dh import frames_from_joints
 from kinematics.joint_errors import Coupling
 from session.schema import is_session_file
@@ -213,7 +213,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
                                                                   checks.missing_steps(*header["missing_steps"])))
     doc = result_to_dict(ident, nominal, nominal_name, source=str(args.input),
                          nominal_model=robot.document if robot else None)
-    doc = documented(doc, rows, scale, ident)
+    doc = documented(doc, rows, scale, ident, robot.limits if robot else None)
     if header is not None:  # the controller's own calibration: what the arm runs today ("before")
         from identify.applications.controller import controller_section
         from session.rows import factory_calibration
@@ -231,6 +231,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             print("\n".join(models), file=sys.stderr)
         return doc
     print(format_report(ident, nominal, nominal_name))
+    for line in flange_text(doc):
+        print(line)
     if reference is not None or note:
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
     said = []

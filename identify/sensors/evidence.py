@@ -3,18 +3,22 @@ camera's frames after it (identify/sensors/flange.py, identify/sensors/scale.py)
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import gamma
 
+from identify.applications.domain import outside
 from identify.estimator.measurements import Measurements
 from identify.results.pipeline import Identification
 from identify.results.verdict import with_session_check
-from identify.sensors.flange import flange_document, frame_point_covariances, turned_round
+from identify.sensors.flange import flange_document, frame_point_jacobian, turned_round
 from identify.sensors.metadata import UNKNOWN
 from identify.sensors.scale import ScaleResult, effect_rms, scale_result
+from identify.simulators.simulate import random_poses
 from kinematics.dh import DHModel, frames_from_joints
 
 Array = NDArray[np.float64]
@@ -48,28 +52,106 @@ def checked(ident: Identification, rows: SensorRows, nominal: DHModel | None) ->
     return ident, scale
 
 
-def documented(doc: dict[str, Any], rows: SensorRows, scale: ScaleResult, ident: Identification | None = None
-               ) -> dict[str, Any]:
+WORKSPACE_POSES = 300  #: random poses within the joint limits where a flange camera's result states the flange
+LIKELY = (0.05, 0.95)  #: the probabilities bounding the range a single calibration's realised RMS is stated in
+
+
+@dataclass(frozen=True)
+class FlangeAccuracy:
+    """The flange's predicted 3D position error (m) over a set of poses: ``rms`` the expected RMS (the fit's
+    covariance, its model error and the scale's ``|p| sigma``; inf with an unknown scale) and ``low``, ``high`` the
+    range (:data:`LIKELY`) the realised RMS of one calibration lies in. The parameters' error is one draw shared by
+    every pose, so the RMS over many poses is a weighted chi-square over the few directions that reach the flange
+    and scatters from calibration to calibration (Satterthwaite's gamma with its mean and variance)."""
+
+    rms: float
+    low: float
+    high: float
+
+    def as_dict(self) -> dict[str, Any]:
+        finite = np.isfinite(self.rms)
+        return {"accuracy_rms": float(self.rms) if finite else None,
+                "likely_rms": [float(self.low), float(self.high)] if finite else None}
+
+
+def documented(doc: dict[str, Any], rows: SensorRows, scale: ScaleResult, ident: Identification | None = None,
+               limits: Array | None = None) -> dict[str, Any]:
     """The result document with the sensor's sections: ``scale`` (unless the device's own) and, for a flange camera,
     ``sensor: flange`` with ``sensor_frame``, ``target``, ``view_point`` and (given ``ident``)
-    ``flange_accuracy_rms``: :func:`flange_accuracy` over the fit poses (m; null with an unknown scale)."""
+    ``flange_accuracy_rms``: :func:`flange_accuracy` over the fit poses (m; null with an unknown scale), and ``flange``:
+    that and its likely range at the fit poses and, given the robot's joint ``limits`` (n, 2; rad or m), at
+    :data:`WORKSPACE_POSES` random poses within them, with how many lie outside the fitted joint ranges."""
     if rows.scale_sigma is not None:
         doc = {**doc, "scale": scale.as_dict(effect_rms(rows.meas.points, scale.sigma))}
     if rows.view_point is not None:
         doc = flange_document(doc, rows.view_point)
         if ident is not None:
+            tool_frame = np.array(doc["tool_frame"])
             q = np.unique(ident.refinement.q, axis=0)
-            value = flange_accuracy(ident, np.array(doc["tool_frame"]), q, scale)
-            doc["flange_accuracy_rms"] = value if np.isfinite(value) else None
+            fit = flange_accuracy(ident, tool_frame, q, scale)
+            doc["flange_accuracy_rms"] = fit.as_dict()["accuracy_rms"]
+            doc["flange"] = {"fit_poses": fit.as_dict()}
+            if limits is not None:
+                doc["flange"]["workspace"] = _workspace(ident, tool_frame, scale, limits, rows.meas)
     return doc
 
 
-def flange_accuracy(ident: Identification, tool_frame: Array, q: Array, scale: ScaleResult) -> float:
-    """RMS over DH joint values ``q`` (m, n) of the 3D standard uncertainty (m) of the flange's position (the last DH
-    frame's origin, through the fitted camera frame ``tool_frame``: last DH frame <- view-point frame) predicted by
-    the plain model: the fit's covariance, its model error and the scale's ``|p| sigma`` (inf: unknown scale)."""
+def _workspace(ident: Identification, tool_frame: Array, scale: ScaleResult, limits: Array,
+               meas: Measurements) -> dict[str, Any]:
+    readings = random_poses(np.asarray(limits, dtype=float), WORKSPACE_POSES, np.random.default_rng(0))
+    q = readings if meas.coupling is None else readings @ meas.coupling.matrix.T + meas.coupling.offset
+    found = outside(ident.domain, q, meas.joint_types) if ident.domain is not None else None
+    section = {**flange_accuracy(ident, tool_frame, q, scale).as_dict(), "poses": WORKSPACE_POSES,
+               "poses_outside_domain": None if found is None else found.count}
+    section["note"] = ("random poses within the robot's joint limits (the margin 10 % of each range); outside the "
+                       "fitted joint ranges (domain) the figure is a lower bound: errors the model cannot hold are "
+                       "not known there")
+    return section
+
+
+def flange_accuracy(ident: Identification, tool_frame: Array, q: Array, scale: ScaleResult) -> FlangeAccuracy:
+    """The 3D standard uncertainty (m) of the flange's position (the last DH frame's origin, through the fitted
+    camera frame ``tool_frame``: last DH frame <- view-point frame) predicted by the plain model over DH joint values
+    ``q`` (m, n), with its likely range (:class:`FlangeAccuracy`)."""
     offset = np.linalg.inv(np.asarray(tool_frame, dtype=float))[:3, 3]  # the flange's origin in the view frame
-    cov = frame_point_covariances(ident.plain, q, offset)
+    jac = frame_point_jacobian(ident.plain, q, offset)
+    k = jac.shape[2]
+    cov = ident.plain.covariance[:k, :k]
+    values, vectors = np.linalg.eigh((cov + cov.T) / 2)
+    spread = jac.reshape(-1, k) @ (vectors * np.sqrt(np.clip(values, 0.0, None)))
+    weights = np.linalg.eigvalsh(spread.T @ spread / len(q))  # mean square per independent direction, m²
     flange = frames_from_joints(ident.model, np.atleast_2d(q))[:, -1, :3, 3]
-    fit = float(np.mean(np.trace(cov, axis1=1, axis2=2))) + 3 * ident.plain.adequacy.model_error**2
-    return float(np.sqrt(fit + effect_rms(flange, scale.sigma) ** 2))
+    shared = effect_rms(flange, scale.sigma)  # the scale: one more direction
+    if not np.isfinite(shared):
+        return FlangeAccuracy(math.inf, math.inf, math.inf)
+    weights = np.append(np.clip(weights, 0.0, None), shared**2)
+    fixed = 3 * ident.plain.adequacy.model_error**2  # per pose, independent: no scatter over many poses
+    mean, variance = float(weights.sum()), 2 * float(np.sum(weights**2))
+    if variance <= 0:
+        value = math.sqrt(mean + fixed)
+        return FlangeAccuracy(value, value, value)
+    low, high = gamma.ppf(LIKELY, mean**2 / variance, scale=variance / mean)
+    return FlangeAccuracy(math.sqrt(mean + fixed), math.sqrt(low + fixed), math.sqrt(high + fixed))
+
+
+def flange_text(doc: dict[str, Any]) -> list[str]:
+    """What a flange camera's result states about the flange, in lines for the operator (none for other devices)."""
+    section = doc.get("flange") or {}
+    lines = []
+    for key, where in (("fit_poses", "at the fit poses"), ("workspace", "over the workspace")):
+        part = section.get(key)
+        if not part:
+            continue
+        if part.get("accuracy_rms") is None:
+            lines.append(f"flange camera: the flange's position {where}: not stated (the board's scale is unknown)")
+            continue
+        low, high = (1e3 * v for v in part["likely_rms"])
+        text = (f"flange camera: the flange's position {where} stated to {part['accuracy_rms'] * 1e3:.3f} mm RMS "
+                f"(one calibration's: {low:.3f}-{high:.3f} mm, 90 %)")
+        if key == "workspace":
+            outside_count = part.get("poses_outside_domain")
+            text += (f", at {part['poses']} random poses within the joint limits"
+                     + ("" if not outside_count else
+                        f"; {outside_count} of them outside the fitted joint ranges, where it is a lower bound"))
+        lines.append(text)
+    return lines

@@ -84,12 +84,11 @@ def flange_document(doc: dict[str, Any], view_point: Array) -> dict[str, Any]:
     return out
 
 
-def frame_point_covariances(written: Any, q: Array, offset: Array, step: float = 1e-7) -> Array:
-    """Covariance (m, 3, 3), m², of the predicted position of the point ``offset`` (3,), m in the target frame (a
+def frame_point_jacobian(written: Any, q: Array, offset: Array, step: float = 1e-7) -> Array:
+    """(m, 3, k): the predicted position (m, board frame) of the point ``offset`` (3,), m in the target frame (a
     flange camera's view-point frame: the camera's axes at the view point; e.g. the flange or the camera's centre),
-    at DH joint values ``q`` (m, n), from the ``written`` model's (:class:`identify.results.written.WrittenModel`,
-    plain) covariance over its axis lines, tracked point and the target frame's turn. The Jacobian by central
-    differences of ``step`` in each parameter."""
+    at DH joint values ``q`` (m, n), by the ``written`` model's (:class:`identify.results.written.WrittenModel`,
+    plain) k axis-line parameters (its covariance's first k), by central differences of ``step``."""
     problem = written.problem
     k = problem.n_lines
     q = np.atleast_2d(np.asarray(q, dtype=float))
@@ -101,5 +100,12 @@ def frame_point_covariances(written: Any, q: Array, offset: Array, step: float =
         lines, _ = problem.lines(x)
         return points_from_lines(lines, q) + np.einsum("mij,j->mi", target_rotations(lines, q), offset)
 
-    jac = np.stack([(predict(e * step) - predict(-e * step)) / (2 * step) for e in np.eye(k)], axis=2)
+    return np.stack([(predict(e * step) - predict(-e * step)) / (2 * step) for e in np.eye(k)], axis=2)
+
+
+def frame_point_covariances(written: Any, q: Array, offset: Array) -> Array:
+    """Covariance (m, 3, 3), m², of the position :func:`frame_point_jacobian` predicts, from the ``written``
+    model's covariance over its axis lines, tracked point and the target frame's turn."""
+    jac = frame_point_jacobian(written, q, offset)
+    k = jac.shape[2]
     return jac @ written.covariance[:k, :k] @ np.swapaxes(jac, 1, 2)

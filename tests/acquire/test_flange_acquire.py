@@ -19,7 +19,7 @@ from acquire.commands.cli import main as acquire_main
 from acquire.planning.flange_locate import rough_mount
 from acquire.planning.flange_views import board_in_view
 from acquire.planning.plan import estimate_duration
-from acquire.planning.plan_flange import build_flange_plan, camera_site, flange_setup
+from acquire.planning.plan_flange import build_flange_plan, camera_site, flange_lines, flange_setup
 from acquire.running.session import Session
 from config.robots import load_robot
 from config.site import SiteConfig
@@ -77,6 +77,21 @@ def test_the_dry_run_plans_views_that_see_the_board(site_file, capsys: pytest.Ca
     assert doc["flange_camera"]["located"] is None
     minutes, seconds = re.search(r"estimated duration: 0:(\d\d):(\d\d)", out).groups()
     assert int(minutes) * 60 + int(seconds) == pytest.approx(estimate_duration(plan, robot, 2 / 30), abs=1)
+
+
+def test_the_duration_estimate_waits_out_the_cameras_latency() -> None:
+    """A stop-and-go reading skips the frames delivered within ``latency`` of its request: the dry run's time counts
+    that wait once per reading, and its table says so."""
+    robot, site = load_robot("ur5e"), SiteConfig().with_overrides(free_poses=FIT, check_poses=CHECK)
+    setups = [flange_setup(robot, TrackerSpec.parse(SPEC + extra), site, rough_mount(MOUNT, None))
+              for extra in ("", "&latency=0.4")]
+    assert setups[0].reading_seconds == pytest.approx(2 / 30)
+    assert setups[1].reading_seconds == pytest.approx(0.4 + 2 / 30)
+    plan = build_flange_plan(robot, camera_site(site, setups[0]), setups[0])
+    durations = [estimate_duration(plan, robot, setup.reading_seconds) for setup in setups]
+    readings = len(plan.steps) * plan.samples_per_step
+    assert durations[1] - durations[0] == pytest.approx(0.4 * readings, rel=1e-6)
+    assert any("each after a 0.4 s latency" in line for line in flange_lines(plan, setups[1]))
 
 
 def test_a_robot_fault_in_the_locate_phase_stops_it_and_creates_no_session(tmp_path, site_file, capsys) -> None:
