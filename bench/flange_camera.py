@@ -140,6 +140,7 @@ class Outcome:
     scale: str
     seconds: float
     estimate: str = ""  # the tracker's final estimate of the lens's parameters (drivers/camera/board_and_lens.py)
+    flagged: str = ""  # the verdict's checks that did not pass ("name: status")
 
 
 def _spec(case: Case) -> str:
@@ -227,7 +228,8 @@ def run_case(case: Case) -> Outcome:
     scale_check = next((c for c in doc["verdict"]["checks"] if c["name"] == "scale"), {"status": "-"})
     return Outcome(case.label, (m + 1) * FRAMES, robot_seconds, rms, stated, likely, hand_eye, validation,
                    ident.plain.adequacy.model_error, doc["verdict"]["status"], scale_check["status"],
-                   time.perf_counter() - start, _estimate(camera.shape))
+                   time.perf_counter() - start, _estimate(camera.shape),
+                   ", ".join(f"{c['name']}: {c['status']}" for c in doc["verdict"]["checks"] if c["status"] != "pass"))
 
 
 def _estimate(shape) -> str:
@@ -332,6 +334,8 @@ def main(argv: list[str] | None = None) -> int:
     for r in results:
         if r.estimate:
             print(f"{r.label}: the tracker's estimate {r.estimate}")
+        if r.flagged:
+            print(f"{r.label}: the verdict's checks not passed: {r.flagged}")
     good = [(r.rms, r.stated) for c, r in zip(cases, results, strict=True) if c.caliper]
     pooled = math.sqrt(np.mean([a**2 for a, _ in good]) / np.mean([b**2 for _, b in good]))
     print(f"pooled ratio sqrt(mean RMS^2 / mean stated^2) over the cases with the caliper's scale: {pooled:.2f} "
