@@ -15,8 +15,8 @@ residuals of the views' flat poses tell them:
   can take up is projected out: for a board facing the camera a focal error is a change of its distance (the
   residuals see it in tilted views, whose near and far corners it scales differently), and most of a principal
   point's shift is a turn of the camera (the residuals see what is left of it, the perspective's change across
-  the image; the turn is the same in every view, so a camera's mount fitted with the arm takes up what the
-  estimate misses).
+  the image; the turn is the same in every view, and a camera mount fitted with the arm takes up most of what the
+  estimate misses, not all: docs/benchmarks.md section 24a).
 
 Each frame's flat pose leaves the reprojection residuals ``r`` (2N px) that the parameters θ explain as ``G θ`` (``G``:
 their image moves with the pose's span projected out). :class:`BoardAndLens` keeps the least-squares θ over every
