@@ -59,15 +59,22 @@ def board_in_view(model: DHModel, q: Array, mount: Array, board: Array, camera: 
     where it does not ("" where it does). ``model``'s base is the robot's base frame (its tool is not used)."""
     q = np.atleast_2d(np.asarray(q, dtype=float))
     flange = frames_from_joints(model, q)[:, -1]  # base <- flange
-    to_camera = np.linalg.inv(flange @ np.asarray(mount, dtype=float)) @ np.asarray(board, dtype=float)  # cam <- board
+    return board_seen(np.linalg.inv(flange @ np.asarray(mount, dtype=float)) @ np.asarray(board, dtype=float), camera)
+
+
+def board_seen(to_camera: Array, camera: FlangeCamera) -> tuple[NDArray[np.bool_], list[str]]:
+    """(m,) whether a camera sees the whole board at each of the poses ``to_camera`` (m, 4, 4, camera <- board) by the
+    rules of the module docstring, and the reason where it does not ("" where it does). Either may be the one that
+    moves: a camera on the flange (:func:`board_in_view`) or a board on the flange seen by a camera in the cell."""
+    to_camera = np.asarray(to_camera, dtype=float).reshape(-1, 4, 4)
     w, h = camera.extent
     corners = np.array([[-w / 2, -h / 2, 0, 1], [w / 2, -h / 2, 0, 1], [w / 2, h / 2, 0, 1], [-w / 2, h / 2, 0, 1]])
     seen = np.einsum("mij,kj->mki", to_camera, corners)[..., :3]  # (m, 4, 3) camera frame
     centre = to_camera[:, :3, 3]
-    ok, reasons = np.ones(len(q), dtype=bool), [""] * len(q)
+    ok, reasons = np.ones(len(to_camera), dtype=bool), [""] * len(to_camera)
     width, height = camera.size
     pad = camera.margin * width
-    for k in range(len(q)):
+    for k in range(len(to_camera)):
         depth = seen[k, :, 2]
         if np.any(depth <= 1e-6):
             ok[k], reasons[k] = False, BEHIND

@@ -32,6 +32,9 @@ from kinematics.dh import frames_from_joints
 # the README's spelling, an A4-size ChArUco board measured with a caliper, few views and frames to stay quick
 SPEC = ("aruco:sim?mount=flange&board=charuco&cols=11&rows=8&square=0.025&size=0.018&square_sigma=0.000002"
         "&width=1280&height=720&distance=0.45&tilt=8&roll=5&frames=2")
+# the runs read one frame per view (the dry run keeps the README's two): half the rendering, the flange still
+# well inside its target (seed 3: stated 72 um with one frame, 65 um with two; the target 300 um)
+RUN_SPEC = SPEC.replace("&frames=2", "&frames=1")
 ROBOT = "mock:ur5e?seed=3"
 FIT, CHECK = 10, 3
 # the bracket's drawing: 12 mm and 5° off the simulation's true mount (drivers/camera/flange_camera.py CAMERA_MOUNT)
@@ -96,8 +99,8 @@ def test_the_duration_estimate_waits_out_the_cameras_latency() -> None:
 
 def test_a_robot_fault_in_the_locate_phase_stops_it_and_creates_no_session(tmp_path, site_file, capsys) -> None:
     session = tmp_path / "flange.session"
-    assert acquire_main(["--robot", ROBOT + "&fault=protective_stop@3", "--tracker", SPEC, "--config", str(site_file),
-                         "--free-poses", str(FIT), "--session", str(session), "--yes", "--quiet",
+    assert acquire_main(["--robot", ROBOT + "&fault=protective_stop@3", "--tracker", RUN_SPEC, "--config",
+                         str(site_file), "--free-poses", str(FIT), "--session", str(session), "--yes", "--quiet",
                          "--camera-mount", MOUNT]) == 1
     captured = capsys.readouterr()
     assert "locate phase: 9 readings of the board about the start pose" in captured.out
@@ -109,7 +112,7 @@ def test_a_robot_fault_in_the_locate_phase_stops_it_and_creates_no_session(tmp_p
 
 def test_a_locate_far_from_the_given_mount_is_refused_in_one_line(tmp_path, site_file, capsys) -> None:
     session = tmp_path / "flange.session"
-    assert acquire_main(["--robot", ROBOT, "--tracker", SPEC, "--config", str(site_file), "--free-poses", str(FIT),
+    assert acquire_main(["--robot", ROBOT, "--tracker", RUN_SPEC, "--config", str(site_file), "--free-poses", str(FIT),
                          "--session", str(session), "--yes", "--quiet", "--camera-mount", "0.005,-0.05,0.045,0,0,60",
                          "--camera-mount-tolerance", "20,10"]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
@@ -133,7 +136,7 @@ def test_a_located_flange_session_stopped_mid_way_resumes_and_identifies_the_fla
     protective stop (the locate's 10 moves, then the 12th of the views) and resumes; the flange within the stated
     accuracy, which the dry run's bound predicted within a factor 3."""
     session = tmp_path / "flange.session"
-    assert acquire_main(["--robot", ROBOT + "&fault=protective_stop@12", "--tracker", SPEC, "--config",
+    assert acquire_main(["--robot", ROBOT + "&fault=protective_stop@12", "--tracker", RUN_SPEC, "--config",
                          str(site_file), "--free-poses", str(FIT), "--session", str(session), "--yes", "--quiet",
                          "--camera-mount", MOUNT]) == 1
     out = capsys.readouterr().out
@@ -160,7 +163,7 @@ def test_a_located_flange_session_stopped_mid_way_resumes_and_identifies_the_fla
         assert [r.outcome for r in s.runs()] == ["failed", "complete"]
         q = np.array([step.q for step in s.plan.steps if step.role == "fit"])
     # the physical flange origin in the board frame: through the identified arm and camera mount, and the truth
-    truth_rig = SimulatedRig.from_spec(ROBOT, SPEC)
+    truth_rig = SimulatedRig.from_spec(ROBOT, RUN_SPEC)
     truth = frames_from_joints(truth_rig.truth, q)[:, -1, :3, 3]
     model = CalibratedModel.from_document(doc).model
     camera = frames_from_joints(model, q)[:, -1] @ np.array(doc["sensor_frame"])  # board <- camera

@@ -20,6 +20,17 @@ pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alon
 ROBOT = "mock:ur5e?seed=3"
 SMALL = ["--steps", "12", "--samples", "3", "--free-poses", "6", "--quiet"]
 COMMAND = [str(Path(sys.executable).with_name("acquire"))]
+# real-time steps of a fraction of a second (full-speed moves, no settling): the stop lands mid-plan within a second
+# or two of the command's start-up instead of after the default moves' and settling's seconds
+FAST_SITE = """schema: 1
+robot:
+  speed: [3.1, 3.1, 3.1, 3.1, 3.1, 3.1]
+  acceleration: [40, 40, 40, 40, 40, 40]
+tracker:
+  measure_time: 0.001
+plan:
+  settle_time: 0.0
+"""
 
 
 def _handler_installed(pid: int, signum: int, timeout: float = 20.0) -> None:
@@ -40,9 +51,11 @@ def _handler_installed(pid: int, signum: int, timeout: float = 20.0) -> None:
 def test_sigterm_and_sighup_stop_the_run_like_ctrl_c(tmp_path, capsys, signum, said):
     """Mid-plan (a real-time mock run): exit 130, one line naming the signal and the resume command, the run
     recorded aborted with the signal as its reason; the resume records the remaining steps, each once."""
-    path = tmp_path / "s.session"
-    proc = subprocess.Popen([*COMMAND, "--robot", ROBOT, "--tracker", "mock", *SMALL, "--realtime",
-                             "--session", str(path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    path, site = tmp_path / "s.session", tmp_path / "fast.yaml"
+    site.write_text(FAST_SITE)
+    proc = subprocess.Popen([*COMMAND, "--robot", ROBOT, "--tracker", "mock", *SMALL, "--realtime", "--config",
+                             str(site), "--session", str(path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
     deadline = time.monotonic() + 60
     while recorded_steps(path) < 2 and time.monotonic() < deadline and proc.poll() is None:
         time.sleep(0.01)

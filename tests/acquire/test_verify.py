@@ -265,9 +265,7 @@ def coupled_run(folder: str) -> tuple[int, int, str]:
 def test_verification_of_a_coupled_robot_commands_its_readings(tmp_path) -> None:
     """The plan holds DH values; the coupled controller is commanded their readings (the session's coupling); the
     identified model, which takes readings, is solved and converted: AP agrees with the simulated truth."""
-    from tests._single_thread import run_single_threaded
-
-    code_a, code_v, path = run_single_threaded(coupled_run, str(tmp_path))
+    code_a, code_v, path = coupled_run(str(tmp_path))
     assert (code_a, code_v) == (0, 0)
     with Session.open(path) as s:
         assert s.coupling is not None and not s.coupling.is_identity

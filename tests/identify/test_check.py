@@ -264,9 +264,7 @@ def _session_then_check(folder: str) -> tuple[int, int, str]:
 
 @pytest.mark.slow
 def test_check_reads_a_session_file(tmp_path):
-    from tests._single_thread import run_single_threaded
-
-    acquired, code, out = run_single_threaded(_session_then_check, str(tmp_path))
+    acquired, code, out = _session_then_check(str(tmp_path))
     assert acquired == 0 and code == 0, out
     assert out.startswith("PASS") and "moved 0.0 mm" in out  # the mock tracker stayed where it was
 

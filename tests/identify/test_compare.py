@@ -20,7 +20,6 @@ from identify.io.result_io import result_to_dict
 from identify.results.pipeline import identify
 from identify.simulators.simulate import simulate
 from kinematics.truth import random_truth
-from tests._single_thread import run_single_threaded
 
 NOISE = 2e-5
 DRAWS = 20
@@ -55,7 +54,7 @@ def draws(count: int) -> list[tuple[bool, list[str], float, float, float]]:
 def test_no_change_is_not_called_a_change_and_a_005_degree_offset_change_is_found() -> None:
     """A -> B: no significant change in >= 95 % of the draws (the test's false-alarm rate is 1 %); A -> C: a
     significant change naming theta3 (and nothing else) in >= 95 %, of the size simulated within its uncertainty."""
-    results = run_single_threaded(draws, DRAWS)
+    results = draws(DRAWS)
     quiet = sum(not r[0] for r in results)
     found = [r for r in results if r[1] == ["theta3"]]
     assert quiet >= 0.95 * DRAWS and len(found) >= 0.95 * DRAWS
@@ -136,6 +135,6 @@ def two_sessions(folder: str) -> tuple[list[int], int, str]:
 
 @pytest.mark.slow
 def test_compare_sessions_of_the_mock_rig(tmp_path) -> None:
-    codes, code, out = run_single_threaded(two_sessions, str(tmp_path))
+    codes, code, out = two_sessions(str(tmp_path))
     assert codes == [0, 0] and code == 0, out
     assert out.startswith("verdict: no significant change over 2 calibrations")

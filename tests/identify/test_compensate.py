@@ -21,7 +21,6 @@ from identify.results.pipeline import identify
 from identify.simulators.simulate import random_poses, simulate
 from kinematics.dh import points_from_joints
 from kinematics.truth import random_truth
-from tests._single_thread import run_single_threaded
 
 NOISE = 5e-5
 ROBOT = load_robot("ur5e")
@@ -162,7 +161,7 @@ def test_compensated_targets_are_reached_at_the_predicted_accuracy_and_nominal_m
     """With the identified model the real TP lands within 1.2x the RMS the covariance predicts (pooled over 3
     draws of 200 targets; no single draw beyond 1.5x); with the nominal model it misses by the truth's deviation
     from it, millimetres."""
-    draws = run_single_threaded(compensation_draws, [21, 22, 23])
+    draws = compensation_draws([21, 22, 23])
     ratios = np.array([d[0] for d in draws])
     for ratio, predicted, nominal_rms, reached in draws:
         assert reached >= 195  # a few random poses sit at a singularity

@@ -169,7 +169,9 @@ def test_two_writers_started_together_one_runs_the_other_exits_2_at_once(tmp_pat
     codes = [proc.returncode for proc in procs]
     assert sorted(codes) == [0, 2], (codes, outputs)
     loser, winner = (0, 1) if codes[0] == 2 else (1, 0)
-    assert ended[loser] < 1.0, ended  # from the start of both processes, interpreter start-up included
+    # refused at once, not after waiting on the winner's lock: well before the winner's resumed run ends (both
+    # from the start of both processes, interpreter start-up included; relative, so a loaded host cannot fail it)
+    assert ended[loser] < min(5.0, 0.5 * ended[winner]), ended
     out, err = outputs[loser]
     assert out == ""  # refused before the plan was even shown: no device was opened, nothing moved
     line = _one_line_of(err)

@@ -180,6 +180,7 @@ def test_each_failure_to_connect_is_one_line(tmp_path, serve, path, error, words
     assert time.monotonic() - started < 1.5
 
 
+@pytest.mark.realtime  # 0.2-0.5 s timeouts on the host's clock: run alone
 def test_a_stalled_stream_times_out_in_one_line_and_the_run_can_resume(tmp_path, serve):
     server = serve(fps=30, stall_after=11)  # 8 frames prove the stream at connect, 3 make the first reading
     tracker = _tracker(tmp_path, server.url("/stall"))
@@ -196,6 +197,7 @@ def test_a_stalled_stream_times_out_in_one_line_and_the_run_can_resume(tmp_path,
         tracker.close()
 
 
+@pytest.mark.realtime  # 0.2-0.5 s timeouts on the host's clock: run alone
 def test_a_broken_stream_reconnects_by_itself(serve):
     server = serve(fps=30, stall_after=10)
     camera = NetworkCamera(server.url("/stall"))

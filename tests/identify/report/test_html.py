@@ -75,6 +75,14 @@ def session_path(tmp_path_factory):
     return path
 
 
+@pytest.fixture(scope="module")
+def recorded_report(session_path) -> tuple[int, str]:
+    """The ur5e report with the acquisition record of ``session_path`` (read by two tests): joints, HTML."""
+    robot, meas, ident = _identified("ur5e")
+    with Session.open(session_path) as session:
+        return robot.n_joints, report_html(ident, meas, robot.nominal, robot.name, session=session, title="cell <7>")
+
+
 def _parse(text: str) -> _Collector:
     collector = _Collector()
     collector.feed(text)
@@ -126,13 +134,11 @@ def test_report_rejects_measurements_it_was_not_made_from():
 
 
 @pytest.mark.slow
-def test_report_with_acquisition_record(session_path, tmp_path):
-    robot, meas, ident = _identified("ur5e")
-    with Session.open(session_path) as session:
-        text = report_html(ident, meas, robot.nominal, robot.name, session=session, title="cell <7>")
+def test_report_with_acquisition_record(recorded_report, tmp_path):
+    joints, text = recorded_report
     parsed = _parse(text)
     assert "acquisition" in parsed.ids
-    assert parsed.figures == robot.n_joints + 4 == len(parsed.images)  # + drift over time
+    assert parsed.figures == joints + 4 == len(parsed.images)  # + drift over time
     for expected in ("test-tracker", "T-9", "rate: 100 Hz", "aborted", "stopped by the operator", "complete",
                      "no valid reading", "operator paused &lt;to check the target&gt;", "cell &lt;7&gt;"):
         assert expected in text
@@ -157,10 +163,8 @@ window.addEventListener('load', function () {
 
 @pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed")
-def test_report_loads_in_headless_chromium(session_path, tmp_path):
-    robot, meas, ident = _identified("ur5e")
-    with Session.open(session_path) as session:
-        text = report_html(ident, meas, robot.nominal, robot.name, session=session)
+def test_report_loads_in_headless_chromium(recorded_report, tmp_path):
+    _, text = recorded_report
     figures = _parse(text).figures
     path = tmp_path / "probe.html"
     path.write_text(text.replace("<body>", "<body>" + _PROBE, 1), encoding="utf-8")
