@@ -12,9 +12,10 @@ coordinate: the detection's error at that angle and scale) and each frame's by n
 first view near the board's normal at 0.45 m (the home reading), then ``--views`` views 0.3-0.75 m away within 40°
 of the board's normal, rolled ±90° (as the flange plan draws them); the pose by ``cv2.solvePnP`` with the
 calibrated camera. Reported per case, over the seeds: the flat poses' error (the board's centre, mm RMS over the
-frames), the tracker's corrected poses' error and the ``shared`` error it states (RMS of ``sqrt(3)`` x the per-axis
-value), the error with every frame corrected by the final estimate instead, and the final estimate against the truth
-in its own standard deviations (the largest over the parameters and seeds).
+frames), the tracker's corrected poses' error and the lens estimate's share of the ``shared`` error it states (RMS
+of ``sqrt(3)`` x the per-axis value; the detection's own noise and bias are not in it), the error with every frame
+corrected by the final estimate instead, and the final estimate against the truth in its own standard deviations
+(the largest over the parameters and seeds).
 
 First, per lens parameter of a typical calibration's error (:data:`TYPICAL`), over the views of the first seed: how
 far it moves each view's least-squares pose (``pose_shifts``: the board centre, mm RMS, and its turn, mrad RMS), and
