@@ -33,8 +33,13 @@ squares of 25 mm, ArUco 4X4_50) or A3 (15x11 of 26 mm, 4X4_100). Real OpenCV det
    section 24a): residual distortion, rolling shutter, exposure blur, lighting, a board bowed 0.5 mm, latency, each
    alone or ``all`` together (with ``flatness=`` and ``lens_sigma=`` declared: the tracker estimates the board's
    shape and the lens's error), or ``undeclared`` (all, neither declared), or ``declared`` (none, both declared); the
-   truth's board frame is the bowed print's mean plane. ``z pos``, ``z rot`` (every case): the plan readings' error
-   against the board's true pose in the camera frame over their ``sigma``, ``sigma_r`` (RMS per axis; 1: honest).
+   truth's board frame is the bowed print's mean plane. The calibration's focal length 0.2 % and principal point
+   (3, -2) px off: ``intrinsics`` (``focal_sigma=`` and ``centre_sigma=`` declared: the tracker estimates them),
+   ``intrinsics-undeclared``, ``focal-undeclared`` and ``centre-undeclared`` (each part alone), ``intrinsics-right``
+   (declared, the calibration right: their cost), ``all-intrinsics`` (``all`` with them). The tracker's final
+   estimate of the lens's parameters is printed below the table. ``z pos``, ``z rot`` (every case): the plan
+   readings' error against the board's true pose in the camera frame over their ``sigma``, ``sigma_r`` (RMS per
+   axis; 1: honest).
 
 Robot time (virtual clock of the rig: moves, settling, frames) and the number of images are reported per case.
 Exit status 1 when a case misses a target.
@@ -52,13 +57,14 @@ import math
 import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from acquire.planning.flange_views import FlangeCamera, flange_view_poses
 from config.robots import load_robot
+from drivers.camera.board_and_lens import pose_shifts
 from drivers.camera.flange_camera import CAMERA_MOUNT
 from drivers.camera.tracker import parse_settings
 from drivers.registry import open_robot, open_tracker
@@ -96,6 +102,14 @@ REAL_ERRORS["declared"] = "flatness=0.0005&lens_sigma=0.005"
 #: the same errors with the user declaring neither the board's flatness nor the lens's uncertainty (nothing estimated)
 REAL_ERRORS["undeclared"] = "&".join(o for o in REAL_ERRORS["all"].split("&") if o.split("=")[0] not in
                                      ("flatness", "lens_sigma"))
+#: the focal length 0.2 % and the principal point (3, -2) px off the calibration: undeclared, declared (the tracker
+#: estimates them: focal_sigma= relative, centre_sigma= px), and those options declared for a calibration that is right
+REAL_ERRORS["intrinsics-undeclared"] = "dfocal=0.002&dcx=3&dcy=-2"
+REAL_ERRORS["intrinsics"] = REAL_ERRORS["intrinsics-undeclared"] + "&focal_sigma=0.005&centre_sigma=5"
+REAL_ERRORS["intrinsics-right"] = "focal_sigma=0.005&centre_sigma=5"
+REAL_ERRORS["focal-undeclared"] = "dfocal=0.002"  # each part alone, undeclared: what the fit takes up of it
+REAL_ERRORS["centre-undeclared"] = "dcx=3&dcy=-2"
+REAL_ERRORS["all-intrinsics"] = REAL_ERRORS["all"] + "&" + REAL_ERRORS["intrinsics"]  # every error, every one declared
 SPEED, ACCELERATION = 1.0, 2.0  # rad/s, rad/s² of the calibration moves
 
 
@@ -107,13 +121,14 @@ class Case:
     printed: float = 1.0
     caliper: bool = True
     errors: str = ""  # a key of REAL_ERRORS, or "": a perfect camera
+    recorrect: bool = False  # every reading re-corrected by the tracker's final lens estimate (:func:`_recorrected`)
 
     @property
     def label(self) -> str:
         source = "caliper" if self.caliper else "nominal"
         scale = "" if self.printed == 1.0 else f", printed {self.printed:g}x, {source}"
         errors = f", {self.errors}" if self.errors else ""
-        return f"{self.board}, seed {self.seed}{scale}{errors}"
+        return f"{self.board}, seed {self.seed}{scale}{errors}" + (", re-corrected" if self.recorrect else "")
 
 
 @dataclass(frozen=True)
@@ -131,6 +146,8 @@ class Outcome:
     status: str
     scale: str
     seconds: float
+    estimate: str = ""  # the tracker's final estimate of the lens's parameters (drivers/camera/board_and_lens.py)
+    flagged: str = ""  # the verdict's checks that did not pass ("name: status")
 
 
 def _spec(case: Case) -> str:
@@ -169,10 +186,15 @@ def run_case(case: Case) -> Outcome:
     mean_plane[2, 3] = 2.0 / 3.0 * parse_settings(TrackerSpec.parse(spec)).sim["imperfections"].bow
     seen = []  # camera <- board (its mean plane) at each reading, the truth
 
+    recorrect = case.recorrect and camera.shape is not None
+    frames, spans = _frame_log(camera.shape) if recorrect else [], []  # each reading's frames in the log
+
     def visit(q: np.ndarray):
         arm.move_joints(q, speed, accel, 60.0)
         arm.wait_until_still(0.2, 10.0)
+        first = len(frames)
         reading = camera.measure(1, 10.0)[0]
+        spans.append((first, len(frames)))
         seen.append(camera.source.target_pose(rig.clock.now()) @ mean_plane)
         return arm.read_joints(), reading
 
@@ -196,6 +218,8 @@ def run_case(case: Case) -> Outcome:
         readings.append(reading)
         truths.append(seen[-1])
     robot_seconds = rig.clock.now() - t0
+    if recorrect:
+        readings = _recorrected(readings, [frames[a:b] for a, b in spans[1:]], camera.shape)
     m = len(readings)
     q_read = np.array(q_read)
     check = np.zeros(m, dtype=bool)
@@ -225,7 +249,8 @@ def run_case(case: Case) -> Outcome:
     scale_check = next((c for c in doc["verdict"]["checks"] if c["name"] == "scale"), {"status": "-"})
     return Outcome(case.label, (m + 1) * FRAMES, robot_seconds, rms, stated, likely, hand_eye, validation,
                    _reading_z(readings, truths), ident.plain.adequacy.model_error, doc["verdict"]["status"],
-                   scale_check["status"], time.perf_counter() - start)
+                   scale_check["status"], time.perf_counter() - start, _estimate(camera.shape),
+                   ", ".join(f"{c['name']}: {c['status']}" for c in doc["verdict"]["checks"] if c["status"] != "pass"))
 
 
 def _reading_z(readings: list, truths: list) -> tuple[float, float]:
@@ -237,6 +262,45 @@ def _reading_z(readings: list, truths: list) -> tuple[float, float]:
              zip(readings, truths, strict=True)]
     orientation = [turn.magnitude() ** 2 / (3 * r.sigma_r**2) for r, turn in zip(readings, turns, strict=True)]
     return math.sqrt(float(np.mean(position))), math.sqrt(float(np.mean(orientation)))
+
+
+def _frame_log(shape) -> list:
+    """Keep, for every frame the tracker corrects, the lens estimate it used and the pose's response to the
+    parameters (bench only: the tracker's ``shape.take`` wrapped)."""
+    log: list = []
+    take = shape.take
+
+    def logged(pose, observation, camera, tp):
+        out = take(pose, observation, camera, tp)
+        shifts = pose_shifts(pose.rotation, pose.translation, observation.object_points, shape.half, camera,
+                             shape.lens).T
+        log.append((shape.estimate()[0], shifts))
+        return out
+
+    shape.take = logged
+    return log
+
+
+def _recorrected(readings: list, frames: list[list], shape) -> list:
+    """A what-if, not the product: every reading (its TP the board's centre) moved by its ``frames``' mean response
+    to the difference between the tracker's final estimate and the ones they were corrected with (frames rejected
+    as outliers are not known here: all count); the sigmas as they were."""
+    final = shape.estimate()[0]
+    out = []
+    for reading, logged in zip(readings, frames, strict=True):
+        move = np.mean([shifts @ (final - used) for used, shifts in logged], axis=0)
+        rotvec = (Rotation.from_rotvec(-move[:3]) * Rotation.from_rotvec(reading.rotvec)).as_rotvec()
+        out.append(replace(reading, position=reading.position - move[3:], rotvec=rotvec))
+    return out
+
+
+def _estimate(shape) -> str:
+    """The tracker's final estimate of the lens's parameters with their standard deviations ("" without one)."""
+    if shape is None or not shape.lens:
+        return ""
+    value, covariance = shape.estimate()
+    sd = np.sqrt(np.diag(covariance))
+    return ", ".join(f"{name} {value[3 + k]:.5g} ± {sd[3 + k]:.2g}" for k, name in enumerate(shape.lens))
 
 
 def hand_eye_park(flanges: np.ndarray, boards: np.ndarray) -> np.ndarray:
@@ -288,6 +352,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--realistic", default="", metavar="ERRORS",
                         help=f"only sessions with a real camera's errors, of {', '.join(REAL_ERRORS)} (comma-separated;"
                              " each on every seed and board), instead of the perfect camera's and the scale cases")
+    parser.add_argument("--recorrect", action="store_true",
+                        help="a what-if, not the product: every reading re-corrected by the tracker's final lens "
+                             "estimate before the fit (with --realistic cases that declare a lens's uncertainty)")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     views = 30 if args.quick else args.views
@@ -299,6 +366,8 @@ def main(argv: list[str] | None = None) -> int:
     if not set(errors) <= set(REAL_ERRORS):
         parser.error(f"--realistic: of {', '.join(REAL_ERRORS)}")
     cases = [Case(board, seed, views, errors=e) for board in boards for seed in seeds for e in (errors or [""])]
+    if args.recorrect:
+        cases = [replace(case, recorrect=True) for case in cases]
     if not args.skip_scale and not errors:
         cases += [Case("A4", 1, views, MISPRINTS[-1], True)] + [Case("A4", 1, views, p, False) for p in MISPRINTS]
     for case in cases:  # every spec is valid before hours of rendering start
@@ -330,6 +399,11 @@ def main(argv: list[str] | None = None) -> int:
             missed.append(r.label)
         if not case.caliper and (r.scale == "pass" or (r.scale == "warn" and r.rms > 1.3 * r.stated)):
             missed.append(r.label + " (a wrong scale passed, or was stated too small)")
+    for r in results:
+        if r.estimate:
+            print(f"{r.label}: the tracker's estimate {r.estimate}")
+        if r.flagged:
+            print(f"{r.label}: the verdict's checks not passed: {r.flagged}")
     good = [(r.rms, r.stated) for c, r in zip(cases, results, strict=True) if c.caliper]
     pooled = math.sqrt(np.mean([a**2 for a, _ in good]) / np.mean([b**2 for _, b in good]))
     print(f"pooled ratio sqrt(mean RMS^2 / mean stated^2) over the cases with the caliper's scale: {pooled:.2f} "

@@ -1,7 +1,8 @@
 """What a board not quite flat and a lens not quite calibrated do to every view, estimated from all the frames.
 
-``aruco:...&flatness=M`` and ``&lens_sigma=K`` (drivers/camera/tracker.py). Both errors are the same in every view
-and move its corners in a pattern no pose can take up, so the residuals of the views' flat poses tell them:
+``aruco:...&flatness=M``, ``&lens_sigma=K``, ``&focal_sigma=F`` and ``&centre_sigma=C`` (drivers/camera/tracker.py).
+These errors are the same in every view and move its corners in a pattern no pose can take up entirely, so the
+residuals of the views' flat poses tell them:
 
 - **the board's shape**: a sheet on a table curls and warps by tenths of a millimetre, out of its plane, in three
   quadratic modes over the board (x, y its centre-to-edge half extents scaled to ±1): ``1/3 - x²`` (curled about
@@ -9,7 +10,13 @@ and move its corners in a pattern no pose can take up, so the residuals of the v
   m (``1/3 - x²`` spans it from the centre to the edges). The modes have no mean over the board: a shape's mean
   height moves the board along its normal, and the board's frame is its mean plane;
 - **the lens**: the radial distortion left after calibration, k1 and k2 off by ``dk1``, ``dk2`` (prior standard
-  uncertainty ``lens_sigma`` each).
+  uncertainty ``lens_sigma`` each); the focal lengths fx, fy off by the factor 1 + ``dfocal`` (relative, prior
+  ``focal_sigma``) and the principal point by ``dcx``, ``dcy`` px (prior ``centre_sigma`` each). What a view's pose
+  can take up is projected out: for a board facing the camera a focal error is a change of its distance (the
+  residuals see it in tilted views, whose near and far corners it scales differently), and most of a principal
+  point's shift is a turn of the camera (the residuals see what is left of it, the perspective's change across
+  the image; the turn is the same in every view, and a camera mount fitted with the arm takes up most of what the
+  estimate misses, not all: docs/benchmarks.md section 24a).
 
 Each frame's flat pose leaves the reprojection residuals ``r`` (2N px) that the parameters θ explain as ``G θ`` (``G``:
 their image moves with the pose's span projected out). :class:`BoardAndLens` keeps the least-squares θ over every
@@ -34,6 +41,9 @@ from numpy.typing import NDArray
 
 Array = NDArray[np.float64]
 _STEP = 1e-6  # finite differences: m of a mode's height, rad of a turn, m of a translation, of a lens coefficient
+#: the lens's parameters in their order (module docstring): dk1, dk2 (``lens_sigma``), dfocal (``focal_sigma``),
+#: dcx, dcy (``centre_sigma``)
+LENS = ("dk1", "dk2", "dfocal", "dcx", "dcy")
 
 
 def modes(points: Array, half: tuple[float, float]) -> Array:
@@ -64,40 +74,51 @@ def pose_jacobian(points: Array, rotation: Array, translation: Array, camera: An
 
 
 def effects(points: Array, rotation: Array, translation: Array, camera: Any, half: tuple[float, float],
-            lens: bool) -> Array:
-    """(2N, 3 or 5): the projections' moves per metre of each shape mode and, with ``lens``, per unit of dk1, dk2."""
+            lens: tuple[str, ...] = ()) -> Array:
+    """(2N, 3 + len(lens)): the projections' moves per metre of each shape mode, then per unit of each of the lens's
+    parameters named in ``lens`` (of :data:`LENS`: dk1, dk2 by finite differences; dfocal, the pixel's offset from
+    the principal point; dcx, dcy, one pixel along u or v)."""
     base = _project(points, rotation, translation, camera)
     out = []
     for heights in modes(points, half):
         lifted = points.copy()
         lifted[:, 2] += _STEP * heights
         out.append((_project(lifted, rotation, translation, camera) - base) / _STEP)
-    if lens:
-        for k in range(2):
+    for name in lens:
+        if name in ("dk1", "dk2"):
             distortion = np.array(camera.distortion, dtype=float)
-            distortion[k] += _STEP
+            distortion[LENS.index(name)] += _STEP
             out.append((_project(points, rotation, translation, camera, distortion) - base) / _STEP)
+        elif name == "dfocal":  # u = fx (1 + dfocal) x_distorted + cx
+            out.append((base.reshape(-1, 2) - camera.matrix[:2, 2]).reshape(-1))
+        else:
+            out.append(np.tile([1.0, 0.0] if name == "dcx" else [0.0, 1.0], len(points)))
     return np.array(out).T
 
 
 def pose_shifts(rotation: Array, translation: Array, object_points: Array, half: tuple[float, float], camera: Any,
-                lens: bool = False) -> Array:
-    """(3 or 5, 6): how the least-squares pose of a flat board seen through the calibrated lens (camera <- board
+                lens: tuple[str, ...] = ()) -> Array:
+    """(3 + len(lens), 6): how the least-squares pose of a flat board seen through the calibrated lens (camera <- board
     ``rotation``, ``translation``) moves, as a turn ω (rad, camera frame) and a translation (m), per unit of each
-    parameter (rows: the shape modes, m, then dk1, dk2 with ``lens``) at the corners ``object_points`` (N, 3)."""
+    parameter (rows: the shape modes, m, then the lens's parameters named in ``lens``, :func:`effects`) at the
+    corners ``object_points`` (N, 3)."""
     points = np.asarray(object_points, dtype=float).reshape(-1, 3)
     solve = np.linalg.pinv(pose_jacobian(points, rotation, translation, camera))
     return (solve @ effects(points, rotation, translation, camera, half, lens)).T
 
 
 class BoardAndLens:
-    """The board's shape modes (m) and, when ``lens_sigma`` > 0, the lens's dk1, dk2, estimated from every frame so
-    far (module docstring); ``flatness`` m the modes' prior (0: the board is flat, only the lens), ``extent`` the
-    board's width and height, m."""
+    """The board's shape modes (m) and the lens's parameters whose prior is above 0 (``lens_sigma``: dk1, dk2;
+    ``focal_sigma``: dfocal, relative; ``centre_sigma``: dcx, dcy, px), estimated from every frame so far (module
+    docstring); ``flatness`` m the modes' prior (0: the board is flat, only the lens), ``extent`` the board's width
+    and height, m. ``lens``: the names of the lens's parameters estimated (of :data:`LENS`), in order."""
 
-    def __init__(self, flatness: float, lens_sigma: float, extent: tuple[float, float]) -> None:
-        self.half, self.lens = (extent[0] / 2, extent[1] / 2), lens_sigma > 0
-        prior = [flatness] * 3 + ([lens_sigma] * 2 if self.lens else [])
+    def __init__(self, flatness: float, lens_sigma: float, extent: tuple[float, float], focal_sigma: float = 0.0,
+                 centre_sigma: float = 0.0) -> None:
+        sigmas = dict(zip(LENS, (lens_sigma, lens_sigma, focal_sigma, centre_sigma, centre_sigma), strict=True))
+        self.half = (extent[0] / 2, extent[1] / 2)
+        self.lens = tuple(name for name in LENS if sigmas[name] > 0)
+        prior = [flatness] * 3 + [sigmas[name] for name in self.lens]
         self.prior = np.array(prior, dtype=float)
         self.used = self.prior > 0  # a zero prior: that parameter is known (0)
         size = len(prior)
@@ -105,9 +126,12 @@ class BoardAndLens:
         self._square_sum, self._dof = 0.0, 0
 
     @classmethod
-    def of(cls, flatness: float, lens_sigma: float, extent: tuple[float, float]) -> BoardAndLens | None:
-        """The estimator for a tracker's options, None when both are 0 (a flat board, a calibrated lens)."""
-        return cls(flatness, lens_sigma, extent) if flatness > 0 or lens_sigma > 0 else None
+    def of(cls, flatness: float, lens_sigma: float, extent: tuple[float, float], focal_sigma: float = 0.0,
+           centre_sigma: float = 0.0) -> BoardAndLens | None:
+        """The estimator for a tracker's options, None when all are 0 (a flat board, a calibrated lens)."""
+        if max(flatness, lens_sigma, focal_sigma, centre_sigma) <= 0:
+            return None
+        return cls(flatness, lens_sigma, extent, focal_sigma, centre_sigma)
 
     def add(self, pose: Any, observation: Any, camera: Any) -> tuple[Array, Array]:
         """Take one frame's flat ``pose`` (drivers/camera/pose.py ``Pose``) of the detected ``observation``; return

@@ -6,6 +6,10 @@ Options (units: metres, seconds, pixels, grey levels of 255):
 - ``dk1``, ``dk2``: **distortion left after calibration**: the lens renders with radial coefficients k1 + dk1 and
   k2 + dk2 while the detection uses the calibrated k1, k2 (``dk1=0.0015`` moves a 1280x720, 60° camera's corner
   pixels by about 0.5 px);
+- ``dfocal``, ``dcx``, ``dcy``: **focal length and principal point left off by the calibration**: the lens renders
+  with fx and fy times 1 + ``dfocal`` (relative; e.g. 0.002) and its principal point ``dcx``, ``dcy`` px off (e.g.
+  3, -2) while the detection uses the calibrated ones (a real calibration's are typically 0.1-0.5 % and 1-5 px off;
+  a relative focal error moves a view's distance by about that fraction of it);
 - ``shutter``: **rolling shutter**, s to read the rows out (top row first; e.g. 0.03): row v is exposed
   ``shutter · v / height`` s after row 0 (the image is rendered in :data:`SHUTTER_BANDS` bands of rows, each at the
   arm's pose at its own time; a target that moves less than :data:`STILL_PX` over the frame is rendered once, at
@@ -37,7 +41,7 @@ from numpy.typing import NDArray
 from drivers.camera.intrinsics import CameraIntrinsics
 
 Array = NDArray[np.float64]
-OPTIONS = ("dk1", "dk2", "shutter", "exposure", "gain", "gradient", "glare", "bow")
+OPTIONS = ("dk1", "dk2", "dfocal", "dcx", "dcy", "shutter", "exposure", "gain", "gradient", "glare", "bow")
 SHUTTER_BANDS = 24  # bands of rows rendered at one time each (a 720-row image: 30 rows a band)
 EXPOSURE_SAMPLES = 5  # renderings averaged over an exposure
 GLARE_CENTRE = (0.62, 0.38)  # the specular patch's centre, share of the image's width and height
@@ -51,6 +55,9 @@ class Imperfections:
 
     dk1: float = 0.0
     dk2: float = 0.0
+    dfocal: float = 0.0
+    dcx: float = 0.0
+    dcy: float = 0.0
     shutter: float = 0.0
     exposure: float = 0.0
     gain: float = 1.0
@@ -64,12 +71,15 @@ class Imperfections:
         return self.shutter > 0 or self.exposure > 0
 
     def lens(self, calibrated: CameraIntrinsics) -> CameraIntrinsics:
-        """The true lens: ``calibrated`` with its k1, k2 off by dk1, dk2."""
-        if self.dk1 == 0 and self.dk2 == 0:
+        """The true lens: ``calibrated`` with its k1, k2 off by dk1, dk2, its focal lengths by the factor 1 + dfocal
+        and its principal point by dcx, dcy px."""
+        if self.dk1 == 0 and self.dk2 == 0 and self.dfocal == 0 and self.dcx == 0 and self.dcy == 0:
             return calibrated
-        distortion = calibrated.distortion.copy()
+        distortion, matrix = calibrated.distortion.copy(), calibrated.matrix.copy()
         distortion[:2] += [self.dk1, self.dk2]
-        return replace(calibrated, distortion=distortion)
+        matrix[:2, :2] *= 1.0 + self.dfocal
+        matrix[:2, 2] += [self.dcx, self.dcy]
+        return replace(calibrated, matrix=matrix, distortion=distortion)
 
     def times(self, height: int) -> tuple[Array, Array]:
         """When each part of a frame is exposed, s after the frame's time: the exposure's sample times (k,) and the
@@ -113,6 +123,10 @@ def parse(raw: dict[str, Any]) -> Imperfections:
             raise ValueError(f"option gain={raw[key]} must be > 0")
         if key == "gradient" and not abs(value) < 1:
             raise ValueError(f"option gradient={raw[key]} must lie between -1 and 1")
+        if key == "dfocal" and not abs(value) <= 0.1:
+            raise ValueError(f"option dfocal={raw[key]} must be within ±0.1 (relative)")
+        if key in ("dcx", "dcy") and not abs(value) <= 100:
+            raise ValueError(f"option {key}={raw[key]} must be within ±100 px")
         if key == "bow" and not abs(value) <= 0.05:
             raise ValueError(f"option bow={raw[key]} must be within ±0.05 m")
         values[key] = value

@@ -28,8 +28,9 @@ Where the camera is (drivers/camera/flange_camera.py):
               camera rides on the flange (eye-in-hand) and sees a board fixed in the cell; the readings are the
               board's pose in the camera frame and the session is a ``sensor: flange`` one
   ``flatness`` m: the print may be this far out of flat (default 0: flat); ``lens_sigma``: the calibration's k1 and
-              k2 may be this far off (default 0): the board's shape and the lens's error are estimated from every frame
-              so far and each reading corrected, their uncertainty in its ``shared`` (drivers/camera/board_and_lens.py)
+              k2 may be this far off (default 0); ``focal_sigma``: its fx, fy, relative (0); ``centre_sigma`` px: its
+              principal point (0): the board's shape and the lens's errors are estimated from every frame so far and
+              each reading corrected, their uncertainty in its ``shared`` (drivers/camera/board_and_lens.py)
   ``square_sigma`` (ChArUco) / ``size_sigma`` (grid, marker): the board was measured (``square=`` / ``size=`` is
               the caliper's value) with this standard uncertainty, m: the scale reference (without it the print is
               unverified and identify checks the scale against the robot's nominal lengths)
@@ -54,9 +55,10 @@ Simulated camera (``aruco:sim`` only): ``width``, ``height`` pixels (640, 480), 
 the camera to the TP at home (1.0), ``tilt`` and ``roll`` degrees of the flange at home (20, 10; ``mount=flange``:
 of the board seen from the camera at home), ``printed`` (``mount=flange``: the true board's size over the declared
 one, 1), a real camera's errors (drivers/camera/imperfections.py: ``dk1``, ``dk2`` distortion left after
-calibration, ``shutter`` s rolling shutter, ``exposure`` s motion blur, ``gain``, ``gradient``, ``glare`` light,
-``bow`` m a board not flat), ``seed`` (the robot's), ``fault`` as the mock tracker's (``target_lost``,
-``bad_reading``: a second copy, ``slow``, ``disconnect``); for streams ``drop`` (probability of a lost frame, 0)
+calibration, ``dfocal`` relative, ``dcx``, ``dcy`` px its focal length and principal point, ``shutter`` s rolling
+shutter, ``exposure`` s motion blur, ``gain``, ``gradient``, ``glare`` light, ``bow`` m a board not flat), ``seed``
+(the robot's), ``fault`` as the mock tracker's (``target_lost``, ``bad_reading``: a second copy, ``slow``,
+``disconnect``); for streams ``drop`` (probability of a lost frame, 0)
 and ``lost=D[@S]`` (the target hidden for D s from S s, default 2, into every stream). Other options: one line.
 
 Streaming (continuous motion, drivers/camera/stream.py): every frame at the camera's frame rate, stamped with its
@@ -133,7 +135,7 @@ from drivers.spec import TrackerSpec
 
 OPTIONS = ("camera", "marker", "size", "board", "cols", "rows", "gap", "square", "first", "layout", "dict", "tp",
            "refine", "frames", "max_rms", "timeout", "retries", "mount", "square_sigma", "size_sigma", "flatness",
-           "lens_sigma", "latency")
+           "lens_sigma", "focal_sigma", "centre_sigma", "latency")
 SIM_OPTIONS = ("width", "height", "fov", "k1", "noise", "blur", "motion", "fps", "drop", "lost", "distance",
                "tilt", "roll", "seed", "fault", "printed", *IMPERFECTIONS)
 OUTLIER_SIGMAS = 5.0
@@ -156,6 +158,8 @@ class Settings:
     scale_sigma: float | None = None  # relative uncertainty of the measured board's scale (None: not measured)
     flatness: float = 0.0  # m: the print's shape modes' prior (drivers/camera/board_and_lens.py)
     lens_sigma: float = 0.0  # the calibrated k1's and k2's prior uncertainty
+    focal_sigma: float = 0.0  # the calibrated fx's and fy's relative prior uncertainty
+    centre_sigma: float = 0.0  # px: the calibrated principal point's prior uncertainty per axis
     latency: float | None = None  # s from exposure to delivery (None: the source's; drivers/camera/latency.py)
 
 
@@ -201,7 +205,8 @@ def parse_settings(spec: TrackerSpec, site: Any = None) -> Settings:
     return Settings(target, tp, refine, number(spec, raw, "frames", 5, int, 1, strict=False),
                     number(spec, raw, "max_rms", 1.0), timeout, number(spec, raw, "retries", 5, int, 0, strict=False),
                     None if camera is None else Path(str(camera)), sim, mount, _scale_sigma(spec, raw, target),
-                    *(number(spec, raw, key, 0.0, low=0, strict=False) for key in ("flatness", "lens_sigma")), latency)
+                    *(number(spec, raw, key, 0.0, low=0, strict=False)
+                      for key in ("flatness", "lens_sigma", "focal_sigma", "centre_sigma")), latency)
 
 
 def _scale_sigma(spec: TrackerSpec, raw: dict[str, Any], target: Target) -> float | None:
@@ -276,7 +281,8 @@ class ArucoTracker(FrameStreaming):
         self.detector = Detector(settings.target, settings.refine, camera)
         self.reference: Array | None = None  # rotation of the last pose: keeps IPPE solutions on one branch
         self._observation: Any = None  # the last frame's detected points (BoardAndLens reads them)
-        self.shape = BoardAndLens.of(settings.flatness, settings.lens_sigma, settings.target.extent)
+        self.shape = BoardAndLens.of(settings.flatness, settings.lens_sigma, settings.target.extent,
+                                     settings.focal_sigma, settings.centre_sigma)
         self.frames_used = self.frames_failed = 0
         self.fresh, self.latency_basis = FreshFrames(source, settings.latency or 0.0), ""
         self._init_stream()

@@ -54,17 +54,21 @@ def _corners(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def test_the_options_are_checked_in_one_line_and_only_for_the_simulated_camera() -> None:
     sim = parse_settings(TrackerSpec.parse("aruco:sim?dk1=0.001&shutter=0.03&exposure=0.01&gain=0.6&gradient=0.3"
-                                           "&glare=120&bow=0.0005")).sim["imperfections"]
+                                           "&glare=120&bow=0.0005&dfocal=0.002&dcx=3&dcy=-2")).sim["imperfections"]
     assert sim == Imperfections(dk1=0.001, shutter=0.03, exposure=0.01, gain=0.6, gradient=0.3, glare=120.0,
-                                bow=0.0005)
+                                bow=0.0005, dfocal=0.002, dcx=3.0, dcy=-2.0)
     assert parse_settings(TrackerSpec.parse("aruco:sim")).sim["imperfections"] == Imperfections()
     for bad, why in (("dk1=x", "dk1=x must be a number"), ("shutter=-0.01", "shutter=-0.01 must be >= 0"),
                      ("gain=0", "gain=0 must be > 0"), ("gradient=1", "gradient=1 must lie between -1 and 1"),
-                     ("bow=0.1", "bow=0.1 must be within ±0.05 m"), ("exposure=nan", "exposure=nan must be finite")):
+                     ("bow=0.1", "bow=0.1 must be within ±0.05 m"), ("exposure=nan", "exposure=nan must be finite"),
+                     ("dfocal=-0.2", r"dfocal=-0.2 must be within ±0.1 \(relative\)"),
+                     ("dcy=150", "dcy=150 must be within ±100 px"), ("focal_sigma=-1", "focal_sigma=-1 must be >= 0")):
         with pytest.raises(SpecError, match=why):
             parse_settings(TrackerSpec.parse(f"aruco:sim?{bad}"))
     with pytest.raises(SpecError, match="only for aruco:sim"):
         parse_settings(TrackerSpec.parse("aruco:0?camera=c.yaml&bow=0.0005"))
+    declared = parse_settings(TrackerSpec.parse("aruco:0?camera=c.yaml&focal_sigma=0.003&centre_sigma=4"))
+    assert (declared.focal_sigma, declared.centre_sigma, declared.lens_sigma) == (0.003, 4.0, 0.0)
 
 
 def test_distortion_left_after_calibration_moves_the_corners_as_the_true_lens_projects_them() -> None:
@@ -79,6 +83,20 @@ def test_distortion_left_after_calibration_moves_the_corners_as_the_true_lens_pr
     assert np.max(np.linalg.norm(seen - truth, axis=1)) < 3 * NOISE_PX
     shift = np.linalg.norm(truth - calibrated, axis=1)
     assert shift.max() > 0.2 and np.max(np.abs(np.linalg.norm(seen - calibrated, axis=1) - shift)) < 3 * NOISE_PX
+
+
+def test_a_focal_length_and_principal_point_left_off_move_the_corners_as_the_true_camera_projects_them() -> None:
+    """fx, fy 0.4 % long and the principal point (3, -2) px off: the corners are where the true camera puts them
+    (within the detection's error) and off the calibrated projection by over 1 px (the focal part grows with the
+    distance from the image's centre)."""
+    pose = _pose(x=0.05, z=0.3, tilt=0.3)
+    wrong = Imperfections(dfocal=0.004, dcx=3.0, dcy=-2.0)
+    points, seen = _corners(Renderer(BOARD, CAMERA, CLEAN, imperfections=wrong).render([pose]))
+    true_camera = wrong.lens(CAMERA)
+    assert true_camera.matrix[0, 0] == pytest.approx(1.004 * CAMERA.matrix[0, 0])
+    assert true_camera.matrix[1, 2] == pytest.approx(CAMERA.matrix[1, 2] - 2.0)
+    assert np.max(np.linalg.norm(seen - _project(points, pose, true_camera), axis=1)) < 3 * NOISE_PX
+    assert np.min(np.linalg.norm(seen - _project(points, pose), axis=1)) > 1.0
 
 
 def test_a_bowed_board_puts_its_corners_where_the_bent_print_projects() -> None:
@@ -232,22 +250,26 @@ def test_the_flatness_model_predicts_what_a_bowed_board_does_to_the_pose() -> No
 
 
 @pytest.mark.parametrize("truth, priors, expected", [
-    (Imperfections(bow=0.001), (0.002, 0.0), [0.001, 0.0, 0.0, 0.0, 0.0]),
-    (Imperfections(dk1=0.01), (0.0, 0.05), [0.0, 0.0, 0.0, 0.01, 0.0])], ids=["bowed board", "lens k1 off"])
+    (Imperfections(bow=0.001), (0.002, 0.0), [0.001, 0.0, 0.0]),
+    (Imperfections(dk1=0.01), (0.0, 0.05), [0.0, 0.0, 0.0, 0.01, 0.0]),
+    (Imperfections(dfocal=0.004, dcx=3.0, dcy=-2.0), (0.0, 0.0, 0.01, 5.0), [0.0, 0.0, 0.0, 0.004, 3.0, -2.0])],
+    ids=["bowed board", "lens k1 off", "focal and centre off"])
 def test_the_boards_shape_or_the_lenss_error_is_estimated_from_the_views_and_the_poses_corrected(
-        truth: Imperfections, priors: tuple[float, float], expected: list[float]) -> None:
-    """Six views, two frames each, of a board bowed 1 mm (its shape estimated) or seen through a lens whose k1 is 0.01
-    off the calibration (dk1, dk2 estimated): the estimate lies within 4 of its own standard deviations of the truth
-    (the detection's errors shared by a view's frames make those 1.4x too small), and the corrected poses (the board's
-    frame: its mean plane) are within 4 of the stated sigmas (the estimate's part and 0.03 px of corner noise) while
-    the flat poses missed by over 3x more; their reprojection RMS is the corner noise's, the pattern taken out (it
-    scales their sigmas). (The shape and the lens's k1, k2 together are hard to tell apart on a small board near the
+        truth: Imperfections, priors: tuple[float, ...], expected: list[float]) -> None:
+    """Six views, two frames each, of a board bowed 1 mm (its shape estimated), seen through a lens whose k1 is 0.01
+    off the calibration (dk1, dk2 estimated), or whose fx, fy are 0.4 % long and principal point (3, -2) px off
+    (dfocal, dcx, dcy estimated; the views tilted up to 0.6 rad tell the focal length from a distance): the estimate
+    lies within 4 of its own standard deviations of the truth (the detection's errors shared by a view's frames make
+    those 1.4x too small), and the corrected poses (the board's frame: its mean plane) are within 4 of the stated
+    sigmas (the estimate's part and 0.03 px of corner noise) while the flat poses missed by over 3x more (1-2 mm for
+    the focal length and centre); their reprojection RMS is the corner noise's, the pattern taken out (it scales
+    their sigmas). (The shape and the lens's k1, k2 together are hard to tell apart on a small board near the
     image's centre: the bench's A4 board at 1280x720 tells them, docs/benchmarks.md section 24a.)"""
     from drivers.camera.board_and_lens import BoardAndLens
     from drivers.camera.pose import estimate_pose
 
     renderer = Renderer(BOARD, CAMERA, Optics(noise=1.0, blur=0.5), imperfections=truth)
-    shape = BoardAndLens(*priors, BOARD.extent)
+    shape = BoardAndLens(priors[0], priors[1], BOARD.extent, *priors[2:])
     rng = np.random.default_rng(5)
     views = [_pose(x=x, z=z, tilt=t) for x, z, t in ((0.0, 0.3, 0.0), (0.07, 0.32, 0.5), (-0.07, 0.3, -0.5),
                                                       (0.04, 0.4, 0.3), (-0.08, 0.35, -0.2), (0.08, 0.28, 0.6))]
@@ -260,13 +282,13 @@ def test_the_boards_shape_or_the_lenss_error_is_estimated_from_the_views_and_the
         for _ in range(2):
             shape.add(*flat_pose(pose), CAMERA)
     value, covariance = shape.estimate()
-    sd, expected = np.sqrt(np.diag(covariance)), np.array(expected[:len(value)])
-    assert np.all(np.abs(value - expected) <= 4 * sd), (value, sd)
-    assert np.all(sd[expected > 0] < 0.25 * expected[expected > 0])  # told from noise
+    sd, expected = np.sqrt(np.diag(covariance)), np.array(expected)
+    assert len(value) == len(expected) and np.all(np.abs(value - expected) <= 4 * sd), (value, sd)
+    assert np.all(sd[expected != 0] < 0.25 * np.abs(expected[expected != 0]))  # told from noise
     corrected_errors, flat_errors, stated, rms = [], [], [], []
     for pose in views:
         flat, obs = flat_pose(pose)
-        residual, moves = BoardAndLens(*priors, BOARD.extent).add(flat, obs, CAMERA)  # this frame's alone
+        residual, moves = BoardAndLens(priors[0], priors[1], BOARD.extent, *priors[2:]).add(flat, obs, CAMERA)  # alone
         corrected, (shared, _) = shape.take(flat, obs, CAMERA, np.zeros(3))
         rms.append([flat.rms, corrected.rms, math.sqrt(np.mean((residual - moves @ expected) ** 2))])
         mean_plane = pose[:3, 3] + pose[:3, 2] * 2 * truth.bow / 3
