@@ -282,7 +282,7 @@ class ArucoTracker(FrameStreaming):
         self.reference: Array | None = None  # rotation of the last pose: keeps IPPE solutions on one branch
         self._observation: Any = None  # the last frame's detected points (BoardAndLens reads them)
         self.shape = BoardAndLens.of(settings.flatness, settings.lens_sigma, settings.target.extent,
-                                     settings.focal_sigma, settings.centre_sigma)
+                                     settings.focal_sigma, settings.centre_sigma, settings.frames)
         self.frames_used = self.frames_failed = 0
         self.fresh, self.latency_basis = FreshFrames(source, settings.latency or 0.0), ""
         self._init_stream()

@@ -278,10 +278,20 @@ def test_the_boards_shape_or_the_lenss_error_is_estimated_from_the_views_and_the
         obs = Detector(BOARD, "edges", CAMERA).detect(renderer.render([pose], rng))
         return estimate_pose(obs, CAMERA.matrix, CAMERA.distortion, False, pose[:3, :3]), obs
 
+    per_view = BoardAndLens(priors[0], priors[1], BOARD.extent, *priors[2:], frames_per_view=2)
     for pose in views:
         for _ in range(2):
-            shape.add(*flat_pose(pose), CAMERA)
+            frame = flat_pose(pose)
+            shape.add(*frame, CAMERA)
+            per_view.add(*frame, CAMERA)
     value, covariance = shape.estimate()
+    # a view's two frames counted as one view: the same estimate (within a tenth of its sd: only the prior's relative
+    # weight changes), twice the variance where the data, not the prior, decide
+    view_value, view_covariance = per_view.estimate()
+    assert np.all(np.abs(view_value - value) <= 0.1 * np.sqrt(np.diag(covariance)))
+    decided = shape.used & (np.diag(covariance) < 0.01 * shape.prior**2)
+    assert decided.any()
+    np.testing.assert_allclose(np.diag(view_covariance)[decided] / np.diag(covariance)[decided], 2.0, rtol=0.05)
     sd, expected = np.sqrt(np.diag(covariance)), np.array(expected)
     assert len(value) == len(expected) and np.all(np.abs(value - expected) <= 4 * sd), (value, sd)
     assert np.all(sd[expected != 0] < 0.25 * np.abs(expected[expected != 0]))  # told from noise
