@@ -101,11 +101,3 @@ def frame_point_jacobian(written: Any, q: Array, offset: Array, step: float = 1e
         return points_from_lines(lines, q) + np.einsum("mij,j->mi", target_rotations(lines, q), offset)
 
     return np.stack([(predict(e * step) - predict(-e * step)) / (2 * step) for e in np.eye(k)], axis=2)
-
-
-def frame_point_covariances(written: Any, q: Array, offset: Array) -> Array:
-    """Covariance (m, 3, 3), m², of the position :func:`frame_point_jacobian` predicts, from the ``written``
-    model's covariance over its axis lines, tracked point and the target frame's turn."""
-    jac = frame_point_jacobian(written, q, offset)
-    k = jac.shape[2]
-    return jac @ written.covariance[:k, :k] @ np.swapaxes(jac, 1, 2)
