@@ -51,10 +51,11 @@ def _views(rng: np.random.Generator, count: int) -> np.ndarray:
 
 
 @cache
-def _truth_and_rows(scale: float = 1.0, count: int = 40) -> tuple[object, Measurements]:
+def _truth_and_rows(scale: float = 1.0, count: int = 40, arm: int | None = None) -> tuple[object, Measurements]:
     """A perturbed UR5e (base: board frame <- DH frame 0) and ``count`` noisy board poses in the camera frame, the
-    positions divided by ``scale`` (a board printed ``scale`` times its nominal size)."""
-    rng = np.random.default_rng(36)
+    positions divided by ``scale`` (a board printed ``scale`` times its nominal size); ``arm`` draws another arm,
+    views and noise (None: the one most tests share)."""
+    rng = np.random.default_rng(36 if arm is None else [36, arm])
     truth = replace(perturbed_model(ROBOT.nominal, rng), base=np.linalg.inv(BOARD))
     q = _views(rng, count)
     board_in_camera = np.linalg.inv(frames_from_joints(truth, q)[:, -1] @ MOUNT)
@@ -123,16 +124,8 @@ def test_the_workspace_accuracy_and_its_range_hold_over_calibrations() -> None:
     inside, realised, stated = 0, [], []
     flange = np.linalg.inv(MOUNT)[:, 3]
     for seed in range(12):
-        rng = np.random.default_rng([36, seed])
-        truth = replace(perturbed_model(ROBOT.nominal, rng), base=np.linalg.inv(BOARD))
-        q = _views(rng, 40)
-        board_in_camera = np.linalg.inv(frames_from_joints(truth, q)[:, -1] @ MOUNT)
-        turn = Rotation.from_rotvec(rng.normal(0, SIGMA_R, (40, 3))).as_matrix()
-        meas = Measurements("RRRRRR", q, board_in_camera[:, :3, 3] + rng.normal(0, SIGMA, (40, 3)), np.arange(40),
-                            np.zeros(40, dtype=np.int64), np.full(40, SIGMA),
-                            rotvec=rotvecs_from_matrices(turn @ board_in_camera[:, :3, :3]),
-                            sigma_r=np.full(40, SIGMA_R), sensor="flange", scale_sigma=1e-5)
-        rows = for_estimator(split_holdout(meas, 0.25, 0))
+        truth, meas = _truth_and_rows(arm=seed)
+        rows = for_estimator(replace(meas, scale_sigma=1e-5))
         ident, scale = checked(identify(rows.meas, ROBOT.nominal), rows, ROBOT.nominal)
         doc = documented(result_to_dict(ident, ROBOT.nominal, "ur5e"), rows, scale, ident, ROBOT.limits)
         where = random_poses(ROBOT.limits, 300, np.random.default_rng([1, seed]))  # not the result's own poses
