@@ -14,6 +14,7 @@ import pytest
 
 from acquire.commands.cli import main
 from acquire.running.session import Session
+from tests._fast_site import fast_site
 from tests._session_steps import recorded_steps
 
 pytestmark = pytest.mark.realtime  # timing-sensitive: make test runs these alone, after the rest
@@ -22,15 +23,7 @@ SMALL = ["--steps", "12", "--samples", "3", "--free-poses", "6", "--quiet"]
 COMMAND = [str(Path(sys.executable).with_name("acquire"))]
 # real-time steps of a fraction of a second (full-speed moves, no settling): the stop lands mid-plan within a second
 # or two of the command's start-up instead of after the default moves' and settling's seconds
-FAST_SITE = """schema: 1
-robot:
-  speed: [3.1, 3.1, 3.1, 3.1, 3.1, 3.1]
-  acceleration: [40, 40, 40, 40, 40, 40]
-tracker:
-  measure_time: 0.001
-plan:
-  settle_time: 0.0
-"""
+FAST_SITE = fast_site()
 
 
 def _handler_installed(pid: int, signum: int, timeout: float = 20.0) -> None:

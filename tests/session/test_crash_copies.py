@@ -23,23 +23,13 @@ import pytest
 
 from acquire.running.session import Session
 from tests._acquire_writer import Writer
+from tests._fast_site import fast_site
 
 ROOT = Path(__file__).resolve().parents[2]
 # a short plan whose real-time steps take ~0.17 s: small sweeps at full speed, no settle time
-FAST_SITE = """schema: 1
-robot:
-  speed: [3.1, 3.1, 3.1, 3.1, 3.1, 3.1]
-  acceleration: [40, 40, 40, 40, 40, 40]
-tracker:
-  measure_time: 0.001
-plan:
-  samples_per_step: 2
-  settle_time: 0.0
-  steps_per_sweep: 4
-  free_poses: 0
-  check_poses: 2
-  sweep_ranges: [[-0.3, 0.3], [-1.87, -1.27], [1.27, 1.87], [-1.87, -1.27], [-1.87, -1.27], [-0.3, 0.3]]
-"""
+FAST_SITE = fast_site(samples_per_step=2, steps_per_sweep=4, free_poses=0, check_poses=2,
+                      sweep_ranges="[[-0.3, 0.3], [-1.87, -1.27], [1.27, 1.87], [-1.87, -1.27], [-1.87, -1.27], "
+                                   "[-0.3, 0.3]]")
 pytestmark = pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not hasattr(os, "fork"),
                                 reason="needs SIGKILL and fork")
 

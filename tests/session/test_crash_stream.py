@@ -28,6 +28,7 @@ from acquire.running.session import Session
 from acquire.running.stream_loop import COMMIT_PERIOD
 from drivers.sim.stream import robot_time_of_stamps
 from tests._acquire_writer import ROOT, Writer
+from tests._fast_site import fast_site
 
 pytestmark = [pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not hasattr(os, "fork"),
                                  reason="needs SIGKILL and fork"),
@@ -35,17 +36,7 @@ pytestmark = [pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not hasattr(o
 
 # quick stop-and-go moves (no settling), so the first sweep starts within a second or two; the sweeps themselves
 # run at their planned speed (1 rad/s: each sweep takes 3.5-7 s)
-FAST_SITE = """schema: 1
-robot:
-  speed: [3.1, 3.1, 3.1, 3.1, 3.1, 3.1]
-  acceleration: [40, 40, 40, 40, 40, 40]
-tracker:
-  measure_time: 0.001
-plan:
-  samples_per_step: 2
-  settle_time: 0.0
-  check_poses: 4
-"""
+FAST_SITE = fast_site(samples_per_step=2, check_poses=4)
 LOSS = 1.0  # s: what a crash may lose at most (issue 16)
 STREAM = 2  # plan index of the first stream step: home, the range start, then the sweep
 
