@@ -52,13 +52,24 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from acquire.planning.flange_views import FlangeCamera, board_seen, look_at, solve_joints
-from bench.flange_camera import ACCELERATION, FOV, FRAMES, HEIGHT, REAL_ERRORS, SPEED, TARGET_RATIO, TARGET_RMS, WIDTH
+from bench.flange_camera import (
+    ACCELERATION,
+    FOV,
+    FRAMES,
+    HEIGHT,
+    REAL_ERRORS,
+    SPEED,
+    TARGET_RATIO,
+    TARGET_RMS,
+    WIDTH,
+    camera_rows,
+    opened,
+    reading_pose,
+    visited,
+)
 from config.robots import load_robot
 from drivers.camera.tracker import parse_settings
-from drivers.registry import open_robot, open_tracker
-from drivers.sim.rig import SimulatedRig
 from drivers.spec import TrackerSpec
-from identify.estimator.measurements import Measurements
 from identify.io.result_io import result_to_dict
 from identify.results.pipeline import identify
 from identify.simulators.simulate import random_poses
@@ -66,7 +77,7 @@ from kinematics.dh import frames_from_joints, points_from_joints
 
 COLS, ROWS, SQUARE, MARKER = 8, 6, 0.025, 0.018  # the board on the flange (m)
 DISTANCE, NEAR, FAR, MAX_ANGLE = 0.7, 0.45, 0.95, math.radians(40.0)  # m at home, the views' depth range, rad
-CHECK_SHARE, CHECK_POSES = 0.25, 300
+CHECK_POSES = 300  # random poses for the truth (a quarter of the views held out: flange_camera.CHECK_SHARE)
 CASES = ("perfect", "distortion", "shutter", "blur", "lighting", "bow", "latency", "undeclared", "all")
 SEEDED = ("perfect", "undeclared", "all")  # the cases run on every seed; the others on seed 1
 
@@ -110,14 +121,6 @@ def spec(case: Case) -> str:
             f"&seed={case.seed}{errors}")
 
 
-def _matrix(reading) -> np.ndarray:
-    """Camera <- board (4x4) of a 6-DoF reading."""
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_rotvec(reading.rotvec).as_matrix()
-    out[:3, 3] = reading.position
-    return out
-
-
 def board_views(nominal, home: np.ndarray, limits: np.ndarray, camera_in_base: np.ndarray, board_on_flange: np.ndarray,
                 view: FlangeCamera, count: int, rng: np.random.Generator) -> np.ndarray:
     """``count`` joint configurations (count, n) that show the board on the flange (``board_on_flange``: flange <-
@@ -153,10 +156,7 @@ def run_case(case: Case) -> Outcome:
     robot = load_robot("ur5e")
     nominal, home, limits = robot.nominal, np.array(robot.home), robot.limits
     camera_spec = spec(case)
-    rig = SimulatedRig.from_spec(f"mock:ur5e?seed={case.seed}", camera_spec)
-    arm, camera = open_robot(f"mock:ur5e?seed={case.seed}", rig=rig), open_tracker(camera_spec, rig=rig)
-    arm.connect(5.0)
-    camera.connect(5.0)
+    rig, arm, camera = opened(case.seed, camera_spec)
     t0 = rig.clock.now()
 
     def visit(q: np.ndarray):
@@ -167,27 +167,16 @@ def run_case(case: Case) -> Outcome:
     _, at_home = visit(home)
     board_on_flange = np.eye(4)
     board_on_flange[:3, 3] = np.round(rig.truth.tool / 0.005) * 0.005  # the board's place from its drawing
-    camera_in_base = frames_from_joints(nominal, home[None])[0, -1] @ board_on_flange @ np.linalg.inv(_matrix(at_home))
+    at_home_flange = frames_from_joints(nominal, home[None])[0, -1]
+    camera_in_base = at_home_flange @ board_on_flange @ np.linalg.inv(reading_pose(at_home))  # base <- camera
     view = FlangeCamera(camera.camera.matrix, (WIDTH, HEIGHT), (COLS * SQUARE, ROWS * SQUARE), near=NEAR, far=FAR,
                         max_angle=MAX_ANGLE, margin=0.04)
     plan = board_views(nominal, home, limits, camera_in_base, board_on_flange, view, case.views,
                        np.random.default_rng([case.seed, 40]))
-    q_read, readings = [], []
-    for q in plan:
-        try:
-            q_act, reading = visit(q)
-        except Exception as exc:  # a view the truth moved out of sight: recorded as missing, as acquire would
-            print(f"  {case.label}: a view was lost ({exc})", file=sys.stderr)
-            continue
-        q_read.append(q_act)
-        readings.append(reading)
+    q_read, readings = (list(column) for column in zip(*visited(plan, visit, case.label), strict=True))
     robot_seconds = rig.clock.now() - t0
     m, q_read = len(readings), np.array(q_read)
-    check = np.zeros(m, dtype=bool)
-    check[np.random.default_rng([case.seed, 41]).choice(m, round(CHECK_SHARE * m), replace=False)] = True
-    meas = Measurements("RRRRRR", q_read, np.array([r.position for r in readings]), np.arange(m),
-                        np.zeros(m, dtype=np.int64), np.array([r.sigma for r in readings]), check, has_role=True,
-                        rotvec=np.array([r.rotvec for r in readings]), sigma_r=np.array([r.sigma_r for r in readings]))
+    meas = camera_rows(q_read, readings, np.random.default_rng([case.seed, 41]))
     ident = identify(meas, nominal)
     doc = result_to_dict(ident, nominal, "ur5e")
     # the truth: the board's centre; a bowed print's frame is its mean plane, 2/3 of the bow towards the camera

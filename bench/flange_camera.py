@@ -163,11 +163,45 @@ def _spec(case: Case) -> str:
             + (f"&{REAL_ERRORS[case.errors]}" if case.errors else ""))
 
 
-def _pose(reading) -> np.ndarray:
+def reading_pose(reading) -> np.ndarray:
+    """Camera <- board (4x4) of a camera's 6-DoF reading."""
     out = np.eye(4)
     out[:3, :3] = Rotation.from_rotvec(reading.rotvec).as_matrix()
     out[:3, 3] = reading.position
     return out
+
+
+def opened(seed: int, spec: str) -> tuple[SimulatedRig, object, object]:
+    """The simulated rig of ``mock:ur5e?seed=SEED`` with the camera ``spec``, its arm and camera connected."""
+    rig = SimulatedRig.from_spec(f"mock:ur5e?seed={seed}", spec)
+    arm, camera = open_robot(f"mock:ur5e?seed={seed}", rig=rig), open_tracker(spec, rig=rig)
+    arm.connect(5.0)
+    camera.connect(5.0)
+    return rig, arm, camera
+
+
+def visited(plan: np.ndarray, visit, label: str) -> list:
+    """What ``visit(q)`` returns at each pose of ``plan`` it reaches; a view the truth moved out of sight is left
+    out (recorded as missing, as acquire would) and said on stderr."""
+    out = []
+    for q in plan:
+        try:
+            out.append(visit(q))
+        except Exception as exc:
+            print(f"  {label}: a view was lost ({exc})", file=sys.stderr)
+    return out
+
+
+def camera_rows(q: np.ndarray, readings: list, rng: np.random.Generator, **header) -> Measurements:
+    """The 6-DoF rows of ``readings`` at joint readings ``q``, :data:`CHECK_SHARE` of them drawn by ``rng`` and held
+    out (``role=check``); ``header``: Measurements' metadata (``sensor``, ``scale_sigma``)."""
+    m = len(readings)
+    check = np.zeros(m, dtype=bool)
+    check[rng.choice(m, round(CHECK_SHARE * m), replace=False)] = True
+    return Measurements("RRRRRR", q, np.array([r.position for r in readings]), np.arange(m),
+                        np.zeros(m, dtype=np.int64), np.array([r.sigma for r in readings]), check, has_role=True,
+                        rotvec=np.array([r.rotvec for r in readings]), sigma_r=np.array([r.sigma_r for r in readings]),
+                        **header)
 
 
 def run_case(case: Case) -> Outcome:
@@ -175,10 +209,7 @@ def run_case(case: Case) -> Outcome:
     robot_model = load_robot("ur5e")
     nominal, home, limits = robot_model.nominal, np.array(robot_model.home), robot_model.limits
     spec = _spec(case)
-    rig = SimulatedRig.from_spec(f"mock:ur5e?seed={case.seed}", spec)
-    arm, camera = open_robot(f"mock:ur5e?seed={case.seed}", rig=rig), open_tracker(spec, rig=rig)
-    arm.connect(5.0)
-    camera.connect(5.0)
+    rig, arm, camera = opened(case.seed, spec)
     t0 = rig.clock.now()
     speed, accel = [SPEED] * 6, [ACCELERATION] * 6
     # a bowed board's frame is its mean plane: 2/3 of the bow out of its edges' plane (drivers/camera/imperfections.py)
@@ -196,38 +227,25 @@ def run_case(case: Case) -> Outcome:
         reading = camera.measure(1, 10.0)[0]
         spans.append((first, len(frames)))
         seen.append(camera.source.target_pose(rig.clock.now()) @ mean_plane)
-        return arm.read_joints(), reading
+        return arm.read_joints(), reading, seen[-1]
 
-    _, at_home = visit(home)
-    board = frames_from_joints(nominal, home[None])[0, -1] @ CAMERA_MOUNT @ _pose(at_home)  # base <- board, a guess
+    _, at_home, _ = visit(home)
+    # base <- board, a guess (nominal kinematics and mount)
+    board = frames_from_joints(nominal, home[None])[0, -1] @ CAMERA_MOUNT @ reading_pose(at_home)
     cols, rows, square, *_, (near, far) = BOARDS[case.board]
     intrinsics = camera.camera
     view = FlangeCamera(intrinsics.matrix, (WIDTH, HEIGHT), (cols * square, rows * square), near=near, far=far,
                         max_angle=math.radians(40.0), margin=0.04)
     plan = flange_view_poses(nominal, home, limits, CAMERA_MOUNT, board, view, case.views,
                              np.random.default_rng([case.seed, 36]))
-    q_read, readings = [], []
-    truths = []
-    for q in plan:
-        try:
-            q_act, reading = visit(q)
-        except Exception as exc:  # a view the truth moved out of sight: recorded as missing, as acquire would
-            print(f"  {case.label}: a view was lost ({exc})", file=sys.stderr)
-            continue
-        q_read.append(q_act)
-        readings.append(reading)
-        truths.append(seen[-1])
+    q_read, readings, truths = (list(column) for column in zip(*visited(plan, visit, case.label), strict=True))
     robot_seconds = rig.clock.now() - t0
     if recorrect:
         readings = _recorrected(readings, [frames[a:b] for a, b in spans[1:]], camera.shape)
-    m = len(readings)
-    q_read = np.array(q_read)
-    check = np.zeros(m, dtype=bool)
-    check[np.random.default_rng([case.seed, 37]).choice(m, round(CHECK_SHARE * m), replace=False)] = True
-    meas = Measurements("RRRRRR", q_read, np.array([r.position for r in readings]), np.arange(m),
-                        np.zeros(m, dtype=np.int64), np.array([r.sigma for r in readings]), check, has_role=True,
-                        rotvec=np.array([r.rotvec for r in readings]), sigma_r=np.array([r.sigma_r for r in readings]),
-                        sensor="flange", scale_sigma=camera.settings.scale_sigma)
+    m, q_read = len(readings), np.array(q_read)
+    meas = camera_rows(q_read, readings, np.random.default_rng([case.seed, 37]), sensor="flange",
+                       scale_sigma=camera.settings.scale_sigma)
+    check = meas.check
     rows_ = for_estimator(meas)
     ident, scale = checked(identify(rows_.meas, nominal), rows_, nominal)
     doc = documented(result_to_dict(ident, nominal, "ur5e"), rows_, scale, ident, limits)
@@ -329,7 +347,7 @@ def _hand_eye_rms(nominal, q: np.ndarray, readings: list, q_check: np.ndarray, t
     as nominal, the camera's mount by Park's method (:func:`hand_eye_park`), the board in the base frame the mean of its
     pose over the views (chordal mean of the rotations), all in the board frame as the truth."""
     flanges = frames_from_joints(nominal, q)[:, -1]
-    boards = np.array([_pose(r) for r in readings])
+    boards = np.array([reading_pose(r) for r in readings])
     mount = hand_eye_park(flanges, boards)
     placed = flanges @ mount @ boards  # base <- board, one per view
     u, _, vt = np.linalg.svd(placed[:, :3, :3].mean(axis=0))
