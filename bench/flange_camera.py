@@ -218,7 +218,7 @@ def run_case(case: Case) -> Outcome:
     seen = []  # camera <- board (its mean plane) at each reading, the truth
 
     recorrect = case.recorrect and camera.shape is not None
-    frames, spans = _frame_log(camera.shape) if recorrect else [], []  # each reading's frames in the log
+    frames, spans = (_frame_log(camera.shape) if recorrect else []), []  # the frames logged, each reading's span
 
     def visit(q: np.ndarray):
         arm.move_joints(q, speed, accel, 60.0)
