@@ -45,7 +45,6 @@ import argparse
 import math
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -64,6 +63,7 @@ from bench.flange_camera import (
     WIDTH,
     camera_rows,
     opened,
+    ran,
     reading_pose,
     visited,
 )
@@ -214,16 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = range(1, (1 if args.quick else args.seeds) + 1)
     every = set(names) if args.every_seed else set(SEEDED)
     cases = [Case(name, seed, views) for name in names for seed in (seeds if name in every else [1])]
-    for case in cases:  # every spec is valid before the rendering starts
-        parse_settings(TrackerSpec.parse(spec(case)))
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as pool:
-            results = list(pool.map(run_case, cases))
-    else:
-        results = []
-        for case in cases:
-            results.append(run_case(case))
-            print(f"  done: {results[-1]}", file=sys.stderr, flush=True)
+    results = ran(cases, spec, run_case, args.jobs)
     print(f"UR5e with a ChArUco board on the flange ({COLS}x{ROWS} squares of {SQUARE * 1e3:g} mm), camera "
           f"{WIDTH}x{HEIGHT} in the cell ({FOV:g}° wide), {FRAMES} frames a view, {views} views planned; the TP "
           f"against the truth at {CHECK_POSES} random poses over the joints' ranges and inside the result's domain")

@@ -359,6 +359,21 @@ def _hand_eye_rms(nominal, q: np.ndarray, readings: list, q_check: np.ndarray, t
     return float(np.sqrt(np.mean(np.sum((predicted - truth) ** 2, axis=1))))
 
 
+def ran(cases: list, spec_of, run, jobs: int) -> list:
+    """``run(case)`` of every case, in ``jobs`` processes (1: in this one, each outcome on stderr as it ends), once
+    every case's camera spec ``spec_of(case)`` has been checked: a bad one fails before hours of rendering."""
+    for case in cases:
+        parse_settings(TrackerSpec.parse(spec_of(case)))
+    if jobs > 1:
+        with ProcessPoolExecutor(jobs) as pool:
+            return list(pool.map(run, cases))
+    results = []
+    for case in cases:
+        results.append(run(case))
+        print(f"  done: {results[-1]}", file=sys.stderr, flush=True)
+    return results
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m bench.flange_camera", description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=3, help="simulated arms per board (default 3)")
@@ -388,16 +403,7 @@ def main(argv: list[str] | None = None) -> int:
         cases = [replace(case, recorrect=True) for case in cases]
     if not args.skip_scale and not errors:
         cases += [Case("A4", 1, views, MISPRINTS[-1], True)] + [Case("A4", 1, views, p, False) for p in MISPRINTS]
-    for case in cases:  # every spec is valid before hours of rendering start
-        parse_settings(TrackerSpec.parse(_spec(case)))
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as pool:
-            results = list(pool.map(run_case, cases))
-    else:
-        results = []
-        for case in cases:
-            results.append(run_case(case))
-            print(f"  done: {results[-1]}", file=sys.stderr, flush=True)
+    results = ran(cases, _spec, run_case, args.jobs)
     print(f"UR5e, camera {WIDTH}x{HEIGHT} on the flange ({FOV:g}° wide), ChArUco boards, {FRAMES} frames a view, "
           f"{views} views planned, {CHECK_POSES} random poses over the joints' ranges for the truth")
     header = (f"{'case':<40} {'images':>6} {'robot s':>7} {'flange RMS mm':>13} {'stated mm':>9} {'ratio':>6} "
