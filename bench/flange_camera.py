@@ -64,7 +64,6 @@ from scipy.spatial.transform import Rotation
 
 from acquire.planning.flange_views import FlangeCamera, flange_view_poses
 from config.robots import load_robot
-from drivers.camera.board_and_lens import pose_shifts
 from drivers.camera.flange_camera import CAMERA_MOUNT
 from drivers.camera.tracker import parse_settings
 from drivers.registry import open_robot, open_tracker
@@ -74,6 +73,7 @@ from identify.estimator.measurements import Measurements
 from identify.io.result_io import result_to_dict
 from identify.results.pipeline import identify
 from identify.sensors.evidence import checked, documented, for_estimator
+from identify.sensors.recorrection import recorrected
 from identify.simulators.simulate import random_poses
 from kinematics.dh import frames_from_joints
 
@@ -121,14 +121,14 @@ class Case:
     printed: float = 1.0
     caliper: bool = True
     errors: str = ""  # a key of REAL_ERRORS, or "": a perfect camera
-    recorrect: bool = False  # every reading re-corrected by the tracker's final lens estimate (:func:`_recorrected`)
+    as_measured: bool = False  # the readings as the tracker corrected them, not again with the final estimate
 
     @property
     def label(self) -> str:
         source = "caliper" if self.caliper else "nominal"
         scale = "" if self.printed == 1.0 else f", printed {self.printed:g}x, {source}"
         errors = f", {self.errors}" if self.errors else ""
-        return f"{self.board}, seed {self.seed}{scale}{errors}" + (", re-corrected" if self.recorrect else "")
+        return f"{self.board}, seed {self.seed}{scale}{errors}" + (", as measured" if self.as_measured else "")
 
 
 @dataclass(frozen=True)
@@ -192,16 +192,20 @@ def visited(plan: np.ndarray, visit, label: str) -> list:
     return out
 
 
-def camera_rows(q: np.ndarray, readings: list, rng: np.random.Generator, **header) -> Measurements:
+def camera_rows(q: np.ndarray, readings: list, rng: np.random.Generator, again: bool = True,
+                **header) -> Measurements:
     """The 6-DoF rows of ``readings`` at joint readings ``q``, :data:`CHECK_SHARE` of them drawn by ``rng`` and held
-    out (``role=check``); ``header``: Measurements' metadata (``sensor``, ``scale_sigma``)."""
+    out (``role=check``); ``header``: Measurements' metadata (``sensor``, ``scale_sigma``). ``again``: readings a
+    camera corrected for its board's shape and its lens corrected again with its final estimate, as a session's
+    measurements are (identify/sensors/recorrection.py)."""
     m = len(readings)
     check = np.zeros(m, dtype=bool)
     check[rng.choice(m, round(CHECK_SHARE * m), replace=False)] = True
-    return Measurements("RRRRRR", q, np.array([r.position for r in readings]), np.arange(m),
+    corrections = [r.correction for r in readings] if again else [None] * m
+    return recorrected(Measurements("RRRRRR", q, np.array([r.position for r in readings]), np.arange(m),
                         np.zeros(m, dtype=np.int64), np.array([r.sigma for r in readings]), check, has_role=True,
                         rotvec=np.array([r.rotvec for r in readings]), sigma_r=np.array([r.sigma_r for r in readings]),
-                        **header)
+                        **header), corrections)
 
 
 def run_case(case: Case) -> Outcome:
@@ -217,15 +221,10 @@ def run_case(case: Case) -> Outcome:
     mean_plane[2, 3] = 2.0 / 3.0 * parse_settings(TrackerSpec.parse(spec)).sim["imperfections"].bow
     seen = []  # camera <- board (its mean plane) at each reading, the truth
 
-    recorrect = case.recorrect and camera.shape is not None
-    frames, spans = (_frame_log(camera.shape) if recorrect else []), []  # the frames logged, each reading's span
-
     def visit(q: np.ndarray):
         arm.move_joints(q, speed, accel, 60.0)
         arm.wait_until_still(0.2, 10.0)
-        first = len(frames)
         reading = camera.measure(1, 10.0)[0]
-        spans.append((first, len(frames)))
         seen.append(camera.source.target_pose(rig.clock.now()) @ mean_plane)
         return arm.read_joints(), reading, seen[-1]
 
@@ -240,10 +239,8 @@ def run_case(case: Case) -> Outcome:
                              np.random.default_rng([case.seed, 36]))
     q_read, readings, truths = (list(column) for column in zip(*visited(plan, visit, case.label), strict=True))
     robot_seconds = rig.clock.now() - t0
-    if recorrect:
-        readings = _recorrected(readings, [frames[a:b] for a, b in spans[1:]], camera.shape)
     m, q_read = len(readings), np.array(q_read)
-    meas = camera_rows(q_read, readings, np.random.default_rng([case.seed, 37]), sensor="flange",
+    meas = camera_rows(q_read, readings, np.random.default_rng([case.seed, 37]), not case.as_measured, sensor="flange",
                        scale_sigma=camera.settings.scale_sigma)
     check = meas.check
     rows_ = for_estimator(meas)
@@ -280,36 +277,6 @@ def _reading_z(readings: list, truths: list) -> tuple[float, float]:
              zip(readings, truths, strict=True)]
     orientation = [turn.magnitude() ** 2 / (3 * r.sigma_r**2) for r, turn in zip(readings, turns, strict=True)]
     return math.sqrt(float(np.mean(position))), math.sqrt(float(np.mean(orientation)))
-
-
-def _frame_log(shape) -> list:
-    """Keep, for every frame the tracker corrects, the lens estimate it used and the pose's response to the
-    parameters (bench only: the tracker's ``shape.take`` wrapped)."""
-    log: list = []
-    take = shape.take
-
-    def logged(pose, observation, camera, tp):
-        out = take(pose, observation, camera, tp)
-        shifts = pose_shifts(pose.rotation, pose.translation, observation.object_points, shape.half, camera,
-                             shape.lens).T
-        log.append((shape.estimate()[0], shifts))
-        return out
-
-    shape.take = logged
-    return log
-
-
-def _recorrected(readings: list, frames: list[list], shape) -> list:
-    """A what-if, not the product: every reading (its TP the board's centre) moved by its ``frames``' mean response
-    to the difference between the tracker's final estimate and the ones they were corrected with (frames rejected
-    as outliers are not known here: all count); the sigmas as they were."""
-    final = shape.estimate()[0]
-    out = []
-    for reading, logged in zip(readings, frames, strict=True):
-        move = np.mean([shifts @ (final - used) for used, shifts in logged], axis=0)
-        rotvec = (Rotation.from_rotvec(-move[:3]) * Rotation.from_rotvec(reading.rotvec)).as_rotvec()
-        out.append(replace(reading, position=reading.position - move[3:], rotvec=rotvec))
-    return out
 
 
 def _estimate(shape) -> str:
@@ -385,9 +352,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--realistic", default="", metavar="ERRORS",
                         help=f"only sessions with a real camera's errors, of {', '.join(REAL_ERRORS)} (comma-separated;"
                              " each on every seed and board), instead of the perfect camera's and the scale cases")
-    parser.add_argument("--recorrect", action="store_true",
-                        help="a what-if, not the product: every reading re-corrected by the tracker's final lens "
-                             "estimate before the fit (with --realistic cases that declare a lens's uncertainty)")
+    parser.add_argument("--as-measured", action="store_true",
+                        help="the readings as the tracker corrected them, one by one with its estimate so far, not "
+                             "again with its final estimate as identify does (what sessions of earlier versions gave)")
     args = parser.parse_args(argv)
     start = time.perf_counter()
     views = 30 if args.quick else args.views
@@ -399,8 +366,8 @@ def main(argv: list[str] | None = None) -> int:
     if not set(errors) <= set(REAL_ERRORS):
         parser.error(f"--realistic: of {', '.join(REAL_ERRORS)}")
     cases = [Case(board, seed, views, errors=e) for board in boards for seed in seeds for e in (errors or [""])]
-    if args.recorrect:
-        cases = [replace(case, recorrect=True) for case in cases]
+    if args.as_measured:
+        cases = [replace(case, as_measured=True) for case in cases]
     if not args.skip_scale and not errors:
         cases += [Case("A4", 1, views, MISPRINTS[-1], True)] + [Case("A4", 1, views, p, False) for p in MISPRINTS]
     results = ran(cases, _spec, run_case, args.jobs)

@@ -55,6 +55,7 @@ CASES = {"focal 0.2 %, centre (3, -2) px": (Imperfections(dfocal=0.002, dcx=3.0,
 class _Pose:
     rotation: np.ndarray
     translation: np.ndarray
+    rms: float = 0.0  # px: the tracker's corrected pose carries the residuals' RMS the estimate leaves
 
 
 @dataclass(frozen=True)
@@ -112,7 +113,8 @@ def session(truth: Imperfections, priors: tuple[float, ...], count: int, seed: i
             image = exact + bias + rng.normal(0.0, NOISE_PX, exact.shape)
             _, rvec, tvec = cv2.solvePnP(CORNERS, image, CAMERA.matrix, CAMERA.distortion)
             pose = _Pose(cv2.Rodrigues(rvec)[0], tvec.ravel())
-            corrected, (shared, _) = shape.take(pose, _Seen(CORNERS, image), CAMERA, np.zeros(3))
+            corrected, correction = shape.take(pose, _Seen(CORNERS, image), CAMERA, np.zeros(3))
+            shared = correction.bias
             flat.append(np.linalg.norm(pose.translation - translation))
             tracker.append(np.linalg.norm(corrected.translation - translation))
             stated.append(math.sqrt(3) * shared)

@@ -41,6 +41,55 @@ class DeviceIdentity:
                 "details": dict(self.details)}
 
 
+@dataclass(frozen=True, eq=False)
+class Correction:
+    """How a camera reading moves with the parameters θ of its board's shape and its lens's residual calibration
+    (``names``, drivers/camera/board_and_lens.py), so that a later, better estimate can correct it again.
+
+    The reading was corrected with the tracker's estimate of the time: its move is ``response @ θ`` (6,): the TP's
+    position (m, camera frame), then a turn (rad, camera frame), to be subtracted. ``response`` (6, p) is the
+    reading's frames' mean move per unit of each parameter, ``applied`` (6,) the mean of the moves their estimates
+    made, ``estimate`` (p,) and ``covariance`` (p, p) the tracker's estimate after the reading, ``bias`` (m) and
+    ``bias_r`` (rad) the per-axis part of its ``sigma`` and ``sigma_r`` that the estimate's uncertainty then made."""
+
+    names: tuple[str, ...]
+    response: Array
+    applied: Array
+    estimate: Array
+    covariance: Array
+    bias: float
+    bias_r: float
+
+    @classmethod
+    def mean(cls, corrections: Sequence[Correction]) -> Correction:
+        """Of several readings (or frames) averaged into one: the mean response and applied move, the last
+        estimate (the most frames behind it), the biases' RMS."""
+        last = corrections[-1]
+        return cls(last.names, np.mean([c.response for c in corrections], axis=0),
+                   np.mean([c.applied for c in corrections], axis=0), last.estimate, last.covariance,
+                   float(np.sqrt(np.mean([c.bias**2 for c in corrections]))),
+                   float(np.sqrt(np.mean([c.bias_r**2 for c in corrections]))))
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready (lists of floats)."""
+        return {"names": list(self.names), "response": np.asarray(self.response).tolist(),
+                "applied": np.asarray(self.applied).tolist(), "estimate": np.asarray(self.estimate).tolist(),
+                "covariance": np.asarray(self.covariance).tolist(), "bias": float(self.bias),
+                "bias_r": float(self.bias_r)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Correction:
+        """The inverse of :meth:`as_dict`; ValueError when a shape does not fit the names."""
+        names = tuple(str(n) for n in d["names"])
+        p = len(names)
+        out = cls(names, np.array(d["response"], dtype=float).reshape(6, p), np.array(d["applied"], dtype=float),
+                  np.array(d["estimate"], dtype=float), np.array(d["covariance"], dtype=float).reshape(p, p),
+                  float(d["bias"]), float(d["bias_r"]))
+        if out.applied.shape != (6,) or out.estimate.shape != (p,):
+            raise ValueError(f"a correction of {p} parameters needs 6 applied moves and {p} estimates")
+        return out
+
+
 @dataclass(frozen=True)
 class TrackerReading:
     """One TP measurement: ``position`` (3,) m in the tracker frame, ``timestamp`` s, the device's
@@ -50,7 +99,9 @@ class TrackerReading:
     ``rotvec`` (3,) a rotation vector (rad; ``position`` is then the frame's origin), with its per-axis standard
     uncertainty ``sigma_r`` (rad) when they report one. ``shared`` (m) and ``shared_r`` (rad): the parts of
     ``sigma`` and ``sigma_r`` (per axis, in quadrature) that every reading of the same still view shares (a
-    camera's detection bias for that view), which averaging readings does not reduce; None: readings independent."""
+    camera's detection bias for that view), which averaging readings does not reduce; None: readings independent.
+    ``correction``: how a camera reading corrected for its board's shape and its lens moves with their estimate
+    (:class:`Correction`; None for every other reading)."""
 
     position: Array
     timestamp: float
@@ -61,6 +112,7 @@ class TrackerReading:
     sigma_r: float | None = None
     shared: float | None = None
     shared_r: float | None = None
+    correction: Correction | None = None
 
 
 @runtime_checkable

@@ -5,13 +5,14 @@ Units: metres (positions, sigma), radians / metres (joints), seconds since the e
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from drivers.base import TrackerReading
+from drivers.base import Correction, TrackerReading
 from session.plan import Step
 
 STATUSES = ("ok", "missing")
@@ -70,6 +71,9 @@ class StepRecord:
     readings carry their ``tp``); ``position`` and ``sigma`` are then the first one's, ``samples`` and
     ``rejected`` the totals. Empty when every reading sees point 1: ``position`` is then point 1's. ``frames``:
     with a full-pose device, each tracked point's averaged orientation (:class:`FrameRecord`, ascending ids).
+    ``corrections``: with a camera that corrects for its board's shape and its lens, each tracked point's
+    (id, drivers/base.py ``Correction``) of its kept readings averaged, so that identify can correct the step again
+    with the session's final estimate (identify/sensors/recorrection.py); the position stored is as measured.
     Equality compares values (NaN equals NaN), so a record read back equals the one written.
     """
 
@@ -92,6 +96,7 @@ class StepRecord:
     used: tuple[bool, ...] = ()
     points: tuple[PointRecord, ...] = ()
     frames: tuple[FrameRecord, ...] = ()
+    corrections: tuple[tuple[int, Correction], ...] = ()
 
     def __post_init__(self) -> None:
         put = object.__setattr__
@@ -106,6 +111,7 @@ class StepRecord:
         put(self, "used", tuple(bool(u) for u in self.used))
         put(self, "points", tuple(self.points))
         put(self, "frames", tuple(self.frames))
+        put(self, "corrections", tuple((int(tp), c) for tp, c in self.corrections))
         if self.status not in STATUSES:
             raise ValueError(f"step {self.plan_index}: status must be 'ok' or 'missing', got {self.status!r}")
         if self.status == "ok":
@@ -164,7 +170,8 @@ class StepRecord:
         points = tuple((p.tp, _floats(p.position), nan_none(p.sigma), p.samples, p.rejected) for p in self.points)
         return (self.plan_index, self.kind, self.sweep, self.joint, self.role, _floats(self.q_cmd),
                 _floats(self.q_act), _floats(self.position), nan_none(self.sigma), self.samples, self.rejected,
-                self.status, self.reason, self.t_start, self.t_end, readings, self.used, points, self.frames)
+                self.status, self.reason, self.t_start, self.t_end, readings, self.used, points, self.frames,
+                tuple((tp, json.dumps(c.as_dict())) for tp, c in self.corrections))
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, StepRecord):

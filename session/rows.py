@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.base import TrackerReading
+from drivers.base import Correction, TrackerReading
 from kinematics.joint_errors import Coupling
 from session.records import FrameRecord, PointRecord, StepRecord
 from session.schema import ORIENTATION_COLUMNS, STEP_COLUMNS, columns, dump_q, load_q, nan_of
@@ -40,6 +40,8 @@ def insert_step(db: sqlite3.Connection, record: StepRecord, readings: list[tuple
                    [(i, p.tp, *p.position, p.sigma, p.samples, p.rejected) for p in record.points])
     db.executemany("INSERT INTO step_orientations (plan_index, tp, rx, ry, rz, sigma_r) VALUES (?, ?, ?, ?, ?, ?)",
                    [(i, f.tp, *f.rotvec, f.sigma_r) for f in record.frames])
+    db.executemany("INSERT INTO step_corrections (plan_index, tp, correction) VALUES (?, ?, ?)",
+                   [(i, tp, json.dumps(c.as_dict())) for tp, c in record.corrections])
 
 
 def retire_step(db: sqlite3.Connection, plan_index: int) -> None:
@@ -54,6 +56,7 @@ def retire_step(db: sqlite3.Connection, plan_index: int) -> None:
                " sigma_r) SELECT plan_index, ?, x, y, z, sigma, t, status, used, tp, rx, ry, rz, sigma_r FROM readings"
                " WHERE plan_index = ? ORDER BY id", (attempt, i))
     db.execute("DELETE FROM step_orientations WHERE plan_index = ?", (i,))
+    db.execute("DELETE FROM step_corrections WHERE plan_index = ?", (i,))
     db.execute("DELETE FROM readings WHERE plan_index = ?", (i,))
     db.execute("DELETE FROM steps WHERE plan_index = ?", (i,))
 
@@ -104,6 +107,17 @@ def frame_rows(db: sqlite3.Connection) -> dict[int, list[FrameRecord]]:
     for i, tp, rx, ry, rz, sigma_r in db.execute(
             "SELECT plan_index, tp, rx, ry, rz, sigma_r FROM step_orientations ORDER BY plan_index, tp"):
         out.setdefault(i, []).append(FrameRecord(tp, (rx, ry, rz), sigma_r))
+    return out
+
+
+def correction_rows(db: sqlite3.Connection) -> dict[int, list[tuple[int, Correction]]]:
+    """Plan index -> (tracked point id, its readings' correction) of a step measured by a camera that corrects for
+    its board's shape and its lens, ascending ids (empty for files without them)."""
+    if not columns(db, "step_corrections"):
+        return {}
+    out: dict[int, list[tuple[int, Correction]]] = {}
+    for i, tp, text in db.execute("SELECT plan_index, tp, correction FROM step_corrections ORDER BY plan_index, tp"):
+        out.setdefault(i, []).append((tp, Correction.from_dict(json.loads(text))))
     return out
 
 

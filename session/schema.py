@@ -23,6 +23,10 @@ The file (stdlib ``sqlite3``, rollback journal ``DELETE``, ``synchronous=EXTRA``
   per-axis sigma, rad); the raw readings' own are the ``rx, ry, rz, sigma_r`` columns of ``readings`` (NULL: a
   position only). Added by :func:`migrate` like ``tp``: a reader of an older version ignores them and reads the
   positions, which stay right, so the schema number does not change.
+- ``step_corrections(plan_index, tp, correction)``: with a camera that corrects its readings for its board's shape
+  and its lens, how every point's average at an ok step moves with their estimate (JSON of drivers/base.py
+  ``Correction``), so that identify corrects it again with the session's final estimate; the positions stored
+  stay as measured. A reader of an older version ignores it and reads the readings as corrected at the time.
 - ``events(id, t, run_id, kind, message)``: pauses, faults, retries, resumes, changed connection details.
 - ``retired_steps`` / ``retired_readings``: earlier attempts of steps measured again (``attempt`` 1, 2...),
   with the columns of ``steps`` / ``readings``; ``steps`` always holds the latest attempt.
@@ -124,6 +128,9 @@ CREATE TABLE IF NOT EXISTS stream_batches (
 CREATE TABLE IF NOT EXISTS step_orientations (
     plan_index INTEGER NOT NULL REFERENCES steps (plan_index), tp INTEGER NOT NULL, rx REAL NOT NULL,
     ry REAL NOT NULL, rz REAL NOT NULL, sigma_r REAL, PRIMARY KEY (plan_index, tp));
+CREATE TABLE IF NOT EXISTS step_corrections (
+    plan_index INTEGER NOT NULL REFERENCES steps (plan_index), tp INTEGER NOT NULL, correction TEXT NOT NULL,
+    PRIMARY KEY (plan_index, tp));
 CREATE TABLE IF NOT EXISTS writer (
     id INTEGER PRIMARY KEY CHECK (id = 1), pid INTEGER NOT NULL, host TEXT NOT NULL, since REAL NOT NULL,
     command TEXT NOT NULL);

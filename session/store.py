@@ -1,25 +1,23 @@
 """A session: one SQLite file holding everything an acquisition recorded, durable and resumable. ``acquire`` writes
 it (acquire/running/session.py adds the measurements); identify's edge reads it (identify/io/session_measurements.py).
-
 The file's tables and settings: session/schema.py; a step's rows: session/rows.py.
 
-Drift is not a table: home re-measurements are steps of kind ``home``, and :meth:`SessionFile.drift`
-computes their displacement from the first one on read (one source of truth, nothing to keep in sync).
+Drift is not a table: home re-measurements are steps of kind ``home``, and :meth:`SessionFile.drift` computes their
+displacement from the first one on read (one source of truth, nothing to keep in sync).
 
 Durability: a step and all its readings are written in one transaction, committed (fsync'd) before
-:meth:`SessionFile.record_step` returns; a ``kill -9`` at any moment leaves the whole step or none of it.
-With the rollback journal the session file itself holds every committed step after each commit: copying the
-``.session`` file alone between steps copies them all, and a closed (finished, stopped or killed between
-steps) session is one file with no ``-wal``/``-shm``/``-journal`` beside it. Only while SQLite writes a
-step's pages (microseconds) is the file alone in flux; ``acquire backup`` copies a live session safely. A writer
-killed while SQLite created its journal can leave an empty one beside the file: SQLite ignores it (it is not a
-step in flight) and the next writer removes it.
+:meth:`SessionFile.record_step` returns; a ``kill -9`` at any moment leaves the whole step or none of it. With the
+rollback journal the session file itself holds every committed step after each commit: copying the ``.session`` file
+alone between steps copies them all, and a closed (finished, stopped or killed between steps) session is one file with
+no ``-wal``/``-shm``/``-journal`` beside it. Only while SQLite writes a step's pages (microseconds) is the file alone
+in flux; ``acquire backup`` copies a live session safely. A writer killed while SQLite created its journal can leave an
+empty one beside the file: SQLite ignores it (it is not a step in flight) and the next writer removes it.
 Creation is atomic too: the file is built under a temporary name and linked into place complete.
 
-One writer: opening for writing (:meth:`SessionFile.create`, ``SessionFile.open(path, write=True)``) takes an
-exclusive ``flock`` on the file, held until :meth:`SessionFile.close`; a second writer is refused at once with a
-:class:`SessionBusy` naming the holder's PID (session/lock.py). Readers take no lock and work while
-a session is written. :func:`session.backup.backup_session` copies a live session.
+One writer: opening for writing (:meth:`SessionFile.create`, ``SessionFile.open(path, write=True)``) takes an exclusive
+``flock`` on the file, held until :meth:`SessionFile.close`; a second writer is refused at once with a
+:class:`SessionBusy` naming the holder's PID (session/lock.py). Readers take no lock and work while a session is
+written. :func:`session.backup.backup_session` copies a live session.
 
 Units: metres (positions, sigma), radians / metres (joints), seconds since the epoch (times).
 """
@@ -42,13 +40,14 @@ import numpy as np
 
 from common import __version__, stop_signals
 from common.outputs import OutputError, check_target, commit_file
-from drivers.base import DeviceIdentity
+from drivers.base import Correction, DeviceIdentity
 from kinematics.joint_errors import Coupling
 from session.lock import lock_for_writing, remove_dead_creations
 from session.lock import unlock as _unlock
 from session.plan import Plan
 from session.records import FrameRecord, PointRecord, StepRecord
 from session.rows import (
+    correction_rows,
     coupling_of,
     drift_from,
     frame_rows,
@@ -91,10 +90,8 @@ class RunInfo:
 
 
 class SessionFile:
-    """An open session file. Create with :meth:`create`, reopen with :meth:`open`; use as a context manager.
-
-    The file's contents, written and read back; ``acquire.running.session.Session`` adds its measurements (the rows as
-    the measurement CSV, identify/io/session_measurements.py)."""
+    """An open session file (its contents, written and read back). Create with :meth:`create`, reopen with
+    :meth:`open`; use as a context manager. ``acquire.running.session.Session`` adds its measurements."""
 
     def __init__(self, path: Path, conn: sqlite3.Connection, header: dict[str, Any], plan: Plan,
                  lock_fd: int | None = None) -> None:
@@ -273,8 +270,7 @@ class SessionFile:
     # --- runs and events ------------------------------------------------------------------------------------
 
     def begin_run(self) -> int:
-        """Start a run (a first start or a resume) and return its id. Runs left ``running`` by a process
-        that died are closed as failed first."""
+        """Start a run (a first start or a resume); its id. Runs a dead process left ``running`` close as failed."""
         if self._run_id is not None:
             raise SessionError(f"{self.path}: run {self._run_id} is still running; end it first")
         now = time.time()
@@ -427,13 +423,13 @@ class SessionFile:
         """Every recorded step in plan order, with its raw readings and, when it saw several tracked points,
         their averages."""
         by_step, points, frames = reading_rows(self._db), point_rows(self._db), frame_rows(self._db)
-        out = []
+        corrections, out = correction_rows(self._db), []
         for row in step_rows(self._db):
-            raw = by_step.get(row["plan_index"], [])
+            raw, i = by_step.get(row["plan_index"], []), row["plan_index"]
             try:
                 out.append(StepRecord(**row, readings=tuple(r for r, _ in raw), used=tuple(u for _, u in raw),
-                                      points=tuple(points.get(row["plan_index"], ())),
-                                      frames=tuple(frames.get(row["plan_index"], ()))))
+                                      points=tuple(points.get(i, ())), frames=tuple(frames.get(i, ())),
+                                      corrections=tuple(corrections.get(i, ()))))
             except ValueError as exc:
                 raise SessionError(f"{self.path}: inconsistent record ({exc})") from None
         return out
@@ -454,6 +450,11 @@ class SessionFile:
         """The averaged target-frame orientations of the steps a full-pose device measured (plan index -> ascending
         tracked-point ids; empty without any)."""
         return frame_rows(self._db)
+
+    def measured_corrections(self) -> dict[int, list[tuple[int, Correction]]]:
+        """How the steps a shape-and-lens-correcting camera measured move with its estimate (plan index ->
+        (tracked point id, drivers/base.py ``Correction``), ascending ids; empty without any)."""
+        return correction_rows(self._db)
 
     def streams(self) -> list[StreamData]:
         """The complete, current attempt of every stream step recorded ok, in plan order (continuous motion)."""

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from acquire.running.session import Session
 from common import stop_signals
 from drivers.averaging import mean_orientation, robust_mean
-from drivers.base import Robot, RobotState, Tracker, TrackerReading
+from drivers.base import Correction, Robot, RobotState, Tracker, TrackerReading
 from drivers.clock import Clock
 from drivers.errors import ConnectionFailed, DeviceTimeout, DriverError, MeasurementError, RobotFault
 from identify.estimator.geometry import circle_2d_algebraic, perpendicular_basis, plane_from_points
@@ -127,6 +127,17 @@ def average_frames(readings: list[TrackerReading], used: list[bool]) -> tuple[Fr
         sigma_r = (mean_sigma(float(np.median(device)), float(np.median(shared)) if shared else 0.0, len(mine))
                    if device else spread)
         out.append(FrameRecord(tp, tuple(float(v) for v in mean), sigma_r))
+    return tuple(out)
+
+
+def average_corrections(readings: list[TrackerReading], used: list[bool]) -> tuple[tuple[int, Correction], ...]:
+    """Each tracked point's kept readings' shape-and-lens corrections averaged (drivers/base.py
+    ``Correction.mean``), for a camera that makes them (empty otherwise)."""
+    out = []
+    for tp in sorted({r.tp for r in readings if r.correction is not None}):
+        mine = [r.correction for r, keep in zip(readings, used, strict=True) if keep and r.tp == tp]
+        if mine and all(c is not None for c in mine):
+            out.append((tp, Correction.mean(mine)))
     return tuple(out)
 
 
@@ -269,7 +280,7 @@ class Orchestrator:
             step, q_cmd=q_cmd, q_act=q_act, position=points[0].position, sigma=points[0].sigma, samples=sum(used),
             rejected=len(used) - sum(used), status="ok", reason="", t_start=t_start, t_end=self.clock.now(),
             readings=readings, used=used, points=tuple(points) if several else (),
-            frames=average_frames(readings, used),
+            frames=average_frames(readings, used), corrections=average_corrections(readings, used),
         )
 
     def _command(self, step: Step) -> tuple[float, ...]:

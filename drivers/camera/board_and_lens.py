@@ -39,11 +39,14 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from drivers.base import Correction
+
 Array = NDArray[np.float64]
 _STEP = 1e-6  # finite differences: m of a mode's height, rad of a turn, m of a translation, of a lens coefficient
 #: the lens's parameters in their order (module docstring): dk1, dk2 (``lens_sigma``), dfocal (``focal_sigma``),
 #: dcx, dcy (``centre_sigma``)
 LENS = ("dk1", "dk2", "dfocal", "dcx", "dcy")
+MODES = ("bow_x", "bow_y", "twist")  #: the shape modes' names, in their order (:func:`modes`)
 
 
 def modes(points: Array, half: tuple[float, float]) -> Array:
@@ -123,6 +126,7 @@ class BoardAndLens:
         sigmas = dict(zip(LENS, (lens_sigma, lens_sigma, focal_sigma, centre_sigma, centre_sigma), strict=True))
         self.half = (extent[0] / 2, extent[1] / 2)
         self.lens = tuple(name for name in LENS if sigmas[name] > 0)
+        self.names = (*MODES, *self.lens)
         prior = [flatness] * 3 + [sigmas[name] for name in self.lens]
         self.prior = np.array(prior, dtype=float)
         self.used = self.prior > 0  # a zero prior: that parameter is known (0)
@@ -172,15 +176,16 @@ class BoardAndLens:
         covariance[np.ix_(used, used)] = s2 * np.linalg.inv(weighted)
         return value, covariance
 
-    def take(self, pose: Any, observation: Any, camera: Any, tp: Array) -> tuple[Any, tuple[float, float]]:
+    def take(self, pose: Any, observation: Any, camera: Any, tp: Array) -> tuple[Any, Correction]:
         """:meth:`add` the frame, then return its pose corrected by the estimate (the flat pose minus its response
         to it, its reprojection RMS the residuals the estimate leaves: the corner noise, no longer the pattern of
-        the shape and the lens) and the per-axis RMS (m, rad) of the TP's and the orientation's error the
-        estimate's uncertainty leaves (``tp``: m, board frame)."""
+        the shape and the lens) and how the TP (``tp``: m, board frame) and the orientation move with the
+        parameters (drivers/base.py ``Correction``: its ``bias`` and ``bias_r`` the per-axis RMS, m and rad, of
+        the error the estimate's uncertainty leaves them)."""
         residual, g = self.add(pose, observation, camera)
         value, covariance = self.estimate()
         shifts = pose_shifts(pose.rotation, pose.translation, observation.object_points, self.half, camera,
-                             self.lens).T  # (6, p)
+                             self.lens).T  # (6, p): turn, then the board's translation
         move = shifts @ value
         rotation = cv2.Rodrigues(-move[:3])[0] @ np.asarray(pose.rotation, dtype=float)
         left = residual - g @ value
@@ -188,6 +193,8 @@ class BoardAndLens:
                             rms=float(np.sqrt(np.mean(left**2))))
         arm = rotation @ np.asarray(tp, dtype=float)  # the TP's lever in the camera frame: a turn ω moves it ω × arm
         cross = np.array([[0.0, arm[2], -arm[1]], [-arm[2], 0.0, arm[0]], [arm[1], -arm[0], 0.0]])  # ω -> ω × arm
-        position = (cross @ shifts[:3] + shifts[3:]) @ covariance @ (cross @ shifts[:3] + shifts[3:]).T
-        turn = shifts[:3] @ covariance @ shifts[:3].T
-        return corrected, (math.sqrt(float(np.trace(position)) / 3), math.sqrt(float(np.trace(turn)) / 3))
+        response = np.vstack([cross @ shifts[:3] + shifts[3:], shifts[:3]])  # (6, p): the TP (m), the turn (rad)
+        position = response[:3] @ covariance @ response[:3].T
+        turn = response[3:] @ covariance @ response[3:].T
+        return corrected, Correction(self.names, response, response @ value, value, covariance,
+                                     math.sqrt(float(np.trace(position)) / 3), math.sqrt(float(np.trace(turn)) / 3))

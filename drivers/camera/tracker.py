@@ -109,7 +109,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from drivers.averaging import CHI3_MEDIAN, frame_sigma, mean_orientation
-from drivers.base import Array, DeviceIdentity, TrackerReading, check_measure_request
+from drivers.base import Array, Correction, DeviceIdentity, TrackerReading, check_measure_request
 from drivers.camera import pose as pose_math
 from drivers.camera.board_and_lens import BoardAndLens
 from drivers.camera.flange_camera import MOUNTS
@@ -337,18 +337,18 @@ class ArucoTracker(FrameStreaming):
     def _reading(self) -> TrackerReading:
         s = self.settings
         poses: list[tuple[Pose, float]] = []
-        flat: list[tuple[float, float]] = []  # each frame's error from the board's shape (m, rad)
+        flat: list[Correction | None] = []  # how each frame moves with the board's shape and the lens
         failures: list[MeasurementError] = []
         while len(poses) < s.frames:
             image, stamp = self._grab(s.timeout)
             while not self.fresh.fresh(stamp):  # exposed before the request (drivers/camera/latency.py)
                 image, stamp = self._grab(self.fresh.time_left(stamp, s.timeout))
             try:
-                pose, bias = self._pose(image), (0.0, 0.0)
+                pose, correction = self._pose(image), None
                 if self.shape is not None:  # corrected for the board's shape seen so far (this frame included)
-                    pose, bias = self.shape.take(pose, self._observation, self.camera, s.tp)
+                    pose, correction = self.shape.take(pose, self._observation, self.camera, s.tp)
                 poses.append((pose, stamp))
-                flat.append(bias)
+                flat.append(correction)
             except MeasurementError as exc:
                 failures.append(exc)
                 self.frames_failed += 1
@@ -388,7 +388,7 @@ class ArucoTracker(FrameStreaming):
         self.reference = pose.rotation
         return pose
 
-    def _average(self, poses: list[tuple[Pose, float]], flat: list[tuple[float, float]]) -> TrackerReading:
+    def _average(self, poses: list[tuple[Pose, float]], flat: list[Correction | None]) -> TrackerReading:
         tp = self.settings.tp
         pts = np.array([p.point(tp) for p, _ in poses])
         noise = CornerNoise()
@@ -417,10 +417,13 @@ class ArucoTracker(FrameStreaming):
         # the detection's bias for this view: the same in every frame and every reading of it (not averaged)
         bias = np.array([p.view_bias(tp, pose_math.VIEW_BIAS_PX, pose_math.VIEW_TURN_BIAS_PX)
                          for (p, _), k in zip(poses, kept, strict=True) if k])
-        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0) + np.mean(np.array(flat)[kept] ** 2, axis=0))
+        mine = [c for c, k in zip(flat, kept, strict=True) if k and c is not None]
+        correction = Correction.mean(mine) if mine else None
+        shape = (0.0, 0.0) if correction is None else (correction.bias, correction.bias_r)
+        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0) + np.square(shape))
         return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=math.hypot(sigma, shared), status=status,
                               rotvec=rotvec, sigma_r=math.hypot(sigma_r, shared_r), shared=float(shared),
-                              shared_r=float(shared_r))
+                              shared_r=float(shared_r), correction=correction)
 
 
 def _summary(failures: list[MeasurementError], tried: int) -> MeasurementError:

@@ -3,6 +3,8 @@ identify's edge.
 
 Stop-and-go steps (:func:`measurements_from`): one row per ok step and tracked point seen, q = the ACTUAL joint
 readings, the averaged TP, the plan's sweep id, joint and role; home re-measurements become held-out free poses.
+A camera's steps corrected for its board's shape and its lens are corrected again with the session's final estimate
+(identify/sensors/recorrection.py).
 A step whose readings carried no device sigma (an I++ server, a profile without one) has, in the session, the spread
 of its own few readings as its sigma: 5 readings give 12 degrees of freedom, a figure off by 20 % either way, and a
 fit that weighs rows by such figures as if known leans on the steps that happened to scatter little and finds a
@@ -35,6 +37,7 @@ from identify.estimator.measurements import Measurements
 from identify.estimator.timing import SweepStreams, coarse_clock_offset, interpolate_joints
 from identify.io.csvio import CsvContent, format_measurements
 from identify.sensors.metadata import UNKNOWN
+from identify.sensors.recorrection import recorrected
 from kinematics.joint_errors import Coupling
 from session.records import FrameRecord, PointRecord
 from session.rows import points_seen
@@ -113,6 +116,10 @@ def _step_measurements(session: SessionFile) -> Measurements:
     rows, points = session.measured_rows()
     meas = measurements_from(rows, points, session.plan.joint_types, session.coupling, session.measured_frames())
     meas = replace(meas, **sensor_of(session.header))
+    corrections = {(i, tp): c for i, mine in session.measured_corrections().items() for tp, c in mine}
+    if corrections:  # a camera's readings corrected again with its final shape-and-lens estimate
+        meas = recorrected(meas, [corrections.get((r["plan_index"], tp)) for r in rows
+                                  for tp, _, _ in points_seen(r, points)])
     spread = session.spread_sigmas()
     if not spread:
         return meas

@@ -27,6 +27,7 @@ from drivers.camera.flange_camera import CAMERA_MOUNT
 from drivers.sim.rig import SimulatedRig
 from drivers.spec import TrackerSpec
 from identify.applications.calibrated import CalibratedModel
+from identify.io.session_measurements import session_measurements
 from kinematics.dh import frames_from_joints
 
 # the README's spelling, an A4-size ChArUco board measured with a caliper, few views and frames to stay quick
@@ -36,6 +37,8 @@ SPEC = ("aruco:sim?mount=flange&board=charuco&cols=11&rows=8&square=0.025&size=0
 # well inside its target (seed 3: stated 72 um with one frame, 65 um with two; the target 300 um)
 RUN_SPEC = SPEC.replace("&frames=2", "&frames=1")
 ROBOT = "mock:ur5e?seed=3"
+# the calibration's focal length 0.2 % long and principal point (3, -2) px off, declared: the tracker estimates them
+LENS = "&dfocal=0.002&dcx=3&dcy=-2&focal_sigma=0.005&centre_sigma=5"
 FIT, CHECK = 10, 3
 # the bracket's drawing: 12 mm and 5° off the simulation's true mount (drivers/camera/flange_camera.py CAMERA_MOUNT)
 MOUNT = "0.005,-0.05,0.045,0,0,85"
@@ -134,9 +137,11 @@ def test_a_located_flange_session_stopped_mid_way_resumes_and_identifies_the_fla
                                                                                     capsys) -> None:
     """The locate phase finds the mount the planner was not told (within what it states), the run stops at a
     protective stop (the locate's 10 moves, then the 12th of the views) and resumes; the flange within the stated
-    accuracy, which the dry run's bound predicted within a factor 3."""
+    accuracy, which the dry run's bound predicted within a factor 3. The camera's focal length and principal point
+    are off and declared: every step keeps its correction, the resumed run's estimate starts afresh, and the
+    session's measurements are corrected again with the first run's (of more views: least variance)."""
     session = tmp_path / "flange.session"
-    assert acquire_main(["--robot", ROBOT + "&fault=protective_stop@12", "--tracker", RUN_SPEC, "--config",
+    assert acquire_main(["--robot", ROBOT + "&fault=protective_stop@12", "--tracker", RUN_SPEC + LENS, "--config",
                          str(site_file), "--free-poses", str(FIT), "--session", str(session), "--yes", "--quiet",
                          "--camera-mount", MOUNT]) == 1
     out = capsys.readouterr().out
@@ -162,8 +167,22 @@ def test_a_located_flange_session_stopped_mid_way_resumes_and_identifies_the_fla
         assert [step.plan_index for step in s.steps()] == list(range(total))
         assert [r.outcome for r in s.runs()] == ["failed", "complete"]
         q = np.array([step.q for step in s.plan.steps if step.role == "fit"])
+        steps = s.steps()
+        rows = session_measurements(s)
+    corrections = {step.plan_index: step.corrections[0][1] for step in steps}
+    assert len(corrections) == total and all(len(step.corrections) == 1 for step in steps)
+    spread = {step.plan_index: float(np.trace(corrections[step.plan_index].covariance)) for step in steps}
+    first, second = list(range(recorded)), list(range(recorded, total))  # the runs' steps, in the plan's order
+    for run in (first, second):  # each run's estimate firms up from its own views, the resumed one from none
+        assert np.all(np.diff([spread[i] for i in run]) < 0), [spread[i] for i in run]
+    final = corrections[first[-1]]  # the first run's last: the estimate of least variance
+    assert spread[first[-1]] == min(spread.values())
+    for step, row in zip(steps, rows.points, strict=True):  # stored as measured, corrected again when read
+        c = corrections[step.plan_index]
+        np.testing.assert_allclose(row, np.array(step.position) - (c.response @ final.estimate - c.applied)[:3],
+                                   atol=1e-12)
     # the physical flange origin in the board frame: through the identified arm and camera mount, and the truth
-    truth_rig = SimulatedRig.from_spec(ROBOT, RUN_SPEC)
+    truth_rig = SimulatedRig.from_spec(ROBOT, RUN_SPEC + LENS)
     truth = frames_from_joints(truth_rig.truth, q)[:, -1, :3, 3]
     model = CalibratedModel.from_document(doc).model
     camera = frames_from_joints(model, q)[:, -1] @ np.array(doc["sensor_frame"])  # board <- camera

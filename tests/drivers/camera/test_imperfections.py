@@ -299,7 +299,8 @@ def test_the_boards_shape_or_the_lenss_error_is_estimated_from_the_views_and_the
     for pose in views:
         flat, obs = flat_pose(pose)
         residual, moves = BoardAndLens(priors[0], priors[1], BOARD.extent, *priors[2:]).add(flat, obs, CAMERA)  # alone
-        corrected, (shared, _) = shape.take(flat, obs, CAMERA, np.zeros(3))
+        corrected, correction = shape.take(flat, obs, CAMERA, np.zeros(3))
+        shared = correction.bias
         rms.append([flat.rms, corrected.rms, math.sqrt(np.mean((residual - moves @ expected) ** 2))])
         mean_plane = pose[:3, 3] + pose[:3, 2] * 2 * truth.bow / 3
         corrected_errors.append(np.linalg.norm(corrected.translation - mean_plane))
