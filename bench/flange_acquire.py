@@ -1,6 +1,7 @@
 """``acquire`` with a simulated camera on the flange, end to end through the locate phase (docs/benchmarks.md, 24c).
 
     PYTHONPATH=. .venv/bin/python -m bench.flange_acquire [--seeds 1 2] [--views 40] [--check 10] [--mount ...]
+        [--options ...] [--keep FOLDER]
 
 Per seed: ``acquire --robot mock:ur5e?seed=S --tracker aruco:sim?mount=flange&... --camera-mount M`` (the README's
 A4 ChArUco board measured with a caliper, 1280x720, 3 frames a view; ``M`` a bracket drawing 12 mm and 5° off the
@@ -106,7 +107,8 @@ def run(seed: int, views: int, check: int, mount: str, folder: Path, options: st
                f"{float(predicted[0]):>9.4f} {float(predicted[1]):>9.4f} {stated * 1e3:>9.4f} {fit * 1e3:>10.4f} "
                f"{anywhere * 1e3:>12.4f} {workspace['accuracy_rms'] * 1e3:>9.4f} "
                f"{workspace['likely_rms'][0] * 1e3:>6.4f}-{workspace['likely_rms'][1] * 1e3:<6.4f} "
-               f"{doc['verdict']['status']:>7} {scale:>5} {code:>4}")
+               f"{doc['verdict']['status']:>7} {scale:>5} {code:>4}"
+               + "".join(f"  {c['name']}: {c['status']}" for c in doc["verdict"]["checks"] if c["status"] != "pass"))
     return locate_row, run_row
 
 
@@ -119,11 +121,14 @@ def main() -> None:
     parser.add_argument("--options", default="", help="appended to the camera's spec, e.g. "
                         "'&dfocal=0.002&dcx=3&dcy=-2&focal_sigma=0.005&centre_sigma=5' (errors that leave the board's "
                         "frame where it is: not bow=)")
+    parser.add_argument("--keep", type=Path, help="a new folder to keep the sessions and results in (default: none)")
     args = parser.parse_args()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) if args.keep is None else args.keep
+        folder.mkdir(parents=True, exist_ok=args.keep is None)
         for seed in args.seeds:
-            rows.append(run(seed, args.views, args.check, args.mount, Path(tmp), args.options))
+            rows.append(run(seed, args.views, args.check, args.mount, folder, args.options))
             print(*rows[-1], sep="\n", flush=True)
     print("\nlocate: errors against the truth and the stated 1 sigma (mm, mrad), corner noise (px), robot time (s)")
     print("seed seen mount_mm  sigma_mm mount_mrad sigma_mrad board_mm  sigma_mm board_mrad sigma_mrad sigma_px "
@@ -131,7 +136,7 @@ def main() -> None:
     print(*(r[0] for r in rows), sep="\n")
     print("\nrun: robot time (s) of the views, predicted (dry run; after the locate: fit, random) and achieved (mm)")
     print("seed views images missing estimate_s  robot_s dry_fit pred_fit pred_rand stated_mm fit_rms_mm random_rms_mm "
-          "ws_stated ws_90%_range  verdict scale exit")
+          "ws_stated ws_90%_range  verdict scale exit  (checks not passed)")
     print(*(r[1] for r in rows), sep="\n")
 
 

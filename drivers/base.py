@@ -70,6 +70,13 @@ class Correction:
                    float(np.sqrt(np.mean([c.bias**2 for c in corrections]))),
                    float(np.sqrt(np.mean([c.bias_r**2 for c in corrections]))))
 
+    def shares(self, covariance: Array) -> tuple[float, float]:
+        """Per-axis RMS (m, rad) of the error an estimate of ``covariance`` (p, p) leaves this reading's position and
+        orientation."""
+        position = self.response[:3] @ covariance @ self.response[:3].T
+        turn = self.response[3:] @ covariance @ self.response[3:].T
+        return float(np.sqrt(np.trace(position) / 3)), float(np.sqrt(np.trace(turn) / 3))
+
     def as_dict(self) -> dict[str, object]:
         """JSON-ready (lists of floats)."""
         return {"names": list(self.names), "response": np.asarray(self.response).tolist(),

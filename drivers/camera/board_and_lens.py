@@ -31,7 +31,6 @@ covariance leaves goes into the reading's ``shared`` error. A reading made early
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 from typing import Any
 
@@ -194,7 +193,6 @@ class BoardAndLens:
         arm = rotation @ np.asarray(tp, dtype=float)  # the TP's lever in the camera frame: a turn ω moves it ω × arm
         cross = np.array([[0.0, arm[2], -arm[1]], [-arm[2], 0.0, arm[0]], [arm[1], -arm[0], 0.0]])  # ω -> ω × arm
         response = np.vstack([cross @ shifts[:3] + shifts[3:], shifts[:3]])  # (6, p): the TP (m), the turn (rad)
-        position = response[:3] @ covariance @ response[:3].T
-        turn = response[3:] @ covariance @ response[3:].T
-        return corrected, Correction(self.names, response, response @ value, value, covariance,
-                                     math.sqrt(float(np.trace(position)) / 3), math.sqrt(float(np.trace(turn)) / 3))
+        correction = Correction(self.names, response, response @ value, value, covariance, 0.0, 0.0)
+        bias, bias_r = correction.shares(covariance)
+        return corrected, replace(correction, bias=bias, bias_r=bias_r)

@@ -27,6 +27,22 @@ FEW_SWEEP_SAMPLES = 8
 
 
 @dataclass(frozen=True)
+class LensShare:
+    """The error a camera's rows share through its final estimate of its board's shape and its lens (p parameters,
+    identify/sensors/recorrection.py): ``response`` (m, 6, p) each row's move per unit of each (its position m, then a
+    turn rad, the device's frame), ``covariance`` (p, p) the estimate's, and ``share``, ``share_r`` (m,) the per-axis
+    RMS it makes of each row's position (m) and orientation (rad), which the rows' ``sigma``, ``sigma_r`` include."""
+
+    response: Array
+    covariance: Array
+    share: Array
+    share_r: Array
+
+    def subset(self, mask: NDArray[np.bool_]) -> LensShare:
+        return LensShare(self.response[mask], self.covariance, self.share[mask], self.share_r[mask])
+
+
+@dataclass(frozen=True)
 class Measurements:
     """One data set. Shapes: q (m, n), points (m, 3), sweep/joint (m,), sigma (m,) or None.
 
@@ -46,6 +62,8 @@ class Measurements:
     an eye-in-hand camera, rides on the flange and the rows are the fixed target's pose in its frame; identify turns
     them round first: identify/sensors/flange.py). ``scale_sigma``: the relative standard uncertainty of the device's
     length scale when a reference fixed it (a camera's board measured with a caliper), None when nothing did.
+    ``lens``: a camera's rows corrected with its final estimate of its board's shape and its lens, how each moves with
+    that estimate's error, one draw shared by every row (:class:`LensShare`; None for every other device).
     """
 
     joint_types: str
@@ -66,6 +84,7 @@ class Measurements:
     sigma_r: Array | None = None
     sensor: str = "fixed"
     scale_sigma: float | None = None
+    lens: LensShare | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "joint_types", check_joint_types(self.joint_types))
@@ -122,6 +141,7 @@ class Measurements:
             streamed=self.streamed[mask],
             rotvec=None if self.rotvec is None else self.rotvec[mask],
             sigma_r=None if self.sigma_r is None else self.sigma_r[mask],
+            lens=None if self.lens is None else self.lens.subset(mask),
         )
 
     def sweeps_of(self, joint: int) -> list[int]:
@@ -230,7 +250,7 @@ def orientation_rows(meas: Measurements) -> tuple[Measurements, list[str]]:
     joined = {name: np.concatenate([getattr(positions, name), getattr(extra, name)])
               for name in ("q", "points", "sweep", "joint", "sigma", "check", "row", "tp", "streamed", "rotvec")}
     t = None if meas.t is None else np.concatenate([meas.t, extra.t])
-    return replace(meas, t=t, sigma_r=None, **joined), notes
+    return replace(meas, t=t, sigma_r=None, lens=None, **joined), notes
 
 
 def prepared_joints(meas: Measurements, home: Array) -> tuple[Array, NDArray[np.int64]]:

@@ -16,7 +16,9 @@ from identify.estimator.measurements import Measurements
 from identify.results.pipeline import Identification
 from identify.results.verdict import with_session_check
 from identify.sensors.flange import flange_document, frame_point_jacobian, turned_round
+from identify.sensors.lens_share import shared_lines
 from identify.sensors.metadata import UNKNOWN
+from identify.sensors.recorrection import unfolded
 from identify.sensors.scale import ScaleResult, effect_rms, scale_result
 from identify.simulators.simulate import random_poses
 from kinematics.dh import DHModel, frames_from_joints
@@ -27,21 +29,25 @@ Array = NDArray[np.float64]
 @dataclass(frozen=True)
 class SensorRows:
     """Rows ready for the estimator (``meas``), the flange camera's ``view_point`` (camera frame, m; None for a
-    fixed device) and the ``scale_sigma`` of the data (None: the device's own scale)."""
+    fixed device), the ``scale_sigma`` of the data (None: the device's own scale) and, for a flange camera, its rows
+    as the camera gave them (``device``, the estimator's before turning round)."""
 
     meas: Measurements
     view_point: Array | None
     scale_sigma: float | None
+    device: Measurements | None = None
 
 
 def for_estimator(meas: Measurements) -> SensorRows:
     """``meas`` as the estimator takes it: a flange camera's rows turned round (its scale unknown unless the data
-    say otherwise); a fixed device's as they are."""
+    say otherwise), without its final lens estimate's share in their sigmas (the flange's statement carries that
+    error as one draw shared by every row: identify/sensors/lens_share.py); a fixed device's as they are."""
     if meas.sensor != "flange":
         return SensorRows(meas, None, meas.scale_sigma)
-    turned, view_point = turned_round(meas)
+    device = unfolded(meas)
+    turned, view_point = turned_round(device)
     scale = UNKNOWN if meas.scale_sigma is None else meas.scale_sigma
-    return SensorRows(replace(turned, scale_sigma=scale), view_point, scale)
+    return SensorRows(replace(turned, scale_sigma=scale), view_point, scale, device)
 
 
 def checked(ident: Identification, rows: SensorRows, nominal: DHModel | None) -> tuple[Identification, ScaleResult]:
@@ -88,20 +94,21 @@ def documented(doc: dict[str, Any], rows: SensorRows, scale: ScaleResult, ident:
         if ident is not None:
             tool_frame = np.array(doc["tool_frame"])
             q = np.unique(ident.refinement.q, axis=0)
-            fit = flange_accuracy(ident, tool_frame, q, scale)
+            lens = shared_lines(ident, rows.device, rows.view_point) if rows.device is not None else None
+            fit = flange_accuracy(ident, tool_frame, q, scale, lens)
             doc["flange_accuracy_rms"] = fit.as_dict()["accuracy_rms"]
             doc["flange"] = {"fit_poses": fit.as_dict()}
             if limits is not None:
-                doc["flange"]["workspace"] = _workspace(ident, tool_frame, scale, limits, rows.meas)
+                doc["flange"]["workspace"] = _workspace(ident, tool_frame, scale, limits, rows.meas, lens)
     return doc
 
 
 def _workspace(ident: Identification, tool_frame: Array, scale: ScaleResult, limits: Array,
-               meas: Measurements) -> dict[str, Any]:
+               meas: Measurements, lens: Array | None) -> dict[str, Any]:
     readings = random_poses(np.asarray(limits, dtype=float), WORKSPACE_POSES, np.random.default_rng(0))
     q = readings if meas.coupling is None else readings @ meas.coupling.matrix.T + meas.coupling.offset
     found = outside(ident.domain, q, meas.joint_types) if ident.domain is not None else None
-    section = {**flange_accuracy(ident, tool_frame, q, scale).as_dict(), "poses": WORKSPACE_POSES,
+    section = {**flange_accuracy(ident, tool_frame, q, scale, lens).as_dict(), "poses": WORKSPACE_POSES,
                "poses_outside_domain": None if found is None else found.count}
     section["note"] = ("random poses within the robot's joint limits (the margin 10 % of each range); outside the "
                        "fitted joint ranges (domain) the figure is a lower bound: errors the model cannot hold are "
@@ -109,16 +116,21 @@ def _workspace(ident: Identification, tool_frame: Array, scale: ScaleResult, lim
     return section
 
 
-def flange_accuracy(ident: Identification, tool_frame: Array, q: Array, scale: ScaleResult) -> FlangeAccuracy:
+def flange_accuracy(ident: Identification, tool_frame: Array, q: Array, scale: ScaleResult,
+                    lens: Array | None = None) -> FlangeAccuracy:
     """The 3D standard uncertainty (m) of the flange's position (the last DH frame's origin, through the fitted
     camera frame ``tool_frame``: last DH frame <- view-point frame) predicted by the plain model over DH joint values
-    ``q`` (m, n), with its likely range (:class:`FlangeAccuracy`)."""
+    ``q`` (m, n), with its likely range (:class:`FlangeAccuracy`); ``lens`` (k, d): the lines' answer to the camera's
+    final lens estimate's error (identify/sensors/lens_share.py), d more independent directions."""
     offset = np.linalg.inv(np.asarray(tool_frame, dtype=float))[:3, 3]  # the flange's origin in the view frame
     jac = frame_point_jacobian(ident.plain, q, offset)
     k = jac.shape[2]
     cov = ident.plain.covariance[:k, :k]
     values, vectors = np.linalg.eigh((cov + cov.T) / 2)
-    spread = jac.reshape(-1, k) @ (vectors * np.sqrt(np.clip(values, 0.0, None)))
+    directions = vectors * np.sqrt(np.clip(values, 0.0, None))
+    if lens is not None:
+        directions = np.hstack([directions, lens])
+    spread = jac.reshape(-1, k) @ directions
     weights = np.linalg.eigvalsh(spread.T @ spread / len(q))  # mean square per independent direction, m²
     flange = frames_from_joints(ident.model, np.atleast_2d(q))[:, -1, :3, 3]
     shared = effect_rms(flange, scale.sigma)  # the scale: one more direction

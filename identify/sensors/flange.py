@@ -35,11 +35,11 @@ from identify.estimator.poe import points_from_lines, target_rotations
 
 Array = NDArray[np.float64]
 
-def turned_round(meas: Measurements) -> tuple[Measurements, Array]:
+def turned_round(meas: Measurements, view_point: Array | None = None) -> tuple[Measurements, Array]:
     """``meas`` of a flange camera (the board's pose in the camera frame on every row) as the estimator's rows (the
-    camera's view-point frame in the board frame, module docstring), and the view point c (3,), m, camera frame.
-    InputError unless every row has an orientation with ``sigma`` and ``sigma_r``: a position alone cannot be
-    turned round."""
+    camera's view-point frame in the board frame, module docstring), and the view point c (3,), m, camera frame
+    (``view_point`` when given, else the fit rows' median). InputError unless every row has an orientation with
+    ``sigma`` and ``sigma_r``: a position alone cannot be turned round."""
     if meas.rotvec is None or not np.all(meas.oriented):
         missing = meas.row[~meas.oriented][0] if meas.rotvec is not None else meas.row[0]
         raise InputError(f"line {int(missing)}: a '# sensor: flange' row needs the board's orientation (rx, ry, rz): "
@@ -49,7 +49,7 @@ def turned_round(meas: Measurements) -> tuple[Measurements, Array]:
     rotation = matrices_from_rotvecs(meas.rotvec)
     t = meas.points
     fit = ~meas.check
-    c = np.median(t[fit] if np.any(fit) else t, axis=0)
+    c = np.median(t[fit] if np.any(fit) else t, axis=0) if view_point is None else np.asarray(view_point, dtype=float)
     inverse = np.swapaxes(rotation, 1, 2)
     points = np.einsum("mij,mj->mi", inverse, c[None, :] - t)
     lever = np.linalg.norm(t - c, axis=1)

@@ -8,8 +8,9 @@ every row is corrected again with the session's most informed estimate (:func:`f
 sigma that came from the estimate's uncertainty is replaced by that of the final estimate. The correction is linear
 in the change of the estimate (it changes by a few of its standard deviations: micrometres of a reading).
 
-The final estimate's own error is one draw shared by every reading; a row's sigma carries it as if it were its own
-(the fit has no shared-error term), which is why its share is kept beside the rows (:func:`shared_part`).
+The final estimate's own error is one draw shared by every reading. A row's sigma carries its share (what a reader of
+the rows alone can use: conservative, as if each row's were its own), and the rows' ``lens`` says how each moves with
+it, so that a flange camera's fit carries it as one shared error instead (identify/sensors/lens_share.py).
 Units: metres, radians.
 """
 
@@ -22,7 +23,7 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from identify.estimator.measurements import Measurements
+from identify.estimator.measurements import LensShare, Measurements
 
 
 class Correction(Protocol):
@@ -39,6 +40,10 @@ class Correction(Protocol):
     bias: float
     bias_r: float
 
+    def shares(self, covariance: np.ndarray) -> tuple[float, float]:
+        """Per-axis RMS (m, rad) of the error an estimate of ``covariance`` leaves the reading."""
+        ...
+
 
 def final_estimate(corrections: Sequence[Correction]) -> Correction:
     """The correction whose estimate has the smallest total variance: within a run the last one (the most frames
@@ -50,35 +55,48 @@ def recorrected(meas: Measurements, corrections: Sequence[Correction | None]) ->
     """``meas`` with each row that has a correction (``corrections`` parallel to its rows, None for a row without
     one) moved to the final estimate: position minus the response times the estimate's change (m, the device's
     frame), orientation turned back by its turn (rad), sigma and sigma_r with the final estimate's share in place
-    of the one it had. ``meas`` unchanged when no row has one or their parameters differ (never in one session)."""
+    of the one it had; ``lens`` says how the rows move with the final estimate's error (:func:`unfolded` takes its
+    share out of the sigmas where the fit carries it as what it is). ``meas`` unchanged when no row has one or their
+    parameters differ (never in one session)."""
     if len(corrections) != len(meas):
         raise ValueError(f"{len(corrections)} corrections for {len(meas)} rows")
     known = [c for c in corrections if c is not None]
     if not known or len({c.names for c in known}) != 1:
         return meas
     final = final_estimate(known)
-    points = np.array(meas.points, dtype=float)
-    rotvec = None if meas.rotvec is None else np.array(meas.rotvec, dtype=float)
-    sigma = None if meas.sigma is None else np.array(meas.sigma, dtype=float)
-    sigma_r = None if meas.sigma_r is None else np.array(meas.sigma_r, dtype=float)
-    for k, c in enumerate(corrections):
-        if c is None:
-            continue
-        move = c.response @ final.estimate - c.applied  # (6,): the TP (m), then the turn (rad)
-        points[k] -= move[:3]
-        bias, bias_r = shared_part(c, final.covariance)
-        if rotvec is not None and np.all(np.isfinite(rotvec[k])):
-            rotvec[k] = (Rotation.from_rotvec(-move[3:]) * Rotation.from_rotvec(rotvec[k])).as_rotvec()
-        if sigma is not None:
-            sigma[k] = np.sqrt(max(sigma[k] ** 2 - c.bias**2, 0.0) + bias**2)
-        if sigma_r is not None and np.isfinite(sigma_r[k]):
-            sigma_r[k] = np.sqrt(max(sigma_r[k] ** 2 - c.bias_r**2, 0.0) + bias_r**2)
-    return replace(meas, points=points, rotvec=rotvec, sigma=sigma, sigma_r=sigma_r)
+    p = len(final.names)
+    response = np.array([np.zeros((6, p)) if c is None else c.response for c in corrections])
+    moves = np.array([np.zeros(6) if c is None else c.response @ final.estimate - c.applied for c in corrections])
+    old = np.array([(0.0, 0.0) if c is None else (c.bias, c.bias_r) for c in corrections])
+    new = np.array([(0.0, 0.0) if c is None else c.shares(final.covariance) for c in corrections])
+
+    def restated(sigma: np.ndarray | None, k: int) -> np.ndarray | None:
+        return None if sigma is None else np.sqrt(np.maximum(sigma**2 - old[:, k] ** 2, 0.0) + new[:, k] ** 2)
+
+    out = moved(meas, moves)
+    return replace(out, sigma=restated(meas.sigma, 0), sigma_r=restated(meas.sigma_r, 1),
+                   lens=LensShare(response, final.covariance, new[:, 0], new[:, 1]))
 
 
-def shared_part(correction: Correction, covariance: np.ndarray) -> tuple[float, float]:
-    """Per-axis RMS (m, rad) of the error the parameters' ``covariance`` leaves a reading of this ``correction``:
-    its position, its orientation."""
-    position = correction.response[:3] @ covariance @ correction.response[:3].T
-    turn = correction.response[3:] @ covariance @ correction.response[3:].T
-    return float(np.sqrt(np.trace(position) / 3)), float(np.sqrt(np.trace(turn) / 3))
+def moved(meas: Measurements, moves: np.ndarray) -> Measurements:
+    """``meas`` with each row's position less ``moves[:, :3]`` (m) and its orientation turned back by
+    ``moves[:, 3:]`` (rad, the device's frame: ``exp(-turn) R``)."""
+    rotvec = meas.rotvec
+    if rotvec is not None:
+        rotvec = np.array(rotvec, dtype=float)
+        turned = np.all(np.isfinite(rotvec), axis=1)
+        rotvec[turned] = (Rotation.from_rotvec(-moves[turned, 3:]) * Rotation.from_rotvec(rotvec[turned])).as_rotvec()
+    return replace(meas, points=np.asarray(meas.points, dtype=float) - moves[:, :3], rotvec=rotvec)
+
+
+def unfolded(meas: Measurements) -> Measurements:
+    """``meas`` with the final estimate's share taken out of its sigmas (for a fit that carries the shared error
+    itself: identify/sensors/lens_share.py); unchanged without one."""
+    lens = meas.lens
+    if lens is None:
+        return meas
+
+    def without(sigma: np.ndarray | None, share: np.ndarray) -> np.ndarray | None:
+        return None if sigma is None else np.sqrt(np.maximum(sigma**2 - share**2, 0.0))
+
+    return replace(meas, sigma=without(meas.sigma, lens.share), sigma_r=without(meas.sigma_r, lens.share_r))

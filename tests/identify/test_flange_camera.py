@@ -17,13 +17,14 @@ from scipy.spatial.transform import Rotation
 from acquire.planning.flange_views import GRAZING, OUT_OF_VIEW, TOO_FAR, FlangeCamera, board_in_view
 from common.errors import InputError
 from config.robots import load_robot
-from identify.estimator.measurements import Measurements
+from identify.estimator.measurements import LensShare, Measurements
 from identify.estimator.orientation import matrices_from_rotvecs, rotvecs_from_matrices
 from identify.io.csvio import format_measurements, parse_measurements
 from identify.io.result_io import result_to_dict
 from identify.results.pipeline import identify, split_holdout
 from identify.sensors.evidence import checked, documented, flange_accuracy, for_estimator
 from identify.sensors.metadata import UNKNOWN
+from identify.sensors.recorrection import moved
 from identify.sensors.scale import scale_result
 from identify.simulators.simulate import random_poses
 from kinematics.dh import frames_from_joints
@@ -213,3 +214,50 @@ def test_identify_reads_a_flange_csv_and_writes_the_cameras_frames(tmp_path, cap
     out = capsys.readouterr().out
     assert "scale:" in out  # the terminal's verdict line names the check
     assert "over the workspace stated to" in out and "where it is a lower bound" in out
+
+
+LENS_SD = np.array([3e-4, 0.5, 0.5])  # the final lens estimate's sd: focal length (relative), principal point (px)
+
+
+def _lensed(meas: Measurements, rng: np.random.Generator) -> Measurements:
+    """``meas`` with one draw of a lens estimate's error shared by every row, as re-corrected camera rows carry it
+    (identify/sensors/recorrection.py): the focal length's moves the board along its line of sight (a 1100 px camera:
+    the pose scales by -dfocal), the principal point's turns it by dcx / f about the camera's y axis (dcy / f about
+    -x) and moves it with the turn; the share in every sigma, the responses in ``lens``."""
+    t = meas.points
+    response = np.zeros((len(t), 6, 3))
+    response[:, :3, 0] = -t
+    for column, turn in ((1, [0.0, 1 / 1100.0, 0.0]), (2, [-1 / 1100.0, 0.0, 0.0])):
+        response[:, 3:, column] = turn
+        response[:, :3, column] = np.cross(turn, t)
+    covariance = np.diag(LENS_SD**2)
+    share = np.sqrt(np.einsum("mij,jk,mik->m", response[:, :3], covariance, response[:, :3]) / 3)
+    share_r = np.sqrt(np.einsum("mij,jk,mik->m", response[:, 3:], covariance, response[:, 3:]) / 3)
+    off = moved(meas, -response @ rng.normal(0.0, LENS_SD))
+    return replace(off, sigma=np.hypot(off.sigma, share), sigma_r=np.hypot(off.sigma_r, share_r),
+                   lens=LensShare(response, covariance, share, share_r))
+
+
+def test_a_lens_estimates_error_shared_by_every_view_is_stated_as_one_draw() -> None:
+    """Every view off by one draw of the lens estimate's error (0.15-0.25 mm of a view: 3-5x its noise). Kept in
+    each row's sigma it was stated 2.6x too large (1 of 10 calibrations within its range: the fit's mount takes up
+    most of it, which independent errors cannot say); carried through the fit as one shared error it is stated as
+    it is: over 10 calibrations the flange's error over the workspace lies within the stated 90 % range in at least
+    6 (binomial: 0.2 % to fail when the range is right) and the pooled ratio within 0.7-1.4."""
+    inside, realised, stated = 0, [], []
+    flange = np.linalg.inv(MOUNT)[:, 3]
+    for seed in range(10):
+        truth, meas = _truth_and_rows(arm=seed)
+        rows = for_estimator(replace(_lensed(meas, np.random.default_rng([7, seed])), scale_sigma=1e-5))
+        ident, scale = checked(identify(rows.meas, ROBOT.nominal), rows, ROBOT.nominal)
+        doc = documented(result_to_dict(ident, ROBOT.nominal, "ur5e"), rows, scale, ident, ROBOT.limits)
+        where = random_poses(ROBOT.limits, 300, np.random.default_rng([1, seed]))
+        fitted = frames_from_joints(ident.model, where)[:, -1] @ np.array(doc["sensor_frame"])
+        error = np.einsum("mij,j->mi", fitted - frames_from_joints(truth, where)[:, -1] @ MOUNT, flange)[:, :3]
+        rms = math.sqrt(np.mean(np.sum(error**2, axis=1)))
+        workspace = doc["flange"]["workspace"]
+        inside += workspace["likely_rms"][0] <= rms <= workspace["likely_rms"][1]
+        realised.append(rms**2)
+        stated.append(workspace["accuracy_rms"] ** 2)
+    assert inside >= 6, inside
+    assert 0.7 < math.sqrt(sum(realised) / sum(stated)) < 1.4

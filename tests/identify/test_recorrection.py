@@ -21,7 +21,7 @@ from drivers.camera.imperfections import Imperfections  # noqa: E402
 from drivers.camera.intrinsics import CameraIntrinsics  # noqa: E402
 from identify.estimator.measurements import Measurements  # noqa: E402
 from identify.io.session_measurements import session_measurements  # noqa: E402
-from identify.sensors.recorrection import final_estimate, recorrected, shared_part  # noqa: E402
+from identify.sensors.recorrection import final_estimate, recorrected  # noqa: E402
 from tests._session_writer import CONFIG, ROBOT, TRACKER, record_for, small_plan  # noqa: E402
 
 CAMERA = CameraIntrinsics.from_fov(1280, 720, 60.0)
@@ -94,7 +94,7 @@ def test_readings_corrected_with_the_final_estimate_are_closer_and_state_what_is
         after = np.linalg.norm(again.points - exact, axis=1)
         assert np.sqrt(np.mean(after**2)) < np.sqrt(np.mean(before**2)) / 2.5, (seed, before, after)
         left.append(np.mean(after**2))
-        stated.append(3 * np.mean([shared_part(r.correction, final.covariance)[0] ** 2 for r in readings]))
+        stated.append(3 * np.mean([r.correction.shares(final.covariance)[0] ** 2 for r in readings]))
     ratio = math.sqrt(sum(left) / sum(stated))
     assert math.sqrt(chi2.ppf(0.001, 9) / 9) < ratio < math.sqrt(chi2.ppf(0.999, 9) / 9), ratio
 
@@ -119,10 +119,10 @@ def test_the_move_the_sigma_and_the_final_estimate_follow_the_record() -> None:
     np.testing.assert_allclose(again.points[0], 1.0 - move[:3], atol=1e-15)
     np.testing.assert_allclose(again.points[1:], meas.points[1:], atol=0)
     np.testing.assert_allclose(Rotation.from_rotvec(again.rotvec[0]).as_rotvec(), -move[3:], atol=1e-12)
-    bias, bias_r = shared_part(early, best.covariance)
+    bias, bias_r = early.shares(best.covariance)
     assert again.sigma[0] == pytest.approx(math.sqrt(1e-6 - 0.25e-6 + bias**2), rel=1e-12)
     assert again.sigma_r[0] == pytest.approx(math.sqrt(1e-6 - 0.04e-6 + bias_r**2), rel=1e-12)
-    own = shared_part(best, best.covariance)[0]
+    own = best.shares(best.covariance)[0]
     assert again.sigma[1] == 1e-3
     assert again.sigma[2] == pytest.approx(math.sqrt(1e-6 - 0.02e-3**2 + own**2), rel=1e-12)
     with pytest.raises(ValueError, match="2 corrections for 3 rows"):

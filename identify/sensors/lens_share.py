@@ -1,0 +1,89 @@
+"""A flange camera's final shape-and-lens estimate's error through the fit: one draw shared by every reading.
+
+Readings corrected again with the session's final estimate (identify/sensors/recorrection.py) all carry that
+estimate's error δθ (covariance C, the rows' ``lens``): reading i is off by its response ``R_i δθ``, the same δθ in
+every one. Kept in each row's sigma it weighs the rows as if it were noise of their own (there the sigmas came out
+about 2x the rows' scatter, a reduced chi-square of 0.27, and the flange's statement 1.9x its error: docs/benchmarks.md
+section 24c), although most of it is a change of the camera's mount that the fit takes up. So the fit is given the
+rows without it (:func:`identify.sensors.recorrection.unfolded`) and it goes through the fit as what it is: for each
+principal direction of C (one standard deviation), the rows are moved by their responses, turned round as the fit's
+were (the same view point), and the fit's linear answer to that move (the weighted least-squares step of its
+Jacobian at the solution, over its inlier rows) is one direction of the lines' error; identify/sensors/evidence.py
+adds these to the flange's statement beside the fit's own covariance. Units: metres, radians.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+from numpy.typing import NDArray
+
+from identify.estimator.measurements import Measurements, orientation_rows
+from identify.estimator.orientation import matrices_from_rotvecs
+from identify.results.pipeline import Identification
+from identify.sensors.flange import turned_round
+from identify.sensors.recorrection import moved
+
+Array = NDArray[np.float64]
+
+
+def shared_lines(ident: Identification, device: Measurements, view_point: Array) -> Array:
+    """(k, d): the plain model's k line parameters' answer to each of the d principal directions (one standard
+    deviation each) of the final estimate's error in ``device``'s rows (the camera's, before turning round about
+    ``view_point``); (k, 0) without a ``lens`` or when the fit's rows cannot be told among them."""
+    problem = ident.plain.problem
+    k = problem.n_lines
+    lens = device.lens
+    if lens is None:
+        return np.zeros((k, 0))
+    values, vectors = np.linalg.eigh((lens.covariance + lens.covariance.T) / 2)
+    keep = values > 1e-12 * max(float(values.max()), 0.0)
+    if not np.any(keep):
+        return np.zeros((k, 0))
+    rows = _fit_order(problem, _fit_rows(device, view_point))
+    if rows is None:
+        return np.zeros((k, 0))
+    x0 = np.zeros(problem.size)
+    jacobian, base = problem.jacobian(x0), problem.residuals(x0)
+    out = []
+    for value, vector in zip(values[keep], vectors.T[keep], strict=True):
+        moves = lens.response @ (np.sqrt(value) * vector)  # (m, 6)
+        fit = _fit_rows(moved(device, moves), view_point)
+        shifted = copy.copy(problem)
+        shifted.points = fit.points[rows]
+        if problem.rotations is not None:
+            shifted.rotations = np.where(problem.oriented[:, None, None], _rotations(fit)[rows], np.nan)
+        step = np.linalg.lstsq(jacobian, base - shifted.residuals(x0), rcond=None)[0]
+        out.append(step[:k])
+    return np.array(out).T
+
+
+def _fit_rows(device: Measurements, view_point: Array) -> Measurements:
+    """The fit's rows of ``device`` turned round about ``view_point``: the held-out rows left out, each orientation a
+    row of its own after the positions (identify/estimator/measurements.orientation_rows)."""
+    turned, _ = turned_round(device, view_point)
+    return orientation_rows(turned.subset(~turned.check))[0]
+
+
+def _rotations(rows: Measurements) -> Array:
+    out = np.full((len(rows), 3, 3), np.nan)
+    oriented = rows.oriented
+    out[oriented] = matrices_from_rotvecs(rows.rotvec[oriented])
+    return out
+
+
+def _fit_order(problem, rows: Measurements) -> NDArray[np.int64] | None:
+    """Which of ``rows`` each of the fit problem's rows is (the fit keeps its inliers in their order): matched in
+    order by position (the same numbers) and kind (position or orientation); None when one cannot be found."""
+    oriented = rows.oriented
+    out, j = [], 0
+    for point, turning in zip(problem.points, problem.oriented, strict=True):
+        while j < len(rows) and not (oriented[j] == turning and np.allclose(rows.points[j], point, rtol=0,
+                                                                            atol=1e-12)):
+            j += 1
+        if j == len(rows):
+            return None
+        out.append(j)
+        j += 1
+    return np.array(out, dtype=np.int64)
