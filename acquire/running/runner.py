@@ -30,7 +30,7 @@ from identify.report.terminal import format_reference, format_report
 from identify.results.pipeline import identify
 from identify.results.verdict import missing_steps as missing_steps_check
 from identify.results.verdict import with_session_check
-from identify.sensors.evidence import checked, documented, flange_text, for_estimator
+from identify.sensors.evidence import camera_text, checked, documented, for_estimator
 from session.rows import factory_calibration
 
 log = logging.getLogger("acquire")
@@ -118,7 +118,7 @@ def identify_session(session: Session, session_path: Path, robot: RobotModel) ->
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")
     doc = result_to_dict(ident, robot.nominal, robot.name, source=str(session_path), nominal_model=robot.document)
     doc = documented(doc, rows, scale, ident, robot.limits)  # a flange camera's mount, board, flange accuracy
-    for line in flange_text(doc):
+    for line in camera_text(doc):
         say(line)
     if section := controller_section(calibration, robot.joint_types):  # what the arm runs today ("before")
         doc["controller"] = section

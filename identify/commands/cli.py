@@ -31,7 +31,7 @@ from identify.io.session_measurements import open_session, read_session
 from identify.io.verification_io import load_verification
 from identify.report.terminal import format_reference, format_report
 from identify.results.pipeline import Identification, identify, split_holdout
-from identify.sensors.evidence import checked, documented, flange_text, for_estimator
+from identify.sensors.evidence import camera_text, checked, documented, for_estimator
 from kinematics.dh import frames_from_joints
 from kinematics.joint_errors import Coupling
 from session.schema import is_session_file
@@ -231,7 +231,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             print("\n".join(models), file=sys.stderr)
         return doc
     print(format_report(ident, nominal, nominal_name))
-    for line in flange_text(doc):
+    for line in camera_text(doc):
         print(line)
     if reference is not None or note:
         print(format_reference(ident, *reference) if reference is not None else f"note: {note}")

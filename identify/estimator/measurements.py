@@ -31,15 +31,28 @@ class LensShare:
     """The error a camera's rows share through its final estimate of its board's shape and its lens (p parameters,
     identify/sensors/recorrection.py): ``response`` (m, 6, p) each row's move per unit of each (its position m, then a
     turn rad, the device's frame), ``covariance`` (p, p) the estimate's, and ``share``, ``share_r`` (m,) the per-axis
-    RMS it makes of each row's position (m) and orientation (rad), which the rows' ``sigma``, ``sigma_r`` include."""
+    RMS it makes of each row's position (m) and orientation (rad), which the rows' ``sigma``, ``sigma_r`` include;
+    ``names`` the parameters and ``estimate`` (p,) their values (drivers/camera/board_and_lens.py: m, relative, px).
+    """
 
     response: Array
     covariance: Array
     share: Array
     share_r: Array
+    names: tuple[str, ...] = ()
+    estimate: Array | None = None
 
     def subset(self, mask: NDArray[np.bool_]) -> LensShare:
-        return LensShare(self.response[mask], self.covariance, self.share[mask], self.share_r[mask])
+        return replace(self, response=self.response[mask], share=self.share[mask], share_r=self.share_r[mask])
+
+    def as_dict(self) -> dict[str, list[float]]:
+        """Each estimated parameter (a prior above 0: variance above 0) as [value, standard deviation] (empty without
+        ``names``)."""
+        if not self.names:
+            return {}
+        sd = np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+        value = np.zeros(len(sd)) if self.estimate is None else self.estimate
+        return {name: [float(v), float(s)] for name, v, s in zip(self.names, value, sd, strict=True) if s > 0}
 
 
 @dataclass(frozen=True)

@@ -58,6 +58,9 @@ def checked(ident: Identification, rows: SensorRows, nominal: DHModel | None) ->
     return ident, scale
 
 
+CAMERA_NOTE = ("the camera's final estimate of its board's shape (bow_x, bow_y, twist: m) and its calibration's errors "
+               "(dk1, dk2; dfocal: relative; dcx, dcy: px) as [value, standard deviation]; every reading was corrected "
+               "with it. A focal or principal-point error many deviations from 0 says: calibrate the camera again")
 WORKSPACE_POSES = 300  #: random poses within the joint limits where a flange camera's result states the flange
 LIKELY = (0.05, 0.95)  #: the probabilities bounding the range a single calibration's realised RMS is stated in
 
@@ -82,13 +85,17 @@ class FlangeAccuracy:
 
 def documented(doc: dict[str, Any], rows: SensorRows, scale: ScaleResult, ident: Identification | None = None,
                limits: Array | None = None) -> dict[str, Any]:
-    """The result document with the sensor's sections: ``scale`` (unless the device's own) and, for a flange camera,
+    """The result document with the sensor's sections: ``scale`` (unless the device's own), ``camera_estimate`` (a
+    camera that estimated its board's shape and its lens: :data:`CAMERA_NOTE`) and, for a flange camera,
     ``sensor: flange`` with ``sensor_frame``, ``target``, ``view_point`` and (given ``ident``)
     ``flange_accuracy_rms``: :func:`flange_accuracy` over the fit poses (m; null with an unknown scale), and ``flange``:
     that and its likely range at the fit poses and, given the robot's joint ``limits`` (n, 2; rad or m), at
     :data:`WORKSPACE_POSES` random poses within them, with how many lie outside the fitted joint ranges."""
     if rows.scale_sigma is not None:
         doc = {**doc, "scale": scale.as_dict(effect_rms(rows.meas.points, scale.sigma))}
+    lens = (rows.device if rows.device is not None else rows.meas).lens
+    if lens is not None:
+        doc = {**doc, "camera_estimate": {**lens.as_dict(), "note": CAMERA_NOTE}}
     if rows.view_point is not None:
         doc = flange_document(doc, rows.view_point)
         if ident is not None:
@@ -146,10 +153,19 @@ def flange_accuracy(ident: Identification, tool_frame: Array, q: Array, scale: S
     return FlangeAccuracy(math.sqrt(mean + fixed), math.sqrt(low + fixed), math.sqrt(high + fixed))
 
 
-def flange_text(doc: dict[str, Any]) -> list[str]:
-    """What a flange camera's result states about the flange, in lines for the operator (none for other devices)."""
-    section = doc.get("flange") or {}
+def camera_text(doc: dict[str, Any]) -> list[str]:
+    """What a camera's result states about the camera's own estimate and, on the flange, about the flange, in lines
+    for the operator (none for other devices)."""
+    units = {"bow_x": (1e3, " mm"), "bow_y": (1e3, " mm"), "twist": (1e3, " mm"), "dk1": (1.0, ""), "dk2": (1.0, ""),
+             "dfocal": (100.0, " %"), "dcx": (1.0, " px"), "dcy": (1.0, " px")}
+    estimate = {k: v for k, v in (doc.get("camera_estimate") or {}).items() if k in units}
     lines = []
+    if estimate:
+        parts = [f"{name} {value * units[name][0]:.3g} ± {sd * units[name][0]:.2g}{units[name][1]}"
+                 for name, (value, sd) in estimate.items()]
+        lines.append(f"camera: its board's shape and calibration errors as estimated ({', '.join(parts)}); every "
+                     "reading corrected with them")
+    section = doc.get("flange") or {}
     for key, where in (("fit_poses", "at the fit poses"), ("workspace", "over the workspace")):
         part = section.get(key)
         if not part:

@@ -75,7 +75,7 @@ def recorrected(meas: Measurements, corrections: Sequence[Correction | None]) ->
 
     out = moved(meas, moves)
     return replace(out, sigma=restated(meas.sigma, 0), sigma_r=restated(meas.sigma_r, 1),
-                   lens=LensShare(response, final.covariance, new[:, 0], new[:, 1]))
+                   lens=LensShare(response, final.covariance, new[:, 0], new[:, 1], final.names, final.estimate))
 
 
 def moved(meas: Measurements, moves: np.ndarray) -> Measurements:

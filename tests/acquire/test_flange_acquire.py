@@ -156,7 +156,11 @@ def test_a_located_flange_session_stopped_mid_way_resumes_and_identifies_the_fla
     turn = np.linalg.norm(Rotation.from_matrix(mount[:3, :3] @ CAMERA_MOUNT[:3, :3].T).as_rotvec())
     assert off < 4 * located["mount_sigma_m"] + 2e-5 and turn < 4 * located["mount_sigma_rad"] + 2e-5, located
     assert acquire_main(["--resume", str(session), "--quiet"]) == 0
+    assert "camera: its board's shape and calibration errors as estimated (dfocal 0.2" in capsys.readouterr().out
     doc = yaml.safe_load(session.with_suffix(".result.yaml").read_text(encoding="utf-8"))
+    for name, true in (("dfocal", 0.002), ("dcx", 3.0), ("dcy", -2.0)):  # the estimate the rows were corrected with
+        value, sd = doc["camera_estimate"][name]
+        assert abs(value - true) < 4 * sd, (name, value, sd)
     assert doc["sensor"] == "flange"
     checks = {c["name"]: c for c in doc["verdict"]["checks"]}
     assert checks["missing_steps"]["status"] == "pass"  # every planned view saw the board (real detection)

@@ -235,7 +235,7 @@ def _lensed(meas: Measurements, rng: np.random.Generator) -> Measurements:
     share_r = np.sqrt(np.einsum("mij,jk,mik->m", response[:, 3:], covariance, response[:, 3:]) / 3)
     off = moved(meas, -response @ rng.normal(0.0, LENS_SD))
     return replace(off, sigma=np.hypot(off.sigma, share), sigma_r=np.hypot(off.sigma_r, share_r),
-                   lens=LensShare(response, covariance, share, share_r))
+                   lens=LensShare(response, covariance, share, share_r, ("dfocal", "dcx", "dcy"), np.zeros(3)))
 
 
 def test_a_lens_estimates_error_shared_by_every_view_is_stated_as_one_draw() -> None:
@@ -259,5 +259,6 @@ def test_a_lens_estimates_error_shared_by_every_view_is_stated_as_one_draw() -> 
         inside += workspace["likely_rms"][0] <= rms <= workspace["likely_rms"][1]
         realised.append(rms**2)
         stated.append(workspace["accuracy_rms"] ** 2)
+        assert doc["camera_estimate"]["dcx"] == [0.0, LENS_SD[1]]  # the estimate the rows were corrected with
     assert inside >= 6, inside
     assert 0.7 < math.sqrt(sum(realised) / sum(stated)) < 1.4
