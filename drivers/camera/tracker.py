@@ -419,8 +419,8 @@ class ArucoTracker(FrameStreaming):
                          for (p, _), k in zip(poses, kept, strict=True) if k])
         mine = [c for c, k in zip(flat, kept, strict=True) if k and c is not None]
         correction = Correction.mean(mine) if mine else None
-        shape = (0.0, 0.0) if correction is None else (correction.bias, correction.bias_r)
-        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0) + np.square(shape))
+        estimated = (0.0, 0.0) if correction is None else (correction.bias, correction.bias_r)  # the estimate's share
+        shared, shared_r = np.sqrt(np.mean(bias**2, axis=0) + np.square(estimated))
         return TrackerReading(pts[kept].mean(axis=0), stamp, sigma=math.hypot(sigma, shared), status=status,
                               rotvec=rotvec, sigma_r=math.hypot(sigma_r, shared_r), shared=float(shared),
                               shared_r=float(shared_r), correction=correction)

@@ -68,7 +68,8 @@ LIKELY = (0.05, 0.95)  #: the probabilities bounding the range a single calibrat
 @dataclass(frozen=True)
 class FlangeAccuracy:
     """The flange's predicted 3D position error (m) over a set of poses: ``rms`` the expected RMS (the fit's
-    covariance, its model error and the scale's ``|p| sigma``; inf with an unknown scale) and ``low``, ``high`` the
+    covariance, a camera's final lens estimate's error, its model error and the scale's ``|p| sigma``; inf with an
+    unknown scale) and ``low``, ``high`` the
     range (:data:`LIKELY`) the realised RMS of one calibration lies in. The parameters' error is one draw shared by
     every pose, so the RMS over many poses is a weighted chi-square over the few directions that reach the flange
     and scatters from calibration to calibration (Satterthwaite's gamma with its mean and variance)."""
@@ -101,21 +102,21 @@ def documented(doc: dict[str, Any], rows: SensorRows, scale: ScaleResult, ident:
         if ident is not None:
             tool_frame = np.array(doc["tool_frame"])
             q = np.unique(ident.refinement.q, axis=0)
-            lens = shared_lines(ident, rows.device, rows.view_point) if rows.device is not None else None
-            fit = flange_accuracy(ident, tool_frame, q, scale, lens)
+            lens_lines = shared_lines(ident, rows.device, rows.view_point) if rows.device is not None else None
+            fit = flange_accuracy(ident, tool_frame, q, scale, lens_lines)
             doc["flange_accuracy_rms"] = fit.as_dict()["accuracy_rms"]
             doc["flange"] = {"fit_poses": fit.as_dict()}
             if limits is not None:
-                doc["flange"]["workspace"] = _workspace(ident, tool_frame, scale, limits, rows.meas, lens)
+                doc["flange"]["workspace"] = _workspace(ident, tool_frame, scale, limits, rows.meas, lens_lines)
     return doc
 
 
 def _workspace(ident: Identification, tool_frame: Array, scale: ScaleResult, limits: Array,
-               meas: Measurements, lens: Array | None) -> dict[str, Any]:
+               meas: Measurements, lens_lines: Array | None) -> dict[str, Any]:
     readings = random_poses(np.asarray(limits, dtype=float), WORKSPACE_POSES, np.random.default_rng(0))
     q = readings if meas.coupling is None else readings @ meas.coupling.matrix.T + meas.coupling.offset
     found = outside(ident.domain, q, meas.joint_types) if ident.domain is not None else None
-    section = {**flange_accuracy(ident, tool_frame, q, scale, lens).as_dict(), "poses": WORKSPACE_POSES,
+    section = {**flange_accuracy(ident, tool_frame, q, scale, lens_lines).as_dict(), "poses": WORKSPACE_POSES,
                "poses_outside_domain": None if found is None else found.count}
     section["note"] = ("random poses within the robot's joint limits (the margin 10 % of each range); outside the "
                        "fitted joint ranges (domain) the figure is a lower bound: errors the model cannot hold are "
@@ -124,19 +125,19 @@ def _workspace(ident: Identification, tool_frame: Array, scale: ScaleResult, lim
 
 
 def flange_accuracy(ident: Identification, tool_frame: Array, q: Array, scale: ScaleResult,
-                    lens: Array | None = None) -> FlangeAccuracy:
+                    lens_lines: Array | None = None) -> FlangeAccuracy:
     """The 3D standard uncertainty (m) of the flange's position (the last DH frame's origin, through the fitted
     camera frame ``tool_frame``: last DH frame <- view-point frame) predicted by the plain model over DH joint values
-    ``q`` (m, n), with its likely range (:class:`FlangeAccuracy`); ``lens`` (k, d): the lines' answer to the camera's
-    final lens estimate's error (identify/sensors/lens_share.py), d more independent directions."""
+    ``q`` (m, n), with its likely range (:class:`FlangeAccuracy`); ``lens_lines`` (k, d): the lines' answer to the
+    camera's final lens estimate's error (identify/sensors/lens_share.py), d more independent directions."""
     offset = np.linalg.inv(np.asarray(tool_frame, dtype=float))[:3, 3]  # the flange's origin in the view frame
     jac = frame_point_jacobian(ident.plain, q, offset)
     k = jac.shape[2]
     cov = ident.plain.covariance[:k, :k]
     values, vectors = np.linalg.eigh((cov + cov.T) / 2)
     directions = vectors * np.sqrt(np.clip(values, 0.0, None))
-    if lens is not None:
-        directions = np.hstack([directions, lens])
+    if lens_lines is not None:
+        directions = np.hstack([directions, lens_lines])
     spread = jac.reshape(-1, k) @ directions
     weights = np.linalg.eigvalsh(spread.T @ spread / len(q))  # mean square per independent direction, m²
     flange = frames_from_joints(ident.model, np.atleast_2d(q))[:, -1, :3, 3]

@@ -53,7 +53,7 @@ def shared_lines(ident: Identification, device: Measurements, view_point: Array)
         shifted = copy.copy(problem)
         shifted.points = fit.points[rows]
         if problem.rotations is not None:
-            shifted.rotations = np.where(problem.oriented[:, None, None], _rotations(fit)[rows], np.nan)
+            shifted.rotations = _rotations(fit)[rows]  # NaN on position rows, as the fit's
         step = np.linalg.lstsq(jacobian, base - shifted.residuals(x0), rcond=None)[0]
         out.append(step[:k])
     return np.array(out).T
