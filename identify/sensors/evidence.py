@@ -14,9 +14,9 @@ from scipy.stats import gamma
 from identify.applications.domain import outside
 from identify.estimator.measurements import Measurements
 from identify.results.pipeline import Identification
-from identify.results.verdict import with_session_check
+from identify.results.verdict import Verdict, holdout, with_session_check
 from identify.sensors.flange import flange_document, frame_point_jacobian, turned_round
-from identify.sensors.lens_share import shared_lines
+from identify.sensors.lens_share import held_out_share, shared_lines
 from identify.sensors.metadata import UNKNOWN
 from identify.sensors.recorrection import unfolded
 from identify.sensors.scale import ScaleResult, effect_rms, scale_result
@@ -51,11 +51,30 @@ def for_estimator(meas: Measurements) -> SensorRows:
 
 
 def checked(ident: Identification, rows: SensorRows, nominal: DHModel | None) -> tuple[Identification, ScaleResult]:
-    """``ident`` with the ``scale`` check in its verdict (when the data's scale is not the device's own)."""
+    """``ident`` with the ``scale`` check in its verdict (when the data's scale is not the device's own) and, for a
+    flange camera's rows that share its final lens estimate's error, that error's part in the held-out check."""
     scale = scale_result(ident, nominal, rows.scale_sigma)
     if scale.check is not None:
         ident = replace(ident, verdict=with_session_check(ident.verdict, scale.check))
-    return ident, scale
+    return _lens_held_out(ident, rows), scale
+
+
+def _lens_held_out(ident: Identification, rows: SensorRows) -> Identification:
+    """``ident`` with the held-out expectation of its plain model grown by what the camera's shared lens error leaves
+    the held-out rows (identify/sensors/lens_share.py ``held_out_share``; the rows' sigmas no longer hold it) and its
+    holdout check made again on it; as it is without that error, held-out rows, or when joint errors were fitted
+    (their check compares the models: not redone here)."""
+    validation = ident.validations.get("plain")
+    if rows.device is None or rows.device.lens is None or validation is None or set(ident.models) != {"plain"}:
+        return ident
+    lines = shared_lines(ident, rows.device, rows.view_point)
+    extra = held_out_share(ident, rows.device, rows.view_point, lines)
+    if extra <= 0:
+        return ident
+    grown = replace(validation, expected=math.sqrt(validation.expected**2 + extra))
+    check = holdout(grown.samples, grown.rms, grown.expected, "plain")
+    kept = tuple(check if c.name == "holdout" else c for c in ident.verdict.checks)
+    return replace(ident, validations={**ident.validations, "plain": grown}, verdict=Verdict(kept))
 
 
 CAMERA_NOTE = ("the camera's final estimate of its board's shape (bow_x, bow_y, twist: m) and its calibration's errors "

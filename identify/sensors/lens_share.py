@@ -9,7 +9,8 @@ rows without it (:func:`identify.sensors.recorrection.unfolded`) and it goes thr
 principal direction of C (one standard deviation), the rows are moved by their responses, turned round as the fit's
 were (the same view point), and the fit's linear answer to that move (the weighted least-squares step of its
 Jacobian at the solution, over its inlier rows) is one direction of the lines' error; identify/sensors/evidence.py
-adds these to the flange's statement beside the fit's own covariance. Units: metres, radians.
+adds these to the flange's statement beside the fit's own covariance, and what they leave the held-out rows
+(:func:`held_out_share`) to the held-out check's expectation. Units: metres, radians.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from numpy.typing import NDArray
 from identify.estimator.measurements import Measurements, orientation_rows
 from identify.estimator.orientation import matrices_from_rotvecs
 from identify.results.pipeline import Identification
-from identify.sensors.flange import turned_round
+from identify.sensors.flange import frame_point_jacobian, turned_round
 from identify.sensors.recorrection import moved
 
 Array = NDArray[np.float64]
@@ -87,3 +88,26 @@ def _fit_order(problem, rows: Measurements) -> NDArray[np.int64] | None:
         out.append(j)
         j += 1
     return np.array(out, dtype=np.int64)
+
+
+def held_out_share(ident: Identification, device: Measurements, view_point: Array, lines: Array) -> float:
+    """Mean square (m², 3D) that the shared error leaves the held-out rows' positions (``device``'s check rows,
+    turned round about ``view_point``) beyond what the fit's answer to it (``lines``: :func:`shared_lines`) predicts
+    there: what the held-out check adds to its expectation (the rows' sigmas no longer hold it). 0 without held-out
+    rows or directions."""
+    check = device.check
+    if lines.shape[1] == 0 or device.lens is None or not np.any(check):
+        return 0.0
+    values, vectors = np.linalg.eigh((device.lens.covariance + device.lens.covariance.T) / 2)
+    keep = values > 1e-12 * max(float(values.max()), 0.0)
+    q = device.q[check]
+    if device.coupling is not None:
+        q = q @ device.coupling.matrix.T + device.coupling.offset
+    predicted = frame_point_jacobian(ident.plain, q, np.zeros(3))  # (c, 3, k): the view point, board frame
+    before = turned_round(device, view_point)[0].points[check]
+    total = 0.0
+    for value, vector, answer in zip(values[keep], vectors.T[keep], lines.T, strict=True):
+        after = turned_round(moved(device, device.lens.response @ (np.sqrt(value) * vector)), view_point)[0]
+        left = after.points[check] - before - predicted @ answer
+        total += float(np.mean(np.sum(left**2, axis=1)))
+    return total
