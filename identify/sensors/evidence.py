@@ -122,6 +122,11 @@ def documented(doc: dict[str, Any], rows: SensorRows, scale: ScaleResult, ident:
             tool_frame = np.array(doc["tool_frame"])
             q = np.unique(ident.refinement.q, axis=0)
             lens_lines = shared_lines(ident, rows.device, rows.view_point) if rows.device is not None else None
+            if lens_lines is None and rows.device is not None and rows.device.lens is not None:
+                share = 1e3 * float(np.sqrt(np.mean(rows.device.lens.share**2)))
+                left_out = (f"the flange's stated accuracy leaves out the error of the camera's final lens estimate "
+                            f"({share:.3g} mm a reading, per axis): a lower bound")
+                doc["warnings"] = [*doc.get("warnings", []), left_out]
             fit = flange_accuracy(ident, tool_frame, q, scale, lens_lines)
             doc["flange_accuracy_rms"] = fit.as_dict()["accuracy_rms"]
             doc["flange"] = {"fit_poses": fit.as_dict()}

@@ -29,10 +29,11 @@ from identify.sensors.recorrection import moved
 Array = NDArray[np.float64]
 
 
-def shared_lines(ident: Identification, device: Measurements, view_point: Array) -> Array:
+def shared_lines(ident: Identification, device: Measurements, view_point: Array) -> Array | None:
     """(k, d): the plain model's k line parameters' answer to each of the d principal directions (one standard
     deviation each) of the final estimate's error in ``device``'s rows (the camera's, before turning round about
-    ``view_point``); (k, 0) without a ``lens`` or when the fit's rows cannot be told among them."""
+    ``view_point``); (k, 0) without a ``lens``; None when the fit's rows cannot be told among them (the caller says
+    so: the error is then left out)."""
     problem = ident.plain.problem
     k = problem.n_lines
     lens = device.lens
@@ -44,7 +45,7 @@ def shared_lines(ident: Identification, device: Measurements, view_point: Array)
         return np.zeros((k, 0))
     rows = _fit_order(problem, _fit_rows(device, view_point))
     if rows is None:
-        return np.zeros((k, 0))
+        return None
     x0 = np.zeros(problem.size)
     jacobian, base = problem.jacobian(x0), problem.residuals(x0)
     out = []
@@ -90,13 +91,13 @@ def _fit_order(problem, rows: Measurements) -> NDArray[np.int64] | None:
     return np.array(out, dtype=np.int64)
 
 
-def held_out_share(ident: Identification, device: Measurements, view_point: Array, lines: Array) -> float:
+def held_out_share(ident: Identification, device: Measurements, view_point: Array, lines: Array | None) -> float:
     """Mean square (m², 3D) that the shared error leaves the held-out rows' positions (``device``'s check rows,
     turned round about ``view_point``) beyond what the fit's answer to it (``lines``: :func:`shared_lines`) predicts
     there: what the held-out check adds to its expectation (the rows' sigmas no longer hold it). 0 without held-out
     rows or directions."""
     check = device.check
-    if lines.shape[1] == 0 or device.lens is None or not np.any(check):
+    if lines is None or lines.shape[1] == 0 or device.lens is None or not np.any(check):
         return 0.0
     values, vectors = np.linalg.eigh((device.lens.covariance + device.lens.covariance.T) / 2)
     keep = values > 1e-12 * max(float(values.max()), 0.0)

@@ -286,3 +286,16 @@ def test_the_held_out_check_expects_what_the_shared_lens_error_leaves_its_rows()
         passed += next(c for c in ident.verdict.checks if c.name == "holdout").status == "pass"
     assert 0.75 < math.sqrt(np.mean(ratios)) < 1.35, ratios
     assert passed >= 6
+
+
+def test_a_lens_error_the_fit_cannot_carry_is_said_not_dropped(monkeypatch) -> None:
+    """When the fit's rows cannot be told among the camera's (they always can today), the flange's statement says it
+    leaves the lens estimate's error out, with its size, rather than state less than it knows."""
+    monkeypatch.setattr("identify.sensors.lens_share._fit_order", lambda problem, rows: None)
+    _, meas = _truth_and_rows(arm=0)
+    rows = for_estimator(replace(_lensed(meas, np.random.default_rng(7)), scale_sigma=1e-5))
+    ident, scale = checked(identify(rows.meas, ROBOT.nominal), rows, ROBOT.nominal)
+    doc = documented(result_to_dict(ident, ROBOT.nominal, "ur5e"), rows, scale, ident, ROBOT.limits)
+    share = 1e3 * math.sqrt(np.mean(rows.device.lens.share**2))
+    assert any(w.startswith("the flange's stated accuracy leaves out the error of the camera's final lens estimate "
+                            f"({share:.3g} mm") for w in doc["warnings"]), doc["warnings"]
