@@ -117,22 +117,28 @@ def test_one_fit_gives_the_camera_and_the_board_within_the_stated_accuracy() -> 
         == ["scale"]  # without the board measured, the scale is only the nominal's: a warning
 
 
+def _stated_and_true(truth: object, meas: Measurements, seed: int) -> tuple[dict, float]:
+    """The result of ``meas`` (the board measured to 10 ppm) with the robot's limits, and the true flange's RMS error
+    (m) of its model and camera frame at 300 random poses within them (drawn with ``seed``: not the result's own)."""
+    rows = for_estimator(replace(meas, scale_sigma=1e-5))
+    ident, scale = checked(identify(rows.meas, ROBOT.nominal), rows, ROBOT.nominal)
+    doc = documented(result_to_dict(ident, ROBOT.nominal, "ur5e"), rows, scale, ident, ROBOT.limits)
+    where = random_poses(ROBOT.limits, 300, np.random.default_rng([1, seed]))
+    fitted = frames_from_joints(ident.model, where)[:, -1] @ np.array(doc["sensor_frame"])
+    flange = np.linalg.inv(MOUNT)[:, 3]
+    error = np.einsum("mij,j->mi", fitted - frames_from_joints(truth, where)[:, -1] @ MOUNT, flange)[:, :3]
+    return doc, math.sqrt(np.mean(np.sum(error**2, axis=1)))
+
+
 def test_the_workspace_accuracy_and_its_range_hold_over_calibrations() -> None:
     """The flange over the workspace (random poses within the joint limits, far beyond the views near home) as the
     result states it: over 12 calibrations (other arms, other noise) the realised RMS lies within the stated 90 %
     range in at least 8 (binomial: 0.4 % to fail when the range is right) and the pooled ratio sqrt(mean RMS² /
     mean stated²) within 0.75-1.3 (its own scatter over 12 draws: about 0.09)."""
     inside, realised, stated = 0, [], []
-    flange = np.linalg.inv(MOUNT)[:, 3]
     for seed in range(12):
         truth, meas = _truth_and_rows(arm=seed)
-        rows = for_estimator(replace(meas, scale_sigma=1e-5))
-        ident, scale = checked(identify(rows.meas, ROBOT.nominal), rows, ROBOT.nominal)
-        doc = documented(result_to_dict(ident, ROBOT.nominal, "ur5e"), rows, scale, ident, ROBOT.limits)
-        where = random_poses(ROBOT.limits, 300, np.random.default_rng([1, seed]))  # not the result's own poses
-        fitted = frames_from_joints(ident.model, where)[:, -1] @ np.array(doc["sensor_frame"])
-        error = np.einsum("mij,j->mi", fitted - frames_from_joints(truth, where)[:, -1] @ MOUNT, flange)[:, :3]
-        rms = math.sqrt(np.mean(np.sum(error**2, axis=1)))
+        doc, rms = _stated_and_true(truth, meas, seed)
         workspace = doc["flange"]["workspace"]
         inside += workspace["likely_rms"][0] <= rms <= workspace["likely_rms"][1]
         realised.append(rms**2)
@@ -245,16 +251,9 @@ def test_a_lens_estimates_error_shared_by_every_view_is_stated_as_one_draw() -> 
     it is: over 10 calibrations the flange's error over the workspace lies within the stated 90 % range in at least
     6 (binomial: 0.2 % to fail when the range is right) and the pooled ratio within 0.7-1.4."""
     inside, realised, stated = 0, [], []
-    flange = np.linalg.inv(MOUNT)[:, 3]
     for seed in range(10):
         truth, meas = _truth_and_rows(arm=seed)
-        rows = for_estimator(replace(_lensed(meas, np.random.default_rng([7, seed])), scale_sigma=1e-5))
-        ident, scale = checked(identify(rows.meas, ROBOT.nominal), rows, ROBOT.nominal)
-        doc = documented(result_to_dict(ident, ROBOT.nominal, "ur5e"), rows, scale, ident, ROBOT.limits)
-        where = random_poses(ROBOT.limits, 300, np.random.default_rng([1, seed]))
-        fitted = frames_from_joints(ident.model, where)[:, -1] @ np.array(doc["sensor_frame"])
-        error = np.einsum("mij,j->mi", fitted - frames_from_joints(truth, where)[:, -1] @ MOUNT, flange)[:, :3]
-        rms = math.sqrt(np.mean(np.sum(error**2, axis=1)))
+        doc, rms = _stated_and_true(truth, _lensed(meas, np.random.default_rng([7, seed])), seed)
         workspace = doc["flange"]["workspace"]
         inside += workspace["likely_rms"][0] <= rms <= workspace["likely_rms"][1]
         realised.append(rms**2)
@@ -292,10 +291,9 @@ def test_a_lens_error_the_fit_cannot_carry_is_said_not_dropped(monkeypatch) -> N
     """When the fit's rows cannot be told among the camera's (they always can today), the flange's statement says it
     leaves the lens estimate's error out, with its size, rather than state less than it knows."""
     monkeypatch.setattr("identify.sensors.lens_share._fit_order", lambda problem, rows: None)
-    _, meas = _truth_and_rows(arm=0)
-    rows = for_estimator(replace(_lensed(meas, np.random.default_rng(7)), scale_sigma=1e-5))
-    ident, scale = checked(identify(rows.meas, ROBOT.nominal), rows, ROBOT.nominal)
-    doc = documented(result_to_dict(ident, ROBOT.nominal, "ur5e"), rows, scale, ident, ROBOT.limits)
-    share = 1e3 * math.sqrt(np.mean(rows.device.lens.share**2))
+    truth, meas = _truth_and_rows(arm=0)
+    lensed = _lensed(meas, np.random.default_rng(7))
+    doc, _ = _stated_and_true(truth, lensed, 0)
+    share = 1e3 * math.sqrt(np.mean(lensed.lens.share**2))
     assert any(w.startswith("the flange's stated accuracy leaves out the error of the camera's final lens estimate "
                             f"({share:.3g} mm") for w in doc["warnings"]), doc["warnings"]
