@@ -39,9 +39,8 @@ def shared_lines(ident: Identification, device: Measurements, view_point: Array)
     lens = device.lens
     if lens is None:
         return np.zeros((k, 0))
-    values, vectors = np.linalg.eigh((lens.covariance + lens.covariance.T) / 2)
-    keep = values > 1e-12 * max(float(values.max()), 0.0)
-    if not np.any(keep):
+    steps = _principal(lens.covariance)
+    if not len(steps):
         return np.zeros((k, 0))
     rows = _fit_order(problem, _fit_rows(device, view_point))
     if rows is None:
@@ -49,16 +48,23 @@ def shared_lines(ident: Identification, device: Measurements, view_point: Array)
     x0 = np.zeros(problem.size)
     jacobian, base = problem.jacobian(x0), problem.residuals(x0)
     out = []
-    for value, vector in zip(values[keep], vectors.T[keep], strict=True):
-        moves = lens.response @ (np.sqrt(value) * vector)  # (m, 6)
+    for step in steps:
+        moves = lens.response @ step  # (m, 6)
         fit = _fit_rows(moved(device, moves), view_point)
         shifted = copy.copy(problem)
         shifted.points = fit.points[rows]
         if problem.rotations is not None:
             shifted.rotations = _rotations(fit)[rows]  # NaN on position rows, as the fit's
-        step = np.linalg.lstsq(jacobian, base - shifted.residuals(x0), rcond=None)[0]
-        out.append(step[:k])
+        answer = np.linalg.lstsq(jacobian, base - shifted.residuals(x0), rcond=None)[0]
+        out.append(answer[:k])
     return np.array(out).T
+
+
+def _principal(covariance: Array) -> Array:
+    """(d, p): one standard deviation along each principal direction of ``covariance`` (p, p) with a variance."""
+    values, vectors = np.linalg.eigh((covariance + covariance.T) / 2)
+    keep = values > 1e-12 * max(float(values.max()), 0.0)
+    return (vectors[:, keep] * np.sqrt(values[keep])).T
 
 
 def _fit_rows(device: Measurements, view_point: Array) -> Measurements:
@@ -99,16 +105,14 @@ def held_out_share(ident: Identification, device: Measurements, view_point: Arra
     check = device.check
     if lines is None or lines.shape[1] == 0 or device.lens is None or not np.any(check):
         return 0.0
-    values, vectors = np.linalg.eigh((device.lens.covariance + device.lens.covariance.T) / 2)
-    keep = values > 1e-12 * max(float(values.max()), 0.0)
     q = device.q[check]
     if device.coupling is not None:
         q = q @ device.coupling.matrix.T + device.coupling.offset
     predicted = frame_point_jacobian(ident.plain, q, np.zeros(3))  # (c, 3, k): the view point, board frame
     before = turned_round(device, view_point)[0].points[check]
     total = 0.0
-    for value, vector, answer in zip(values[keep], vectors.T[keep], lines.T, strict=True):
-        after = turned_round(moved(device, device.lens.response @ (np.sqrt(value) * vector)), view_point)[0]
+    for step, answer in zip(_principal(device.lens.covariance), lines.T, strict=True):
+        after = turned_round(moved(device, device.lens.response @ step), view_point)[0]
         left = after.points[check] - before - predicted @ answer
         total += float(np.mean(np.sum(left**2, axis=1)))
     return total
