@@ -18,7 +18,7 @@ import numpy as np
 from drivers.base import Correction, TrackerReading
 from kinematics.joint_errors import Coupling
 from session.records import FrameRecord, PointRecord, StepRecord
-from session.schema import ORIENTATION_COLUMNS, STEP_COLUMNS, columns, dump_q, load_q, nan_of
+from session.schema import ORIENTATION_COLUMNS, STEP_COLUMNS, SessionError, columns, dump_q, load_q, nan_of
 
 
 def insert_step(db: sqlite3.Connection, record: StepRecord, readings: list[tuple[Any, ...]], run_id: int) -> None:
@@ -117,7 +117,11 @@ def correction_rows(db: sqlite3.Connection) -> dict[int, list[tuple[int, Correct
         return {}
     out: dict[int, list[tuple[int, Correction]]] = {}
     for i, tp, text in db.execute("SELECT plan_index, tp, correction FROM step_corrections ORDER BY plan_index, tp"):
-        out.setdefault(i, []).append((tp, Correction.from_dict(json.loads(text))))
+        try:
+            out.setdefault(i, []).append((tp, Correction.from_dict(json.loads(text))))
+        except (ValueError, KeyError, TypeError) as exc:  # json's errors are ValueErrors
+            raise SessionError(f"step {i}: its camera correction is unreadable ({type(exc).__name__}: {exc}); the "
+                               "file was changed by something other than dh-calib") from None
     return out
 
 

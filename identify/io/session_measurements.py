@@ -60,8 +60,12 @@ def read_session(path: Path) -> tuple[CsvContent, dict[str, Any]]:
         if "verification" in (session.header.get("config") or {}):
             raise InputError(f"{path} is a verification session (acquire verify), not measurements to identify "
                              "from; its results are in the .verify.yaml and report beside it")
-        header = {**session.header, "robot_model": session.plan.robot, "missing_steps": missing_steps(session)}
-        return CsvContent(session_measurements(session), {"session": str(path)}, []), header
+        try:
+            header = {**session.header, "robot_model": session.plan.robot, "missing_steps": missing_steps(session)}
+            return CsvContent(session_measurements(session), {"session": str(path)}, []), header
+        except SessionError as exc:  # a record that does not read back; the file's own messages name it already
+            text = str(exc)
+            raise InputError(text if text.startswith(str(session.path)) else f"{path}: {text}") from None
 
 
 def missing_steps(session: SessionFile) -> tuple[int, int, dict[str, int]]:

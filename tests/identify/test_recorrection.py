@@ -159,3 +159,29 @@ def test_a_session_keeps_each_steps_correction_and_its_measurements_are_correcte
         c = record.corrections[0][1]
         np.testing.assert_allclose(row, np.array(record.position) - (c.response @ final.estimate - c.applied)[:3],
                                    rtol=0, atol=1e-15)
+
+
+def test_an_unreadable_correction_is_one_line_and_exit_2(tmp_path: Path, capsys) -> None:
+    """A session whose stored correction was damaged by another program: ``identify`` says which step, in one line,
+    exits 2 and writes nothing."""
+    import sqlite3
+
+    from identify.commands.cli import main as identify_main
+
+    plan = small_plan()
+    path = tmp_path / "camera.session"
+    correction = Correction(("dfocal",), np.full((6, 1), 1e-3), np.zeros(6), np.zeros(1), np.eye(1), 1e-6, 1e-6)
+    with Session.create(path, plan, CONFIG, ROBOT, TRACKER) as session:
+        session.begin_run()
+        for i in range(len(plan.steps)):
+            record = record_for(plan, i)
+            session.record_step(replace(record, corrections=((1, correction),)) if record.status == "ok" else record)
+        session.end_run("complete")
+    with sqlite3.connect(path) as db:
+        db.execute("UPDATE step_corrections SET correction = ? WHERE plan_index = 3", ('{"names": ["a"]}',))
+    db.close()
+    before = path.read_bytes()
+    assert identify_main([str(path), "--out", str(tmp_path / "r.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "step 3: its camera correction is unreadable" in err, err
+    assert not (tmp_path / "r.yaml").exists() and path.read_bytes() == before
